@@ -1,0 +1,404 @@
+//! Compliance: the paper's "elementary deformations" (section 4-1) in compliance form.
+//!
+//! `C = K_ff^-1`; the 3x3 block `C_nk` maps a force at node `k` to the displacement of node `n`.
+//! The paper stores `T^u_nk = C_nk C_kk^-1` and `T^f_k = C_kk^-1`, and its mutual-influence
+//! matrix `M` (eq. 8) is `C_SS` with block rows scaled by `C_kk^-1`; storing `C` (symmetric)
+//! holds the same information in half the space.
+//!
+//! One sparse Cholesky factorisation of `K_ff` (fill-reducing ordering) replaces the paper's
+//! `3m` conjugate-gradient solves; blocked multi-right-hand-side solves then give the columns
+//! of the contact candidates.
+
+use crate::fem::{DofMap, Elasticity, FemError, FixedSet};
+use faer::dyn_stack::{MemBuffer, MemStack};
+use faer::linalg::solvers::Solve;
+use faer::sparse::linalg::cholesky::{
+    CholeskySymbolicParams, LltRef, SymbolicCholesky, SymmetricOrdering,
+    factorize_symbolic_cholesky,
+};
+use faer::sparse::{SparseColMat, Triplet};
+use faer::{Conj, Mat, Par, Side};
+use indicatif::ProgressBar;
+use rayon::prelude::*;
+
+/// A 3x3 block, row-major, in m/N for compliance and N/m for stiffness.
+pub type Block3 = [[f64; 3]; 3];
+
+/// Errors of the compliance precompute and the imposed-displacement solves.
+#[derive(Debug, thiserror::Error)]
+pub enum ComplianceError {
+    /// Problem in the elastic model or the fixed set.
+    #[error(transparent)]
+    Fem(#[from] FemError),
+    /// The factorisation failed (out of memory or a non positive definite `K_ff`).
+    #[error("sparse Cholesky factorisation of K_ff failed: {0}")]
+    Factorisation(String),
+    /// A requested node does not exist.
+    #[error("node {node} does not exist (the mesh has {nodes} nodes)")]
+    NoSuchNode {
+        /// Requested id.
+        node: usize,
+        /// Number of nodes.
+        nodes: usize,
+    },
+    /// A contact node with a fixed component cannot take an imposed displacement.
+    #[error("node {0} has fixed components, so no displacement can be imposed on it")]
+    FixedContactNode(usize),
+    /// Two contact nodes given twice, or a singular `C_SS`.
+    #[error("the contact set is degenerate: {0}")]
+    DegenerateContact(String),
+}
+
+/// Size and cost figures of a factorisation, for reports and benchmarks.
+#[derive(Debug, Clone, Copy, serde::Serialize)]
+pub struct FactorStats {
+    /// Order of `K_ff`.
+    pub free_dofs: usize,
+    /// Stored non-zeros of `K_ff` (upper triangle).
+    pub nnz_k: usize,
+    /// Stored entries of the Cholesky factor `L` (supernodal storage may include explicit zeros).
+    pub nnz_l: usize,
+}
+
+/// `K_ff = L L^T` with a fill-reducing permutation, and the free-dof numbering.
+pub struct Compliance {
+    dofs: DofMap,
+    symbolic: SymbolicCholesky<usize>,
+    values: Vec<f64>,
+    stats: FactorStats,
+}
+
+impl std::fmt::Debug for Compliance {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Compliance").field("stats", &self.stats).finish()
+    }
+}
+
+/// How many right-hand sides one blocked solve carries (3 per node).
+const NODES_PER_BLOCK: usize = 32;
+
+impl Compliance {
+    /// Assembles and factorises `K_ff` for `fixed`, after refusing fixed sets that leave rigid
+    /// motions. Uses all rayon threads.
+    pub fn factorize(body: &Elasticity, fixed: &FixedSet) -> Result<Self, ComplianceError> {
+        body.check_rigid_motions(fixed)?;
+        let dofs = DofMap::new(fixed);
+        let k = body.stiffness(&dofs);
+        Self::factorize_matrix(dofs, &k)
+    }
+
+    /// Factorises an assembled upper-triangular `K_ff` (see [`Elasticity::stiffness`]).
+    pub fn factorize_matrix(
+        dofs: DofMap,
+        k: &SparseColMat<usize, f64>,
+    ) -> Result<Self, ComplianceError> {
+        let fail = |e: &dyn std::fmt::Display| ComplianceError::Factorisation(e.to_string());
+        let symbolic = factorize_symbolic_cholesky(
+            k.symbolic(),
+            Side::Upper,
+            SymmetricOrdering::Amd,
+            CholeskySymbolicParams::default(),
+        )
+        .map_err(|e| fail(&format!("{e:?}")))?;
+        let mut values = Vec::new();
+        values
+            .try_reserve_exact(symbolic.len_val())
+            .map_err(|_| fail(&"out of memory for the factor"))?;
+        values.resize(symbolic.len_val(), 0.0);
+        let par = Par::rayon(0);
+        let mut mem = MemBuffer::try_new(
+            symbolic.factorize_numeric_llt_scratch::<f64>(par, Default::default()),
+        )
+        .map_err(|_| fail(&"out of memory for the factorisation workspace"))?;
+        symbolic
+            .factorize_numeric_llt(
+                &mut values,
+                k.as_ref(),
+                Side::Upper,
+                Default::default(),
+                par,
+                MemStack::new(&mut mem),
+                Default::default(),
+            )
+            .map_err(|e| {
+                fail(&format!(
+                    "{e:?}; K_ff is not positive definite (check the fixed set and the mesh)"
+                ))
+            })?;
+        let stats = FactorStats {
+            free_dofs: dofs.free_count(),
+            nnz_k: k.compute_nnz(),
+            nnz_l: symbolic.len_val(),
+        };
+        Ok(Self {
+            dofs,
+            symbolic,
+            values,
+            stats,
+        })
+    }
+
+    /// Size figures of the factorisation.
+    pub fn stats(&self) -> FactorStats {
+        self.stats
+    }
+
+    /// The free-dof numbering.
+    pub fn dofs(&self) -> &DofMap {
+        &self.dofs
+    }
+
+    /// Solves `K_ff X = B` in place for a block of right-hand sides (free-dof rows).
+    pub fn solve_in_place(&self, rhs: faer::MatMut<'_, f64>, par: Par) {
+        let llt = LltRef::new(&self.symbolic, &self.values);
+        let mut mem = MemBuffer::new(self.symbolic.solve_in_place_scratch::<f64>(rhs.ncols(), par));
+        llt.solve_in_place_with_conj(Conj::No, rhs, par, MemStack::new(&mut mem));
+    }
+
+    /// Node-major displacement field (length `3 N`, zeros at fixed dofs) for node-major forces.
+    pub fn displacement(&self, forces: &[f64]) -> Vec<f64> {
+        let mut rhs = Mat::<f64>::zeros(self.dofs.free_count(), 1);
+        for node in 0..self.dofs.nodes() {
+            for c in 0..3 {
+                if let Some(d) = self.dofs.free_dof(node, c) {
+                    rhs[(d, 0)] = forces[3 * node + c];
+                }
+            }
+        }
+        self.solve_in_place(rhs.as_mut(), Par::rayon(0));
+        self.dofs.expand(rhs.col(0).try_as_col_major().map_or(&[], |c| c.as_slice()))
+    }
+
+    fn check_nodes(&self, nodes: &[usize]) -> Result<(), ComplianceError> {
+        let n = self.dofs.nodes();
+        match nodes.iter().find(|&&k| k >= n) {
+            Some(&node) => Err(ComplianceError::NoSuchNode { node, nodes: n }),
+            None => Ok(()),
+        }
+    }
+
+    /// The blocks `C(nodes[a], nodes[b])` for every pair, `result[a][b]`, row-major in m/N.
+    pub fn blocks(
+        &self,
+        nodes: &[usize],
+        progress: Option<&ProgressBar>,
+    ) -> Result<Vec<Vec<Block3>>, ComplianceError> {
+        self.check_nodes(nodes)?;
+        let nf = self.dofs.free_count();
+        let m = nodes.len();
+        let rows: Vec<Vec<Block3>> = nodes
+            .par_chunks(NODES_PER_BLOCK)
+            .flat_map_iter(|block| {
+                let mut rhs = Mat::<f64>::zeros(nf, 3 * block.len());
+                for (j, &k) in block.iter().enumerate() {
+                    for c in 0..3 {
+                        if let Some(d) = self.dofs.free_dof(k, c) {
+                            rhs[(d, 3 * j + c)] = 1.0;
+                        }
+                    }
+                }
+                self.solve_in_place(rhs.as_mut(), Par::Seq);
+                if let Some(p) = progress {
+                    p.inc(block.len() as u64);
+                }
+                // Column block k gives C(n, k) for every n; by symmetry this is row k's
+                // C(k, n) = C(n, k)^T.
+                (0..block.len())
+                    .map(|j| {
+                        (0..m)
+                            .map(|b| {
+                                let n = nodes[b];
+                                let mut c_nk = [[0.0; 3]; 3];
+                                for (r, row) in c_nk.iter_mut().enumerate() {
+                                    for (c, v) in row.iter_mut().enumerate() {
+                                        if let Some(d) = self.dofs.free_dof(n, r) {
+                                            *v = rhs[(d, 3 * j + c)];
+                                        }
+                                    }
+                                }
+                                transpose(c_nk)
+                            })
+                            .collect::<Vec<_>>()
+                    })
+                    .collect::<Vec<_>>()
+            })
+            .collect();
+        Ok(rows)
+    }
+}
+
+/// Transpose of a 3x3 block.
+pub fn transpose(b: Block3) -> Block3 {
+    std::array::from_fn(|i| std::array::from_fn(|j| b[j][i]))
+}
+
+/// Forces and displacements of an imposed-displacement solve.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ImposedSolution {
+    /// Force at each contact node (N), in the order of the contact set.
+    pub forces: Vec<[f64; 3]>,
+}
+
+/// Compliance form of the paper's eq. 2 / eq. 8: with displacements `u*_S` imposed on the
+/// contact set `S` and every other free node force-free, the contact forces are
+/// `f_S = C_SS^-1 u*_S`. `c_ss[a][b]` is `C(S_a, S_b)`. Dense Cholesky on `3|S| x 3|S|`.
+pub fn contact_forces(
+    c_ss: &[Vec<Block3>],
+    imposed: &[[f64; 3]],
+) -> Result<ImposedSolution, ComplianceError> {
+    let m = imposed.len();
+    if c_ss.len() != m || c_ss.iter().any(|row| row.len() != m) {
+        return Err(ComplianceError::DegenerateContact(format!(
+            "C_SS is {}x? blocks but {m} displacements were imposed",
+            c_ss.len()
+        )));
+    }
+    let c = Mat::<f64>::from_fn(3 * m, 3 * m, |i, j| c_ss[i / 3][j / 3][i % 3][j % 3]);
+    let llt = c.llt(Side::Lower).map_err(|e| {
+        ComplianceError::DegenerateContact(format!("C_SS is not positive definite ({e:?})"))
+    })?;
+    let u = Mat::<f64>::from_fn(3 * m, 1, |i, _| imposed[i / 3][i % 3]);
+    let f = llt.solve(&u);
+    Ok(ImposedSolution {
+        forces: (0..m)
+            .map(|a| [f[(3 * a, 0)], f[(3 * a + 1, 0)], f[(3 * a + 2, 0)]])
+            .collect(),
+    })
+}
+
+/// Superposition (the paper's eq. 9 in compliance form): `u_n = sum_k C_nk f_k`.
+pub fn superpose(c_ns: &[Block3], forces: &[[f64; 3]]) -> [f64; 3] {
+    let mut u = [0.0; 3];
+    for (c, f) in c_ns.iter().zip(forces) {
+        for (r, ur) in u.iter_mut().enumerate() {
+            *ur += c[r][0] * f[0] + c[r][1] * f[1] + c[r][2] * f[2];
+        }
+    }
+    u
+}
+
+/// The paper's eq. 2 solved as written: the saddle-point system
+/// `[K_ff Kbar; Kbar^T 0] [u; lambda] = [0; u*]` (appendix A, Lagrange multipliers), by a
+/// sparse LU factorisation. Returns the contact forces `f = -lambda` (the paper: "lambda_i are
+/// equal to the opposite of the force ... to impose u_i = u*_i").
+///
+/// This is the reference the compliance form is checked against; it is much slower than
+/// [`contact_forces`] and only meant for tests and audits.
+pub fn lagrange_forces(
+    body: &Elasticity,
+    fixed: &FixedSet,
+    contact: &[usize],
+    imposed: &[[f64; 3]],
+) -> Result<ImposedSolution, ComplianceError> {
+    let dofs = DofMap::new(fixed);
+    let k = body.stiffness(&dofs);
+    let nf = dofs.free_count();
+    let mut constrained = Vec::with_capacity(3 * contact.len());
+    for &node in contact {
+        if node >= dofs.nodes() {
+            return Err(ComplianceError::NoSuchNode {
+                node,
+                nodes: dofs.nodes(),
+            });
+        }
+        for c in 0..3 {
+            constrained.push(
+                dofs.free_dof(node, c)
+                    .ok_or(ComplianceError::FixedContactNode(node))?,
+            );
+        }
+    }
+    let n = nf + constrained.len();
+    let mut triplets = Vec::with_capacity(2 * k.compute_nnz() + 2 * constrained.len());
+    for j in 0..nf {
+        for (i, &v) in k
+            .row_idx_of_col(j)
+            .zip(k.val_of_col(j))
+        {
+            triplets.push(Triplet::new(i, j, v));
+            if i != j {
+                triplets.push(Triplet::new(j, i, v));
+            }
+        }
+    }
+    for (l, &d) in constrained.iter().enumerate() {
+        triplets.push(Triplet::new(d, nf + l, 1.0));
+        triplets.push(Triplet::new(nf + l, d, 1.0));
+    }
+    let a = SparseColMat::<usize, f64>::try_new_from_triplets(n, n, &triplets)
+        .map_err(|e| ComplianceError::Factorisation(format!("{e:?}")))?;
+    let lu = a
+        .sp_lu()
+        .map_err(|e| ComplianceError::Factorisation(format!("{e:?}")))?;
+    let mut rhs = Mat::<f64>::zeros(n, 1);
+    for (a, u) in imposed.iter().enumerate() {
+        for c in 0..3 {
+            rhs[(nf + 3 * a + c, 0)] = u[c];
+        }
+    }
+    lu.solve_in_place(rhs.as_mut());
+    Ok(ImposedSolution {
+        forces: (0..contact.len())
+            .map(|a| std::array::from_fn(|c| -rhs[(nf + 3 * a + c, 0)]))
+            .collect(),
+    })
+}
+
+/// Static solve with prescribed values on the held dofs: `u = u_held` where `held` is fixed,
+/// `K u = 0` at every other dof. Returns `(u, K u)`: the field and the nodal forces, which are
+/// the reactions at the held dofs. `K u` is computed element by element, independently of the
+/// assembled matrix.
+pub fn solve_prescribed(
+    body: &Elasticity,
+    held: &FixedSet,
+    u_held: &[f64],
+) -> Result<(Vec<f64>, Vec<f64>), ComplianceError> {
+    let n = body.nodes();
+    let mut u: Vec<f64> = (0..3 * n)
+        .map(|d| if held.is_fixed(d / 3, d % 3) { u_held[d] } else { 0.0 })
+        .collect();
+    let k_u = body.apply(&u);
+    let inner = Compliance::factorize(body, held)?;
+    let dofs = inner.dofs();
+    let mut rhs = Mat::<f64>::zeros(dofs.free_count(), 1);
+    for d in 0..3 * n {
+        if let Some(f) = dofs.free_dof(d / 3, d % 3) {
+            rhs[(f, 0)] = -k_u[d];
+        }
+    }
+    inner.solve_in_place(rhs.as_mut(), Par::rayon(0));
+    for (d, ud) in u.iter_mut().enumerate() {
+        if let Some(f) = dofs.free_dof(d / 3, d % 3) {
+            *ud = rhs[(f, 0)];
+        }
+    }
+    let forces = body.apply(&u);
+    Ok((u, forces))
+}
+
+/// Independent reference for [`contact_forces`]: the imposed displacements as Dirichlet
+/// conditions. The contact nodes join the fixed set, the other free dofs are solved force-free
+/// and the contact forces are the reactions `(K u)_S`.
+pub fn dirichlet_forces(
+    body: &Elasticity,
+    fixed: &FixedSet,
+    contact: &[usize],
+    imposed: &[[f64; 3]],
+) -> Result<ImposedSolution, ComplianceError> {
+    let mut held = fixed.clone();
+    let mut u_held = vec![0.0; 3 * body.nodes()];
+    for (&node, u) in contact.iter().zip(imposed) {
+        if (0..3).any(|c| fixed.is_fixed(node, c)) {
+            return Err(ComplianceError::FixedContactNode(node));
+        }
+        held.fix_node(node)?;
+        u_held[3 * node..3 * node + 3].copy_from_slice(u);
+    }
+    let (_, reactions) = solve_prescribed(body, &held, &u_held)?;
+    Ok(ImposedSolution {
+        forces: contact
+            .iter()
+            .map(|&k| [reactions[3 * k], reactions[3 * k + 1], reactions[3 * k + 2]])
+            .collect(),
+    })
+}

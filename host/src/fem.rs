@@ -1,0 +1,585 @@
+//! P1 linear elasticity on tetrahedra (the paper's section 3, eq. 1: `K u = f`).
+//!
+//! Displacements are numbered node-major: dof `3 i + c` is component `c` (x, y, z) of node `i`.
+//! Fixed dofs (`u = 0`) are removed; the remaining *free* dofs keep node-major order, so `K_ff`
+//! is assembled directly (upper triangle, CSC) in the layout the Cholesky factorisation wants.
+
+use crate::mesh::{TetMesh, cross, dot, sub};
+use faer::sparse::{SparseColMat, SymbolicSparseColMat};
+use rayon::prelude::*;
+
+/// Errors of the finite element model.
+#[derive(Debug, thiserror::Error)]
+pub enum FemError {
+    /// Young's modulus or Poisson's ratio outside the physical range.
+    #[error("invalid material: {0}")]
+    Material(String),
+    /// A tetrahedron with non-positive volume reached the assembly (meshes are validated on load).
+    #[error("tetrahedron {tet} has non-positive volume {volume:e} m^3")]
+    BadElement {
+        /// Tetrahedron id.
+        tet: usize,
+        /// Its signed volume.
+        volume: f64,
+    },
+    /// A fixed node id is not in the mesh.
+    #[error("fixed node {node} does not exist (the mesh has {nodes} nodes)")]
+    NoSuchNode {
+        /// The offending id.
+        node: usize,
+        /// Number of nodes in the mesh.
+        nodes: usize,
+    },
+    /// The fixed set leaves a rigid-body motion free, so `K_ff` is singular.
+    #[error(
+        "the fixed set leaves rigid motions free, so K_ff is singular: {0}. Fix more nodes \
+         (e.g. --fix-box around a support) so every connected part is held in all 6 directions"
+    )]
+    RigidMotion(String),
+    /// A box that selects no node.
+    #[error("fixed box {0:?} contains no node of the mesh")]
+    EmptyBox([f64; 6]),
+}
+
+/// Isotropic linear elastic material in SI units.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Material {
+    /// Young's modulus E in pascals.
+    pub young: f64,
+    /// Poisson's ratio nu (dimensionless, -1 < nu < 0.5).
+    pub poisson: f64,
+}
+
+impl Material {
+    /// Checks `E > 0` and `-1 < nu < 0.5` (nu = 0.5 is incompressible: P1 cannot represent it).
+    pub fn new(young: f64, poisson: f64) -> Result<Self, FemError> {
+        if !(young.is_finite() && young > 0.0) {
+            return Err(FemError::Material(format!(
+                "Young's modulus must be a positive number of pascals, got {young}"
+            )));
+        }
+        if !(poisson > -1.0 && poisson < 0.5) {
+            return Err(FemError::Material(format!(
+                "Poisson's ratio must lie in (-1, 0.5), got {poisson}"
+            )));
+        }
+        Ok(Self { young, poisson })
+    }
+
+    /// Lamé parameters `(lambda, mu)` in pascals.
+    pub fn lame(&self) -> (f64, f64) {
+        let (e, nu) = (self.young, self.poisson);
+        (
+            e * nu / ((1.0 + nu) * (1.0 - 2.0 * nu)),
+            e / (2.0 * (1.0 + nu)),
+        )
+    }
+}
+
+/// Which displacement components are held at zero. Builders add nodes, boxes or single
+/// components; the set only grows.
+#[derive(Debug, Clone, PartialEq)]
+pub struct FixedSet {
+    fixed: Vec<[bool; 3]>,
+}
+
+impl FixedSet {
+    /// Nothing fixed, for a mesh of `nodes` nodes.
+    pub fn none(nodes: usize) -> Self {
+        Self {
+            fixed: vec![[false; 3]; nodes],
+        }
+    }
+
+    /// Fixes all three components of `node`.
+    pub fn fix_node(&mut self, node: usize) -> Result<(), FemError> {
+        self.fix_component(node, 0)?;
+        self.fix_component(node, 1)?;
+        self.fix_component(node, 2)
+    }
+
+    /// Fixes component `axis` (0 = x, 1 = y, 2 = z) of `node`, e.g. a slide-only support.
+    pub fn fix_component(&mut self, node: usize, axis: usize) -> Result<(), FemError> {
+        let nodes = self.fixed.len();
+        let slot = self
+            .fixed
+            .get_mut(node)
+            .ok_or(FemError::NoSuchNode { node, nodes })?;
+        slot[axis.min(2)] = true;
+        Ok(())
+    }
+
+    /// Fixes the given components of every node inside the closed box
+    /// `[xmin, ymin, zmin, xmax, ymax, zmax]`; returns how many nodes it selected.
+    pub fn fix_box(
+        &mut self,
+        mesh: &TetMesh,
+        bounds: [f64; 6],
+        components: [bool; 3],
+    ) -> Result<usize, FemError> {
+        let mut count = 0;
+        for (p, slot) in mesh.nodes.iter().zip(&mut self.fixed) {
+            if (0..3).all(|a| p[a] >= bounds[a] && p[a] <= bounds[a + 3]) {
+                for a in 0..3 {
+                    slot[a] |= components[a];
+                }
+                count += 1;
+            }
+        }
+        if count == 0 {
+            return Err(FemError::EmptyBox(bounds));
+        }
+        Ok(count)
+    }
+
+    /// Whether component `axis` of `node` is fixed.
+    pub fn is_fixed(&self, node: usize, axis: usize) -> bool {
+        self.fixed[node][axis]
+    }
+
+    /// Number of nodes the set covers.
+    pub fn nodes(&self) -> usize {
+        self.fixed.len()
+    }
+
+    /// Number of fixed dofs.
+    pub fn count(&self) -> usize {
+        self.fixed.iter().flatten().filter(|&&f| f).count()
+    }
+}
+
+/// Numbering of the free dofs, node-major, with fixed dofs removed.
+#[derive(Debug, Clone)]
+pub struct DofMap {
+    index: Vec<u32>,
+    free: usize,
+}
+
+const FIXED: u32 = u32::MAX;
+
+impl DofMap {
+    /// Numbers the dofs left free by `fixed`.
+    pub fn new(fixed: &FixedSet) -> Self {
+        let mut free = 0;
+        let index = fixed
+            .fixed
+            .iter()
+            .flatten()
+            .map(|&f| {
+                if f {
+                    FIXED
+                } else {
+                    free += 1;
+                    (free - 1) as u32
+                }
+            })
+            .collect();
+        Self { index, free }
+    }
+
+    /// Free-dof index of component `axis` of `node`, or `None` if it is fixed.
+    pub fn free_dof(&self, node: usize, axis: usize) -> Option<usize> {
+        let i = self.index[3 * node + axis];
+        (i != FIXED).then_some(i as usize)
+    }
+
+    /// Number of free dofs (the order of `K_ff`).
+    pub fn free_count(&self) -> usize {
+        self.free
+    }
+
+    /// Number of nodes.
+    pub fn nodes(&self) -> usize {
+        self.index.len() / 3
+    }
+
+    /// Scatters a free-dof vector into a full node-major vector (zeros at fixed dofs).
+    pub fn expand(&self, free: &[f64]) -> Vec<f64> {
+        self.index
+            .iter()
+            .map(|&i| if i == FIXED { 0.0 } else { free[i as usize] })
+            .collect()
+    }
+}
+
+/// Shape-function gradients and volume of one P1 tetrahedron.
+#[derive(Debug, Clone, Copy)]
+struct Element {
+    grad: [[f64; 3]; 4],
+    volume: f64,
+}
+
+impl Element {
+    fn new(x: [[f64; 3]; 4]) -> Self {
+        // Columns of J are the edge vectors from vertex 0; rows of J^-1 are grad N1..N3.
+        let e = [sub(x[1], x[0]), sub(x[2], x[0]), sub(x[3], x[0])];
+        let det = dot(e[0], cross(e[1], e[2]));
+        let rows = [cross(e[1], e[2]), cross(e[2], e[0]), cross(e[0], e[1])].map(|r| scale(r, 1.0 / det));
+        let g0 = [
+            -(rows[0][0] + rows[1][0] + rows[2][0]),
+            -(rows[0][1] + rows[1][1] + rows[2][1]),
+            -(rows[0][2] + rows[1][2] + rows[2][2]),
+        ];
+        Self {
+            grad: [g0, rows[0], rows[1], rows[2]],
+            volume: det / 6.0,
+        }
+    }
+
+    /// The 3x3 block `K_ab` of the element stiffness `V B^T D B`, row index = component at `a`:
+    /// `V (lambda g_a g_b^T + mu g_b g_a^T + mu (g_a . g_b) I)`.
+    fn block(&self, a: usize, b: usize, lambda: f64, mu: f64) -> [[f64; 3]; 3] {
+        let (ga, gb) = (self.grad[a], self.grad[b]);
+        let gg = dot(ga, gb);
+        let mut k = [[0.0; 3]; 3];
+        for (i, row) in k.iter_mut().enumerate() {
+            for (j, v) in row.iter_mut().enumerate() {
+                let diag = if i == j { mu * gg } else { 0.0 };
+                *v = self.volume * (lambda * ga[i] * gb[j] + mu * gb[i] * ga[j] + diag);
+            }
+        }
+        k
+    }
+}
+
+/// The discretised elastic body: element data and the node graph, ready to assemble `K_ff`
+/// for any fixed set or to apply the full `K` to a displacement field.
+#[derive(Debug, Clone)]
+pub struct Elasticity {
+    material: Material,
+    positions: Vec<[f64; 3]>,
+    tets: Vec<[usize; 4]>,
+    elements: Vec<Element>,
+    /// CSR: tetrahedra incident to each node.
+    node_tets: Csr,
+    /// CSR: sorted neighbours of each node, itself included.
+    node_adj: Csr,
+}
+
+#[derive(Debug, Clone)]
+struct Csr {
+    ptr: Vec<usize>,
+    idx: Vec<usize>,
+}
+
+impl Csr {
+    fn row(&self, i: usize) -> &[usize] {
+        &self.idx[self.ptr[i]..self.ptr[i + 1]]
+    }
+}
+
+impl Elasticity {
+    /// Precomputes element gradients and the node graph.
+    pub fn new(mesh: &TetMesh, material: Material) -> Result<Self, FemError> {
+        let elements: Vec<Element> = mesh
+            .tets
+            .par_iter()
+            .map(|t| Element::new(t.map(|i| mesh.nodes[i])))
+            .collect();
+        if let Some((tet, e)) = elements
+            .iter()
+            .enumerate()
+            .find(|(_, e)| !(e.volume > 0.0 && e.volume.is_finite()))
+        {
+            return Err(FemError::BadElement {
+                tet,
+                volume: e.volume,
+            });
+        }
+        let n = mesh.nodes.len();
+        let node_tets = incidence(n, &mesh.tets);
+        let node_adj = adjacency(&node_tets, &mesh.tets);
+        Ok(Self {
+            material,
+            positions: mesh.nodes.clone(),
+            tets: mesh.tets.clone(),
+            elements,
+            node_tets,
+            node_adj,
+        })
+    }
+
+    /// Number of nodes.
+    pub fn nodes(&self) -> usize {
+        self.node_tets.ptr.len() - 1
+    }
+
+    /// The material.
+    pub fn material(&self) -> Material {
+        self.material
+    }
+
+    /// Sorted neighbours of `node` in the mesh (sharing a tetrahedron), itself included.
+    pub fn neighbours(&self, node: usize) -> &[usize] {
+        self.node_adj.row(node)
+    }
+
+    /// The 3x3 block `K_mn` of the global stiffness (rows: components at `m`).
+    fn global_block(&self, m: usize, n: usize, lambda: f64, mu: f64, acc: &mut [[f64; 3]; 3]) {
+        for &t in self.node_tets.row(n) {
+            let tet = &self.tets[t];
+            let (Some(a), Some(b)) = (
+                tet.iter().position(|&v| v == m),
+                tet.iter().position(|&v| v == n),
+            ) else {
+                continue;
+            };
+            let k = self.elements[t].block(a, b, lambda, mu);
+            for i in 0..3 {
+                for j in 0..3 {
+                    acc[i][j] += k[i][j];
+                }
+            }
+        }
+    }
+
+    /// Assembles the upper triangle of `K_ff` in CSC form (columns in parallel: each node's
+    /// three columns only read shared data, so there are no write conflicts).
+    pub fn stiffness(&self, dofs: &DofMap) -> SparseColMat<usize, f64> {
+        let (lambda, mu) = self.material.lame();
+        let n = self.nodes();
+        // Per node: (row indices, values) of its up-to-three columns, concatenated.
+        let columns: Vec<[(Vec<usize>, Vec<f64>); 3]> = (0..n)
+            .into_par_iter()
+            .map(|node| {
+                let lower: Vec<usize> = self
+                    .neighbours(node)
+                    .iter()
+                    .copied()
+                    .filter(|&m| m <= node)
+                    .collect();
+                let mut blocks = vec![[[0.0; 3]; 3]; lower.len()];
+                for (m, acc) in lower.iter().zip(&mut blocks) {
+                    self.global_block(*m, node, lambda, mu, acc);
+                }
+                std::array::from_fn(|c| {
+                    let mut rows = Vec::new();
+                    let mut vals = Vec::new();
+                    if let Some(col) = dofs.free_dof(node, c) {
+                        for (m, block) in lower.iter().zip(&blocks) {
+                            for (cr, row_of_block) in block.iter().enumerate() {
+                                match dofs.free_dof(*m, cr) {
+                                    Some(row) if row <= col => {
+                                        rows.push(row);
+                                        vals.push(row_of_block[c]);
+                                    }
+                                    _ => {}
+                                }
+                            }
+                        }
+                    }
+                    (rows, vals)
+                })
+            })
+            .collect();
+        let nf = dofs.free_count();
+        let mut col_ptr = Vec::with_capacity(nf + 1);
+        col_ptr.push(0usize);
+        let nnz: usize = columns.iter().flatten().map(|(r, _)| r.len()).sum();
+        let mut row_idx = Vec::with_capacity(nnz);
+        let mut values = Vec::with_capacity(nnz);
+        for (node, cols) in columns.into_iter().enumerate() {
+            for (c, (rows, vals)) in cols.into_iter().enumerate() {
+                if dofs.free_dof(node, c).is_some() {
+                    row_idx.extend(rows);
+                    values.extend(vals);
+                    col_ptr.push(row_idx.len());
+                }
+            }
+        }
+        let symbolic = SymbolicSparseColMat::new_checked(nf, nf, col_ptr, None, row_idx);
+        SparseColMat::new(symbolic, values)
+    }
+
+    /// Applies the full (unconstrained) stiffness: returns `K u` for a node-major field `u` of
+    /// length `3 N`. Element by element, independent of [`Elasticity::stiffness`]; used for
+    /// reaction forces and residual checks.
+    pub fn apply(&self, u: &[f64]) -> Vec<f64> {
+        let (lambda, mu) = self.material.lame();
+        let n = self.nodes();
+        (0..n)
+            .into_par_iter()
+            .flat_map_iter(|m| {
+                let mut f = [0.0; 3];
+                for &nb in self.neighbours(m) {
+                    let mut k = [[0.0; 3]; 3];
+                    self.global_block(m, nb, lambda, mu, &mut k);
+                    for (i, fi) in f.iter_mut().enumerate() {
+                        *fi += (0..3).map(|j| k[i][j] * u[3 * nb + j]).sum::<f64>();
+                    }
+                }
+                f
+            })
+            .collect()
+    }
+
+    /// Refuses a fixed set that leaves a rigid-body motion free in some connected part of the
+    /// mesh: the 6 rigid modes restricted to the fixed dofs of each part must have full rank.
+    pub fn check_rigid_motions(&self, fixed: &FixedSet) -> Result<(), FemError> {
+        for (part, members) in self.components().iter().enumerate() {
+            let centre = {
+                let mut c = [0.0; 3];
+                for &i in members {
+                    c = add(c, self.positions[i]);
+                }
+                scale(c, 1.0 / members.len() as f64)
+            };
+            let extent = members
+                .iter()
+                .map(|&i| norm(sub(self.positions[i], centre)))
+                .fold(0.0, f64::max)
+                .max(f64::MIN_POSITIVE);
+            // Gram matrix G = R^T R of the rigid modes sampled at the fixed dofs.
+            let mut gram = [[0.0; 6]; 6];
+            for &i in members {
+                let r = scale(sub(self.positions[i], centre), 1.0 / extent);
+                for axis in 0..3 {
+                    if !fixed.is_fixed(i, axis) {
+                        continue;
+                    }
+                    let row = rigid_mode_row(r, axis);
+                    for a in 0..6 {
+                        for b in 0..6 {
+                            gram[a][b] += row[a] * row[b];
+                        }
+                    }
+                }
+            }
+            if let Some(mode) = free_rigid_mode(gram) {
+                return Err(FemError::RigidMotion(format!(
+                    "part {part} of the mesh ({} nodes, first node {}) can move freely: {}",
+                    members.len(),
+                    members[0],
+                    describe_mode(mode)
+                )));
+            }
+        }
+        Ok(())
+    }
+
+    /// Connected parts of the mesh (nodes sharing tetrahedra), each a sorted node list. Nodes
+    /// without tetrahedra are not listed.
+    fn components(&self) -> Vec<Vec<usize>> {
+        let n = self.nodes();
+        let mut seen = vec![false; n];
+        let mut parts = Vec::new();
+        for start in 0..n {
+            if seen[start] || self.node_tets.row(start).is_empty() {
+                continue;
+            }
+            let mut stack = vec![start];
+            seen[start] = true;
+            let mut members = Vec::new();
+            while let Some(i) = stack.pop() {
+                members.push(i);
+                for &j in self.neighbours(i) {
+                    if !seen[j] {
+                        seen[j] = true;
+                        stack.push(j);
+                    }
+                }
+            }
+            members.sort_unstable();
+            parts.push(members);
+        }
+        parts
+    }
+
+}
+
+/// Row of the rigid-mode matrix for component `axis` at relative position `r`: translations
+/// along x, y, z, then rotations about x, y, z (`omega x r`).
+fn rigid_mode_row(r: [f64; 3], axis: usize) -> [f64; 6] {
+    let mut row = [0.0; 6];
+    row[axis] = 1.0;
+    for w in 0..3 {
+        let mut omega = [0.0; 3];
+        omega[w] = 1.0;
+        row[3 + w] = cross(omega, r)[axis];
+    }
+    row
+}
+
+/// Returns a unit rigid mode (6 coefficients) in the near-null space of the Gram matrix, if any.
+fn free_rigid_mode(gram: [[f64; 6]; 6]) -> Option<[f64; 6]> {
+    let g = faer::Mat::<f64>::from_fn(6, 6, |i, j| gram[i][j]);
+    let eig = g.self_adjoint_eigen(faer::Side::Lower).ok()?;
+    let s = eig.S();
+    let largest = s[5].max(f64::MIN_POSITIVE);
+    (s[0] <= 1e-10 * largest).then(|| std::array::from_fn(|i| eig.U()[(i, 0)]))
+}
+
+fn describe_mode(mode: [f64; 6]) -> String {
+    let t = [mode[0], mode[1], mode[2]];
+    let w = [mode[3], mode[4], mode[5]];
+    let fmt = |v: [f64; 3]| format!("({:.2}, {:.2}, {:.2})", v[0], v[1], v[2]);
+    if norm(w) < 1e-6 {
+        format!("translation along {}", fmt(t))
+    } else if norm(t) < 1e-6 {
+        format!("rotation about axis {}", fmt(w))
+    } else {
+        format!("rigid motion with translation {} and rotation {}", fmt(t), fmt(w))
+    }
+}
+
+fn incidence(n: usize, tets: &[[usize; 4]]) -> Csr {
+    let mut ptr = vec![0usize; n + 1];
+    for t in tets {
+        for &v in t {
+            ptr[v + 1] += 1;
+        }
+    }
+    for i in 0..n {
+        ptr[i + 1] += ptr[i];
+    }
+    let mut fill = ptr.clone();
+    let mut idx = vec![0; ptr[n]];
+    for (ti, t) in tets.iter().enumerate() {
+        for &v in t {
+            idx[fill[v]] = ti;
+            fill[v] += 1;
+        }
+    }
+    Csr { ptr, idx }
+}
+
+fn adjacency(node_tets: &Csr, tets: &[[usize; 4]]) -> Csr {
+    let n = node_tets.ptr.len() - 1;
+    let rows: Vec<Vec<usize>> = (0..n)
+        .into_par_iter()
+        .map(|i| {
+            let mut row: Vec<usize> = node_tets
+                .row(i)
+                .iter()
+                .flat_map(|&t| tets[t])
+                .chain(std::iter::once(i))
+                .collect();
+            row.sort_unstable();
+            row.dedup();
+            row
+        })
+        .collect();
+    let mut ptr = Vec::with_capacity(n + 1);
+    ptr.push(0);
+    let mut idx = Vec::new();
+    for row in rows {
+        idx.extend(row);
+        ptr.push(idx.len());
+    }
+    Csr { ptr, idx }
+}
+
+fn add(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
+    [a[0] + b[0], a[1] + b[1], a[2] + b[2]]
+}
+
+
+fn scale(a: [f64; 3], s: f64) -> [f64; 3] {
+    [a[0] * s, a[1] * s, a[2] * s]
+}
+
+
+fn norm(a: [f64; 3]) -> f64 {
+    dot(a, a).sqrt()
+}
+
