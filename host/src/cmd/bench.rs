@@ -1,0 +1,196 @@
+//! `host bench …`: benchmarks that print figures (never asserted by tests).
+
+use anyhow::{Context, Result};
+use host::compliance::Compliance;
+use host::fem::{DofMap, Elasticity, FixedSet, Material};
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+/// Benchmarks.
+#[derive(clap::Subcommand, Debug)]
+pub enum Bench {
+    /// Assembly, factorisation and column-solve times and peak memory of the compliance
+    /// precompute, on the shipped livers (and the 100k one if generated).
+    Compliance(ComplianceArgs),
+}
+
+/// Arguments of `host bench compliance`.
+#[derive(clap::Args, Debug)]
+pub struct ComplianceArgs {
+    /// Meshes to measure; default: host/meshes/liver-1k4.msh, liver-10k.msh and
+    /// host/meshes/generated/liver-100k.msh when present.
+    #[arg(long)]
+    mesh: Vec<PathBuf>,
+    /// Young's modulus in Pa.
+    #[arg(long, default_value_t = 3.0e3)]
+    young: f64,
+    /// Poisson's ratio.
+    #[arg(long, default_value_t = 0.45)]
+    poisson: f64,
+    /// The organ rests on a bed: nodes in the lowest `bed` fraction of the height are fixed.
+    #[arg(long, default_value_t = 0.1)]
+    bed: f64,
+    /// At most this many contact-candidate nodes (the free surface nodes nearest the top
+    /// centre, a stand-in for a scene's reachable region).
+    #[arg(long, default_value_t = 5000)]
+    max_nodes: usize,
+    /// Print one JSON object per mesh instead of a table.
+    #[arg(long)]
+    json: bool,
+}
+
+#[derive(serde::Serialize)]
+struct Report {
+    mesh: String,
+    nodes: usize,
+    tets: usize,
+    free_dofs: usize,
+    columns: usize,
+    load_s: f64,
+    assemble_s: f64,
+    factor_s: f64,
+    columns_s: f64,
+    nnz_k: usize,
+    nnz_l: usize,
+    peak_rss_mib: f64,
+    factor_peak_rss_mib: f64,
+}
+
+/// Runs a benchmark.
+pub fn run(bench: Bench) -> Result<()> {
+    match bench {
+        Bench::Compliance(args) => compliance(args),
+    }
+}
+
+fn default_meshes() -> Vec<PathBuf> {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("meshes");
+    let mut v = vec![dir.join("liver-1k4.msh"), dir.join("liver-10k.msh")];
+    let big = dir.join("generated/liver-100k.msh");
+    if big.exists() {
+        v.push(big);
+    } else {
+        eprintln!(
+            "note: {} not found; generate it with `python3 scripts/gen_meshes.py --only liver-100k`",
+            big.display()
+        );
+    }
+    v
+}
+
+fn compliance(args: ComplianceArgs) -> Result<()> {
+    let meshes = if args.mesh.is_empty() {
+        default_meshes()
+    } else {
+        args.mesh.clone()
+    };
+    let material = Material::new(args.young, args.poisson)?;
+    if !args.json {
+        println!(
+            "{:<22} {:>7} {:>8} {:>7} {:>6} {:>8} {:>8} {:>8} {:>9} {:>10} {:>9}",
+            "mesh", "nodes", "tets", "dofs", "cols", "assem s", "factor s", "cols s", "nnz(L) M",
+            "peak MiB", "factor MiB"
+        );
+    }
+    for path in meshes {
+        let r = measure(&path, material, &args)
+            .with_context(|| format!("benchmark on {}", path.display()))?;
+        if args.json {
+            println!("{}", serde_json::to_string(&r)?);
+        } else {
+            println!(
+                "{:<22} {:>7} {:>8} {:>7} {:>6} {:>8.3} {:>8.3} {:>8.3} {:>9.2} {:>10.0} {:>9.0}",
+                r.mesh,
+                r.nodes,
+                r.tets,
+                r.free_dofs,
+                r.columns,
+                r.assemble_s,
+                r.factor_s,
+                r.columns_s,
+                r.nnz_l as f64 / 1e6,
+                r.peak_rss_mib,
+                r.factor_peak_rss_mib
+            );
+        }
+    }
+    Ok(())
+}
+
+fn measure(path: &Path, material: Material, args: &ComplianceArgs) -> Result<Report> {
+    let t = Instant::now();
+    let mesh = host::mesh::load(path)?;
+    let surface = host::mesh::boundary(&mesh)?;
+    let load_s = t.elapsed().as_secs_f64();
+
+    let (lo, hi) = mesh.bounding_box();
+    let mut fixed = FixedSet::none(mesh.nodes.len());
+    let top = lo[2] + args.bed * (hi[2] - lo[2]);
+    fixed.fix_box(&mesh, [lo[0], lo[1], lo[2], hi[0], hi[1], top], [true; 3])?;
+
+    let centre = [0.5 * (lo[0] + hi[0]), 0.5 * (lo[1] + hi[1]), hi[2]];
+    let mut candidates: Vec<usize> = surface
+        .nodes
+        .iter()
+        .copied()
+        .filter(|&i| (0..3).all(|c| !fixed.is_fixed(i, c)))
+        .collect();
+    let dist = |i: usize| (0..3).map(|a| (mesh.nodes[i][a] - centre[a]).powi(2)).sum::<f64>();
+    candidates.sort_by(|&a, &b| dist(a).total_cmp(&dist(b)));
+    candidates.truncate(args.max_nodes);
+
+    reset_peak_rss();
+    let t = Instant::now();
+    let body = Elasticity::new(&mesh, material)?;
+    body.check_rigid_motions(&fixed)?;
+    let dofs = DofMap::new(&fixed);
+    let k = body.stiffness(&dofs);
+    let assemble_s = t.elapsed().as_secs_f64();
+
+    let t = Instant::now();
+    let c = Compliance::factorize_matrix(dofs, &k)?;
+    let factor_s = t.elapsed().as_secs_f64();
+    let factor_peak_rss_mib = peak_rss_mib();
+
+    let bar = super::compliance::progress_bar(candidates.len() as u64, "columns");
+    let t = Instant::now();
+    let blocks = c.blocks(&candidates, Some(&bar))?;
+    let columns_s = t.elapsed().as_secs_f64();
+    bar.finish_and_clear();
+    drop(blocks);
+    let stats = c.stats();
+    Ok(Report {
+        mesh: path
+            .file_name()
+            .map_or_else(|| path.display().to_string(), |n| n.to_string_lossy().into()),
+        nodes: mesh.nodes.len(),
+        tets: mesh.tets.len(),
+        free_dofs: stats.free_dofs,
+        columns: candidates.len(),
+        load_s,
+        assemble_s,
+        factor_s,
+        columns_s,
+        nnz_k: stats.nnz_k,
+        nnz_l: stats.nnz_l,
+        peak_rss_mib: peak_rss_mib(),
+        factor_peak_rss_mib,
+    })
+}
+
+/// Resets the kernel's peak-RSS mark of this process (Linux; ignored elsewhere).
+fn reset_peak_rss() {
+    let _ = std::fs::write("/proc/self/clear_refs", "5");
+}
+
+/// Peak resident set size since the last reset, in MiB (0 where unavailable).
+fn peak_rss_mib() -> f64 {
+    std::fs::read_to_string("/proc/self/status")
+        .ok()
+        .and_then(|s| {
+            s.lines()
+                .find(|l| l.starts_with("VmHWM:"))
+                .and_then(|l| l.split_whitespace().nth(1)?.parse::<f64>().ok())
+        })
+        .map_or(0.0, |kib| kib / 1024.0)
+}

@@ -1,0 +1,68 @@
+//! `host compliance`: compliance blocks of requested nodes as JSON (a stable interface).
+
+use super::fixing::{FixArgs, parse_list};
+use anyhow::{Context, Result};
+use host::compliance::Compliance;
+use host::fem::{Elasticity, Material};
+use indicatif::{ProgressBar, ProgressStyle};
+use std::io::Write;
+use std::path::PathBuf;
+
+/// Arguments of `host compliance`.
+#[derive(clap::Args, Debug)]
+#[command(after_help = "Prints {\"nodes\":[i,...],\"blocks\":[[[9 numbers],...],...]} where \
+blocks[a][b] is C(nodes[a], nodes[b]) row-major in m/N. Node ids are 0-based positions in the \
+file's node order.")]
+pub struct Args {
+    /// Tetrahedral mesh (.msh v2/v4, .vtu, .vtk), coordinates in metres.
+    #[arg(long)]
+    mesh: PathBuf,
+    /// Young's modulus in Pa.
+    #[arg(long)]
+    young: f64,
+    /// Poisson's ratio.
+    #[arg(long)]
+    poisson: f64,
+    #[command(flatten)]
+    fix: FixArgs,
+    /// Nodes whose blocks are wanted, comma separated.
+    #[arg(long, value_name = "i,j,...")]
+    nodes: String,
+}
+
+/// Runs the command.
+pub fn run(args: Args) -> Result<()> {
+    let mesh = host::mesh::load(&args.mesh)?;
+    let nodes = parse_list::<usize>(&args.nodes).context("--nodes")?;
+    let material = Material::new(args.young, args.poisson)?;
+    let fixed = args.fix.build(&mesh)?;
+    let body = Elasticity::new(&mesh, material)?;
+    let compliance = Compliance::factorize(&body, &fixed)?;
+    let progress = progress_bar(nodes.len() as u64, "columns");
+    let blocks = compliance.blocks(&nodes, Some(&progress))?;
+    progress.finish_and_clear();
+    let flat: Vec<Vec<[f64; 9]>> = blocks
+        .iter()
+        .map(|row| {
+            row.iter()
+                .map(|b| std::array::from_fn(|i| b[i / 3][i % 3]))
+                .collect()
+        })
+        .collect();
+    let mut out = std::io::BufWriter::new(std::io::stdout().lock());
+    serde_json::to_writer(&mut out, &serde_json::json!({ "nodes": nodes, "blocks": flat }))?;
+    writeln!(out)?;
+    out.flush()?;
+    Ok(())
+}
+
+/// A progress bar on stderr (hidden when stderr is not a terminal).
+pub fn progress_bar(len: u64, what: &str) -> ProgressBar {
+    let bar = ProgressBar::new(len);
+    if let Ok(style) = ProgressStyle::with_template(&format!(
+        "{{elapsed_precise}} [{{bar:40}}] {{pos}}/{{len}} {what} ({{eta}} left)"
+    )) {
+        bar.set_style(style);
+    }
+    bar
+}

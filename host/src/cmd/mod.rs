@@ -1,0 +1,6 @@
+//! Subcommands.
+
+pub mod bench;
+pub mod compliance;
+pub mod demo;
+pub mod fixing;

@@ -1,0 +1,71 @@
+//! Reading mesh files: format dispatch on the file extension.
+
+use super::error::{MeshError, Origin};
+use super::{TetMesh, gmsh, validate, vtk, vtu};
+use std::path::Path;
+
+/// Mesh file formats that can be read.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Format {
+    /// Gmsh `.msh`: version 2 ASCII, version 4.1 ASCII or binary (detected from `$MeshFormat`).
+    Msh,
+    /// VTK XML unstructured grid `.vtu`.
+    Vtu,
+    /// Legacy VTK `.vtk`, ASCII (classic or version 5.1 layout) or binary (classic layout).
+    Vtk,
+}
+
+impl Format {
+    /// The format for a file name's extension (case-insensitive).
+    pub fn from_path(path: &Path) -> Result<Format, MeshError> {
+        let ext = path
+            .extension()
+            .map(|e| e.to_string_lossy().to_ascii_lowercase())
+            .unwrap_or_default();
+        match ext.as_str() {
+            "msh" => Ok(Format::Msh),
+            "vtu" => Ok(Format::Vtu),
+            "vtk" => Ok(Format::Vtk),
+            _ => Err(MeshError::UnknownExtension {
+                file: Origin(Some(path.to_path_buf())),
+                extension: ext,
+            }),
+        }
+    }
+}
+
+/// Parse the contents of a mesh file without validating the mesh. Never panics; errors carry no
+/// file name (add one with [`MeshError::with_path`]).
+pub fn read_bytes(bytes: &[u8], format: Format) -> Result<TetMesh, MeshError> {
+    match format {
+        Format::Msh => gmsh::read_msh(bytes),
+        Format::Vtu => vtu::read_vtu(bytes),
+        Format::Vtk => vtk::read_legacy(bytes),
+    }
+}
+
+/// Parse the contents of a Gmsh `.msh` file (e.g. one embedded with `include_bytes!`) and
+/// [`validate`] the mesh: the in-memory counterpart of [`load`].
+pub fn parse_msh(bytes: &[u8]) -> Result<TetMesh, MeshError> {
+    let mesh = read_bytes(bytes, Format::Msh)?;
+    validate(&mesh)?;
+    Ok(mesh)
+}
+
+/// Read a mesh file (format from its extension) without validating the mesh, for tools that
+/// want to report every problem themselves.
+pub fn read(path: &Path) -> Result<TetMesh, MeshError> {
+    let format = Format::from_path(path)?;
+    let bytes = std::fs::read(path).map_err(|source| MeshError::Io {
+        file: Origin(Some(path.to_path_buf())),
+        source,
+    })?;
+    read_bytes(&bytes, format).map_err(|e| e.with_path(path))
+}
+
+/// Read a mesh file and [`validate`] it.
+pub fn load(path: &Path) -> Result<TetMesh, MeshError> {
+    let mesh = read(path)?;
+    validate(&mesh).map_err(|e| e.with_path(path))?;
+    Ok(mesh)
+}

@@ -1,0 +1,81 @@
+//! Tetrahedral meshes: reading (Gmsh `.msh`, VTK `.vtu`/`.vtk`), validation, boundary surface.
+//!
+//! Node ids are 0-based positions in the file's node order; tetrahedron ids are 0-based positions
+//! among the file's tetrahedra. Every error names the file and the offending id.
+//!
+//! - [`load`] = [`read`] + [`validate`]; [`read_bytes`] parses in-memory file contents.
+//! - Formats: Gmsh MSH 2 ASCII (own parser), MSH 4.1 ASCII and binary (via `mshio`), legacy VTK
+//!   ASCII (own parser; classic and 5.1 layouts) and binary (via `vtkio`), VTK XML `.vtu` (own
+//!   reader: ascii, base64 and raw appended data, optionally zlib-compressed). Gmsh node tags
+//!   may be arbitrary and are mapped to positions.
+//! - Elements of dimension < 3 (points, lines, surface triangles) are ignored; 3D elements other
+//!   than 4-node tetrahedra are an error ([`MeshError::UnsupportedElement`]).
+//! - [`boundary`] gives the outward-oriented boundary triangles.
+//!
+//! No input makes these functions panic.
+
+mod boundary;
+pub mod error;
+mod gmsh;
+mod io;
+pub mod structured;
+mod text;
+mod validate;
+mod vtk;
+mod vtu;
+
+pub use boundary::{Surface, boundary};
+pub use error::{MeshError, Origin};
+pub use io::{Format, load, parse_msh, read, read_bytes};
+pub use validate::{DEGENERATE_QUALITY, DUPLICATE_NODE_TOLERANCE, validate};
+
+/// A linear (P1) tetrahedral mesh in SI units (metres).
+///
+/// Tetrahedra are positively oriented: `(x1-x0) . ((x2-x0) x (x3-x0)) > 0`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TetMesh {
+    /// Node coordinates in metres.
+    pub nodes: Vec<[f64; 3]>,
+    /// Four node ids per tetrahedron.
+    pub tets: Vec<[usize; 4]>,
+}
+
+impl TetMesh {
+    /// Signed volume of tetrahedron `t` (positive when correctly oriented).
+    pub fn signed_volume(&self, t: usize) -> f64 {
+        let [a, b, c, d] = self.tets[t].map(|i| self.nodes[i]);
+        let u = sub(b, a);
+        let v = sub(c, a);
+        let w = sub(d, a);
+        dot(u, cross(v, w)) / 6.0
+    }
+
+    /// Axis-aligned bounding box `(min, max)` of the nodes.
+    pub fn bounding_box(&self) -> ([f64; 3], [f64; 3]) {
+        let mut lo = [f64::INFINITY; 3];
+        let mut hi = [f64::NEG_INFINITY; 3];
+        for p in &self.nodes {
+            for a in 0..3 {
+                lo[a] = lo[a].min(p[a]);
+                hi[a] = hi[a].max(p[a]);
+            }
+        }
+        (lo, hi)
+    }
+}
+
+pub(crate) fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
+    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
+}
+
+pub(crate) fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
+    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+}
+
+pub(crate) fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
+    [
+        a[1] * b[2] - a[2] * b[1],
+        a[2] * b[0] - a[0] * b[2],
+        a[0] * b[1] - a[1] * b[0],
+    ]
+}

@@ -1,0 +1,25 @@
+#!/usr/bin/env bash
+# Runs every test of the project on a fresh machine, installing what it needs first.
+# This is the README's second command; .ci/run calls it too, so CI proves the README.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+
+step() { printf '\n== %s\n' "$*"; }
+
+step "toolchain: thumbv7em-none-eabihf target, rustfmt, clippy"
+if ! rustup target list --installed | grep -qx thumbv7em-none-eabihf; then
+    rustup target add thumbv7em-none-eabihf
+fi
+for c in rustfmt clippy; do
+    rustup component list --installed | grep -q "^$c" || rustup component add "$c"
+done
+
+step "format and lints"
+cargo fmt --all --check
+cargo clippy --workspace --all-targets --release -- -D warnings
+
+step "no_std crates cross-compile for the MCU"
+cargo build --release -p bank-format -p firmware --target thumbv7em-none-eabihf
+
+step "tests (release: the FEM refinement series is heavy in debug)"
+cargo test --workspace --release
