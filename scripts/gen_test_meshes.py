@@ -88,7 +88,8 @@ def cube_with_gmsh():
         gmsh.write(os.path.join(DATA, "cube_v41_sparse.msh"))
     finally:
         gmsh.finalize()
-    # Gmsh's node order in files is its tag order; check we reproduce it.
+    # Gmsh writes nodes in tag order, which is getNodes()'s order here (the Rust test checks
+    # that every file reads to the same node order).
     return points, np.array(tets), np.array(tris)
 
 
@@ -175,13 +176,10 @@ def positive(p, t):
     return t
 
 
-def msh2(nodes, elements, extra_sections=""):
-    """MSH 2.2 ASCII text. nodes: list of (x, y, z) with tags 1..N (or (tag, x, y, z) strings);
-    elements: list of (type, [node tags])."""
-    out = ["$MeshFormat", "2.2 0 8", "$EndMeshFormat"]
-    if extra_sections:
-        out.append(extra_sections.rstrip("\n"))
-    out += ["$Nodes", str(len(nodes))]
+def msh2(nodes, elements):
+    """MSH 2.2 ASCII text. nodes: (x, y, z) tuples, written with tags 1..N, or preformatted
+    "tag x y z" lines; elements: (Gmsh type, [node tags]) pairs."""
+    out = ["$MeshFormat", "2.2 0 8", "$EndMeshFormat", "$Nodes", str(len(nodes))]
     for i, n in enumerate(nodes):
         out.append(n if isinstance(n, str) else f"{i + 1} " + " ".join(repr(float(x)) for x in n))
     out += ["$EndNodes", "$Elements", str(len(elements))]
@@ -191,9 +189,9 @@ def msh2(nodes, elements, extra_sections=""):
     return "\n".join(out)
 
 
-def tets_msh2(nodes, tets, **kw):
+def tets_msh2(nodes, tets):
     """MSH 2.2 of 0-based tets (written with 1-based tags)."""
-    return msh2(nodes, [(4, [i + 1 for i in t]) for t in tets], **kw)
+    return msh2(nodes, [(4, [i + 1 for i in t]) for t in tets])
 
 
 def vtk_legacy(nodes, cells):
@@ -213,7 +211,7 @@ def vtk_legacy(nodes, cells):
 CUBE = [(S * i, S * j, S * k) for k in (0, 1) for j in (0, 1) for i in (0, 1)]
 FIVE = [[0, 1, 2, 4], [3, 1, 2, 7], [5, 1, 4, 7], [6, 2, 4, 7], [1, 2, 4, 7]]
 FIVE = [positive(CUBE, t) for t in FIVE]
-# The unit tetrahedron and an unrelated far point.
+# The corner tetrahedron of the same box.
 TET = [(0.0, 0.0, 0.0), (S, 0.0, 0.0), (0.0, S, 0.0), (0.0, 0.0, S)]
 
 

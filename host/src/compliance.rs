@@ -10,8 +10,10 @@
 //! of the contact candidates.
 
 use crate::fem::{DofMap, Elasticity, FemError, FixedSet};
+use crate::ordering::{DofPermutation, Ordering, nested_dissection};
 use faer::dyn_stack::{MemBuffer, MemStack};
 use faer::linalg::solvers::Solve;
+use faer::perm::PermRef;
 use faer::sparse::linalg::cholesky::{
     CholeskySymbolicParams, LltRef, SymbolicCholesky, SymmetricOrdering,
     factorize_symbolic_cholesky,
@@ -70,7 +72,9 @@ pub struct Compliance {
 
 impl std::fmt::Debug for Compliance {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("Compliance").field("stats", &self.stats).finish()
+        f.debug_struct("Compliance")
+            .field("stats", &self.stats)
+            .finish()
     }
 }
 
@@ -81,22 +85,47 @@ impl Compliance {
     /// Assembles and factorises `K_ff` for `fixed`, after refusing fixed sets that leave rigid
     /// motions. Uses all rayon threads.
     pub fn factorize(body: &Elasticity, fixed: &FixedSet) -> Result<Self, ComplianceError> {
-        body.check_rigid_motions(fixed)?;
-        let dofs = DofMap::new(fixed);
-        let k = body.stiffness(&dofs);
-        Self::factorize_matrix(dofs, &k)
+        Self::factorize_ordered(body, fixed, Ordering::default())
     }
 
-    /// Factorises an assembled upper-triangular `K_ff` (see [`Elasticity::stiffness`]).
+    /// [`Compliance::factorize`] with a chosen fill-reducing ordering.
+    pub fn factorize_ordered(
+        body: &Elasticity,
+        fixed: &FixedSet,
+        ordering: Ordering,
+    ) -> Result<Self, ComplianceError> {
+        body.check_rigid_motions(fixed)?;
+        let dofs = DofMap::new(fixed);
+        let perm = match ordering {
+            Ordering::Amd => None,
+            Ordering::NestedDissection => {
+                Some(nested_dissection(body, &dofs).map_err(ComplianceError::Factorisation)?)
+            }
+        };
+        let k = body.stiffness(&dofs);
+        Self::factorize_matrix(dofs, &k, perm.as_ref())
+    }
+
+    /// Factorises an assembled upper-triangular `K_ff` (see [`Elasticity::stiffness`]) with the
+    /// given dof permutation, or faer's AMD when `None`.
     pub fn factorize_matrix(
         dofs: DofMap,
         k: &SparseColMat<usize, f64>,
+        perm: Option<&DofPermutation>,
     ) -> Result<Self, ComplianceError> {
         let fail = |e: &dyn std::fmt::Display| ComplianceError::Factorisation(e.to_string());
+        let ordering = match perm {
+            None => SymmetricOrdering::Amd,
+            Some(p) => SymmetricOrdering::Custom(PermRef::new_checked(
+                &p.forward,
+                &p.inverse,
+                dofs.free_count(),
+            )),
+        };
         let symbolic = factorize_symbolic_cholesky(
             k.symbolic(),
             Side::Upper,
-            SymmetricOrdering::Amd,
+            ordering,
             CholeskySymbolicParams::default(),
         )
         .map_err(|e| fail(&format!("{e:?}")))?;
@@ -151,7 +180,10 @@ impl Compliance {
     /// Solves `K_ff X = B` in place for a block of right-hand sides (free-dof rows).
     pub fn solve_in_place(&self, rhs: faer::MatMut<'_, f64>, par: Par) {
         let llt = LltRef::new(&self.symbolic, &self.values);
-        let mut mem = MemBuffer::new(self.symbolic.solve_in_place_scratch::<f64>(rhs.ncols(), par));
+        let mut mem = MemBuffer::new(
+            self.symbolic
+                .solve_in_place_scratch::<f64>(rhs.ncols(), par),
+        );
         llt.solve_in_place_with_conj(Conj::No, rhs, par, MemStack::new(&mut mem));
     }
 
@@ -166,7 +198,8 @@ impl Compliance {
             }
         }
         self.solve_in_place(rhs.as_mut(), Par::rayon(0));
-        self.dofs.expand(rhs.col(0).try_as_col_major().map_or(&[], |c| c.as_slice()))
+        self.dofs
+            .expand(rhs.col(0).try_as_col_major().map_or(&[], |c| c.as_slice()))
     }
 
     fn check_nodes(&self, nodes: &[usize]) -> Result<(), ComplianceError> {
@@ -311,10 +344,7 @@ pub fn lagrange_forces(
     let n = nf + constrained.len();
     let mut triplets = Vec::with_capacity(2 * k.compute_nnz() + 2 * constrained.len());
     for j in 0..nf {
-        for (i, &v) in k
-            .row_idx_of_col(j)
-            .zip(k.val_of_col(j))
-        {
+        for (i, &v) in k.row_idx_of_col(j).zip(k.val_of_col(j)) {
             triplets.push(Triplet::new(i, j, v));
             if i != j {
                 triplets.push(Triplet::new(j, i, v));
@@ -355,15 +385,21 @@ pub fn solve_prescribed(
 ) -> Result<(Vec<f64>, Vec<f64>), ComplianceError> {
     let n = body.nodes();
     let mut u: Vec<f64> = (0..3 * n)
-        .map(|d| if held.is_fixed(d / 3, d % 3) { u_held[d] } else { 0.0 })
+        .map(|d| {
+            if held.is_fixed(d / 3, d % 3) {
+                u_held[d]
+            } else {
+                0.0
+            }
+        })
         .collect();
     let k_u = body.apply(&u);
     let inner = Compliance::factorize(body, held)?;
     let dofs = inner.dofs();
     let mut rhs = Mat::<f64>::zeros(dofs.free_count(), 1);
-    for d in 0..3 * n {
+    for (d, ku) in k_u.iter().enumerate() {
         if let Some(f) = dofs.free_dof(d / 3, d % 3) {
-            rhs[(f, 0)] = -k_u[d];
+            rhs[(f, 0)] = -ku;
         }
     }
     inner.solve_in_place(rhs.as_mut(), Par::rayon(0));

@@ -214,7 +214,8 @@ impl Element {
         // Columns of J are the edge vectors from vertex 0; rows of J^-1 are grad N1..N3.
         let e = [sub(x[1], x[0]), sub(x[2], x[0]), sub(x[3], x[0])];
         let det = dot(e[0], cross(e[1], e[2]));
-        let rows = [cross(e[1], e[2]), cross(e[2], e[0]), cross(e[0], e[1])].map(|r| scale(r, 1.0 / det));
+        let rows =
+            [cross(e[1], e[2]), cross(e[2], e[0]), cross(e[0], e[1])].map(|r| scale(r, 1.0 / det));
         let g0 = [
             -(rows[0][0] + rows[1][0] + rows[2][0]),
             -(rows[0][1] + rows[1][1] + rows[2][1]),
@@ -484,7 +485,6 @@ impl Elasticity {
         }
         parts
     }
-
 }
 
 /// Row of the rigid-mode matrix for component `axis` at relative position `r`: translations
@@ -518,7 +518,11 @@ fn describe_mode(mode: [f64; 6]) -> String {
     } else if norm(t) < 1e-6 {
         format!("rotation about axis {}", fmt(w))
     } else {
-        format!("rigid motion with translation {} and rotation {}", fmt(t), fmt(w))
+        format!(
+            "rigid motion with translation {} and rotation {}",
+            fmt(t),
+            fmt(w)
+        )
     }
 }
 
@@ -573,13 +577,10 @@ fn add(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
     [a[0] + b[0], a[1] + b[1], a[2] + b[2]]
 }
 
-
 fn scale(a: [f64; 3], s: f64) -> [f64; 3] {
     [a[0] * s, a[1] * s, a[2] * s]
 }
 
-
 fn norm(a: [f64; 3]) -> f64 {
     dot(a, a).sqrt()
 }
-

@@ -4,6 +4,8 @@
 //! elasticity, the paper's section 3), [`compliance`] (the "elementary deformations" of section 6
 //! as compliance blocks C_nk, and the imposed-displacement solve of eq. 2 / appendix A).
 
-pub mod mesh;
-pub mod fem;
 pub mod compliance;
+pub mod fem;
+pub mod mesh;
+pub mod ordering;
+pub mod schur;

@@ -7,7 +7,11 @@ use clap::{Parser, Subcommand};
 use std::process::ExitCode;
 
 #[derive(Parser)]
-#[command(name = "host", version, about = "Haptic soft-tissue simulator: host tools")]
+#[command(
+    name = "host",
+    version,
+    about = "Haptic soft-tissue simulator: host tools"
+)]
 struct Cli {
     #[command(subcommand)]
     command: Command,

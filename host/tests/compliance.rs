@@ -59,7 +59,11 @@ fn compliance_is_symmetric_and_diagonal_blocks_positive_definite() {
         let d1 = k[1][1] - k[0][1] * k[0][1] / d0;
         let m12 = k[1][2] - k[0][1] * k[0][2] / d0;
         let d2 = k[2][2] - k[0][2] * k[0][2] / d0 - m12 * m12 / d1;
-        assert!(d0 > 0.0 && d1 > 0.0 && d2 > 0.0, "C_kk of node {} not SPD", nodes[a]);
+        assert!(
+            d0 > 0.0 && d1 > 0.0 && d2 > 0.0,
+            "C_kk of node {} not SPD",
+            nodes[a]
+        );
     }
     // A unit force gives C_kk; the field it produces matches the single-RHS solve.
     let k = nodes[20];
@@ -72,7 +76,11 @@ fn compliance_is_symmetric_and_diagonal_blocks_positive_definite() {
 }
 
 fn relative_error(a: &[[f64; 3]], b: &[[f64; 3]]) -> f64 {
-    let num: f64 = a.iter().zip(b).flat_map(|(x, y)| (0..3).map(move |c| (x[c] - y[c]).powi(2))).sum();
+    let num: f64 = a
+        .iter()
+        .zip(b)
+        .flat_map(|(x, y)| (0..3).map(move |c| (x[c] - y[c]).powi(2)))
+        .sum();
     let den: f64 = b.iter().flat_map(|y| y.iter().map(|v| v * v)).sum();
     (num / den).sqrt()
 }
@@ -86,7 +94,10 @@ fn check_contact(contact: &[usize], imposed: &[[f64; 3]]) {
     let lagrange = lagrange_forces(&body, &fixed, contact, imposed).unwrap();
     let e1 = relative_error(&compliance_form.forces, &dirichlet.forces);
     let e2 = relative_error(&lagrange.forces, &dirichlet.forces);
-    eprintln!("|S| = {}: compliance vs Dirichlet {e1:.2e}, Lagrange vs Dirichlet {e2:.2e}", contact.len());
+    eprintln!(
+        "|S| = {}: compliance vs Dirichlet {e1:.2e}, Lagrange vs Dirichlet {e2:.2e}",
+        contact.len()
+    );
     assert!(e1 <= 1e-9 && e2 <= 1e-9);
     // Superposition (eq. 9) reproduces the imposed displacements at the contact nodes.
     for (a, u) in imposed.iter().enumerate() {
@@ -115,7 +126,14 @@ fn three_contact_nodes_match_direct_solves() {
         nearest(&mesh, [0.0375, 0.02, SIZE[2]]),
         nearest(&mesh, [0.03, 0.0267, SIZE[2]]),
     ];
-    check_contact(&s, &[[0.0, 0.0, -2e-3], [1e-4, 0.0, -2.5e-3], [0.0, -1e-4, -1.5e-3]]);
+    check_contact(
+        &s,
+        &[
+            [0.0, 0.0, -2e-3],
+            [1e-4, 0.0, -2.5e-3],
+            [0.0, -1e-4, -1.5e-3],
+        ],
+    );
 }
 
 #[test]
@@ -124,7 +142,10 @@ fn fixed_sets_leaving_rigid_motions_are_refused() {
     let body = Elasticity::new(&mesh, Material::new(3.0e3, 0.45).unwrap()).unwrap();
     let refuse = |fixed: &FixedSet, what: &str| match Compliance::factorize(&body, fixed) {
         Err(host::compliance::ComplianceError::Fem(FemError::RigidMotion(msg))) => {
-            assert!(msg.contains(what), "message {msg:?} should mention {what:?}")
+            assert!(
+                msg.contains(what),
+                "message {msg:?} should mention {what:?}"
+            )
         }
         other => panic!("expected a rigid-motion error, got {other:?}"),
     };
@@ -136,7 +157,11 @@ fn fixed_sets_leaving_rigid_motions_are_refused() {
     // Slide-only support on the bed: the body can slide in x and y.
     let mut slide = FixedSet::none(mesh.nodes.len());
     slide
-        .fix_box(&mesh, [-1.0, -1.0, -1.0, 1.0, 1.0, 1e-9], [false, false, true])
+        .fix_box(
+            &mesh,
+            [-1.0, -1.0, -1.0, 1.0, 1.0, 1e-9],
+            [false, false, true],
+        )
         .unwrap();
     refuse(&slide, "translation");
     // Two pinned nodes: rotation about the line through them.

@@ -26,7 +26,8 @@ fn dot(a: &[f64], b: &[f64]) -> f64 {
 /// `lambda/2 tr(eps)^2 + mu eps:eps`, `eps = sym(A)`.
 fn energy_density(m: Material, a: [[f64; 3]; 3]) -> f64 {
     let (lambda, mu) = m.lame();
-    let eps: [[f64; 3]; 3] = std::array::from_fn(|i| std::array::from_fn(|j| 0.5 * (a[i][j] + a[j][i])));
+    let eps: [[f64; 3]; 3] =
+        std::array::from_fn(|i| std::array::from_fn(|j| 0.5 * (a[i][j] + a[j][i])));
     let tr = eps[0][0] + eps[1][1] + eps[2][2];
     let mut ee = 0.0;
     for row in eps {
@@ -37,12 +38,21 @@ fn energy_density(m: Material, a: [[f64; 3]; 3]) -> f64 {
     0.5 * lambda * tr * tr + mu * ee
 }
 
-const A: [[f64; 3]; 3] = [[1.0e-3, 2.0e-4, -3.0e-4], [5.0e-4, -2.0e-3, 1.0e-4], [-4.0e-4, 3.0e-4, 1.5e-3]];
+const A: [[f64; 3]; 3] = [
+    [1.0e-3, 2.0e-4, -3.0e-4],
+    [5.0e-4, -2.0e-3, 1.0e-4],
+    [-4.0e-4, 3.0e-4, 1.5e-3],
+];
 
 #[test]
 fn single_element_energy_and_rigid_modes() {
     let mesh = TetMesh {
-        nodes: vec![[0.0, 0.0, 0.0], [0.02, 0.001, 0.0], [0.003, 0.015, 0.002], [0.001, 0.004, 0.01]],
+        nodes: vec![
+            [0.0, 0.0, 0.0],
+            [0.02, 0.001, 0.0],
+            [0.003, 0.015, 0.002],
+            [0.001, 0.004, 0.01],
+        ],
         tets: vec![[0, 1, 2, 3]],
     };
     let mat = Material::new(5.0e3, 0.3).unwrap();
@@ -53,7 +63,10 @@ fn single_element_energy_and_rigid_modes() {
     let ku = body.apply(&u);
     let energy = 0.5 * dot(&u, &ku);
     let expected = v * energy_density(mat, A);
-    assert!((energy - expected).abs() <= 1e-12 * expected, "{energy} vs {expected}");
+    assert!(
+        (energy - expected).abs() <= 1e-12 * expected,
+        "{energy} vs {expected}"
+    );
     // Rigid motions (translation + infinitesimal rotation) carry no force.
     let skew = [[0.0, -0.3, 0.2], [0.3, 0.0, -0.1], [-0.2, 0.1, 0.0]];
     let rigid = linear_field(&mesh, skew, [0.1, -0.2, 0.3]);
@@ -137,7 +150,10 @@ fn patch_test_reproduces_linear_field_exactly() {
             interior += 1;
             for c in 0..3 {
                 assert!((u[3 * i + c] - exact[3 * i + c]).abs() <= 1e-12 * umax);
-                assert!(f[3 * i + c].abs() <= 1e-11 * fmax, "interior node {i} carries force");
+                assert!(
+                    f[3 * i + c].abs() <= 1e-11 * fmax,
+                    "interior node {i} carries force"
+                );
             }
         }
     }
@@ -178,12 +194,18 @@ fn box_uniaxial_compression_is_exact() {
     for (i, p) in mesh.nodes.iter().enumerate() {
         let exact = [nu * strain * p[0], nu * strain * p[1], -strain * p[2]];
         for c in 0..3 {
-            assert!((u[3 * i + c] - exact[c]).abs() <= 1e-12 * strain * size[2], "node {i}");
+            assert!(
+                (u[3 * i + c] - exact[c]).abs() <= 1e-12 * strain * size[2],
+                "node {i}"
+            );
         }
     }
     let force: f64 = top.iter().map(|&i| f[3 * i + 2]).sum();
     let expected = -e * size[0] * size[1] * strain;
-    assert!((force - expected).abs() <= 1e-12 * expected.abs(), "{force} vs {expected}");
+    assert!(
+        (force - expected).abs() <= 1e-12 * expected.abs(),
+        "{force} vs {expected}"
+    );
 }
 
 /// Mean tip deflection of a cantilever clamped at x = 0 under a tip shear `p` spread over the
@@ -225,15 +247,25 @@ fn cantilever_ratio(cells: [usize; 3]) -> (usize, f64) {
 
 #[test]
 fn cantilever_converges_to_timoshenko() {
-    let series: Vec<(usize, f64)> = [[10, 2, 2], [20, 4, 4], [40, 6, 6], [60, 8, 8], [100, 12, 12], [160, 16, 16]]
-        .into_iter()
-        .map(cantilever_ratio)
-        .collect();
+    let series: Vec<(usize, f64)> = [
+        [10, 2, 2],
+        [20, 4, 4],
+        [40, 6, 6],
+        [60, 8, 8],
+        [100, 12, 12],
+        [160, 16, 16],
+    ]
+    .into_iter()
+    .map(cantilever_ratio)
+    .collect();
     for (nodes, ratio) in &series {
         eprintln!("cantilever: {nodes:6} nodes  tip deflection / Timoshenko = {ratio:.4}");
     }
     for pair in series.windows(2) {
-        assert!(pair[1].1 > pair[0].1, "refinement must reduce locking: {series:?}");
+        assert!(
+            pair[1].1 > pair[0].1,
+            "refinement must reduce locking: {series:?}"
+        );
     }
     let last = series.last().unwrap().1;
     assert!(last > 0.93 && last < 1.0, "finest ratio {last}");

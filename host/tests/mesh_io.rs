@@ -81,15 +81,38 @@ fn every_problem_is_reported_with_its_ids() {
     type Check = fn(&MeshError) -> bool;
     let cases: &[(&str, Check, &[&str])] = &[
         // Validation, in `validate`'s order.
-        ("no_tets.msh", |e| matches!(e, MeshError::NoTetrahedra { nodes: 3, .. }), &["no tetrahedra"]),
+        (
+            "no_tets.msh",
+            |e| matches!(e, MeshError::NoTetrahedra { nodes: 3, .. }),
+            &["no tetrahedra"],
+        ),
         (
             "index_out_of_range.vtk",
-            |e| matches!(e, MeshError::NodeIndexOutOfRange { tet: 1, node: 9, num_nodes: 5, .. }),
+            |e| {
+                matches!(
+                    e,
+                    MeshError::NodeIndexOutOfRange {
+                        tet: 1,
+                        node: 9,
+                        num_nodes: 5,
+                        ..
+                    }
+                )
+            },
             &["tetrahedron 1 refers to node 9", "only 5 nodes"],
         ),
         (
             "repeated_node.msh",
-            |e| matches!(e, MeshError::RepeatedNode { tet: 2, node: 2, .. }),
+            |e| {
+                matches!(
+                    e,
+                    MeshError::RepeatedNode {
+                        tet: 2,
+                        node: 2,
+                        ..
+                    }
+                )
+            },
             &["tetrahedron 2 uses node 2 more than once"],
         ),
         (
@@ -99,7 +122,16 @@ fn every_problem_is_reported_with_its_ids() {
         ),
         (
             "duplicate_nodes.msh",
-            |e| matches!(e, MeshError::DuplicateNodes { first: 1, second: 8, .. }),
+            |e| {
+                matches!(
+                    e,
+                    MeshError::DuplicateNodes {
+                        first: 1,
+                        second: 8,
+                        ..
+                    }
+                )
+            },
             &["nodes 1 and 8 coincide"],
         ),
         (
@@ -119,7 +151,16 @@ fn every_problem_is_reported_with_its_ids() {
         ),
         (
             "duplicate_tet.msh",
-            |e| matches!(e, MeshError::DuplicateTet { first: 2, second: 5, .. }),
+            |e| {
+                matches!(
+                    e,
+                    MeshError::DuplicateTet {
+                        first: 2,
+                        second: 5,
+                        ..
+                    }
+                )
+            },
             &["tetrahedra 2 and 5 have the same nodes"],
         ),
         (
@@ -132,17 +173,44 @@ fn every_problem_is_reported_with_its_ids() {
         ),
         (
             "overlapping.msh",
-            |e| matches!(e, MeshError::OverlappingTets { face: [0, 1, 2], tets: [0, 1], .. }),
+            |e| {
+                matches!(
+                    e,
+                    MeshError::OverlappingTets {
+                        face: [0, 1, 2],
+                        tets: [0, 1],
+                        ..
+                    }
+                )
+            },
             &["tetrahedra 0 and 1 overlap", "[0, 1, 2]"],
         ),
         (
             "nonmanifold_edge.msh",
-            |e| matches!(e, MeshError::NonManifoldEdge { edge: [0, 1], triangles: 4, .. }),
+            |e| {
+                matches!(
+                    e,
+                    MeshError::NonManifoldEdge {
+                        edge: [0, 1],
+                        triangles: 4,
+                        ..
+                    }
+                )
+            },
             &["edge between nodes 0 and 1 is shared by 4 boundary triangles"],
         ),
         (
             "nonmanifold_vertex.msh",
-            |e| matches!(e, MeshError::NonManifoldVertex { node: 0, fans: 2, .. }),
+            |e| {
+                matches!(
+                    e,
+                    MeshError::NonManifoldVertex {
+                        node: 0,
+                        fans: 2,
+                        ..
+                    }
+                )
+            },
             &["at node 0 the boundary triangles form 2 separate fans"],
         ),
         // Reading.
@@ -173,7 +241,16 @@ fn every_problem_is_reported_with_its_ids() {
         ),
         (
             "unknown_node_tag.msh",
-            |e| matches!(e, MeshError::UnknownNodeTag { element: 1, node_tag: 99, .. }),
+            |e| {
+                matches!(
+                    e,
+                    MeshError::UnknownNodeTag {
+                        element: 1,
+                        node_tag: 99,
+                        ..
+                    }
+                )
+            },
             &["element 1 refers to node tag 99"],
         ),
         (
@@ -203,7 +280,10 @@ fn every_problem_is_reported_with_its_ids() {
         let msg = e.to_string();
         assert!(check(&e), "{name}: wrong error: {msg}");
         let prefix = format!("{}: ", path.display());
-        assert!(msg.starts_with(&prefix), "{name}: message lacks the file: {msg}");
+        assert!(
+            msg.starts_with(&prefix),
+            "{name}: message lacks the file: {msg}"
+        );
         for t in *texts {
             assert!(msg.contains(t), "{name}: {msg:?} does not contain {t:?}");
         }
@@ -211,7 +291,11 @@ fn every_problem_is_reported_with_its_ids() {
     // A missing file.
     let e = mesh::load(&data("bad/does_not_exist.msh")).unwrap_err();
     assert!(matches!(e, MeshError::Io { .. }), "{e}");
-    assert!(e.to_string().contains("does_not_exist.msh: cannot read mesh file"), "{e}");
+    assert!(
+        e.to_string()
+            .contains("does_not_exist.msh: cannot read mesh file"),
+        "{e}"
+    );
 }
 
 /// Parse `bytes`; whatever parses is also validated and has its boundary taken. Nothing may panic.
@@ -243,7 +327,10 @@ fn truncated_inputs_are_errors_not_panics() {
                 Err(e) => guarded += internal_failure(&e) as usize,
             }
         }
-        println!("{name}: {} prefixes, {guarded} caught parser panics", bytes.len());
+        println!(
+            "{name}: {} prefixes, {guarded} caught parser panics",
+            bytes.len()
+        );
     }
 }
 
@@ -336,7 +423,10 @@ fn cube_boundary_is_closed_outward_and_has_the_right_area() {
             (pa[1] + pb[1] + pd[1]) / 3.0 - c[1],
             (pa[2] + pb[2] + pd[2]) / 3.0 - c[2],
         ];
-        assert!(g[0] * n[0] + g[1] * n[1] + g[2] * n[2] > 0.0, "inward triangle {a} {b} {d}");
+        assert!(
+            g[0] * n[0] + g[1] * n[1] + g[2] * n[2] > 0.0,
+            "inward triangle {a} {b} {d}"
+        );
     }
     assert!((area - 6.0 * L * L).abs() < 1e-15, "area {area}");
     // Every edge in exactly two triangles, once in each direction (consistent orientation).
@@ -346,9 +436,15 @@ fn cube_boundary_is_closed_outward_and_has_the_right_area() {
         .flat_map(|&[a, b, c]| [(a, b), (b, c), (c, a)])
         .collect();
     directed.sort_unstable();
-    assert!(directed.windows(2).all(|w| w[0] != w[1]), "a directed edge repeats");
+    assert!(
+        directed.windows(2).all(|w| w[0] != w[1]),
+        "a directed edge repeats"
+    );
     for &(a, b) in &directed {
-        assert!(directed.binary_search(&(b, a)).is_ok(), "edge {a}-{b} has no twin");
+        assert!(
+            directed.binary_search(&(b, a)).is_ok(),
+            "edge {a}-{b} has no twin"
+        );
     }
     // Boundary nodes: sorted, unique, exactly the nodes of the triangles, and all on the faces.
     assert!(s.nodes.windows(2).all(|w| w[0] < w[1]));
@@ -358,7 +454,10 @@ fn cube_boundary_is_closed_outward_and_has_the_right_area() {
     assert_eq!(tri_nodes, s.nodes);
     for &i in &s.nodes {
         let p = m.nodes[i];
-        assert!(p.iter().any(|&x| x.abs() < 1e-12 || (x - L).abs() < 1e-12), "{p:?}");
+        assert!(
+            p.iter().any(|&x| x.abs() < 1e-12 || (x - L).abs() < 1e-12),
+            "{p:?}"
+        );
     }
     // Euler characteristic of a sphere: V - E + F = 2.
     let v = s.nodes.len() as i64;

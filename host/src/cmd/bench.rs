@@ -3,6 +3,7 @@
 use anyhow::{Context, Result};
 use host::compliance::Compliance;
 use host::fem::{DofMap, Elasticity, FixedSet, Material};
+use host::ordering::{Ordering, nested_dissection};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
@@ -27,13 +28,17 @@ pub struct ComplianceArgs {
     /// Poisson's ratio.
     #[arg(long, default_value_t = 0.45)]
     poisson: f64,
-    /// The organ rests on a bed: nodes in the lowest `bed` fraction of the height are fixed.
-    #[arg(long, default_value_t = 0.1)]
+    /// The organ rests on a bed: nodes less than this height (m) above its lowest point are
+    /// fixed (the peer script's `--fix-box -1,-1,-1,1,1,0.01` for the shipped livers).
+    #[arg(long, default_value_t = 0.01)]
     bed: f64,
     /// At most this many contact-candidate nodes (the free surface nodes nearest the top
     /// centre, a stand-in for a scene's reachable region).
     #[arg(long, default_value_t = 5000)]
     max_nodes: usize,
+    /// Fill-reducing ordering.
+    #[arg(long, value_enum, default_value_t = Ordering::default())]
+    ordering: Ordering,
     /// Print one JSON object per mesh instead of a table.
     #[arg(long)]
     json: bool,
@@ -88,8 +93,17 @@ fn compliance(args: ComplianceArgs) -> Result<()> {
     if !args.json {
         println!(
             "{:<22} {:>7} {:>8} {:>7} {:>6} {:>8} {:>8} {:>8} {:>9} {:>10} {:>9}",
-            "mesh", "nodes", "tets", "dofs", "cols", "assem s", "factor s", "cols s", "nnz(L) M",
-            "peak MiB", "factor MiB"
+            "mesh",
+            "nodes",
+            "tets",
+            "dofs",
+            "cols",
+            "assem s",
+            "factor s",
+            "cols s",
+            "nnz(L) M",
+            "peak MiB",
+            "factor MiB"
         );
     }
     for path in meshes {
@@ -125,7 +139,7 @@ fn measure(path: &Path, material: Material, args: &ComplianceArgs) -> Result<Rep
 
     let (lo, hi) = mesh.bounding_box();
     let mut fixed = FixedSet::none(mesh.nodes.len());
-    let top = lo[2] + args.bed * (hi[2] - lo[2]);
+    let top = lo[2] + args.bed;
     fixed.fix_box(&mesh, [lo[0], lo[1], lo[2], hi[0], hi[1], top], [true; 3])?;
 
     let centre = [0.5 * (lo[0] + hi[0]), 0.5 * (lo[1] + hi[1]), hi[2]];
@@ -135,7 +149,11 @@ fn measure(path: &Path, material: Material, args: &ComplianceArgs) -> Result<Rep
         .copied()
         .filter(|&i| (0..3).all(|c| !fixed.is_fixed(i, c)))
         .collect();
-    let dist = |i: usize| (0..3).map(|a| (mesh.nodes[i][a] - centre[a]).powi(2)).sum::<f64>();
+    let dist = |i: usize| {
+        (0..3)
+            .map(|a| (mesh.nodes[i][a] - centre[a]).powi(2))
+            .sum::<f64>()
+    };
     candidates.sort_by(|&a, &b| dist(a).total_cmp(&dist(b)));
     candidates.truncate(args.max_nodes);
 
@@ -148,7 +166,13 @@ fn measure(path: &Path, material: Material, args: &ComplianceArgs) -> Result<Rep
     let assemble_s = t.elapsed().as_secs_f64();
 
     let t = Instant::now();
-    let c = Compliance::factorize_matrix(dofs, &k)?;
+    let perm = match args.ordering {
+        Ordering::Amd => None,
+        Ordering::NestedDissection => {
+            Some(nested_dissection(&body, &dofs).map_err(anyhow::Error::msg)?)
+        }
+    };
+    let c = Compliance::factorize_matrix(dofs, &k, perm.as_ref())?;
     let factor_s = t.elapsed().as_secs_f64();
     let factor_peak_rss_mib = peak_rss_mib();
 
@@ -160,9 +184,10 @@ fn measure(path: &Path, material: Material, args: &ComplianceArgs) -> Result<Rep
     drop(blocks);
     let stats = c.stats();
     Ok(Report {
-        mesh: path
-            .file_name()
-            .map_or_else(|| path.display().to_string(), |n| n.to_string_lossy().into()),
+        mesh: path.file_name().map_or_else(
+            || path.display().to_string(),
+            |n| n.to_string_lossy().into(),
+        ),
         nodes: mesh.nodes.len(),
         tets: mesh.tets.len(),
         free_dofs: stats.free_dofs,

@@ -10,9 +10,12 @@ use std::path::PathBuf;
 
 /// Arguments of `host compliance`.
 #[derive(clap::Args, Debug)]
-#[command(after_help = "Prints {\"nodes\":[i,...],\"blocks\":[[[9 numbers],...],...]} where \
+#[command(
+    after_help = "Prints {\"nodes\":[i,...],\"blocks\":[[[9 numbers],...],...]} where \
 blocks[a][b] is C(nodes[a], nodes[b]) row-major in m/N. Node ids are 0-based positions in the \
-file's node order.")]
+file's node order.",
+    allow_negative_numbers = true
+)]
 pub struct Args {
     /// Tetrahedral mesh (.msh v2/v4, .vtu, .vtk), coordinates in metres.
     #[arg(long)]
@@ -50,7 +53,10 @@ pub fn run(args: Args) -> Result<()> {
         })
         .collect();
     let mut out = std::io::BufWriter::new(std::io::stdout().lock());
-    serde_json::to_writer(&mut out, &serde_json::json!({ "nodes": nodes, "blocks": flat }))?;
+    serde_json::to_writer(
+        &mut out,
+        &serde_json::json!({ "nodes": nodes, "blocks": flat }),
+    )?;
     writeln!(out)?;
     out.flush()?;
     Ok(())

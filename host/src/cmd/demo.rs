@@ -58,7 +58,7 @@ pub fn run(args: Args) -> Result<()> {
     );
     let material = Material::new(args.young, args.poisson)?;
     let mut fixed = FixedSet::none(mesh.nodes.len());
-    let bed = lo[2] + 0.1 * (hi[2] - lo[2]);
+    let bed = lo[2] + 0.01;
     let held = fixed.fix_box(&mesh, [lo[0], lo[1], lo[2], hi[0], hi[1], bed], [true; 3])?;
     println!(
         "material  E = {} Pa, nu = {}; organ resting on a bed: {held} nodes with z <= {bed:.4} m fixed",

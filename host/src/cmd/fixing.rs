@@ -11,7 +11,11 @@ pub struct FixArgs {
     /// Fix the nodes inside a closed box `xmin,ymin,zmin,xmax,ymax,zmax` (metres). Append
     /// `:xyz`-style axes to fix only those components, e.g. `...,0.01:z` for a slide-only
     /// support. May repeat.
-    #[arg(long = "fix-box", value_name = "BOX[:AXES]")]
+    #[arg(
+        long = "fix-box",
+        value_name = "BOX[:AXES]",
+        allow_hyphen_values = true
+    )]
     pub boxes: Vec<String>,
     /// File with one node id per line (0-based, file node order; `#` starts a comment):
     /// all three components of those nodes are fixed.
@@ -50,7 +54,10 @@ fn parse_box(spec: &str) -> Result<([f64; 6], [bool; 3])> {
     };
     let values = parse_list::<f64>(numbers)?;
     let Ok(bounds) = <[f64; 6]>::try_from(values.as_slice()) else {
-        bail!("expected 6 numbers xmin,ymin,zmin,xmax,ymax,zmax, got {}", values.len());
+        bail!(
+            "expected 6 numbers xmin,ymin,zmin,xmax,ymax,zmax, got {}",
+            values.len()
+        );
     };
     if bounds.iter().any(|v| !v.is_finite()) || (0..3).any(|a| bounds[a] > bounds[a + 3]) {
         bail!("box bounds must be finite with min <= max on every axis");

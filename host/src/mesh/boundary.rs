@@ -46,7 +46,11 @@ pub(crate) fn check_size(mesh: &TetMesh) -> Result<(), MeshError> {
 /// The first tetrahedron (in id order) with a node id out of range.
 pub(crate) fn check_indices(mesh: &TetMesh) -> Result<(), MeshError> {
     let n = mesh.nodes.len();
-    if let Some(t) = mesh.tets.par_iter().position_first(|t| t.iter().any(|&v| v >= n)) {
+    if let Some(t) = mesh
+        .tets
+        .par_iter()
+        .position_first(|t| t.iter().any(|&v| v >= n))
+    {
         let node = mesh.tets[t].iter().copied().find(|&v| v >= n).unwrap_or(n);
         return Err(MeshError::NodeIndexOutOfRange {
             file: nofile(),
@@ -200,7 +204,9 @@ pub(crate) fn surface(mesh: &TetMesh) -> Result<Surface, MeshError> {
             let (ri, rj) = (find(&mut parent, i), find(&mut parent, j));
             parent[ri] = rj;
         }
-        let fans = (0..local.len()).filter(|&i| find(&mut parent, i) == i).count();
+        let fans = (0..local.len())
+            .filter(|&i| find(&mut parent, i) == i)
+            .count();
         if fans != 1 {
             return Err(MeshError::NonManifoldVertex {
                 file: nofile(),
@@ -240,7 +246,10 @@ mod tests {
             assert!(dot(n, sub(pa, centroid)) > 0.0);
         }
         // Inverted: still outward.
-        let inv = TetMesh { nodes: m.nodes.clone(), tets: vec![[0, 2, 1, 3]] };
+        let inv = TetMesh {
+            nodes: m.nodes.clone(),
+            tets: vec![[0, 2, 1, 3]],
+        };
         for [a, b, c] in boundary(&inv).unwrap().triangles {
             let (pa, pb, pc) = (m.nodes[a], m.nodes[b], m.nodes[c]);
             let n = cross(sub(pb, pa), sub(pc, pa));
@@ -259,8 +268,14 @@ mod tests {
 
     #[test]
     fn out_of_range_is_an_error_not_a_panic() {
-        let m = TetMesh { nodes: vec![[0.0; 3]; 3], tets: vec![[0, 1, 2, 3]] };
+        let m = TetMesh {
+            nodes: vec![[0.0; 3]; 3],
+            tets: vec![[0, 1, 2, 3]],
+        };
         let e = boundary(&m).unwrap_err().to_string();
-        assert_eq!(e, "tetrahedron 0 refers to node 3, but the mesh has only 3 nodes");
+        assert_eq!(
+            e,
+            "tetrahedron 0 refers to node 3, but the mesh has only 3 nodes"
+        );
     }
 }

@@ -93,7 +93,9 @@ pub enum MeshError {
         kind: String,
     },
     /// A Gmsh element refers to a node tag that the `$Nodes` section does not define.
-    #[error("{file}element {element} refers to node tag {node_tag}, which is not defined in $Nodes")]
+    #[error(
+        "{file}element {element} refers to node tag {node_tag}, which is not defined in $Nodes"
+    )]
     UnknownNodeTag {
         /// The file.
         file: Origin,
@@ -111,7 +113,9 @@ pub enum MeshError {
         nodes: usize,
     },
     /// A tetrahedron refers to a node id that does not exist.
-    #[error("{file}tetrahedron {tet} refers to node {node}, but the mesh has only {num_nodes} nodes")]
+    #[error(
+        "{file}tetrahedron {tet} refers to node {node}, but the mesh has only {num_nodes} nodes"
+    )]
     NodeIndexOutOfRange {
         /// The file.
         file: Origin,
@@ -178,7 +182,9 @@ pub enum MeshError {
         node: usize,
     },
     /// Two nodes at the same position (within `1e-12` of the bounding-box diagonal).
-    #[error("{file}nodes {first} and {second} coincide (both at {coords:?}, distance {distance:.2e} m)")]
+    #[error(
+        "{file}nodes {first} and {second} coincide (both at {coords:?}, distance {distance:.2e} m)"
+    )]
     DuplicateNodes {
         /// The file.
         file: Origin,
@@ -258,7 +264,9 @@ pub enum MeshError {
         fans: usize,
     },
     /// The mesh is too large for the 32-bit ids used internally.
-    #[error("{file}mesh too large ({nodes} nodes, {tets} tetrahedra; at most 2^32 - 1 and 2^30 - 1)")]
+    #[error(
+        "{file}mesh too large ({nodes} nodes, {tets} tetrahedra; at most 2^32 - 1 and 2^30 - 1)"
+    )]
     TooLarge {
         /// The file.
         file: Origin,

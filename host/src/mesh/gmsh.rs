@@ -16,7 +16,12 @@ const GMSH_TET4: i64 = 4;
 /// Dimension and human-readable name of a Gmsh element type, `None` if unknown.
 pub(crate) fn element_kind(ty: i64) -> Option<(u8, Cow<'static, str>)> {
     let fixed = |dim: u8, name: &'static str| Some((dim, Cow::Borrowed(name)));
-    let family = |dim: u8, family: &str| Some((dim, Cow::Owned(format!("{family} (Gmsh element type {ty})"))));
+    let family = |dim: u8, family: &str| {
+        Some((
+            dim,
+            Cow::Owned(format!("{family} (Gmsh element type {ty})")),
+        ))
+    };
     match ty {
         1 => fixed(1, "2-node line"),
         2 => fixed(2, "3-node triangle"),
@@ -39,9 +44,7 @@ pub(crate) fn element_kind(ty: i64) -> Option<(u8, Cow<'static, str>)> {
         19 => fixed(3, "13-node pyramid"),
         20..=25 | 42..=46 | 52..=56 | 68 | 85 | 135 | 138 | 140 => family(2, "high-order triangle"),
         26..=28 | 62..=67 | 70 | 84 | 134 => family(1, "line"),
-        29..=33 | 71..=75 | 79..=83 | 87 | 136 | 137 | 139 => {
-            family(3, "high-order tetrahedron")
-        }
+        29..=33 | 71..=75 | 79..=83 | 87 | 136 | 137 | 139 => family(3, "high-order tetrahedron"),
         34 | 69 => family(2, "polygon"),
         35 => family(3, "polyhedron"),
         36..=41 | 47..=51 | 57..=61 | 86 => family(2, "high-order quadrangle"),
@@ -67,7 +70,7 @@ pub(crate) fn read_msh(bytes: &[u8]) -> Result<TetMesh, MeshError> {
             }
             read_msh2(bytes)
         }
-        Some(v) if v == 4.1 => read_msh41(bytes, &header),
+        _ if header.version == "4.1" => read_msh41(bytes, &header),
         _ => Err(MeshError::UnsupportedVersion {
             file: nofile(),
             version: header.version,
@@ -99,9 +102,9 @@ fn read_header(bytes: &[u8]) -> Result<Header, MeshError> {
             show(first)
         )));
     }
-    let line = c.next_nonblank_line().ok_or_else(|| {
-        c.err("unexpected end of file in $MeshFormat (file truncated?)")
-    })?;
+    let line = c
+        .next_nonblank_line()
+        .ok_or_else(|| c.err("unexpected end of file in $MeshFormat (file truncated?)"))?;
     let mut t = tokens(line);
     let (Some(v), Some(ft), Some(ds)) = (t.next(), t.next(), t.next()) else {
         return Err(c.err(format!(
@@ -113,9 +116,12 @@ fn read_header(bytes: &[u8]) -> Result<Header, MeshError> {
     if parse_num::<f64>(v).is_none() {
         return Err(c.err(format!("invalid MSH version {}", show(v))));
     }
-    let file_type = parse_num(ft)
-        .filter(|&x: &u32| x <= 1)
-        .ok_or_else(|| c.err(format!("invalid MSH file type {} (expected 0 or 1)", show(ft))))?;
+    let file_type = parse_num(ft).filter(|&x: &u32| x <= 1).ok_or_else(|| {
+        c.err(format!(
+            "invalid MSH file type {} (expected 0 or 1)",
+            show(ft)
+        ))
+    })?;
     let data_size = parse_num(ds)
         .filter(|&x: &u32| (1..=16).contains(&x))
         .ok_or_else(|| c.err(format!("invalid MSH data size {}", show(ds))))?;
@@ -157,9 +163,9 @@ fn read_msh2(bytes: &[u8]) -> Result<TetMesh, MeshError> {
                     return Err(c.err("second $Nodes section (only one is supported)"));
                 }
                 seen_nodes = true;
-                let count_line = c
-                    .next_nonblank_line()
-                    .ok_or_else(|| c.err("unexpected end of file after $Nodes (file truncated?)"))?;
+                let count_line = c.next_nonblank_line().ok_or_else(|| {
+                    c.err("unexpected end of file after $Nodes (file truncated?)")
+                })?;
                 let n: usize = parse_num(count_line).ok_or_else(|| {
                     c.err(format!("invalid number of nodes {}", show(count_line)))
                 })?;
@@ -304,13 +310,11 @@ fn read_msh2_element(
     let mut tet = [0usize; 4];
     for (k, slot) in tet.iter_mut().enumerate() {
         let node_tag = int(first_node + k, "node tag")?;
-        *slot = *tag_to_id
-            .get(&node_tag)
-            .ok_or(MeshError::UnknownNodeTag {
-                file: nofile(),
-                element: tag,
-                node_tag,
-            })?;
+        *slot = *tag_to_id.get(&node_tag).ok_or(MeshError::UnknownNodeTag {
+            file: nofile(),
+            element: tag,
+            node_tag,
+        })?;
     }
     tets.push(tet);
     Ok(())
@@ -368,7 +372,19 @@ fn convert_mshio_error(e: &mshio::MshParserError<&[u8]>, bytes: &[u8], binary: b
         .filter_msh_errors()
         .find(|(_, k)| k.context().is_none())
         .or_else(|| e.backtrace.first())
-        .map(|(_, k)| k.to_string())
+        .map(|(_, k)| match k {
+            // Bare nom errors: say what was expected.
+            mshio::error::MshParserErrorKind::NomError(kind) => {
+                match format!("{kind:?}").as_str() {
+                    "Tag" => "expected a section tag such as \"$EndNodes\"".to_string(),
+                    "Digit" => "expected an integer".to_string(),
+                    "Float" | "Double" => "expected a number".to_string(),
+                    "Eof" => "data ends early".to_string(),
+                    other => format!("malformed data ({other})"),
+                }
+            }
+            k => k.to_string(),
+        })
         .unwrap_or_else(|| "invalid data".into());
     let at_end = if binary {
         rest.len() < 8
@@ -492,7 +508,6 @@ fn msh41_to_mesh(msh: &mshio::MshFile<u64, i32, f64>) -> Result<TetMesh, MeshErr
         }
     }
     let mesh = TetMesh { nodes, tets };
-    drop(tag_to_id);
     Ok(mesh)
 }
 
@@ -514,7 +529,17 @@ impl TetMesh {
         let n = self.nodes.len();
         let t = self.tets.len();
         writeln!(w, "$MeshFormat\n4.1 0 8\n$EndMeshFormat")?;
-        writeln!(w, "$Entities\n0 0 0 1\n1 0 0 0 0 0 0 0 0\n$EndEntities")?;
+        let (lo, hi) = if n == 0 {
+            ([0.0; 3], [0.0; 3])
+        } else {
+            self.bounding_box()
+        };
+        let bbox: Vec<String> = lo.iter().chain(&hi).map(|&v| fmt_coord(v)).collect();
+        writeln!(
+            w,
+            "$Entities\n0 0 0 1\n1 {} 0 0\n$EndEntities",
+            bbox.join(" ")
+        )?;
         writeln!(w, "$Nodes")?;
         if n == 0 {
             writeln!(w, "0 0 0 0")?;
@@ -524,7 +549,13 @@ impl TetMesh {
                 writeln!(w, "{i}")?;
             }
             for p in &self.nodes {
-                writeln!(w, "{} {} {}", fmt_coord(p[0]), fmt_coord(p[1]), fmt_coord(p[2]))?;
+                writeln!(
+                    w,
+                    "{} {} {}",
+                    fmt_coord(p[0]),
+                    fmt_coord(p[1]),
+                    fmt_coord(p[2])
+                )?;
             }
         }
         writeln!(w, "$EndNodes\n$Elements")?;
@@ -549,7 +580,10 @@ mod tests {
         assert_eq!(element_kind(4).map(|k| k.0), Some(3));
         assert_eq!(element_kind(2).map(|k| k.0), Some(2));
         assert_eq!(element_kind(15).map(|k| k.0), Some(0));
-        assert_eq!(element_kind(11).map(|k| k.1.into_owned()).as_deref(), Some("10-node tetrahedron"));
+        assert_eq!(
+            element_kind(11).map(|k| k.1.into_owned()).as_deref(),
+            Some("10-node tetrahedron")
+        );
         assert!(element_kind(141).is_none());
         assert!(element_kind(-1).is_none());
     }
@@ -572,11 +606,41 @@ mod tests {
         let mut buf = Vec::new();
         m.write_msh4_ascii(&mut buf).unwrap();
         assert_eq!(read_msh(&buf).unwrap(), m);
-        let empty = TetMesh { nodes: vec![], tets: vec![] };
+        let empty = TetMesh {
+            nodes: vec![],
+            tets: vec![],
+        };
         let mut buf = Vec::new();
         empty.write_msh4_ascii(&mut buf).unwrap();
         // Must not panic; an empty mesh either reads back empty or is rejected.
         let _ = read_msh(&buf);
+    }
+
+    #[test]
+    fn malformed_v41_is_an_error_not_a_panic() {
+        // Zero nodes with tags 1..1: `mshio` subtracts 1 from the count (a panic with overflow
+        // checks on, caught here).
+        let text = "$MeshFormat\n4.1 0 8\n$EndMeshFormat\n$Nodes\n1 0 1 1\n$EndNodes\n";
+        assert!(read_msh(text.as_bytes()).is_err());
+        let e = read_msh(b"$MeshFormat\n4.1 1 3\n").unwrap_err().to_string();
+        assert_eq!(
+            e,
+            "line 2: unsupported data size 3 in $MeshFormat (expected 8)"
+        );
+        let e = read_msh(b"$MeshFormat\n4.1 0 99999999999999999999\n")
+            .unwrap_err()
+            .to_string();
+        assert!(e.starts_with("line 2: invalid MSH data size"), "{e}");
+        let e = read_msh(
+            b"$MeshFormat\n4.1 0 8\n$EndMeshFormat\n$Nodes\n1 2 1 2\n3 1 0 2\n1\n2\n0 0 0\n",
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(
+            e.starts_with("line 10: unexpected end of file (file truncated?)"),
+            "{e}"
+        );
+        assert!(e.contains("node section"), "{e}");
     }
 
     #[test]

@@ -9,9 +9,9 @@ use std::path::Path;
 pub enum Format {
     /// Gmsh `.msh`: version 2 ASCII, version 4.1 ASCII or binary (detected from `$MeshFormat`).
     Msh,
-    /// VTK XML unstructured grid `.vtu`.
+    /// VTK XML unstructured grid `.vtu` (ascii, base64 or raw appended data; zlib or none).
     Vtu,
-    /// Legacy VTK `.vtk`, ASCII (classic or version 5.1 layout) or binary (classic layout).
+    /// Legacy VTK `.vtk`, ASCII or binary, classic or version 5.1 (`OFFSETS`/`CONNECTIVITY`) layout.
     Vtk,
 }
 

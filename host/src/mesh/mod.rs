@@ -5,9 +5,10 @@
 //!
 //! - [`load`] = [`read`] + [`validate`]; [`read_bytes`] parses in-memory file contents.
 //! - Formats: Gmsh MSH 2 ASCII (own parser), MSH 4.1 ASCII and binary (via `mshio`), legacy VTK
-//!   ASCII (own parser; classic and 5.1 layouts) and binary (via `vtkio`), VTK XML `.vtu` (own
-//!   reader: ascii, base64 and raw appended data, optionally zlib-compressed). Gmsh node tags
-//!   may be arbitrary and are mapped to positions.
+//!   `.vtk` ASCII and binary, classic and 5.1 layouts (own parser), VTK XML `.vtu` (own reader:
+//!   ascii, base64 and raw appended data, optionally zlib-compressed). Gmsh node tags may be
+//!   arbitrary and are mapped to positions. (`vtkio` is not used: it cannot read meshio's
+//!   `.vtu` files nor VTK 5.1 files, and prints to stderr or panics on malformed input.)
 //! - Elements of dimension < 3 (points, lines, surface triangles) are ignored; 3D elements other
 //!   than 4-node tetrahedra are an error ([`MeshError::UnsupportedElement`]).
 //! - [`boundary`] gives the outward-oriented boundary triangles.

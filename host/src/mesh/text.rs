@@ -128,7 +128,8 @@ pub(crate) fn parse_num<T: FromStr>(tok: &[u8]) -> Option<T> {
 
 /// Split a line into whitespace-separated tokens.
 pub(crate) fn tokens(line: &[u8]) -> impl Iterator<Item = &[u8]> {
-    line.split(|b| b.is_ascii_whitespace()).filter(|t| !t.is_empty())
+    line.split(|b| b.is_ascii_whitespace())
+        .filter(|t| !t.is_empty())
 }
 
 /// Strip leading and trailing ASCII whitespace.

@@ -59,7 +59,11 @@ pub fn validate(mesh: &TetMesh) -> Result<(), MeshError> {
 
 fn check_repeated(mesh: &TetMesh) -> Result<(), MeshError> {
     let repeated = |t: &[usize; 4]| (0..4).find(|&i| t[i + 1..].contains(&t[i]));
-    if let Some(t) = mesh.tets.par_iter().position_first(|t| repeated(t).is_some()) {
+    if let Some(t) = mesh
+        .tets
+        .par_iter()
+        .position_first(|t| repeated(t).is_some())
+    {
         let nodes = mesh.tets[t];
         let node = repeated(&nodes).map_or(0, |i| nodes[i]);
         return Err(MeshError::RepeatedNode {
@@ -105,12 +109,16 @@ fn check_duplicate_nodes(mesh: &TetMesh) -> Result<(), MeshError> {
         }
     };
     if !(tol > 0.0 && tol.is_finite()) {
-        // All nodes at one point (or none): only exact duplicates are possible.
-        return if mesh.nodes.len() > 1 {
-            Err(report(0, 1))
-        } else {
-            Ok(())
-        };
+        // All nodes at one point, or a bounding box too large for f64: exact duplicates only.
+        let key = |p: &[f64; 3]| p.map(|x| (x + 0.0).to_bits());
+        let mut seen: HashMap<[u64; 3], usize> = HashMap::with_capacity(mesh.nodes.len());
+        for (j, p) in mesh.nodes.iter().enumerate() {
+            if let Some(&i) = seen.get(&key(p)) {
+                return Err(report(i, j));
+            }
+            seen.insert(key(p), j);
+        }
+        return Ok(());
     }
     let h = 4.0 * tol;
     let rel = tol / h;
@@ -169,15 +177,20 @@ fn check_unreferenced(mesh: &TetMesh) -> Result<(), MeshError> {
     Ok(())
 }
 
+/// Quality below the threshold, or NaN (all four nodes at one point).
+fn is_degenerate(quality: f64) -> bool {
+    quality.is_nan() || quality.abs() < DEGENERATE_QUALITY
+}
+
 fn check_shapes(mesh: &TetMesh) -> Result<(), MeshError> {
     let bad = |t: usize| {
         let q = mesh.quality(t);
-        !(q.abs() >= DEGENERATE_QUALITY) || q < 0.0
+        is_degenerate(q) || q < 0.0
     };
     if let Some(t) = (0..mesh.tets.len()).into_par_iter().position_first(bad) {
         let quality = mesh.quality(t);
         let volume = mesh.signed_volume(t);
-        return Err(if !(quality.abs() >= DEGENERATE_QUALITY) {
+        return Err(if is_degenerate(quality) {
             MeshError::DegenerateTet {
                 file: nofile(),
                 tet: t,
@@ -258,11 +271,49 @@ mod tests {
         let c = m.nodes[13];
         m.nodes.push([c[0] + 1e-13, c[1], c[2] - 1e-13]);
         let e = validate(&m).unwrap_err();
-        assert!(matches!(e, MeshError::DuplicateNodes { first: 13, second: 27, .. }), "{e}");
+        assert!(
+            matches!(
+                e,
+                MeshError::DuplicateNodes {
+                    first: 13,
+                    second: 27,
+                    ..
+                }
+            ),
+            "{e}"
+        );
         // 1e-9 apart is not a duplicate (it is unreferenced instead).
         m.nodes[27] = [c[0] + 1e-9, c[1], c[2]];
         let e = validate(&m).unwrap_err();
-        assert!(matches!(e, MeshError::UnreferencedNode { node: 27, .. }), "{e}");
+        assert!(
+            matches!(e, MeshError::UnreferencedNode { node: 27, .. }),
+            "{e}"
+        );
+    }
+
+    #[test]
+    fn huge_coordinates_do_not_fake_duplicates() {
+        let mut m = unit_tet();
+        m.nodes[1] = [1e308, 0.0, 0.0];
+        m.nodes[2] = [-1e308, 1.0, 0.0];
+        // The bounding-box diagonal overflows; distinct nodes must not be reported.
+        assert!(!matches!(
+            validate(&m),
+            Err(MeshError::DuplicateNodes { .. })
+        ));
+        m.nodes[3] = m.nodes[1];
+        let e = validate(&m).unwrap_err();
+        assert!(
+            matches!(
+                e,
+                MeshError::DuplicateNodes {
+                    first: 1,
+                    second: 3,
+                    ..
+                }
+            ),
+            "{e}"
+        );
     }
 
     #[test]
@@ -279,11 +330,17 @@ mod tests {
 
     #[test]
     fn empty_and_out_of_range() {
-        let m = TetMesh { nodes: vec![], tets: vec![] };
+        let m = TetMesh {
+            nodes: vec![],
+            tets: vec![],
+        };
         assert!(matches!(validate(&m), Err(MeshError::NoTetrahedra { .. })));
         let mut m = unit_tet();
         m.tets[0][2] = 17;
         let e = validate(&m).unwrap_err().to_string();
-        assert_eq!(e, "tetrahedron 0 refers to node 17, but the mesh has only 4 nodes");
+        assert_eq!(
+            e,
+            "tetrahedron 0 refers to node 17, but the mesh has only 4 nodes"
+        );
     }
 }

@@ -44,7 +44,10 @@ fn cell_kind(ty: u32) -> Option<(u8, &'static str)> {
         30 => (2, "VTK_QUADRATIC_LINEAR_QUAD"),
         31 => (3, "VTK_QUADRATIC_LINEAR_WEDGE (12-node wedge)"),
         32 => (3, "VTK_BIQUADRATIC_QUADRATIC_WEDGE (18-node wedge)"),
-        33 => (3, "VTK_BIQUADRATIC_QUADRATIC_HEXAHEDRON (24-node hexahedron)"),
+        33 => (
+            3,
+            "VTK_BIQUADRATIC_QUADRATIC_HEXAHEDRON (24-node hexahedron)",
+        ),
         34 => (2, "VTK_BIQUADRATIC_TRIANGLE"),
         35 => (1, "VTK_CUBIC_LINE"),
         36 => (2, "VTK_QUADRATIC_POLYGON"),
@@ -95,7 +98,7 @@ pub(crate) struct Builder {
 impl Builder {
     /// Add the points of a piece from a flat `x y z x y z ...` array.
     pub(crate) fn add_points(&mut self, flat: &[f64]) -> Result<(), MeshError> {
-        if flat.len() % 3 != 0 {
+        if !flat.len().is_multiple_of(3) {
             return Err(format_err(format!(
                 "the points array has {} values, not a multiple of 3",
                 flat.len()
@@ -178,9 +181,9 @@ pub(crate) fn read_legacy(bytes: &[u8]) -> Result<TetMesh, MeshError> {
     }
     c.next_line()
         .ok_or_else(|| c.err("unexpected end of file: missing title line (file truncated?)"))?;
-    let enc = c
-        .next_nonblank_line()
-        .ok_or_else(|| c.err("unexpected end of file: missing ASCII/BINARY line (file truncated?)"))?;
+    let enc = c.next_nonblank_line().ok_or_else(|| {
+        c.err("unexpected end of file: missing ASCII/BINARY line (file truncated?)")
+    })?;
     match enc.to_ascii_uppercase().as_slice() {
         b"ASCII" => read_legacy_ascii(c, bytes.len()),
         b"BINARY" => {
@@ -342,7 +345,10 @@ fn assemble(
     out.add_points(points)?;
     for (ty, w) in types.iter().zip(offsets.windows(2)) {
         let verts = conn.get(w[0]..w[1]).ok_or_else(|| {
-            format_err(format!("cell {} has invalid offsets {}..{}", out.cells, w[0], w[1]))
+            format_err(format!(
+                "cell {} has invalid offsets {}..{}",
+                out.cells, w[0], w[1]
+            ))
         })?;
         out.add_cell(*ty, verts, 0)?;
     }
@@ -368,7 +374,10 @@ impl<'a> Bin<'a> {
     fn line(&mut self) -> Option<(usize, Vec<&'a [u8]>)> {
         loop {
             let rest = self.b.get(self.pos..).filter(|r| !r.is_empty())?;
-            let len = rest.iter().position(|&c| c == b'\n').map_or(rest.len(), |i| i + 1);
+            let len = rest
+                .iter()
+                .position(|&c| c == b'\n')
+                .map_or(rest.len(), |i| i + 1);
             let at = self.pos;
             self.pos += len;
             let toks: Vec<&[u8]> = super::text::tokens(&rest[..len]).collect();
@@ -380,15 +389,18 @@ impl<'a> Bin<'a> {
 
     fn take(&mut self, n: usize, what: &str) -> Result<&'a [u8], MeshError> {
         let at = self.pos;
-        let end = at.checked_add(n).filter(|&e| e <= self.b.len()).ok_or_else(|| {
-            self.err(
+        let end = at
+            .checked_add(n)
+            .filter(|&e| e <= self.b.len())
+            .ok_or_else(|| {
+                self.err(
                 at,
                 format!(
                     "unexpected end of file in {what}: {n} bytes needed, {} left (file truncated?)",
                     self.b.len().saturating_sub(at)
                 ),
             )
-        })?;
+            })?;
         self.pos = end;
         Ok(&self.b[at..end])
     }
@@ -409,7 +421,7 @@ impl<'a> Bin<'a> {
             b"unsigned_long" | b"vtktypeuint64" => (8, 'u'),
             _ => return Err(self.err(at, format!("unsupported data type {} for {what}", show(ty)))),
         };
-        let bytes = self.take(n.checked_mul(size).unwrap_or(usize::MAX), what)?;
+        let bytes = self.take(n.saturating_mul(size), what)?;
         Ok(bytes
             .chunks_exact(size)
             .map(|c| {
@@ -465,26 +477,40 @@ impl Num {
 
 /// The body of a binary legacy file, from byte `start` (just after the `BINARY` line).
 fn read_legacy_binary(bytes: &[u8], start: usize) -> Result<TetMesh, MeshError> {
-    let mut r = Bin { b: bytes, pos: start };
-    let parse_count = |r: &Bin<'_>, at: usize, tok: Option<&&[u8]>, what: &str| -> Result<usize, MeshError> {
-        tok.and_then(|t| parse_num(t))
-            .ok_or_else(|| r.err(at, format!("missing or invalid {what}")))
+    let mut r = Bin {
+        b: bytes,
+        pos: start,
     };
-    let (at, toks) = r.line().ok_or_else(|| r.err(start, "unexpected end of file before DATASET"))?;
+    let parse_count =
+        |r: &Bin<'_>, at: usize, tok: Option<&&[u8]>, what: &str| -> Result<usize, MeshError> {
+            tok.and_then(|t| parse_num(t))
+                .ok_or_else(|| r.err(at, format!("missing or invalid {what}")))
+        };
+    let (at, toks) = r
+        .line()
+        .ok_or_else(|| r.err(start, "unexpected end of file before DATASET"))?;
     let is = |t: Option<&&[u8]>, kw: &[u8]| t.is_some_and(|t| t.eq_ignore_ascii_case(kw));
     if !is(toks.first(), b"DATASET") || !is(toks.get(1), b"UNSTRUCTURED_GRID") {
-        return Err(r.err(at, "expected \"DATASET UNSTRUCTURED_GRID\" (only unstructured grids hold tetrahedra)"));
+        return Err(r.err(
+            at,
+            "expected \"DATASET UNSTRUCTURED_GRID\" (only unstructured grids hold tetrahedra)",
+        ));
     }
     let mut points: Option<Vec<f64>> = None;
     let mut cells: Option<(Vec<usize>, Vec<u64>)> = None;
     let mut types: Option<Vec<u32>> = None;
     while let Some((at, toks)) = r.line() {
-        let kw = toks.first().map(|t| t.to_ascii_uppercase()).unwrap_or_default();
+        let kw = toks
+            .first()
+            .map(|t| t.to_ascii_uppercase())
+            .unwrap_or_default();
         match kw.as_slice() {
             b"FIELD" => {
                 let arrays = parse_count(&r, at, toks.get(2), "number of field arrays")?;
                 for _ in 0..arrays {
-                    let (at, t) = r.line().ok_or_else(|| r.err(r.pos, "unexpected end of file in FIELD"))?;
+                    let (at, t) = r
+                        .line()
+                        .ok_or_else(|| r.err(r.pos, "unexpected end of file in FIELD"))?;
                     let comps = parse_count(&r, at, t.get(1), "number of components")?;
                     let tuples = parse_count(&r, at, t.get(2), "number of tuples")?;
                     let ty = t.get(3).copied().unwrap_or(b"");
@@ -507,7 +533,7 @@ fn read_legacy_binary(bytes: &[u8], start: usize) -> Result<TetMesh, MeshError> 
             b"POINTS" => {
                 let n = parse_count(&r, at, toks.get(1), "number of points")?;
                 let ty = toks.get(2).copied().unwrap_or(b"");
-                let v = r.numbers(n.checked_mul(3).unwrap_or(usize::MAX), ty, "point coordinates")?;
+                let v = r.numbers(n.saturating_mul(3), ty, "point coordinates")?;
                 points = Some(
                     v.iter()
                         .map(|x| match *x {
@@ -526,13 +552,18 @@ fn read_legacy_binary(bytes: &[u8], start: usize) -> Result<TetMesh, MeshError> 
                     Some((at2, t)) if is(t.first(), b"OFFSETS") => {
                         let ty = t.get(1).copied().unwrap_or(b"");
                         let offsets = r.indices(a, ty, "cell offsets")?;
-                        let (at3, t) = r.line().ok_or_else(|| r.err(r.pos, "unexpected end of file: missing CONNECTIVITY"))?;
+                        let (at3, t) = r.line().ok_or_else(|| {
+                            r.err(r.pos, "unexpected end of file: missing CONNECTIVITY")
+                        })?;
                         if !is(t.first(), b"CONNECTIVITY") {
                             return Err(r.err(at3, "expected CONNECTIVITY after the cell offsets"));
                         }
                         let ty = t.get(1).copied().unwrap_or(b"");
                         let conn = r.indices(b, ty, "cell connectivity")?;
-                        let offsets: Vec<usize> = offsets.iter().map(|&o| usize::try_from(o).unwrap_or(usize::MAX)).collect();
+                        let offsets: Vec<usize> = offsets
+                            .iter()
+                            .map(|&o| usize::try_from(o).unwrap_or(usize::MAX))
+                            .collect();
                         let bad = offsets.first().is_some_and(|&o| o != 0)
                             || offsets.windows(2).any(|w| w[0] > w[1])
                             || offsets.last().is_some_and(|&o| o != conn.len());
@@ -557,7 +588,10 @@ fn read_legacy_binary(bytes: &[u8], start: usize) -> Result<TetMesh, MeshError> 
                             i += 1 + k;
                         }
                         if i != b {
-                            return Err(r.err(at, format!("CELLS header says {b} numbers, the cells use {i}")));
+                            return Err(r.err(
+                                at,
+                                format!("CELLS header says {b} numbers, the cells use {i}"),
+                            ));
                         }
                         cells = Some((offsets, conn));
                     }
@@ -566,14 +600,21 @@ fn read_legacy_binary(bytes: &[u8], start: usize) -> Result<TetMesh, MeshError> 
             b"CELL_TYPES" => {
                 let n = parse_count(&r, at, toks.get(1), "number of cell types")?;
                 let v = r.indices(n, b"int", "cell types")?;
-                types = Some(v.iter().map(|&t| u32::try_from(t).unwrap_or(u32::MAX)).collect());
+                types = Some(
+                    v.iter()
+                        .map(|&t| u32::try_from(t).unwrap_or(u32::MAX))
+                        .collect(),
+                );
             }
             b"POINT_DATA" | b"CELL_DATA" => break,
             _ => {
-                return Err(r.err(at, format!(
-                    "unexpected keyword {} (expected POINTS, CELLS or CELL_TYPES)",
-                    show(toks.first().copied().unwrap_or(b""))
-                )));
+                return Err(r.err(
+                    at,
+                    format!(
+                        "unexpected keyword {} (expected POINTS, CELLS or CELL_TYPES)",
+                        show(toks.first().copied().unwrap_or(b""))
+                    ),
+                ));
             }
         }
     }
@@ -633,6 +674,9 @@ mod tests {
         assert_eq!(e, "line 10: invalid y coordinate \"zero\" of point 3");
         let hex = TET_V4.replace("\n10\n", "\n12\n");
         let e = read_legacy(hex.as_bytes()).unwrap_err().to_string();
-        assert!(e.contains("element 1 is of unsupported type VTK_HEXAHEDRON"), "{e}");
+        assert!(
+            e.contains("element 1 is of unsupported type VTK_HEXAHEDRON"),
+            "{e}"
+        );
     }
 }

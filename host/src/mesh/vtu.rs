@@ -113,16 +113,38 @@ fn next_tag(xml: &[u8], mut pos: usize) -> Res<Option<Tag<'_>>> {
                 i += 1;
             }
             match xml.get(i) {
-                None => return Err(At(lt, "unexpected end of file inside a tag (file truncated?)".into())),
+                None => {
+                    return Err(At(
+                        lt,
+                        "unexpected end of file inside a tag (file truncated?)".into(),
+                    ));
+                }
                 Some(b'>') => {
-                    return Ok(Some(Tag { name, attrs, closing, empty: false, start: lt, end: i + 1 }));
+                    return Ok(Some(Tag {
+                        name,
+                        attrs,
+                        closing,
+                        empty: false,
+                        start: lt,
+                        end: i + 1,
+                    }));
                 }
                 Some(b'/') if xml.get(i + 1) == Some(&b'>') => {
-                    return Ok(Some(Tag { name, attrs, closing, empty: true, start: lt, end: i + 2 }));
+                    return Ok(Some(Tag {
+                        name,
+                        attrs,
+                        closing,
+                        empty: true,
+                        start: lt,
+                        end: i + 2,
+                    }));
                 }
                 Some(_) => {
                     let k0 = i;
-                    while i < xml.len() && !matches!(xml[i], b'=' | b'>' | b'/') && !xml[i].is_ascii_whitespace() {
+                    while i < xml.len()
+                        && !matches!(xml[i], b'=' | b'>' | b'/')
+                        && !xml[i].is_ascii_whitespace()
+                    {
                         i += 1;
                     }
                     let key = &xml[k0..i];
@@ -130,7 +152,10 @@ fn next_tag(xml: &[u8], mut pos: usize) -> Res<Option<Tag<'_>>> {
                         i += 1;
                     }
                     if xml.get(i) != Some(&b'=') {
-                        return Err(At(lt, format!("malformed attribute {:?}", String::from_utf8_lossy(key))));
+                        return Err(At(
+                            lt,
+                            format!("malformed attribute {:?}", String::from_utf8_lossy(key)),
+                        ));
                     }
                     i += 1;
                     while i < xml.len() && xml[i].is_ascii_whitespace() {
@@ -144,7 +169,9 @@ fn next_tag(xml: &[u8], mut pos: usize) -> Res<Option<Tag<'_>>> {
                         .get(v0..)
                         .and_then(|r| r.iter().position(|&c| c == q))
                         .map(|p| p + v0)
-                        .ok_or_else(|| At(lt, "unterminated attribute value (file truncated?)".into()))?;
+                        .ok_or_else(|| {
+                            At(lt, "unterminated attribute value (file truncated?)".into())
+                        })?;
                     attrs.push((key, &xml[v0..v1]));
                     i = v1 + 1;
                 }
@@ -239,11 +266,17 @@ impl Encoding {
             Scalar::U8 => Num::Int(i128::from(buf[0])),
             Scalar::I16 => Num::Int(i128::from(i16::from_le_bytes([buf[0], buf[1]]))),
             Scalar::U16 => Num::Int(i128::from(u16::from_le_bytes([buf[0], buf[1]]))),
-            Scalar::I32 => Num::Int(i128::from(i32::from_le_bytes([buf[0], buf[1], buf[2], buf[3]]))),
-            Scalar::U32 => Num::Int(i128::from(u32::from_le_bytes([buf[0], buf[1], buf[2], buf[3]]))),
+            Scalar::I32 => Num::Int(i128::from(i32::from_le_bytes([
+                buf[0], buf[1], buf[2], buf[3],
+            ]))),
+            Scalar::U32 => Num::Int(i128::from(u32::from_le_bytes([
+                buf[0], buf[1], buf[2], buf[3],
+            ]))),
             Scalar::I64 => Num::Int(i128::from(i64::from_le_bytes(buf))),
             Scalar::U64 => Num::Int(i128::from(u64::from_le_bytes(buf))),
-            Scalar::F32 => Num::Float(f64::from(f32::from_le_bytes([buf[0], buf[1], buf[2], buf[3]]))),
+            Scalar::F32 => Num::Float(f64::from(f32::from_le_bytes([
+                buf[0], buf[1], buf[2], buf[3],
+            ]))),
             Scalar::F64 => Num::Float(f64::from_le_bytes(buf)),
         }
     }
@@ -334,10 +367,15 @@ fn decode_array(
     appended: Option<&[u8]>,
 ) -> Res<Vec<Num>> {
     let at = tag.start;
-    let ty = tag
-        .attr("type")
-        .and_then(Scalar::parse)
-        .ok_or_else(|| At(at, format!("missing or unsupported DataArray type {:?}", tag.attr_str("type").unwrap_or_default())))?;
+    let ty = tag.attr("type").and_then(Scalar::parse).ok_or_else(|| {
+        At(
+            at,
+            format!(
+                "missing or unsupported DataArray type {:?}",
+                tag.attr_str("type").unwrap_or_default()
+            ),
+        )
+    })?;
     let format = tag.attr("format").unwrap_or(b"ascii");
     let raw: Vec<u8> = match format {
         b"ascii" => {
@@ -354,20 +392,30 @@ fn decode_array(
                     v.ok_or_else(|| {
                         At(
                             tag.end + (t.as_ptr() as usize - content.as_ptr() as usize),
-                            format!("invalid number {:?} in a data array", String::from_utf8_lossy(t)),
+                            format!(
+                                "invalid number {:?} in a data array",
+                                String::from_utf8_lossy(t)
+                            ),
                         )
                     })
                 })
                 .collect();
         }
         b"binary" => {
-            let text: Vec<u8> = content.iter().copied().filter(|c| !c.is_ascii_whitespace()).collect();
+            let text: Vec<u8> = content
+                .iter()
+                .copied()
+                .filter(|c| !c.is_ascii_whitespace())
+                .collect();
             let h = enc.header_size();
             let bad = || At(at, "invalid base64 data in a binary data array".into());
             if enc.zlib {
                 // Header [nb][nu][np][nc_1..nc_nb] and blocks are base64-encoded separately.
                 let first = base64(text.get(..b64_len(h)).ok_or_else(bad)?).ok_or_else(bad)?;
-                let nb = first.get(..h).map(|b| enc.uint(b) as usize).ok_or_else(bad)?;
+                let nb = first
+                    .get(..h)
+                    .map(|b| enc.uint(b) as usize)
+                    .ok_or_else(bad)?;
                 let hlen = b64_len(nb.saturating_add(3).saturating_mul(h));
                 let header = base64(text.get(..hlen).ok_or_else(bad)?).ok_or_else(bad)?;
                 let blocks = base64(text.get(hlen..).ok_or_else(bad)?).ok_or_else(bad)?;
@@ -381,10 +429,16 @@ fn decode_array(
             }
         }
         b"appended" => {
-            let data = appended.ok_or_else(|| At(at, "appended data array but no raw <AppendedData>".into()))?;
+            let data = appended
+                .ok_or_else(|| At(at, "appended data array but no raw <AppendedData>".into()))?;
             let off = tag.attr_num("offset")?.unwrap_or(0) as usize;
             let h = enc.header_size();
-            let short = || At(at, "appended data array runs past the end of the file (file truncated?)".into());
+            let short = || {
+                At(
+                    at,
+                    "appended data array runs past the end of the file (file truncated?)".into(),
+                )
+            };
             let d = data.get(off..).ok_or_else(short)?;
             if enc.zlib {
                 let nb = d.get(..h).map(|b| enc.uint(b) as usize).ok_or_else(short)?;
@@ -397,12 +451,21 @@ fn decode_array(
             }
         }
         other => {
-            return Err(At(at, format!("unsupported DataArray format {:?}", String::from_utf8_lossy(other))));
+            return Err(At(
+                at,
+                format!(
+                    "unsupported DataArray format {:?}",
+                    String::from_utf8_lossy(other)
+                ),
+            ));
         }
     };
     let size = ty.size();
-    if raw.len() % size != 0 {
-        return Err(At(at, "binary data array length is not a multiple of its type size".into()));
+    if !raw.len().is_multiple_of(size) {
+        return Err(At(
+            at,
+            "binary data array length is not a multiple of its type size".into(),
+        ));
     }
     Ok(raw.chunks_exact(size).map(|b| enc.value(ty, b)).collect())
 }
@@ -438,7 +501,14 @@ fn finish_piece(p: PieceArrays, out: &mut Builder) -> Res<()> {
         })
         .collect();
     if flat.len() as u64 != p.num_points.saturating_mul(3) {
-        return Err(At(at, format!("{} point coordinates for NumberOfPoints=\"{}\"", flat.len(), p.num_points)));
+        return Err(At(
+            at,
+            format!(
+                "{} point coordinates for NumberOfPoints=\"{}\"",
+                flat.len(),
+                p.num_points
+            ),
+        ));
     }
     let point_offset = out.nodes.len();
     out.add_points(&flat).map_err(|e| At(at, e.to_string()))?;
@@ -459,15 +529,22 @@ fn finish_piece(p: PieceArrays, out: &mut Builder) -> Res<()> {
             ),
         ));
     }
-    let conn: Vec<u64> = conn.iter().map(|n| int(n, at, "point index")).collect::<Res<_>>()?;
+    let conn: Vec<u64> = conn
+        .iter()
+        .map(|n| int(n, at, "point index"))
+        .collect::<Res<_>>()?;
     let mut start = 0usize;
     for (o, t) in offsets.iter().zip(&types) {
         let end = int(o, at, "cell offset")? as usize;
         let ty = u32::try_from(int(t, at, "cell type")?).unwrap_or(u32::MAX);
-        let verts = conn
-            .get(start..end)
-            .ok_or_else(|| At(at, format!("cell offsets {start}..{end} outside the connectivity array")))?;
-        out.add_cell(ty, verts, point_offset).map_err(|e| At(at, e.to_string()))?;
+        let verts = conn.get(start..end).ok_or_else(|| {
+            At(
+                at,
+                format!("cell offsets {start}..{end} outside the connectivity array"),
+            )
+        })?;
+        out.add_cell(ty, verts, point_offset)
+            .map_err(|e| At(at, e.to_string()))?;
         start = end;
     }
     Ok(())
@@ -478,16 +555,28 @@ fn read(bytes: &[u8]) -> Res<TetMesh> {
     let (xml, appended) = match find(bytes, b"<AppendedData", 0) {
         None => (bytes, None),
         Some(a) => {
-            let tag = next_tag(bytes, a)?.ok_or_else(|| At(a, "truncated <AppendedData>".into()))?;
+            let tag =
+                next_tag(bytes, a)?.ok_or_else(|| At(a, "truncated <AppendedData>".into()))?;
             if tag.attr("encoding") != Some(b"raw") {
-                return Err(At(a, "only encoding=\"raw\" appended data is supported".into()));
+                return Err(At(
+                    a,
+                    "only encoding=\"raw\" appended data is supported".into(),
+                ));
             }
-            let underscore = find(bytes, b"_", tag.end)
-                .ok_or_else(|| At(a, "appended data without the '_' marker (file truncated?)".into()))?;
+            let underscore = find(bytes, b"_", tag.end).ok_or_else(|| {
+                At(
+                    a,
+                    "appended data without the '_' marker (file truncated?)".into(),
+                )
+            })?;
             (&bytes[..a], Some(&bytes[underscore + 1..]))
         }
     };
-    let mut enc = Encoding { big_endian: false, header64: false, zlib: false };
+    let mut enc = Encoding {
+        big_endian: false,
+        header64: false,
+        zlib: false,
+    };
     let mut out = Builder::default();
     let mut piece: Option<PieceArrays> = None;
     let mut section: Option<&[u8]> = None;
@@ -499,10 +588,13 @@ fn read(bytes: &[u8]) -> Res<TetMesh> {
             (b"VTKFile", false) => {
                 seen_root = true;
                 if tag.attr("type") != Some(b"UnstructuredGrid") {
-                    return Err(At(tag.start, format!(
-                        "VTK XML file of type {:?}; only UnstructuredGrid holds tetrahedra",
-                        tag.attr_str("type").unwrap_or_default()
-                    )));
+                    return Err(At(
+                        tag.start,
+                        format!(
+                            "VTK XML file of type {:?}; only UnstructuredGrid holds tetrahedra",
+                            tag.attr_str("type").unwrap_or_default()
+                        ),
+                    ));
                 }
                 enc.big_endian = tag.attr("byte_order") == Some(b"BigEndian");
                 enc.header64 = tag.attr("header_type") == Some(b"UInt64");
@@ -510,10 +602,13 @@ fn read(bytes: &[u8]) -> Res<TetMesh> {
                     None | Some(b"") => false,
                     Some(b"vtkZLibDataCompressor") => true,
                     Some(other) => {
-                        return Err(At(tag.start, format!(
-                            "unsupported compressor {:?} (only vtkZLibDataCompressor)",
-                            String::from_utf8_lossy(other)
-                        )));
+                        return Err(At(
+                            tag.start,
+                            format!(
+                                "unsupported compressor {:?} (only vtkZLibDataCompressor)",
+                                String::from_utf8_lossy(other)
+                            ),
+                        ));
                     }
                 };
             }
@@ -526,19 +621,28 @@ fn read(bytes: &[u8]) -> Res<TetMesh> {
                 });
             }
             (b"Piece", true) => {
-                let p = piece.take().ok_or_else(|| At(tag.start, "</Piece> without <Piece>".into()))?;
+                let p = piece
+                    .take()
+                    .ok_or_else(|| At(tag.start, "</Piece> without <Piece>".into()))?;
                 finish_piece(p, &mut out)?;
             }
-            (b"Points" | b"Cells" | b"PointData" | b"CellData" | b"FieldData", false) if !tag.empty => {
+            (b"Points" | b"Cells" | b"PointData" | b"CellData" | b"FieldData", false)
+                if !tag.empty =>
+            {
                 section = Some(tag.name);
             }
-            (b"Points" | b"Cells" | b"PointData" | b"CellData" | b"FieldData", true) => section = None,
+            (b"Points" | b"Cells" | b"PointData" | b"CellData" | b"FieldData", true) => {
+                section = None
+            }
             (b"DataArray", false) => {
                 let content_end = if tag.empty {
                     tag.end
                 } else {
                     find(xml, b"</DataArray", tag.end).ok_or_else(|| {
-                        At(tag.start, "unterminated <DataArray> (file truncated?)".into())
+                        At(
+                            tag.start,
+                            "unterminated <DataArray> (file truncated?)".into(),
+                        )
                     })?
                 };
                 let content = &xml[tag.end..content_end];
@@ -562,7 +666,10 @@ fn read(bytes: &[u8]) -> Res<TetMesh> {
         return Err(At(0, "not a VTK XML file (no <VTKFile> element)".into()));
     }
     if piece.is_some() {
-        return Err(At(xml.len(), "unexpected end of file inside <Piece> (file truncated?)".into()));
+        return Err(At(
+            xml.len(),
+            "unexpected end of file inside <Piece> (file truncated?)".into(),
+        ));
     }
     Ok(out.finish())
 }

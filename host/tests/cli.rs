@@ -1,0 +1,211 @@
+//! The `host` command line: the stable `compliance` JSON interface and its errors.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+fn host(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_host"))
+        .args(args)
+        .output()
+        .expect("run host")
+}
+
+fn liver() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("meshes/liver-1k4.msh")
+}
+
+const BED: &str = "-1,-1,-1,1,1,0.01";
+
+#[test]
+fn compliance_prints_one_json_object_matching_the_library() {
+    let mesh = liver();
+    let out = host(&[
+        "compliance",
+        "--mesh",
+        mesh.to_str().unwrap(),
+        "--young",
+        "3000",
+        "--poisson",
+        "0.45",
+        "--fix-box",
+        BED,
+        "--nodes",
+        "700,701,1000",
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).expect("stdout is JSON only");
+    assert_eq!(v["nodes"], serde_json::json!([700, 701, 1000]));
+    let blocks = v["blocks"].as_array().unwrap();
+    assert_eq!(blocks.len(), 3);
+    let get = |a: usize, b: usize, i: usize| blocks[a][b][i].as_f64().unwrap();
+    // Same numbers as the library, and C_kn = C_nk^T.
+    let m = host::mesh::load(&mesh).unwrap();
+    let body =
+        host::fem::Elasticity::new(&m, host::fem::Material::new(3000.0, 0.45).unwrap()).unwrap();
+    let mut fixed = host::fem::FixedSet::none(m.nodes.len());
+    fixed
+        .fix_box(&m, [-1.0, -1.0, -1.0, 1.0, 1.0, 0.01], [true; 3])
+        .unwrap();
+    let c = host::compliance::Compliance::factorize(&body, &fixed).unwrap();
+    let lib = c.blocks(&[700, 701, 1000], None).unwrap();
+    for a in 0..3 {
+        for b in 0..3 {
+            assert_eq!(blocks[a][b].as_array().unwrap().len(), 9);
+            for i in 0..9 {
+                assert!(
+                    (get(a, b, i) - lib[a][b][i / 3][i % 3]).abs() <= 1e-15 * get(a, a, 0).abs()
+                );
+                assert!(
+                    (get(a, b, i) - get(b, a, (i % 3) * 3 + i / 3)).abs() <= 1e-12 * get(a, a, 0)
+                );
+            }
+        }
+    }
+}
+
+#[test]
+fn fix_nodes_file_is_equivalent_to_the_box() {
+    let mesh = liver();
+    let m = host::mesh::load(&mesh).unwrap();
+    let dir = std::env::temp_dir().join(format!("host-cli-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let list = dir.join("bed.txt");
+    let ids: String = (0..m.nodes.len())
+        .filter(|&i| m.nodes[i][2] <= 0.01)
+        .map(|i| format!("{i}\n"))
+        .collect();
+    std::fs::write(&list, format!("# bed nodes\n{ids}")).unwrap();
+    let common = [
+        "compliance",
+        "--mesh",
+        mesh.to_str().unwrap(),
+        "--young",
+        "3000",
+        "--poisson",
+        "0.45",
+        "--nodes",
+        "700",
+    ];
+    let by_box = host(&[&common[..], &["--fix-box", BED]].concat());
+    let by_file = host(&[&common[..], &["--fix-nodes", list.to_str().unwrap()]].concat());
+    assert!(by_box.status.success() && by_file.status.success());
+    assert_eq!(by_box.stdout, by_file.stdout);
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+fn fails_with(args: &[&str], needle: &str) {
+    let out = host(args);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success(), "expected failure for {args:?}");
+    assert!(out.stdout.is_empty(), "nothing on stdout on failure");
+    assert!(
+        stderr.contains(needle),
+        "stderr {stderr:?} should mention {needle:?}"
+    );
+    assert!(!stderr.contains("panicked"), "{stderr}");
+}
+
+#[test]
+fn bad_input_is_reported_on_stderr_with_a_nonzero_exit() {
+    let mesh = liver();
+    let m = mesh.to_str().unwrap();
+    let base = |extra: &[&'static str]| -> Vec<String> {
+        let mut v: Vec<String> = [
+            "compliance",
+            "--mesh",
+            m,
+            "--young",
+            "3000",
+            "--poisson",
+            "0.45",
+        ]
+        .iter()
+        .map(|s| s.to_string())
+        .collect();
+        v.extend(extra.iter().map(|s| s.to_string()));
+        v
+    };
+    let run = |extra: &[&'static str], needle: &str| {
+        let v = base(extra);
+        let refs: Vec<&str> = v.iter().map(String::as_str).collect();
+        fails_with(&refs, needle);
+    };
+    run(&["--nodes", "1"], "nothing is fixed");
+    run(&["--fix-box", BED, "--nodes", "1,x"], "\"x\"");
+    run(&["--fix-box", BED, "--nodes", "999999"], "node 999999");
+    run(
+        &["--fix-box", "5,5,5,6,6,6", "--nodes", "1"],
+        "contains no node",
+    );
+    run(
+        &["--fix-box", "0,0,0,1,1", "--nodes", "1"],
+        "expected 6 numbers",
+    );
+    run(
+        &["--fix-box", "-1,-1,-1,1,1,0.01:z", "--nodes", "700"],
+        "rigid motions",
+    );
+    run(
+        &[
+            "--fix-box",
+            BED,
+            "--nodes",
+            "700",
+            "--fix-nodes",
+            "/nonexistent/list",
+        ],
+        "/nonexistent/list",
+    );
+    fails_with(
+        &[
+            "compliance",
+            "--mesh",
+            "/nonexistent.msh",
+            "--young",
+            "1",
+            "--poisson",
+            "0.3",
+            "--fix-box",
+            BED,
+            "--nodes",
+            "0",
+        ],
+        "/nonexistent.msh",
+    );
+    fails_with(
+        &[
+            "compliance",
+            "--mesh",
+            m,
+            "--young",
+            "-3",
+            "--poisson",
+            "0.3",
+            "--fix-box",
+            BED,
+            "--nodes",
+            "0",
+        ],
+        "Young",
+    );
+    fails_with(
+        &[
+            "compliance",
+            "--mesh",
+            m,
+            "--young",
+            "3000",
+            "--poisson",
+            "0.5",
+            "--fix-box",
+            BED,
+            "--nodes",
+            "0",
+        ],
+        "Poisson",
+    );
+}
