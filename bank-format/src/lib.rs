@@ -1,9 +1,62 @@
-//! The bank: the compact, precomputed compliance data the MCU reads in place, and the
-//! host-device link frames. `no_std`, no allocation.
+//! The bank and the link: the compact, precomputed compliance data the MCU reads in place, and
+//! the host-device link frames. `no_std`, no allocation (the writer needs feature `alloc`).
 //!
-//! The layout and its written specification arrive with the scenes-and-banks issue; until then
-//! this crate only fixes the units and constants both sides agree on.
+//! The byte layout, its versioning rules, the CRC and every validation rule are specified in
+//! `SPEC.md` beside this crate's `Cargo.toml`; this documentation covers the API.
+//!
+//! # The bank
+//!
+//! A *scene* says what the tool can reach; the host keeps only the surface nodes in that
+//! reachable region R and writes, for each node k of R: its position, `C_kk`, and `C_kl` for
+//! the neighbours l within a truncation radius (the paper's `T^f_k = C_kk^-1` and mutual
+//! influence `M = C_SS` follow from these), plus R's triangles, a bucket grid for collision,
+//! the tissue force law Q and the device calibration. [`BankBuilder`] (feature `alloc`) writes
+//! it; [`Bank::parse`] validates it completely (bounds, indices, finite values, SPD blocks,
+//! symmetric couplings, monotone Q, CRC, ...) without copying, after which every accessor is
+//! a plain slice access. Every failure is a distinct [`BankError`].
+//!
+//! # The link
+//!
+//! [`DeviceToHost`] and [`HostToDevice`] messages travel as frames
+//! `COBS(postcard(msg) ++ crc32) ++ 0x00` ([`encode_frame`], [`FrameDecoder`]).
+//!
+//! All quantities are SI ([`UNITS`]); the format is little-endian and this crate only builds
+//! for little-endian targets (x86-64, Cortex-M).
 #![no_std]
+#![deny(missing_docs)]
+// Validation writes `!(x > 0.0)` on purpose: the negated comparison also rejects NaN.
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
+
+#[cfg(feature = "alloc")]
+extern crate alloc;
+
+#[cfg(target_endian = "big")]
+compile_error!("bank-format reads the bank in place and assumes a little-endian target");
+
+mod error;
+mod frame;
+mod law;
+mod layout;
+mod reader;
+#[cfg(feature = "alloc")]
+mod writer;
+
+pub use error::{BankError, DeviceField};
+pub use frame::{
+    Contact, Counters, DeviceToHost, FRAME_CRC_LEN, FaultReason, FeedIter, FrameDecoder,
+    FrameError, FrameStats, HostToDevice, MAX_CONTACTS, MAX_FRAME, MAX_MESSAGE, Mode,
+    PROTOCOL_VERSION, State, Telemetry, cobs_max_len, decode_frame, encode_frame,
+};
+pub use law::{LAW_SAMPLES, LawKind, TissueLaw};
+pub use layout::{
+    BANK_ALIGN, BankHeader, BankMeta, CRC_OFFSET, CRC32, DeviceCalibration, GridHeader, HEADER_LEN,
+    LAW_CHEBYSHEV, LAW_LINEAR, LawRecord, MAGIC, MAX_LAW_COEFFS, MAX_NODES, MAX_SECTIONS,
+    SECTION_ALIGN, SECTION_ENTRY_LEN, SectionEntry, SectionKind, VERSION_MAJOR, VERSION_MINOR,
+    bank_crc, reseal,
+};
+pub use reader::{Bank, Grid, SPD_PIVOT_REL, SYMMETRY_REL, TRUNCATION_SLACK, validate_device};
+#[cfg(feature = "alloc")]
+pub use writer::{AlignedBytes, BankBuilder, BuildError, INPUT_SYMMETRY_REL};
 
 /// Every quantity crossing the host-device boundary is SI: metres, newtons, pascals, seconds,
 /// amperes. Compliance blocks are therefore in metres per newton.

@@ -36,6 +36,14 @@ pub enum FemError {
          (e.g. --fix-box around a support) so every connected part is held in all 6 directions"
     )]
     RigidMotion(String),
+    /// A fixed set built for a mesh with another number of nodes.
+    #[error("the fixed set covers {fixed} nodes but the mesh has {nodes}")]
+    FixedSetMismatch {
+        /// Nodes covered by the fixed set.
+        fixed: usize,
+        /// Nodes of the mesh.
+        nodes: usize,
+    },
     /// A box that selects no node.
     #[error("fixed box {0:?} contains no node of the mesh")]
     EmptyBox([f64; 6]),
@@ -417,6 +425,12 @@ impl Elasticity {
     /// Refuses a fixed set that leaves a rigid-body motion free in some connected part of the
     /// mesh: the 6 rigid modes restricted to the fixed dofs of each part must have full rank.
     pub fn check_rigid_motions(&self, fixed: &FixedSet) -> Result<(), FemError> {
+        if fixed.nodes() != self.nodes() {
+            return Err(FemError::FixedSetMismatch {
+                fixed: fixed.nodes(),
+                nodes: self.nodes(),
+            });
+        }
         for (part, members) in self.components().iter().enumerate() {
             let centre = {
                 let mut c = [0.0; 3];

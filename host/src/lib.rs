@@ -8,4 +8,3 @@ pub mod compliance;
 pub mod fem;
 pub mod mesh;
 pub mod ordering;
-pub mod schur;

@@ -5,15 +5,18 @@
 //! matrix `M` (eq. 8) is `C_SS` with block rows scaled by `C_kk^-1`; storing `C` (symmetric)
 //! holds the same information in half the space.
 //!
-//! One sparse Cholesky factorisation of `K_ff` (fill-reducing ordering) replaces the paper's
-//! `3m` conjugate-gradient solves; blocked multi-right-hand-side solves then give the columns
-//! of the contact candidates.
+//! One sparse Cholesky factorisation of `K_ff` (nested-dissection ordering, supernodal) replaces
+//! the paper's `3m` conjugate-gradient solves; a sparse forward substitution restricted to the
+//! contact candidates then gives all their blocks at once ([`gram`]).
+
+mod gram;
 
 use crate::fem::{DofMap, Elasticity, FemError, FixedSet};
 use crate::ordering::{DofPermutation, Ordering, nested_dissection};
 use faer::dyn_stack::{MemBuffer, MemStack};
 use faer::linalg::solvers::Solve;
 use faer::perm::PermRef;
+use faer::sparse::linalg::SupernodalThreshold;
 use faer::sparse::linalg::cholesky::{
     CholeskySymbolicParams, LltRef, SymbolicCholesky, SymmetricOrdering,
     factorize_symbolic_cholesky,
@@ -21,7 +24,6 @@ use faer::sparse::linalg::cholesky::{
 use faer::sparse::{SparseColMat, Triplet};
 use faer::{Conj, Mat, Par, Side};
 use indicatif::ProgressBar;
-use rayon::prelude::*;
 
 /// A 3x3 block, row-major, in m/N for compliance and N/m for stiffness.
 pub type Block3 = [[f64; 3]; 3];
@@ -78,9 +80,6 @@ impl std::fmt::Debug for Compliance {
     }
 }
 
-/// How many right-hand sides one blocked solve carries (3 per node).
-const NODES_PER_BLOCK: usize = 32;
-
 impl Compliance {
     /// Assembles and factorises `K_ff` for `fixed`, after refusing fixed sets that leave rigid
     /// motions. Uses all rayon threads.
@@ -126,7 +125,11 @@ impl Compliance {
             k.symbolic(),
             Side::Upper,
             ordering,
-            CholeskySymbolicParams::default(),
+            // Always supernodal: the Gram method of [`Compliance::blocks`] walks supernodes.
+            CholeskySymbolicParams {
+                supernodal_flop_ratio_threshold: SupernodalThreshold::FORCE_SUPERNODAL,
+                ..Default::default()
+            },
         )
         .map_err(|e| fail(&format!("{e:?}")))?;
         let mut values = Vec::new();
@@ -210,53 +213,30 @@ impl Compliance {
         }
     }
 
-    /// The blocks `C(nodes[a], nodes[b])` for every pair, `result[a][b]`, row-major in m/N.
+    /// The blocks `C(nodes[a], nodes[b])` for every pair, `result[a][b]`, row-major in m/N,
+    /// by a sparse forward substitution and a Gram product (see [`gram`]). A requested node's
+    /// fixed components give zero rows and columns. The progress bar, if any, counts
+    /// supernodes.
     pub fn blocks(
         &self,
         nodes: &[usize],
         progress: Option<&ProgressBar>,
     ) -> Result<Vec<Vec<Block3>>, ComplianceError> {
         self.check_nodes(nodes)?;
-        let nf = self.dofs.free_count();
+        let mut requested = vec![false; self.dofs.nodes()];
+        for &k in nodes {
+            if std::mem::replace(&mut requested[k], true) {
+                return Err(ComplianceError::DegenerateContact(format!(
+                    "node {k} is requested twice"
+                )));
+            }
+        }
         let m = nodes.len();
-        let rows: Vec<Vec<Block3>> = nodes
-            .par_chunks(NODES_PER_BLOCK)
-            .flat_map_iter(|block| {
-                let mut rhs = Mat::<f64>::zeros(nf, 3 * block.len());
-                for (j, &k) in block.iter().enumerate() {
-                    for c in 0..3 {
-                        if let Some(d) = self.dofs.free_dof(k, c) {
-                            rhs[(d, 3 * j + c)] = 1.0;
-                        }
-                    }
-                }
-                self.solve_in_place(rhs.as_mut(), Par::Seq);
-                if let Some(p) = progress {
-                    p.inc(block.len() as u64);
-                }
-                // Column block k gives C(n, k) for every n; by symmetry this is row k's
-                // C(k, n) = C(n, k)^T.
-                (0..block.len())
-                    .map(|j| {
-                        (0..m)
-                            .map(|b| {
-                                let n = nodes[b];
-                                let mut c_nk = [[0.0; 3]; 3];
-                                for (r, row) in c_nk.iter_mut().enumerate() {
-                                    for (c, v) in row.iter_mut().enumerate() {
-                                        if let Some(d) = self.dofs.free_dof(n, r) {
-                                            *v = rhs[(d, 3 * j + c)];
-                                        }
-                                    }
-                                }
-                                transpose(c_nk)
-                            })
-                            .collect::<Vec<_>>()
-                    })
-                    .collect::<Vec<_>>()
-            })
-            .collect();
-        Ok(rows)
+        if self.dofs.free_count() == 0 {
+            return Ok(vec![vec![[[0.0; 3]; 3]; m]; m]);
+        }
+        let layout = gram::Layout::new(&self.dofs, nodes);
+        gram::gram_blocks(&self.symbolic, &self.values, &layout, m, progress)
     }
 }
 

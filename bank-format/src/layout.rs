@@ -1,0 +1,399 @@
+//! The bank's on-flash records: header, section table and the fixed-size section records.
+//!
+//! Every record is `#[repr(C)]`, [`Pod`], built only from 4-byte fields (so its alignment is 4
+//! and it has no padding), and stored little-endian. The byte layout is specified in `SPEC.md`
+//! beside this crate; the constants here are the single source of truth that the spec quotes.
+
+use bytemuck::{Pod, Zeroable};
+
+/// The eight bytes a bank starts with.
+pub const MAGIC: [u8; 8] = *b"HAPTBANK";
+/// Major version this crate reads and writes. A reader rejects any other major version.
+pub const VERSION_MAJOR: u16 = 1;
+/// Minor version this crate writes. Readers accept any minor version of their major version
+/// (minor versions only add optional sections, which older readers skip).
+pub const VERSION_MINOR: u16 = 0;
+/// Size of [`BankHeader`] in bytes; the section table follows it.
+pub const HEADER_LEN: usize = 32;
+/// Size of one [`SectionEntry`] in bytes.
+pub const SECTION_ENTRY_LEN: usize = 16;
+/// Upper bound on the number of section table entries.
+pub const MAX_SECTIONS: usize = 32;
+/// Every section offset, and the bank's total length, is a multiple of this.
+pub const SECTION_ALIGN: usize = 8;
+/// The input slice must start at an address that is a multiple of this (the largest alignment
+/// of any element type in the bank).
+pub const BANK_ALIGN: usize = 4;
+/// Byte offset of the CRC field in the header.
+pub const CRC_OFFSET: usize = 20;
+/// Largest number of nodes in the reachable region R (node indices are `u16`).
+pub const MAX_NODES: usize = u16::MAX as usize;
+/// Most coefficients a tissue law may have (Chebyshev degree <= 15).
+pub const MAX_LAW_COEFFS: usize = 16;
+
+/// The CRC the bank (and the link frames) use: CRC-32/ISO-HDLC, the "IEEE" CRC-32 of zlib,
+/// Ethernet and PNG (poly 0x04C11DB7 reflected, init and final XOR 0xFFFFFFFF; check value of
+/// `"123456789"` is 0xCBF43926).
+pub const CRC32: crc::Crc<u32> = crc::Crc::<u32>::new(&crc::CRC_32_ISO_HDLC);
+
+/// The fixed 32-byte header at offset 0.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Pod, Zeroable)]
+pub struct BankHeader {
+    /// [`MAGIC`].
+    pub magic: [u8; 8],
+    /// [`VERSION_MAJOR`] of the writer.
+    pub version_major: u16,
+    /// [`VERSION_MINOR`] of the writer.
+    pub version_minor: u16,
+    /// Bytes before the section table: [`HEADER_LEN`].
+    pub header_len: u16,
+    /// Number of [`SectionEntry`] records that follow the header (at most [`MAX_SECTIONS`]).
+    pub section_count: u16,
+    /// Length of the whole bank in bytes, a multiple of [`SECTION_ALIGN`]. The input slice may be
+    /// longer (a flash region is erased to 0xFF past the bank); bytes past it are ignored.
+    pub total_len: u32,
+    /// CRC-32 ([`CRC32`]) of the first `total_len` bytes with this field read as zero.
+    pub crc32: u32,
+    /// Reserved, zero.
+    pub flags: u32,
+    /// Reserved, zero.
+    pub reserved: u32,
+}
+
+/// One entry of the section table.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Pod, Zeroable)]
+pub struct SectionEntry {
+    /// [`SectionKind::code`].
+    pub kind: u32,
+    /// Offset of the section's first byte from the bank's start; a multiple of
+    /// [`SECTION_ALIGN`].
+    pub offset: u32,
+    /// Length of the section in bytes: exactly `count` times the element size.
+    pub len: u32,
+    /// Number of elements.
+    pub count: u32,
+}
+
+/// What a section holds. The numeric codes are part of the format (see `SPEC.md`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum SectionKind {
+    /// Pseudo-kind naming the header and section table in errors; code 0 must not appear in the
+    /// section table.
+    Header,
+    /// [`BankMeta`], one element.
+    Meta,
+    /// Node positions `[f32; 3]` in m, one per node of R.
+    Positions,
+    /// Node id in the host mesh (`u32`), one per node of R.
+    MeshIds,
+    /// Triangles of R's surface, `[u16; 3]` node indices, counter-clockwise seen from outside.
+    Triangles,
+    /// CSR row starts (`u32`, n + 1) of the node-to-triangle adjacency.
+    NodeTriStarts,
+    /// CSR items (`u32` triangle indices) of the node-to-triangle adjacency.
+    NodeTriItems,
+    /// [`GridHeader`], one element.
+    Grid,
+    /// CSR bucket starts (`u32`, cells + 1) of the collision grid.
+    GridStarts,
+    /// CSR bucket items (`u16` node indices) of the collision grid.
+    GridItems,
+    /// Self-compliance `C_kk` per node, `[f32; 6]` = xx, xy, xz, yy, yz, zz, in m/N.
+    Ckk,
+    /// CSR row starts (`u32`, n + 1) of the neighbour lists.
+    NeighbourStarts,
+    /// Neighbour node indices (`u16`), each row strictly ascending.
+    NeighbourIndex,
+    /// Coupling blocks `C_kl`, `[f32; 9]` row-major, m/N, one per neighbour entry.
+    NeighbourCkl,
+    /// [`LawRecord`], one element: the tissue force law Q.
+    TissueLaw,
+    /// [`DeviceCalibration`], one element.
+    Device,
+    /// A section of a later minor version that this reader does not know; skipped.
+    Unknown(u32),
+}
+
+impl SectionKind {
+    /// The sections a valid bank of this major version must contain, in the order the writer
+    /// lays them out.
+    pub const REQUIRED: [SectionKind; 15] = [
+        SectionKind::Meta,
+        SectionKind::Positions,
+        SectionKind::MeshIds,
+        SectionKind::Triangles,
+        SectionKind::NodeTriStarts,
+        SectionKind::NodeTriItems,
+        SectionKind::Grid,
+        SectionKind::GridStarts,
+        SectionKind::GridItems,
+        SectionKind::Ckk,
+        SectionKind::NeighbourStarts,
+        SectionKind::NeighbourIndex,
+        SectionKind::NeighbourCkl,
+        SectionKind::TissueLaw,
+        SectionKind::Device,
+    ];
+
+    /// The kind with numeric code `code`.
+    pub const fn from_code(code: u32) -> SectionKind {
+        match code {
+            0 => SectionKind::Header,
+            1 => SectionKind::Meta,
+            2 => SectionKind::Positions,
+            3 => SectionKind::MeshIds,
+            4 => SectionKind::Triangles,
+            5 => SectionKind::NodeTriStarts,
+            6 => SectionKind::NodeTriItems,
+            7 => SectionKind::Grid,
+            8 => SectionKind::GridStarts,
+            9 => SectionKind::GridItems,
+            10 => SectionKind::Ckk,
+            11 => SectionKind::NeighbourStarts,
+            12 => SectionKind::NeighbourIndex,
+            13 => SectionKind::NeighbourCkl,
+            14 => SectionKind::TissueLaw,
+            15 => SectionKind::Device,
+            other => SectionKind::Unknown(other),
+        }
+    }
+
+    /// The numeric code stored in [`SectionEntry::kind`].
+    pub const fn code(self) -> u32 {
+        match self {
+            SectionKind::Header => 0,
+            SectionKind::Meta => 1,
+            SectionKind::Positions => 2,
+            SectionKind::MeshIds => 3,
+            SectionKind::Triangles => 4,
+            SectionKind::NodeTriStarts => 5,
+            SectionKind::NodeTriItems => 6,
+            SectionKind::Grid => 7,
+            SectionKind::GridStarts => 8,
+            SectionKind::GridItems => 9,
+            SectionKind::Ckk => 10,
+            SectionKind::NeighbourStarts => 11,
+            SectionKind::NeighbourIndex => 12,
+            SectionKind::NeighbourCkl => 13,
+            SectionKind::TissueLaw => 14,
+            SectionKind::Device => 15,
+            SectionKind::Unknown(code) => code,
+        }
+    }
+
+    /// Size in bytes of one element of this section (`None` for unknown kinds, whose elements
+    /// this reader does not interpret, and for the header pseudo-kind).
+    pub const fn element_size(self) -> Option<usize> {
+        Some(match self {
+            SectionKind::Header | SectionKind::Unknown(_) => return None,
+            SectionKind::Meta => core::mem::size_of::<BankMeta>(),
+            SectionKind::Positions => 12,
+            SectionKind::MeshIds => 4,
+            SectionKind::Triangles => 6,
+            SectionKind::NodeTriStarts => 4,
+            SectionKind::NodeTriItems => 4,
+            SectionKind::Grid => core::mem::size_of::<GridHeader>(),
+            SectionKind::GridStarts => 4,
+            SectionKind::GridItems => 2,
+            SectionKind::Ckk => 24,
+            SectionKind::NeighbourStarts => 4,
+            SectionKind::NeighbourIndex => 2,
+            SectionKind::NeighbourCkl => 36,
+            SectionKind::TissueLaw => core::mem::size_of::<LawRecord>(),
+            SectionKind::Device => core::mem::size_of::<DeviceCalibration>(),
+        })
+    }
+
+    /// A short lower-case name, used by `Display`.
+    pub const fn name(self) -> &'static str {
+        match self {
+            SectionKind::Header => "header",
+            SectionKind::Meta => "meta",
+            SectionKind::Positions => "positions",
+            SectionKind::MeshIds => "mesh ids",
+            SectionKind::Triangles => "triangles",
+            SectionKind::NodeTriStarts => "node-triangle starts",
+            SectionKind::NodeTriItems => "node-triangle items",
+            SectionKind::Grid => "grid",
+            SectionKind::GridStarts => "grid starts",
+            SectionKind::GridItems => "grid items",
+            SectionKind::Ckk => "C_kk",
+            SectionKind::NeighbourStarts => "neighbour starts",
+            SectionKind::NeighbourIndex => "neighbour index",
+            SectionKind::NeighbourCkl => "C_kl",
+            SectionKind::TissueLaw => "tissue law",
+            SectionKind::Device => "device",
+            SectionKind::Unknown(_) => "unknown",
+        }
+    }
+}
+
+impl core::fmt::Display for SectionKind {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            SectionKind::Unknown(code) => write!(f, "unknown section {code}"),
+            other => f.write_str(other.name()),
+        }
+    }
+}
+
+/// Bank-wide metadata (section [`SectionKind::Meta`]).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, PartialEq, Pod, Zeroable)]
+pub struct BankMeta {
+    /// Opaque 64-bit scene identity chosen by the host (e.g. a hash of the scene file), low word
+    /// first, so the host can check that a device runs the bank of the scene it displays.
+    pub scene_id: [u32; 2],
+    /// Truncation radius in m: every pair of nodes of R closer than this (see `SPEC.md` for the
+    /// exact rule) has its `C_kl` in the neighbour lists. Finite, `>= 0`.
+    pub truncation_radius_m: f32,
+    /// Reserved, zero.
+    pub reserved: u32,
+}
+
+impl BankMeta {
+    /// [`BankMeta::scene_id`] as one `u64`.
+    pub const fn scene_id(&self) -> u64 {
+        (self.scene_id[0] as u64) | ((self.scene_id[1] as u64) << 32)
+    }
+}
+
+/// The collision grid's geometry (section [`SectionKind::Grid`]).
+///
+/// Cell `(i, j, k)` covers `origin + cell_size * [i, i+1) x [j, j+1) x [k, k+1)` and has linear
+/// index `i + dims[0] * (j + dims[1] * k)`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, PartialEq, Pod, Zeroable)]
+pub struct GridHeader {
+    /// Corner of cell (0, 0, 0), m.
+    pub origin_m: [f32; 3],
+    /// Edge length of the cubic cells, m, finite and `> 0`.
+    pub cell_size_m: f32,
+    /// Number of cells along x, y, z; each `>= 1`.
+    pub dims: [u16; 3],
+    /// Reserved, zero.
+    pub reserved: u16,
+}
+
+/// Law kind code: `Q(f) = c0 + c1 f` (two coefficients, `c1 > 0`).
+pub const LAW_LINEAR: u32 = 1;
+/// Law kind code: `Q(f) = sum_i c_i T_i(x)` with `x = (2 f - (f_min + f_max)) / (f_max - f_min)`
+/// on the domain, continued linearly outside it.
+pub const LAW_CHEBYSHEV: u32 = 2;
+
+/// The tissue force law Q as stored (section [`SectionKind::TissueLaw`]); see
+/// [`crate::TissueLaw`] for the validated, evaluable form.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, PartialEq, Pod, Zeroable)]
+pub struct LawRecord {
+    /// [`LAW_LINEAR`] or [`LAW_CHEBYSHEV`].
+    pub kind: u32,
+    /// Number of coefficients used, `1..=16` (exactly 2 for a linear law).
+    pub coeff_count: u32,
+    /// Fitted domain `[f_min, f_max]` of the linear force magnitude, N; `0 <= f_min < f_max`.
+    pub domain_n: [f32; 2],
+    /// Coefficients; entries past `coeff_count` are zero. Linear: `[c0 (N), c1 (1)]`.
+    /// Chebyshev: `c_i` in N.
+    pub coeffs: [f32; MAX_LAW_COEFFS],
+}
+
+/// Calibration of the laparoscopic gimbal (section [`SectionKind::Device`]).
+///
+/// Joints are indexed 0 = pitch (rad), 1 = yaw (rad), 2 = insertion (m, distance from the
+/// fulcrum to the tool tip along the shaft). Forward kinematics (all in the scene frame of the
+/// positions):
+///
+/// `tip = fulcrum + insertion * Rot(yaw_axis, yaw) * Rot(pitch_axis, pitch) * shaft_axis`
+///
+/// where `Rot(a, t)` is the right-handed rotation by `t` about the unit axis `a` (yaw is the
+/// outer, ground-fixed gimbal axis, pitch the inner one, given at rest). Encoder counts `n`
+/// map to joint values `q = home + 2 pi n / (counts_per_rev * transmission)` (for insertion the
+/// `2 pi n / counts_per_rev` motor radians divide by the transmission in rad/m). Motor current
+/// for a joint effort `tau` (N m, or N for insertion) is
+/// `i = tau / (transmission * torque_constant)`, then clamped to `current_limit`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, PartialEq, Pod, Zeroable)]
+pub struct DeviceCalibration {
+    /// Fulcrum (trocar point) in m.
+    pub fulcrum_m: [f32; 3],
+    /// Unit vector along the shaft from the fulcrum towards the tip, at pitch = yaw = 0.
+    pub shaft_axis: [f32; 3],
+    /// Unit pitch axis at rest, orthogonal to `shaft_axis`.
+    pub pitch_axis: [f32; 3],
+    /// Unit yaw axis (ground-fixed), orthogonal to `shaft_axis` and `pitch_axis`.
+    pub yaw_axis: [f32; 3],
+    /// Lower joint limits: pitch rad, yaw rad, insertion m.
+    pub joint_min: [f32; 3],
+    /// Upper joint limits: pitch rad, yaw rad, insertion m. `min < max`, angles within
+    /// `[-pi, pi]`, `0 <= insertion min`.
+    pub joint_max: [f32; 3],
+    /// Joint values at which the encoders read zero after a zero-encoders command (the rest pose
+    /// on the dock), inside the limits.
+    pub home_joint: [f32; 3],
+    /// Encoder counts per motor revolution, per joint (quadrature edges counted), `> 0`.
+    pub counts_per_rev: [u32; 3],
+    /// Transmission: motor radians per joint radian (pitch, yaw) or per metre of insertion
+    /// (rad/m). Its sign encodes the motor's direction; `|value| > 0`.
+    pub transmission: [f32; 3],
+    /// Motor torque constants, N m / A, `> 0`.
+    pub torque_constant_nm_per_a: [f32; 3],
+    /// Hard current limits per motor, A, in `(0, 20]`.
+    pub current_limit_a: [f32; 3],
+    /// Largest tip force the device renders, N, in `(0, 50]`.
+    pub max_force_n: f32,
+    /// Radius of the tool tip, m, in `[0, 0.05]`; contacts spread over the nodes under it.
+    pub tip_radius_m: f32,
+}
+
+/// The CRC-32 of `bank` as the header's `crc32` field defines it: over all of `bank` with the
+/// four bytes at [`CRC_OFFSET`] taken as zero. `bank` must be exactly the bank (`total_len`
+/// bytes); a slice shorter than the header gives the CRC of what there is.
+pub fn bank_crc(bank: &[u8]) -> u32 {
+    let mut digest = CRC32.digest();
+    match (bank.get(..CRC_OFFSET), bank.get(CRC_OFFSET + 4..)) {
+        (Some(head), Some(tail)) => {
+            digest.update(head);
+            digest.update(&[0; 4]);
+            digest.update(tail);
+        }
+        _ => digest.update(bank),
+    }
+    digest.finalize()
+}
+
+/// Recompute and store the CRC of a bank in place (for tools that patch a bank, e.g. new device
+/// calibration, without rebuilding it). Uses the header's `total_len`; returns `false` (and
+/// changes nothing) when the header is missing or `total_len` exceeds the slice.
+pub fn reseal(bytes: &mut [u8]) -> bool {
+    let total = match bytes.get(16..20).and_then(|b| <[u8; 4]>::try_from(b).ok()) {
+        Some(b) => u32::from_le_bytes(b) as usize,
+        None => return false,
+    };
+    if total < HEADER_LEN {
+        return false;
+    }
+    let Some(bank) = bytes.get_mut(..total) else {
+        return false;
+    };
+    let crc = bank_crc(bank);
+    match bank.get_mut(CRC_OFFSET..CRC_OFFSET + 4) {
+        Some(field) => {
+            field.copy_from_slice(&crc.to_le_bytes());
+            true
+        }
+        None => false,
+    }
+}
+
+// The layout is fixed: fail the build if a record's size drifts.
+const _: () = {
+    assert!(core::mem::size_of::<BankHeader>() == HEADER_LEN);
+    assert!(core::mem::size_of::<SectionEntry>() == SECTION_ENTRY_LEN);
+    assert!(core::mem::size_of::<BankMeta>() == 16);
+    assert!(core::mem::size_of::<GridHeader>() == 24);
+    assert!(core::mem::size_of::<LawRecord>() == 80);
+    assert!(core::mem::size_of::<DeviceCalibration>() == 140);
+    assert!(core::mem::align_of::<DeviceCalibration>() == BANK_ALIGN);
+};

@@ -1,0 +1,976 @@
+//! The zero-copy reader: [`Bank::parse`] validates a bank in place and hands out typed slices
+//! of it. Nothing is copied and nothing is allocated; every access is bounds-checked.
+
+use crate::error::{BankError, DeviceField};
+use crate::law::TissueLaw;
+use crate::layout::{
+    BANK_ALIGN, BankHeader, BankMeta, DeviceCalibration, GridHeader, HEADER_LEN, MAGIC, MAX_NODES,
+    MAX_SECTIONS, SECTION_ALIGN, SECTION_ENTRY_LEN, SectionEntry, SectionKind, VERSION_MAJOR,
+    bank_crc,
+};
+use bytemuck::Pod;
+use core::ops::Range;
+
+/// Smallest Cholesky pivot accepted, relative to the largest diagonal entry, when checking that
+/// a `C_kk` or a pair's 6x6 compliance is positive definite (below it the block is singular at
+/// f32 precision).
+pub const SPD_PIVOT_REL: f64 = 1.0e-7;
+/// Tolerance on `|C_lk - C_kl^T|` per entry, relative to `sqrt(max diag C_kk * max diag C_ll)`.
+pub const SYMMETRY_REL: f64 = 1.0e-5;
+/// Pairs closer than `truncation_radius_m * (1 - TRUNCATION_SLACK)` must be coupled; the slack
+/// absorbs the rounding of positions to f32.
+pub const TRUNCATION_SLACK: f64 = 1.0e-4;
+
+/// A validated bank, borrowing the bytes it was parsed from.
+#[derive(Clone, Copy, Debug)]
+pub struct Bank<'a> {
+    bytes: &'a [u8],
+    header: &'a BankHeader,
+    meta: &'a BankMeta,
+    positions: &'a [[f32; 3]],
+    mesh_ids: &'a [u32],
+    triangles: &'a [[u16; 3]],
+    node_tri_starts: &'a [u32],
+    node_tri_items: &'a [u32],
+    grid: Grid<'a>,
+    ckk: &'a [[f32; 6]],
+    nb_starts: &'a [u32],
+    nb_index: &'a [u16],
+    nb_ckl: &'a [[f32; 9]],
+    law: TissueLaw,
+    device: &'a DeviceCalibration,
+}
+
+/// The collision grid: buckets of node indices over R (CSR: the nodes of cell `c` are
+/// `items[starts[c]..starts[c + 1]]`, ascending).
+#[derive(Clone, Copy, Debug)]
+pub struct Grid<'a> {
+    header: &'a GridHeader,
+    starts: &'a [u32],
+    items: &'a [u16],
+}
+
+impl<'a> Grid<'a> {
+    /// Corner of cell (0, 0, 0), m.
+    pub fn origin_m(&self) -> [f32; 3] {
+        self.header.origin_m
+    }
+
+    /// Cell edge length, m.
+    pub fn cell_size_m(&self) -> f32 {
+        self.header.cell_size_m
+    }
+
+    /// Cells along x, y, z.
+    pub fn dims(&self) -> [u16; 3] {
+        self.header.dims
+    }
+
+    /// Total number of cells.
+    pub fn cell_count(&self) -> usize {
+        let [x, y, z] = self.header.dims;
+        usize::from(x) * usize::from(y) * usize::from(z)
+    }
+
+    /// CSR starts, `cell_count() + 1` entries.
+    pub fn starts(&self) -> &'a [u32] {
+        self.starts
+    }
+
+    /// CSR items: node indices, one per node of R.
+    pub fn items(&self) -> &'a [u16] {
+        self.items
+    }
+
+    /// The cell containing `p`, by the spec's rule `i = floor((p - origin) / cell_size)` in f32
+    /// per axis, or `None` outside the grid (or for NaN).
+    pub fn cell_of(&self, p: [f32; 3]) -> Option<[u16; 3]> {
+        cell_of(self.header, p)
+    }
+
+    /// Linear index of cell `(i, j, k)`: `i + dims[0] * (j + dims[1] * k)`.
+    pub fn cell_index(&self, cell: [u16; 3]) -> Option<usize> {
+        let [nx, ny, nz] = self.header.dims;
+        let [i, j, k] = cell;
+        if i >= nx || j >= ny || k >= nz {
+            return None;
+        }
+        Some(usize::from(i) + usize::from(nx) * (usize::from(j) + usize::from(ny) * usize::from(k)))
+    }
+
+    /// Node indices in the cell with linear index `index` (empty if out of range).
+    pub fn cell_items(&self, index: usize) -> &'a [u16] {
+        csr_row(self.starts, index)
+            .and_then(|r| self.items.get(r))
+            .unwrap_or(&[])
+    }
+}
+
+/// `floor((p - origin) / cell_size)` per axis in f32, if inside `0..dims`.
+pub(crate) fn cell_of(g: &GridHeader, p: [f32; 3]) -> Option<[u16; 3]> {
+    let mut out = [0u16; 3];
+    for axis in 0..3 {
+        let t = (p[axis] - g.origin_m[axis]) / g.cell_size_m;
+        // Negative and NaN fail; for t >= 0 truncation is floor.
+        if !(t >= 0.0) {
+            return None;
+        }
+        let i = t as u32;
+        if i >= u32::from(g.dims[axis]) {
+            return None;
+        }
+        out[axis] = i as u16;
+    }
+    Some(out)
+}
+
+/// Signed cell coordinate `floor((x - origin) / h)` without libm (saturating).
+fn signed_cell(x: f32, origin: f32, h: f32) -> i64 {
+    let t = (x - origin) / h;
+    let i = t as i64;
+    if (i as f32) > t { i - 1 } else { i }
+}
+
+/// The index range of CSR row `i`.
+fn csr_row(starts: &[u32], i: usize) -> Option<Range<usize>> {
+    let a = *starts.get(i)? as usize;
+    let b = *starts.get(i.checked_add(1)?)? as usize;
+    (a <= b).then_some(a..b)
+}
+
+fn read_header(bytes: &[u8]) -> Result<&BankHeader, BankError> {
+    let head = bytes.get(..HEADER_LEN).ok_or(BankError::TooShort {
+        needed: HEADER_LEN,
+        got: bytes.len(),
+    })?;
+    bytemuck::try_from_bytes(head).map_err(|_| BankError::Misaligned)
+}
+
+/// Cast a byte range to elements, mapping a failure (it cannot happen once offsets and the base
+/// are aligned and sizes checked) to a section error.
+fn cast<T: Pod>(bytes: &[u8], section: SectionKind) -> Result<&[T], BankError> {
+    bytemuck::try_cast_slice(bytes).map_err(|_| BankError::SectionMisaligned { section })
+}
+
+fn all_finite(values: &[f32]) -> bool {
+    values.iter().all(|v| v.is_finite())
+}
+
+impl<'a> Bank<'a> {
+    /// Validate `bytes` and borrow it as a bank. `bytes` must start on a 4-byte boundary and
+    /// hold at least the header's `total_len` bytes; anything after that is ignored (a flash
+    /// region may be larger than the bank). See `SPEC.md` for every rule and its order.
+    pub fn parse(bytes: &'a [u8]) -> Result<Bank<'a>, BankError> {
+        let header = read_header(bytes)?;
+        if bytes.as_ptr().align_offset(BANK_ALIGN) != 0 {
+            return Err(BankError::Misaligned);
+        }
+        if header.magic != MAGIC {
+            return Err(BankError::BadMagic);
+        }
+        if header.version_major != VERSION_MAJOR {
+            return Err(BankError::UnsupportedVersion {
+                major: header.version_major,
+                minor: header.version_minor,
+            });
+        }
+        if usize::from(header.header_len) != HEADER_LEN {
+            return Err(BankError::BadHeaderLength {
+                header_len: header.header_len,
+            });
+        }
+        let section_count = usize::from(header.section_count);
+        if section_count > MAX_SECTIONS {
+            return Err(BankError::TooManySections {
+                count: header.section_count,
+            });
+        }
+        let table_end = HEADER_LEN + SECTION_ENTRY_LEN * section_count;
+        let total = header.total_len as usize;
+        if !total.is_multiple_of(SECTION_ALIGN) || total < table_end {
+            return Err(BankError::BadTotalLength {
+                total_len: header.total_len,
+            });
+        }
+        let bank = bytes.get(..total).ok_or(BankError::TooShort {
+            needed: total,
+            got: bytes.len(),
+        })?;
+        let computed = bank_crc(bank);
+        if computed != header.crc32 {
+            return Err(BankError::CrcMismatch {
+                stored: header.crc32,
+                computed,
+            });
+        }
+        if header.flags != 0 || header.reserved != 0 {
+            return Err(BankError::ReservedNotZero {
+                section: SectionKind::Header,
+            });
+        }
+        let table: &[SectionEntry] = cast(
+            bank.get(HEADER_LEN..table_end).unwrap_or(&[]),
+            SectionKind::Header,
+        )?;
+        check_table(table, table_end, total)?;
+        let sections = Sections { bank, table };
+
+        // Meta.
+        let meta: &BankMeta = sections.single(SectionKind::Meta)?;
+        if meta.reserved != 0 {
+            return Err(BankError::ReservedNotZero {
+                section: SectionKind::Meta,
+            });
+        }
+        if !meta.truncation_radius_m.is_finite() {
+            return Err(BankError::NonFinite {
+                section: SectionKind::Meta,
+                entry: 0,
+            });
+        }
+        if !(meta.truncation_radius_m >= 0.0) {
+            return Err(BankError::BadTruncationRadius);
+        }
+
+        // Tissue law and device.
+        let law = TissueLaw::from_record(sections.single(SectionKind::TissueLaw)?)?;
+        let device: &DeviceCalibration = sections.single(SectionKind::Device)?;
+        check_device(device)?;
+
+        // Nodes.
+        let positions: &[[f32; 3]] = sections.slice(SectionKind::Positions)?;
+        let n = positions.len();
+        if n == 0 || n > MAX_NODES {
+            return Err(BankError::NodeCount { count: n as u32 });
+        }
+        if let Some(k) = positions.iter().position(|p| !all_finite(p)) {
+            return Err(BankError::NonFinite {
+                section: SectionKind::Positions,
+                entry: k as u32,
+            });
+        }
+        let mesh_ids: &[u32] = sections.slice(SectionKind::MeshIds)?;
+        expect_count(mesh_ids.len(), n, SectionKind::MeshIds)?;
+
+        // Triangles and their adjacency.
+        let triangles: &[[u16; 3]] = sections.slice(SectionKind::Triangles)?;
+        for (t, tri) in triangles.iter().enumerate() {
+            if tri.iter().any(|&v| usize::from(v) >= n) {
+                return Err(BankError::IndexOutOfRange {
+                    section: SectionKind::Triangles,
+                    entry: t as u32,
+                });
+            }
+            if tri[0] == tri[1] || tri[1] == tri[2] || tri[0] == tri[2] {
+                return Err(BankError::DegenerateTriangle { triangle: t as u32 });
+            }
+        }
+        let node_tri_starts: &[u32] = sections.slice(SectionKind::NodeTriStarts)?;
+        let node_tri_items: &[u32] = sections.slice(SectionKind::NodeTriItems)?;
+        expect_count(node_tri_starts.len(), n + 1, SectionKind::NodeTriStarts)?;
+        expect_count(
+            node_tri_items.len(),
+            triangles.len().saturating_mul(3),
+            SectionKind::NodeTriItems,
+        )?;
+        check_starts(
+            node_tri_starts,
+            node_tri_items.len(),
+            SectionKind::NodeTriStarts,
+        )?;
+        for k in 0..n {
+            let row = csr_row(node_tri_starts, k)
+                .and_then(|r| node_tri_items.get(r.clone()).map(|items| (r, items)));
+            let Some((range, items)) = row else {
+                return Err(BankError::BadCsrStarts {
+                    section: SectionKind::NodeTriStarts,
+                    entry: k as u32,
+                });
+            };
+            let mut prev: Option<u32> = None;
+            for (offset, &t) in items.iter().enumerate() {
+                let Some(tri) = triangles.get(t as usize) else {
+                    return Err(BankError::IndexOutOfRange {
+                        section: SectionKind::NodeTriItems,
+                        entry: (range.start + offset) as u32,
+                    });
+                };
+                let ascending = prev.is_none_or(|p| t > p);
+                if !ascending || !tri.iter().any(|&v| usize::from(v) == k) {
+                    return Err(BankError::NodeTriangleMismatch { node: k as u32 });
+                }
+                prev = Some(t);
+            }
+        }
+
+        // Collision grid.
+        let grid_header: &GridHeader = sections.single(SectionKind::Grid)?;
+        if !all_finite(&grid_header.origin_m) || !grid_header.cell_size_m.is_finite() {
+            return Err(BankError::NonFinite {
+                section: SectionKind::Grid,
+                entry: 0,
+            });
+        }
+        if grid_header.reserved != 0 {
+            return Err(BankError::ReservedNotZero {
+                section: SectionKind::Grid,
+            });
+        }
+        let cells = grid_header
+            .dims
+            .iter()
+            .map(|&d| u64::from(d))
+            .product::<u64>();
+        if !(grid_header.cell_size_m > 0.0) || cells == 0 || cells >= u64::from(u32::MAX) {
+            return Err(BankError::GridGeometry);
+        }
+        let cells = cells as usize;
+        let grid_starts: &[u32] = sections.slice(SectionKind::GridStarts)?;
+        let grid_items: &[u16] = sections.slice(SectionKind::GridItems)?;
+        expect_count(grid_starts.len(), cells + 1, SectionKind::GridStarts)?;
+        expect_count(grid_items.len(), n, SectionKind::GridItems)?;
+        check_starts(grid_starts, grid_items.len(), SectionKind::GridStarts)?;
+        let grid = Grid {
+            header: grid_header,
+            starts: grid_starts,
+            items: grid_items,
+        };
+        for c in 0..cells {
+            let Some(range) = csr_row(grid_starts, c) else {
+                return Err(BankError::BadCsrStarts {
+                    section: SectionKind::GridStarts,
+                    entry: c as u32,
+                });
+            };
+            let mut prev: Option<u16> = None;
+            for e in range {
+                let item = grid_items.get(e).copied().unwrap_or(u16::MAX);
+                let Some(p) = positions.get(usize::from(item)) else {
+                    return Err(BankError::IndexOutOfRange {
+                        section: SectionKind::GridItems,
+                        entry: e as u32,
+                    });
+                };
+                if prev.is_some_and(|q| item <= q) {
+                    return Err(BankError::GridItemsNotSorted { cell: c as u32 });
+                }
+                prev = Some(item);
+                if grid.cell_of(*p).and_then(|cell| grid.cell_index(cell)) != Some(c) {
+                    return Err(BankError::GridItemWrongCell {
+                        cell: c as u32,
+                        entry: e as u32,
+                    });
+                }
+            }
+        }
+
+        // Self-compliance.
+        let ckk: &[[f32; 6]] = sections.slice(SectionKind::Ckk)?;
+        expect_count(ckk.len(), n, SectionKind::Ckk)?;
+        for (k, c) in ckk.iter().enumerate() {
+            if !all_finite(c) {
+                return Err(BankError::NonFinite {
+                    section: SectionKind::Ckk,
+                    entry: k as u32,
+                });
+            }
+            if !is_spd::<3>(&sym3(c)) {
+                return Err(BankError::CkkNotSpd { node: k as u32 });
+            }
+        }
+
+        // Neighbour lists and couplings.
+        let nb_starts: &[u32] = sections.slice(SectionKind::NeighbourStarts)?;
+        let nb_index: &[u16] = sections.slice(SectionKind::NeighbourIndex)?;
+        let nb_ckl: &[[f32; 9]] = sections.slice(SectionKind::NeighbourCkl)?;
+        expect_count(nb_starts.len(), n + 1, SectionKind::NeighbourStarts)?;
+        expect_count(nb_ckl.len(), nb_index.len(), SectionKind::NeighbourCkl)?;
+        check_starts(nb_starts, nb_index.len(), SectionKind::NeighbourStarts)?;
+        if let Some(e) = nb_ckl.iter().position(|c| !all_finite(c)) {
+            return Err(BankError::NonFinite {
+                section: SectionKind::NeighbourCkl,
+                entry: e as u32,
+            });
+        }
+        for k in 0..n {
+            let range = csr_row(nb_starts, k).unwrap_or(0..0);
+            let mut prev: Option<u16> = None;
+            for e in range {
+                let l = nb_index.get(e).copied().unwrap_or(u16::MAX);
+                if usize::from(l) >= n {
+                    return Err(BankError::IndexOutOfRange {
+                        section: SectionKind::NeighbourIndex,
+                        entry: e as u32,
+                    });
+                }
+                if usize::from(l) == k {
+                    return Err(BankError::NeighbourSelf { node: k as u32 });
+                }
+                if prev.is_some_and(|q| l <= q) {
+                    return Err(BankError::NeighbourNotSorted { node: k as u32 });
+                }
+                prev = Some(l);
+            }
+        }
+        let bank = Bank {
+            bytes: bank,
+            header,
+            meta,
+            positions,
+            mesh_ids,
+            triangles,
+            node_tri_starts,
+            node_tri_items,
+            grid,
+            ckk,
+            nb_starts,
+            nb_index,
+            nb_ckl,
+            law,
+            device,
+        };
+        bank.check_couplings()?;
+        bank.check_coverage()?;
+        Ok(bank)
+    }
+
+    /// Reciprocity, symmetry and pairwise positive definiteness of the couplings.
+    fn check_couplings(&self) -> Result<(), BankError> {
+        let n = self.node_count();
+        for k in 0..n {
+            let (ls, blocks) = self.neighbours(k);
+            for (&l, c_kl) in ls.iter().zip(blocks) {
+                let l = usize::from(l);
+                let err_node = k as u32;
+                let err_nb = l as u32;
+                let Some(c_lk) = self.find_coupling(l, k) else {
+                    return Err(BankError::NeighbourNotReciprocal {
+                        node: err_node,
+                        neighbour: err_nb,
+                    });
+                };
+                if l < k {
+                    continue; // the pair was checked from its smaller node
+                }
+                let (Some(ckk), Some(cll)) = (self.ckk.get(k), self.ckk.get(l)) else {
+                    continue;
+                };
+                let dk = f64::from(ckk[0].max(ckk[3]).max(ckk[5]));
+                let dl = f64::from(cll[0].max(cll[3]).max(cll[5]));
+                let tol2 = SYMMETRY_REL * SYMMETRY_REL * dk * dl;
+                for i in 0..3 {
+                    for j in 0..3 {
+                        let d = f64::from(c_lk[3 * j + i]) - f64::from(c_kl[3 * i + j]);
+                        if !(d * d <= tol2) {
+                            return Err(BankError::CklAsymmetric {
+                                node: err_node,
+                                neighbour: err_nb,
+                            });
+                        }
+                    }
+                }
+                let a = sym3(ckk);
+                let b = sym3(cll);
+                let mut m = [[0.0f64; 6]; 6];
+                for i in 0..3 {
+                    for j in 0..3 {
+                        m[i][j] = a[i][j];
+                        m[i + 3][j + 3] = b[i][j];
+                        m[i][j + 3] = f64::from(c_kl[3 * i + j]);
+                        m[j + 3][i] = f64::from(c_kl[3 * i + j]);
+                    }
+                }
+                if !is_spd::<6>(&m) {
+                    return Err(BankError::PairNotSpd {
+                        node: err_node,
+                        neighbour: err_nb,
+                    });
+                }
+            }
+        }
+        for (t, tri) in self.triangles.iter().enumerate() {
+            let [a, b, c] = tri.map(usize::from);
+            if self.find_coupling(a, b).is_none()
+                || self.find_coupling(b, c).is_none()
+                || self.find_coupling(a, c).is_none()
+            {
+                return Err(BankError::TriangleEdgeNotCoupled { triangle: t as u32 });
+            }
+        }
+        Ok(())
+    }
+
+    /// Every pair closer than the truncation radius is coupled.
+    fn check_coverage(&self) -> Result<(), BankError> {
+        let r = self.meta.truncation_radius_m;
+        if r <= 0.0 {
+            return Ok(());
+        }
+        let limit = f64::from(r) * (1.0 - TRUNCATION_SLACK);
+        let limit2 = limit * limit;
+        let g = self.grid.header;
+        let h = g.cell_size_m;
+        for (k, p) in self.positions.iter().enumerate() {
+            let mut lo = [0u16; 3];
+            let mut hi = [0u16; 3];
+            for axis in 0..3 {
+                let top = i64::from(g.dims[axis]) - 1;
+                lo[axis] = signed_cell(p[axis] - r, g.origin_m[axis], h).clamp(0, top) as u16;
+                hi[axis] = signed_cell(p[axis] + r, g.origin_m[axis], h).clamp(0, top) as u16;
+            }
+            for cz in lo[2]..=hi[2] {
+                for cy in lo[1]..=hi[1] {
+                    for cx in lo[0]..=hi[0] {
+                        let Some(c) = self.grid.cell_index([cx, cy, cz]) else {
+                            continue;
+                        };
+                        for &l in self.grid.cell_items(c) {
+                            let l = usize::from(l);
+                            if l <= k {
+                                continue;
+                            }
+                            let Some(q) = self.positions.get(l) else {
+                                continue;
+                            };
+                            let d2: f64 = (0..3)
+                                .map(|i| {
+                                    let d = f64::from(p[i]) - f64::from(q[i]);
+                                    d * d
+                                })
+                                .sum();
+                            if d2 < limit2 && self.find_coupling(k, l).is_none() {
+                                return Err(BankError::MissingNeighbour {
+                                    node: k as u32,
+                                    neighbour: l as u32,
+                                });
+                            }
+                        }
+                    }
+                }
+            }
+        }
+        Ok(())
+    }
+
+    fn find_coupling(&self, k: usize, l: usize) -> Option<&'a [f32; 9]> {
+        let (ls, blocks) = self.neighbours(k);
+        let l = u16::try_from(l).ok()?;
+        let i = ls.binary_search(&l).ok()?;
+        blocks.get(i)
+    }
+
+    /// The bank's bytes (exactly `total_len` of them).
+    pub fn bytes(&self) -> &'a [u8] {
+        self.bytes
+    }
+
+    /// The bank's CRC-32, which also serves as its identity on the link.
+    pub fn crc(&self) -> u32 {
+        self.header.crc32
+    }
+
+    /// `(major, minor)` version of the writer.
+    pub fn version(&self) -> (u16, u16) {
+        (self.header.version_major, self.header.version_minor)
+    }
+
+    /// Bank-wide metadata.
+    pub fn meta(&self) -> &'a BankMeta {
+        self.meta
+    }
+
+    /// The host's scene identity.
+    pub fn scene_id(&self) -> u64 {
+        self.meta.scene_id()
+    }
+
+    /// Truncation radius, m.
+    pub fn truncation_radius_m(&self) -> f32 {
+        self.meta.truncation_radius_m
+    }
+
+    /// Number of nodes in R (1..=65535).
+    pub fn node_count(&self) -> usize {
+        self.positions.len()
+    }
+
+    /// Node positions, m.
+    pub fn positions(&self) -> &'a [[f32; 3]] {
+        self.positions
+    }
+
+    /// Each node's id in the host mesh (for the display).
+    pub fn mesh_ids(&self) -> &'a [u32] {
+        self.mesh_ids
+    }
+
+    /// R's surface triangles (node indices, counter-clockwise seen from outside).
+    pub fn triangles(&self) -> &'a [[u16; 3]] {
+        self.triangles
+    }
+
+    /// Indices of the triangles that contain node `k`, ascending (empty for `k` out of range).
+    pub fn node_triangles(&self, k: usize) -> &'a [u32] {
+        csr_row(self.node_tri_starts, k)
+            .and_then(|r| self.node_tri_items.get(r))
+            .unwrap_or(&[])
+    }
+
+    /// The collision grid.
+    pub fn grid(&self) -> Grid<'a> {
+        self.grid
+    }
+
+    /// `C_kk` as stored: xx, xy, xz, yy, yz, zz in m/N.
+    pub fn c_kk(&self, k: usize) -> Option<[f32; 6]> {
+        self.ckk.get(k).copied()
+    }
+
+    /// `C_kk` as a full symmetric 3x3 matrix, m/N.
+    pub fn c_kk_matrix(&self, k: usize) -> Option<[[f32; 3]; 3]> {
+        self.ckk
+            .get(k)
+            .map(|c| [[c[0], c[1], c[2]], [c[1], c[3], c[4]], [c[2], c[4], c[5]]])
+    }
+
+    /// Node `k`'s neighbours `l` (ascending, `l != k`) and the blocks `C_kl` (row-major 3x3,
+    /// m/N: displacement of `k` per unit force at `l`). Empty for `k` out of range.
+    pub fn neighbours(&self, k: usize) -> (&'a [u16], &'a [[f32; 9]]) {
+        match csr_row(self.nb_starts, k) {
+            Some(r) => match (self.nb_index.get(r.clone()), self.nb_ckl.get(r)) {
+                (Some(ls), Some(cs)) => (ls, cs),
+                _ => (&[], &[]),
+            },
+            None => (&[], &[]),
+        }
+    }
+
+    /// The 3x3 compliance block `C_kl` (m/N) for any two nodes: `C_kk` when `k == l`, the stored
+    /// coupling when `l` is a neighbour of `k`, `None` otherwise (truncated or out of range).
+    pub fn coupling(&self, k: usize, l: usize) -> Option<[[f32; 3]; 3]> {
+        if k == l {
+            return self.c_kk_matrix(k);
+        }
+        self.find_coupling(k, l)
+            .map(|c| [[c[0], c[1], c[2]], [c[3], c[4], c[5]], [c[6], c[7], c[8]]])
+    }
+
+    /// The tissue force law Q.
+    pub fn tissue_law(&self) -> &TissueLaw {
+        &self.law
+    }
+
+    /// The device calibration.
+    pub fn device(&self) -> &'a DeviceCalibration {
+        self.device
+    }
+
+    /// The node nearest to `p` among the 27 buckets around `p`'s cell (clipped to the grid),
+    /// with its squared distance in m^2; `None` if those buckets are empty or `p` is more than
+    /// one cell outside the grid (or not finite).
+    pub fn nearest_node(&self, p: [f32; 3]) -> Option<(u16, f32)> {
+        if !all_finite(&p) {
+            return None;
+        }
+        let g = self.grid.header;
+        let mut lo = [0u16; 3];
+        let mut hi = [0u16; 3];
+        for axis in 0..3 {
+            let c = signed_cell(p[axis], g.origin_m[axis], g.cell_size_m);
+            let top = i64::from(g.dims[axis]) - 1;
+            let (a, b) = (c.saturating_sub(1).max(0), c.saturating_add(1).min(top));
+            if a > b {
+                return None;
+            }
+            lo[axis] = a as u16;
+            hi[axis] = b as u16;
+        }
+        let mut best: Option<(u16, f32)> = None;
+        for cz in lo[2]..=hi[2] {
+            for cy in lo[1]..=hi[1] {
+                for cx in lo[0]..=hi[0] {
+                    let Some(c) = self.grid.cell_index([cx, cy, cz]) else {
+                        continue;
+                    };
+                    for &l in self.grid.cell_items(c) {
+                        let Some(q) = self.positions.get(usize::from(l)) else {
+                            continue;
+                        };
+                        let d2 = (p[0] - q[0]) * (p[0] - q[0])
+                            + (p[1] - q[1]) * (p[1] - q[1])
+                            + (p[2] - q[2]) * (p[2] - q[2]);
+                        if best.is_none_or(|(_, b)| d2 < b) {
+                            best = Some((l, d2));
+                        }
+                    }
+                }
+            }
+        }
+        best
+    }
+}
+
+struct Sections<'a> {
+    bank: &'a [u8],
+    table: &'a [SectionEntry],
+}
+
+impl<'a> Sections<'a> {
+    fn bytes(&self, kind: SectionKind) -> Result<(&'a [u8], u32), BankError> {
+        let entry = self
+            .table
+            .iter()
+            .find(|e| e.kind == kind.code())
+            .ok_or(BankError::MissingSection { section: kind })?;
+        let start = entry.offset as usize;
+        let end = start
+            .checked_add(entry.len as usize)
+            .ok_or(BankError::SectionOutOfBounds { section: kind })?;
+        let bytes = self
+            .bank
+            .get(start..end)
+            .ok_or(BankError::SectionOutOfBounds { section: kind })?;
+        Ok((bytes, entry.count))
+    }
+
+    fn slice<T: Pod>(&self, kind: SectionKind) -> Result<&'a [T], BankError> {
+        let (bytes, _) = self.bytes(kind)?;
+        cast(bytes, kind)
+    }
+
+    fn single<T: Pod>(&self, kind: SectionKind) -> Result<&'a T, BankError> {
+        let (bytes, count) = self.bytes(kind)?;
+        let items: &[T] = cast(bytes, kind)?;
+        match (count, items) {
+            (1, [one]) => Ok(one),
+            _ => Err(BankError::CountMismatch { section: kind }),
+        }
+    }
+}
+
+fn expect_count(got: usize, want: usize, section: SectionKind) -> Result<(), BankError> {
+    if got == want {
+        Ok(())
+    } else {
+        Err(BankError::CountMismatch { section })
+    }
+}
+
+fn check_starts(starts: &[u32], items: usize, section: SectionKind) -> Result<(), BankError> {
+    let mut prev = 0u32;
+    for (i, &s) in starts.iter().enumerate() {
+        let bad = if i == 0 { s != 0 } else { s < prev };
+        if bad {
+            return Err(BankError::BadCsrStarts {
+                section,
+                entry: i as u32,
+            });
+        }
+        prev = s;
+    }
+    if prev as usize != items {
+        return Err(BankError::BadCsrStarts {
+            section,
+            entry: starts.len().saturating_sub(1) as u32,
+        });
+    }
+    Ok(())
+}
+
+fn check_table(table: &[SectionEntry], table_end: usize, total: usize) -> Result<(), BankError> {
+    for (i, e) in table.iter().enumerate() {
+        let section = SectionKind::from_code(e.kind);
+        if section == SectionKind::Header {
+            return Err(BankError::ReservedSectionKind { entry: i as u32 });
+        }
+        let start = e.offset as usize;
+        if !start.is_multiple_of(SECTION_ALIGN) {
+            return Err(BankError::SectionMisaligned { section });
+        }
+        let end = start
+            .checked_add(e.len as usize)
+            .filter(|&end| end <= total)
+            .ok_or(BankError::SectionOutOfBounds { section })?;
+        if start < table_end && end > start {
+            return Err(BankError::SectionOverlap { section });
+        }
+        let earlier = table.get(..i).unwrap_or(&[]);
+        if earlier.iter().any(|p| p.kind == e.kind) {
+            return Err(BankError::DuplicateSection { section });
+        }
+        let overlaps = earlier.iter().any(|p| {
+            let (ps, pe) = (p.offset as usize, p.offset as usize + p.len as usize);
+            start < pe && ps < end
+        });
+        if overlaps {
+            return Err(BankError::SectionOverlap { section });
+        }
+        if let Some(size) = section.element_size()
+            && (e.count as usize).checked_mul(size) != Some(e.len as usize)
+        {
+            return Err(BankError::SizeMismatch { section });
+        }
+    }
+    for section in SectionKind::REQUIRED {
+        if !table.iter().any(|e| e.kind == section.code()) {
+            return Err(BankError::MissingSection { section });
+        }
+    }
+    Ok(())
+}
+
+fn sym3(c: &[f32; 6]) -> [[f64; 3]; 3] {
+    let c = c.map(f64::from);
+    [[c[0], c[1], c[2]], [c[1], c[3], c[4]], [c[2], c[4], c[5]]]
+}
+
+/// LDL^T in f64: every pivot must exceed [`SPD_PIVOT_REL`] times the largest diagonal entry
+/// (equivalent to a Cholesky factorisation succeeding with that margin; no square roots).
+fn is_spd<const N: usize>(m: &[[f64; N]; N]) -> bool {
+    let mut max_diag = 0.0f64;
+    for (i, row) in m.iter().enumerate() {
+        max_diag = max_diag.max(row[i]);
+    }
+    if !(max_diag > 0.0) {
+        return false;
+    }
+    let tol = SPD_PIVOT_REL * max_diag;
+    let mut l = [[0.0f64; N]; N];
+    let mut d = [0.0f64; N];
+    for j in 0..N {
+        let mut dj = m[j][j];
+        for k in 0..j {
+            dj -= l[j][k] * l[j][k] * d[k];
+        }
+        if !(dj > tol) {
+            return false;
+        }
+        d[j] = dj;
+        for i in j + 1..N {
+            let mut v = m[i][j];
+            for k in 0..j {
+                v -= l[i][k] * l[j][k] * d[k];
+            }
+            l[i][j] = v / dj;
+        }
+    }
+    true
+}
+
+fn check_device(d: &DeviceCalibration) -> Result<(), BankError> {
+    let floats = [
+        &d.fulcrum_m[..],
+        &d.shaft_axis,
+        &d.pitch_axis,
+        &d.yaw_axis,
+        &d.joint_min,
+        &d.joint_max,
+        &d.home_joint,
+        &d.transmission,
+        &d.torque_constant_nm_per_a,
+        &d.current_limit_a,
+        &[d.max_force_n, d.tip_radius_m],
+    ];
+    if !floats.iter().all(|v| all_finite(v)) {
+        return Err(BankError::NonFinite {
+            section: SectionKind::Device,
+            entry: 0,
+        });
+    }
+    let dot = |a: &[f32; 3], b: &[f32; 3]| -> f64 {
+        (0..3).map(|i| f64::from(a[i]) * f64::from(b[i])).sum()
+    };
+    let unit = |a: &[f32; 3]| (dot(a, a) - 1.0).abs() <= 2.0e-3;
+    let fail = |field| Err(BankError::Device { field });
+    if !unit(&d.shaft_axis) {
+        return fail(DeviceField::ShaftAxis);
+    }
+    if !unit(&d.pitch_axis) {
+        return fail(DeviceField::PitchAxis);
+    }
+    if !unit(&d.yaw_axis) {
+        return fail(DeviceField::YawAxis);
+    }
+    if dot(&d.shaft_axis, &d.pitch_axis).abs() > 1.0e-3
+        || dot(&d.shaft_axis, &d.yaw_axis).abs() > 1.0e-3
+        || dot(&d.pitch_axis, &d.yaw_axis).abs() > 1.0e-3
+    {
+        return fail(DeviceField::AxesNotOrthogonal);
+    }
+    let pi = core::f32::consts::PI;
+    for axis in 0..3u8 {
+        let i = usize::from(axis);
+        let (lo, hi) = (d.joint_min[i], d.joint_max[i]);
+        let bounded = if i < 2 {
+            lo >= -pi && hi <= pi
+        } else {
+            lo >= 0.0
+        };
+        if !(lo < hi) || !bounded {
+            return fail(DeviceField::JointRange { axis });
+        }
+        if !(lo <= d.home_joint[i] && d.home_joint[i] <= hi) {
+            return fail(DeviceField::HomeJoint { axis });
+        }
+    }
+    for axis in 0..3u8 {
+        let i = usize::from(axis);
+        if d.counts_per_rev[i] == 0 {
+            return fail(DeviceField::CountsPerRev { axis });
+        }
+        if !(d.transmission[i].abs() >= 1.0e-6) {
+            return fail(DeviceField::Transmission { axis });
+        }
+        if !(d.torque_constant_nm_per_a[i] > 0.0) {
+            return fail(DeviceField::TorqueConstant { axis });
+        }
+        let limit = d.current_limit_a[i];
+        if !(limit > 0.0 && limit <= 20.0) {
+            return fail(DeviceField::CurrentLimit { axis });
+        }
+    }
+    if !(d.max_force_n > 0.0 && d.max_force_n <= 50.0) {
+        return fail(DeviceField::MaxForce);
+    }
+    if !(d.tip_radius_m >= 0.0 && d.tip_radius_m <= 0.05) {
+        return fail(DeviceField::TipRadius);
+    }
+    Ok(())
+}
+
+/// Validate a device calibration on its own (the same rules [`Bank::parse`] applies).
+pub fn validate_device(d: &DeviceCalibration) -> Result<(), BankError> {
+    check_device(d)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn signed_cell_floors() {
+        assert_eq!(signed_cell(-0.5, 0.0, 1.0), -1);
+        assert_eq!(signed_cell(-1.0, 0.0, 1.0), -1);
+        assert_eq!(signed_cell(0.0, 0.0, 1.0), 0);
+        assert_eq!(signed_cell(2.5, 0.0, 1.0), 2);
+    }
+
+    #[test]
+    fn spd_check() {
+        assert!(is_spd::<3>(&[
+            [2.0, 1.0, 0.0],
+            [1.0, 2.0, 0.0],
+            [0.0, 0.0, 1.0]
+        ]));
+        assert!(!is_spd::<3>(&[
+            [1.0, 2.0, 0.0],
+            [2.0, 1.0, 0.0],
+            [0.0, 0.0, 1.0]
+        ]));
+        assert!(!is_spd::<3>(&[
+            [f64::NAN, 0.0, 0.0],
+            [0.0, 1.0, 0.0],
+            [0.0, 0.0, 1.0]
+        ]));
+    }
+}

@@ -1,0 +1,442 @@
+//! The host-side writer (feature `alloc`): turns plain Rust data into a bank, then validates its
+//! own output with the reader, so it never hands out a bank the firmware would reject.
+
+use crate::error::BankError;
+use crate::law::TissueLaw;
+use crate::layout::{
+    BankHeader, BankMeta, DeviceCalibration, GridHeader, HEADER_LEN, MAGIC, MAX_NODES,
+    SECTION_ALIGN, SECTION_ENTRY_LEN, SectionEntry, SectionKind, VERSION_MAJOR, VERSION_MINOR,
+    reseal,
+};
+use crate::reader::{Bank, cell_of};
+use alloc::collections::BTreeMap;
+use alloc::vec;
+use alloc::vec::Vec;
+use core::fmt;
+
+/// Relative tolerance for the input's own symmetry: `C_kk` against its transpose, and the two
+/// directions of a coupling given twice.
+pub const INPUT_SYMMETRY_REL: f64 = 1.0e-6;
+
+/// Everything a bank holds, as plain host data. Node `k` of R is entry `k` of every per-node
+/// vector. All quantities SI (m, N, m/N).
+#[derive(Clone, Debug)]
+pub struct BankBuilder {
+    /// Node positions, m.
+    pub positions_m: Vec<[f64; 3]>,
+    /// Node id in the host mesh, per node.
+    pub mesh_ids: Vec<u32>,
+    /// R's surface triangles as node indices, counter-clockwise seen from outside.
+    pub triangles: Vec<[u32; 3]>,
+    /// `C_kk` per node, m/N (symmetric; stored symmetrised).
+    pub c_kk: Vec<[[f64; 3]; 3]>,
+    /// Couplings `(k, l, C_kl)`, `k != l`, m/N. Each unordered pair once or in both directions
+    /// (then `C_lk` must equal `C_kl^T`); the bank stores both directions.
+    pub couplings: Vec<(u32, u32, [[f64; 3]; 3])>,
+    /// Edge of the collision grid's cubic cells, m (e.g. the mean surface edge length or the
+    /// tool tip diameter, whichever is larger). Flash cost: 4 bytes per cell of the bounding box.
+    pub grid_cell_size_m: f64,
+    /// Truncation radius, m: every pair of nodes closer than this must be in `couplings`.
+    pub truncation_radius_m: f64,
+    /// Opaque scene identity (e.g. a hash of the scene file).
+    pub scene_id: u64,
+    /// The tissue force law Q.
+    pub law: TissueLaw,
+    /// Device calibration.
+    pub device: DeviceCalibration,
+}
+
+/// Why [`BankBuilder::build`] refused its input.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum BuildError {
+    /// A per-node vector's length differs from `positions_m`'s.
+    LengthMismatch {
+        /// `"mesh_ids"` or `"c_kk"`.
+        field: &'static str,
+    },
+    /// A triangle or coupling names a node that does not exist.
+    IndexOutOfRange {
+        /// `"triangles"` or `"couplings"`.
+        field: &'static str,
+        /// Entry of that vector.
+        entry: usize,
+    },
+    /// A coupling with `k == l`.
+    SelfCoupling {
+        /// Entry of `couplings`.
+        entry: usize,
+    },
+    /// `C_kk` of this node is not symmetric.
+    AsymmetricCkk {
+        /// Node.
+        node: usize,
+    },
+    /// A pair given in both directions with `C_lk != C_kl^T` (or twice with different values).
+    InconsistentCoupling {
+        /// Entry of `couplings`.
+        entry: usize,
+    },
+    /// Grid cell size not positive, or the grid would exceed 65535 cells along an axis or
+    /// `u32::MAX` cells in all.
+    Grid,
+    /// The bank would exceed 4 GiB.
+    TooLarge,
+    /// The output fails the reader's validation (the input breaks a format rule).
+    Rejected(BankError),
+}
+
+impl fmt::Display for BuildError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            BuildError::LengthMismatch { field } => {
+                write!(f, "{field} must have one entry per node")
+            }
+            BuildError::IndexOutOfRange { field, entry } => {
+                write!(f, "{field}[{entry}] names a node that does not exist")
+            }
+            BuildError::SelfCoupling { entry } => write!(f, "couplings[{entry}] has k == l"),
+            BuildError::AsymmetricCkk { node } => write!(f, "C_kk of node {node} not symmetric"),
+            BuildError::InconsistentCoupling { entry } => {
+                write!(
+                    f,
+                    "couplings[{entry}] disagrees with the same pair given before"
+                )
+            }
+            BuildError::Grid => f.write_str("grid cell size invalid or grid too large"),
+            BuildError::TooLarge => f.write_str("bank larger than 4 GiB"),
+            BuildError::Rejected(e) => write!(f, "bank rejected by the reader: {e}"),
+        }
+    }
+}
+
+impl core::error::Error for BuildError {}
+
+impl From<BankError> for BuildError {
+    fn from(e: BankError) -> Self {
+        BuildError::Rejected(e)
+    }
+}
+
+/// Bytes stored with 8-byte alignment (a `Vec<u8>` promises only 1), so a bank read from a file
+/// or built in memory can be handed to [`Bank::parse`].
+#[derive(Clone, Debug, Default)]
+pub struct AlignedBytes {
+    words: Vec<u64>,
+    len: usize,
+}
+
+impl AlignedBytes {
+    /// Copy `bytes` into aligned storage.
+    pub fn new(bytes: &[u8]) -> AlignedBytes {
+        let mut words = vec![0u64; bytes.len().div_ceil(8)];
+        let dst: &mut [u8] = bytemuck::cast_slice_mut(&mut words);
+        if let Some(d) = dst.get_mut(..bytes.len()) {
+            d.copy_from_slice(bytes);
+        }
+        AlignedBytes {
+            words,
+            len: bytes.len(),
+        }
+    }
+
+    /// The bytes.
+    pub fn as_slice(&self) -> &[u8] {
+        let all: &[u8] = bytemuck::cast_slice(&self.words);
+        all.get(..self.len).unwrap_or(&[])
+    }
+
+    /// The bytes, mutable (for tools that patch a bank; see [`crate::reseal`]).
+    pub fn as_mut_slice(&mut self) -> &mut [u8] {
+        let all: &mut [u8] = bytemuck::cast_slice_mut(&mut self.words);
+        all.get_mut(..self.len).unwrap_or(&mut [])
+    }
+}
+
+impl core::ops::Deref for AlignedBytes {
+    type Target = [u8];
+    fn deref(&self) -> &[u8] {
+        self.as_slice()
+    }
+}
+
+fn f32s<const N: usize>(a: [f64; N]) -> [f32; N] {
+    a.map(|v| v as f32)
+}
+
+fn transpose(m: &[[f64; 3]; 3]) -> [[f64; 3]; 3] {
+    let mut t = [[0.0; 3]; 3];
+    for (i, row) in m.iter().enumerate() {
+        for (j, v) in row.iter().enumerate() {
+            t[j][i] = *v;
+        }
+    }
+    t
+}
+
+fn max_abs(m: &[[f64; 3]; 3]) -> f64 {
+    m.iter().flatten().fold(0.0f64, |a, v| a.max(v.abs()))
+}
+
+fn close(a: &[[f64; 3]; 3], b: &[[f64; 3]; 3]) -> bool {
+    let tol = INPUT_SYMMETRY_REL * max_abs(a).max(max_abs(b));
+    a.iter()
+        .flatten()
+        .zip(b.iter().flatten())
+        .all(|(x, y)| (x - y).abs() <= tol)
+}
+
+impl BankBuilder {
+    /// Write the bank. Fails on malformed input, and on any input the reader rejects.
+    pub fn build(&self) -> Result<Vec<u8>, BuildError> {
+        let n = self.positions_m.len();
+        if self.mesh_ids.len() != n {
+            return Err(BuildError::LengthMismatch { field: "mesh_ids" });
+        }
+        if self.c_kk.len() != n {
+            return Err(BuildError::LengthMismatch { field: "c_kk" });
+        }
+        if n == 0 || n > MAX_NODES {
+            return Err(BankError::NodeCount {
+                count: u32::try_from(n).unwrap_or(u32::MAX),
+            }
+            .into());
+        }
+        let positions: Vec<[f32; 3]> = self.positions_m.iter().map(|p| f32s(*p)).collect();
+
+        // Triangles and node -> triangle adjacency (ascending by construction).
+        let mut triangles = Vec::with_capacity(self.triangles.len());
+        let mut node_tris: Vec<Vec<u32>> = vec![Vec::new(); n];
+        for (t, tri) in self.triangles.iter().enumerate() {
+            let mut out = [0u16; 3];
+            for (o, &v) in out.iter_mut().zip(tri) {
+                *o = u16::try_from(v)
+                    .ok()
+                    .filter(|&v| usize::from(v) < n)
+                    .ok_or(BuildError::IndexOutOfRange {
+                        field: "triangles",
+                        entry: t,
+                    })?;
+            }
+            triangles.push(out);
+            let t = u32::try_from(t).map_err(|_| BuildError::TooLarge)?;
+            for v in out {
+                if let Some(list) = node_tris.get_mut(usize::from(v))
+                    && list.last() != Some(&t)
+                {
+                    list.push(t);
+                }
+            }
+        }
+        let (node_tri_starts, node_tri_items) = csr(&node_tris)?;
+
+        // Grid: origin half a cell below the smallest coordinate, dims from the largest.
+        let h = self.grid_cell_size_m as f32;
+        if !(h > 0.0 && h.is_finite()) {
+            return Err(BuildError::Grid);
+        }
+        let mut grid = GridHeader {
+            origin_m: [0.0; 3],
+            cell_size_m: h,
+            dims: [0; 3],
+            reserved: 0,
+        };
+        for axis in 0..3 {
+            let lo = positions
+                .iter()
+                .map(|p| p[axis])
+                .fold(f32::INFINITY, f32::min);
+            let hi = positions
+                .iter()
+                .map(|p| p[axis])
+                .fold(f32::NEG_INFINITY, f32::max);
+            let origin = lo - 0.5 * h;
+            let top = (hi - origin) / h;
+            if !(0.0..65534.0).contains(&top) {
+                return Err(BuildError::Grid);
+            }
+            grid.origin_m[axis] = origin;
+            grid.dims[axis] = top as u16 + 1;
+        }
+        let cells: u64 = grid.dims.iter().map(|&d| u64::from(d)).product();
+        if cells >= u64::from(u32::MAX) {
+            return Err(BuildError::Grid);
+        }
+        let mut buckets: Vec<Vec<u16>> = vec![Vec::new(); cells as usize];
+        for (k, p) in positions.iter().enumerate() {
+            let [i, j, l] = cell_of(&grid, *p).ok_or(BuildError::Grid)?;
+            let [nx, ny, _] = grid.dims.map(usize::from);
+            let c = usize::from(i) + nx * (usize::from(j) + ny * usize::from(l));
+            buckets.get_mut(c).ok_or(BuildError::Grid)?.push(k as u16);
+        }
+        let (grid_starts, grid_items) = csr(&buckets)?;
+
+        // Self-compliance, symmetrised.
+        let mut ckk = Vec::with_capacity(n);
+        for (k, c) in self.c_kk.iter().enumerate() {
+            if !close(c, &transpose(c)) {
+                return Err(BuildError::AsymmetricCkk { node: k });
+            }
+            let s = |i: usize, j: usize| (0.5 * (c[i][j] + c[j][i])) as f32;
+            ckk.push([s(0, 0), s(0, 1), s(0, 2), s(1, 1), s(1, 2), s(2, 2)]);
+        }
+
+        // Couplings: one canonical block per unordered pair, stored both ways.
+        let mut pairs: BTreeMap<(u16, u16), [[f64; 3]; 3]> = BTreeMap::new();
+        for (e, (k, l, c)) in self.couplings.iter().enumerate() {
+            let idx = |v: u32| {
+                u16::try_from(v).ok().filter(|&v| usize::from(v) < n).ok_or(
+                    BuildError::IndexOutOfRange {
+                        field: "couplings",
+                        entry: e,
+                    },
+                )
+            };
+            let (k, l) = (idx(*k)?, idx(*l)?);
+            if k == l {
+                return Err(BuildError::SelfCoupling { entry: e });
+            }
+            let (key, block) = if k < l {
+                ((k, l), *c)
+            } else {
+                ((l, k), transpose(c))
+            };
+            match pairs.get(&key) {
+                Some(prev) if !close(prev, &block) => {
+                    return Err(BuildError::InconsistentCoupling { entry: e });
+                }
+                Some(_) => {}
+                None => {
+                    pairs.insert(key, block);
+                }
+            }
+        }
+        let mut rows: Vec<Vec<(u16, [f32; 9])>> = vec![Vec::new(); n];
+        for (&(a, b), c) in &pairs {
+            let m: [f32; 9] = [
+                c[0][0], c[0][1], c[0][2], c[1][0], c[1][1], c[1][2], c[2][0], c[2][1], c[2][2],
+            ]
+            .map(|v| v as f32);
+            let mt = [m[0], m[3], m[6], m[1], m[4], m[7], m[2], m[5], m[8]];
+            if let Some(r) = rows.get_mut(usize::from(a)) {
+                r.push((b, m));
+            }
+            if let Some(r) = rows.get_mut(usize::from(b)) {
+                r.push((a, mt));
+            }
+        }
+        for r in &mut rows {
+            r.sort_by_key(|(l, _)| *l);
+        }
+        let nb_lists: Vec<Vec<u16>> = rows
+            .iter()
+            .map(|r| r.iter().map(|(l, _)| *l).collect())
+            .collect();
+        let (nb_starts, nb_index) = csr(&nb_lists)?;
+        let nb_ckl: Vec<[f32; 9]> = rows.iter().flatten().map(|(_, c)| *c).collect();
+
+        let meta = BankMeta {
+            scene_id: [self.scene_id as u32, (self.scene_id >> 32) as u32],
+            truncation_radius_m: self.truncation_radius_m as f32,
+            reserved: 0,
+        };
+        let law = self.law.to_record();
+
+        // Lay out: header, table, then the sections in REQUIRED order, 8-aligned.
+        let mut body = Sink::default();
+        body.push(SectionKind::Meta, bytemuck::bytes_of(&meta), 1)?;
+        body.push_slice(SectionKind::Positions, &positions)?;
+        body.push_slice(SectionKind::MeshIds, &self.mesh_ids)?;
+        body.push_slice(SectionKind::Triangles, &triangles)?;
+        body.push_slice(SectionKind::NodeTriStarts, &node_tri_starts)?;
+        body.push_slice(SectionKind::NodeTriItems, &node_tri_items)?;
+        body.push(SectionKind::Grid, bytemuck::bytes_of(&grid), 1)?;
+        body.push_slice(SectionKind::GridStarts, &grid_starts)?;
+        body.push_slice(SectionKind::GridItems, &grid_items)?;
+        body.push_slice(SectionKind::Ckk, &ckk)?;
+        body.push_slice(SectionKind::NeighbourStarts, &nb_starts)?;
+        body.push_slice(SectionKind::NeighbourIndex, &nb_index)?;
+        body.push_slice(SectionKind::NeighbourCkl, &nb_ckl)?;
+        body.push(SectionKind::TissueLaw, bytemuck::bytes_of(&law), 1)?;
+        body.push(SectionKind::Device, bytemuck::bytes_of(&self.device), 1)?;
+
+        let table_len = SECTION_ENTRY_LEN * body.table.len();
+        let data_start = HEADER_LEN + table_len;
+        let total = data_start + body.data.len();
+        let total_u32 = u32::try_from(total).map_err(|_| BuildError::TooLarge)?;
+        let header = BankHeader {
+            magic: MAGIC,
+            version_major: VERSION_MAJOR,
+            version_minor: VERSION_MINOR,
+            header_len: HEADER_LEN as u16,
+            section_count: body.table.len() as u16,
+            total_len: total_u32,
+            crc32: 0,
+            flags: 0,
+            reserved: 0,
+        };
+        let mut out = Vec::with_capacity(total);
+        out.extend_from_slice(bytemuck::bytes_of(&header));
+        for e in &body.table {
+            let shifted = SectionEntry {
+                offset: e
+                    .offset
+                    .checked_add(data_start as u32)
+                    .ok_or(BuildError::TooLarge)?,
+                ..*e
+            };
+            out.extend_from_slice(bytemuck::bytes_of(&shifted));
+        }
+        out.extend_from_slice(&body.data);
+        reseal(&mut out);
+
+        // The writer's output must satisfy the reader.
+        let aligned = AlignedBytes::new(&out);
+        Bank::parse(&aligned)?;
+        Ok(out)
+    }
+}
+
+/// CSR (starts, items) of per-row lists.
+fn csr<T: Copy>(rows: &[Vec<T>]) -> Result<(Vec<u32>, Vec<T>), BuildError> {
+    let mut starts = Vec::with_capacity(rows.len() + 1);
+    let mut items = Vec::new();
+    starts.push(0u32);
+    for r in rows {
+        items.extend_from_slice(r);
+        starts.push(u32::try_from(items.len()).map_err(|_| BuildError::TooLarge)?);
+    }
+    Ok((starts, items))
+}
+
+/// Section data being laid out (offsets relative to the end of the section table).
+#[derive(Default)]
+struct Sink {
+    data: Vec<u8>,
+    table: Vec<SectionEntry>,
+}
+
+impl Sink {
+    fn push(&mut self, kind: SectionKind, bytes: &[u8], count: usize) -> Result<(), BuildError> {
+        let offset = u32::try_from(self.data.len()).map_err(|_| BuildError::TooLarge)?;
+        let len = u32::try_from(bytes.len()).map_err(|_| BuildError::TooLarge)?;
+        let count = u32::try_from(count).map_err(|_| BuildError::TooLarge)?;
+        self.data.extend_from_slice(bytes);
+        self.data
+            .resize(self.data.len().next_multiple_of(SECTION_ALIGN), 0);
+        self.table.push(SectionEntry {
+            kind: kind.code(),
+            offset,
+            len,
+            count,
+        });
+        Ok(())
+    }
+
+    fn push_slice<T: bytemuck::Pod>(
+        &mut self,
+        kind: SectionKind,
+        items: &[T],
+    ) -> Result<(), BuildError> {
+        self.push(kind, bytemuck::cast_slice(items), items.len())
+    }
+}

@@ -1,0 +1,246 @@
+//! Every `BankError` variant, each produced by corrupting exactly one thing in a valid bank.
+//!
+//! Corruptions behind the CRC check are followed by `reseal` (the CRC is recomputed) so that
+//! the deeper validation is reached; `crc_mismatch` is the one that leaves the CRC stale.
+#![allow(clippy::needless_range_loop)] // index loops read best for 3x3 blocks
+
+mod common;
+
+use bank_format::{
+    AlignedBytes, Bank, BankError as E, BuildError, DeviceField as F, SectionKind as K,
+};
+use common::*;
+
+/// Number of `BankError` variants (codes 1..=LAST_CODE).
+const LAST_CODE: u16 = 40;
+
+/// Section-relative byte offsets used below.
+const DEV_SHAFT: usize = 12;
+const DEV_PITCH: usize = 24;
+const DEV_YAW: usize = 36;
+const DEV_MIN: usize = 48;
+const DEV_MAX: usize = 60;
+const DEV_HOME: usize = 72;
+const DEV_COUNTS: usize = 84;
+const DEV_TRANS: usize = 96;
+const DEV_KT: usize = 108;
+const DEV_LIMIT: usize = 120;
+const DEV_FORCE: usize = 132;
+const DEV_TIP: usize = 136;
+
+fn set_entry(kind: K, field: usize, value: u32) -> Result<(), E> {
+    corrupt(|b| {
+        let (i, ..) = section(b, kind);
+        put_u32(b, entry_field(i, field), value);
+    })
+}
+
+fn device_f32(at: usize, v: f32) -> Result<(), E> {
+    corrupt_section(K::Device, |s| put_f32(s, at, v))
+}
+
+macro_rules! cases {
+    ($($name:ident: $pat:pat => $body:expr;)*) => {
+        mod run {
+            use super::*;
+            $(pub fn $name() -> Result<(), E> { $body })*
+        }
+        $(
+            #[test]
+            fn $name() {
+                let got = run::$name();
+                assert!(matches!(got, Err($pat)), "{}: got {:?}", stringify!($name), got);
+                // Display works for every error.
+                assert!(!got.unwrap_err().to_string().is_empty());
+            }
+        )*
+        #[test]
+        fn every_variant_has_a_case() {
+            let codes = [$(run::$name().unwrap_err().code()),*];
+            for code in 1..=LAST_CODE {
+                assert!(codes.contains(&code), "no test produces error code {code}");
+            }
+        }
+    };
+}
+
+cases! {
+    too_short_for_header: E::TooShort { needed: 32, got: 16 } => parse(&valid_bytes()[..16]);
+    too_short_for_total_len: E::TooShort { .. } => {
+        let b = valid_bytes();
+        let n = b.len();
+        match parse(&b[..n - 8]) {
+            Err(E::TooShort { needed, got }) if needed == n && got == n - 8 => {
+                Err(E::TooShort { needed, got })
+            }
+            other => other,
+        }
+    };
+    misaligned: E::Misaligned => {
+        let mut b = vec![0u8];
+        b.extend(valid_bytes());
+        let aligned = AlignedBytes::new(&b);
+        Bank::parse(&aligned[1..]).map(|_| ())
+    };
+    bad_magic: E::BadMagic => corrupt(|b| b[0] = b'X');
+    unsupported_version: E::UnsupportedVersion { major: 2, minor: 0 } => corrupt(|b| put_u16(b, 8, 2));
+    bad_header_length: E::BadHeaderLength { header_len: 24 } => corrupt(|b| put_u16(b, 12, 24));
+    too_many_sections: E::TooManySections { count: 33 } => corrupt(|b| put_u16(b, 14, 33));
+    bad_total_length_unaligned: E::BadTotalLength { .. } => {
+        let mut b = valid_bytes();
+        let n = b.len() as u32;
+        put_u32(&mut b, 16, n - 4);
+        parse(&b)
+    };
+    bad_total_length_inside_table: E::BadTotalLength { total_len: 64 } => {
+        let mut b = valid_bytes();
+        put_u32(&mut b, 16, 64);
+        parse(&b)
+    };
+    crc_mismatch: E::CrcMismatch { .. } => {
+        let mut b = valid_bytes();
+        let (_, off, ..) = section(&b, K::Positions);
+        b[off + 5] ^= 0x10;
+        parse(&b)
+    };
+    reserved_header_flags: E::ReservedNotZero { section: K::Header } => corrupt(|b| put_u32(b, 24, 1));
+    reserved_section_kind: E::ReservedSectionKind { entry: 3 } => corrupt(|b| put_u32(b, entry_field(3, 0), 0));
+    section_out_of_bounds: E::SectionOutOfBounds { section: K::Positions } => {
+        let total = valid_bytes().len() as u32;
+        set_entry(K::Positions, 1, total)
+    };
+    section_length_overflows: E::SectionOutOfBounds { section: K::MeshIds } => set_entry(K::MeshIds, 2, u32::MAX);
+    section_misaligned: E::SectionMisaligned { section: K::Positions } => corrupt(|b| {
+        let (i, off, ..) = section(b, K::Positions);
+        put_u32(b, entry_field(i, 1), off as u32 + 4);
+    });
+    section_overlap: E::SectionOverlap { section: K::MeshIds } => corrupt(|b| {
+        let (_, pos_off, ..) = section(b, K::Positions);
+        let (i, ..) = section(b, K::MeshIds);
+        put_u32(b, entry_field(i, 1), pos_off as u32);
+    });
+    section_overlaps_table: E::SectionOverlap { section: K::Meta } => set_entry(K::Meta, 1, 32);
+    duplicate_section: E::DuplicateSection { section: K::Positions } => set_entry(K::MeshIds, 0, K::Positions.code());
+    missing_section: E::MissingSection { section: K::Device } => set_entry(K::Device, 0, 99);
+    size_mismatch: E::SizeMismatch { section: K::Positions } => set_entry(K::Positions, 3, 5);
+    count_mismatch: E::CountMismatch { section: K::MeshIds } => corrupt(|b| {
+        let (i, ..) = section(b, K::MeshIds);
+        put_u32(b, entry_field(i, 2), 12);
+        put_u32(b, entry_field(i, 3), 3);
+    });
+    node_count_zero: E::NodeCount { count: 0 } => corrupt(|b| {
+        let (i, ..) = section(b, K::Positions);
+        put_u32(b, entry_field(i, 2), 0);
+        put_u32(b, entry_field(i, 3), 0);
+    });
+    non_finite_position: E::NonFinite { section: K::Positions, entry: 1 } =>
+        corrupt_section(K::Positions, |s| put_f32(s, 12 + 4, f32::NAN));
+    non_finite_ckk: E::NonFinite { section: K::Ckk, entry: 3 } =>
+        corrupt_section(K::Ckk, |s| put_f32(s, 3 * 24 + 8, f32::INFINITY));
+    non_finite_ckl: E::NonFinite { section: K::NeighbourCkl, entry: 2 } =>
+        corrupt_section(K::NeighbourCkl, |s| put_f32(s, 2 * 36, f32::NAN));
+    non_finite_grid: E::NonFinite { section: K::Grid, entry: 0 } =>
+        corrupt_section(K::Grid, |s| put_f32(s, 4, f32::NAN));
+    non_finite_law: E::NonFinite { section: K::TissueLaw, entry: 0 } =>
+        corrupt_section(K::TissueLaw, |s| put_f32(s, 16, f32::NAN));
+    non_finite_device: E::NonFinite { section: K::Device, entry: 0 } => device_f32(0, f32::NEG_INFINITY);
+    non_finite_meta: E::NonFinite { section: K::Meta, entry: 0 } =>
+        corrupt_section(K::Meta, |s| put_f32(s, 8, f32::NAN));
+    triangle_index_out_of_range: E::IndexOutOfRange { section: K::Triangles, entry: 1 } =>
+        corrupt_section(K::Triangles, |s| put_u16(s, 6 + 4, 4));
+    node_triangle_index_out_of_range: E::IndexOutOfRange { section: K::NodeTriItems, entry: 2 } =>
+        corrupt_section(K::NodeTriItems, |s| put_u32(s, 2 * 4, 2));
+    grid_item_out_of_range: E::IndexOutOfRange { section: K::GridItems, entry: 1 } =>
+        corrupt_section(K::GridItems, |s| put_u16(s, 2, 9));
+    neighbour_index_out_of_range: E::IndexOutOfRange { section: K::NeighbourIndex, entry: 2 } =>
+        corrupt_section(K::NeighbourIndex, |s| put_u16(s, 4, 4));
+    bad_neighbour_starts: E::BadCsrStarts { section: K::NeighbourStarts, entry: 0 } =>
+        corrupt_section(K::NeighbourStarts, |s| put_u32(s, 0, 1));
+    bad_grid_starts_end: E::BadCsrStarts { section: K::GridStarts, entry: 4 } =>
+        corrupt_section(K::GridStarts, |s| put_u32(s, 16, 3));
+    bad_node_triangle_starts_decrease: E::BadCsrStarts { section: K::NodeTriStarts, entry: 2 } =>
+        corrupt_section(K::NodeTriStarts, |s| put_u32(s, 8, 1));
+    degenerate_triangle: E::DegenerateTriangle { triangle: 1 } =>
+        corrupt_section(K::Triangles, |s| put_u16(s, 6 + 4, 0));
+    node_triangle_mismatch: E::NodeTriangleMismatch { node: 1 } =>
+        corrupt_section(K::NodeTriItems, |s| put_u32(s, 2 * 4, 1));
+    grid_cell_size_zero: E::GridGeometry => corrupt_section(K::Grid, |s| put_f32(s, 12, 0.0));
+    grid_dimension_zero: E::GridGeometry => corrupt_section(K::Grid, |s| put_u16(s, 18, 0));
+    reserved_grid: E::ReservedNotZero { section: K::Grid } => corrupt_section(K::Grid, |s| put_u16(s, 22, 1));
+    grid_item_wrong_cell: E::GridItemWrongCell { cell: 0, entry: 0 } =>
+        corrupt_section(K::GridItems, |s| { put_u16(s, 0, 1); put_u16(s, 2, 0); });
+    grid_items_not_sorted: E::GridItemsNotSorted { cell: 0 } => corrupt(|b| {
+        let (_, st, ..) = section(b, K::GridStarts);
+        let (_, it, ..) = section(b, K::GridItems);
+        put_u32(b, st + 4, 2);
+        put_u32(b, st + 8, 2);
+        put_u16(b, it + 2, 0);
+    });
+    ckk_not_spd: E::CkkNotSpd { node: 2 } => corrupt_section(K::Ckk, |s| put_f32(s, 2 * 24, -1.0e-3));
+    neighbour_self: E::NeighbourSelf { node: 0 } => corrupt_section(K::NeighbourIndex, |s| put_u16(s, 0, 0));
+    neighbour_not_sorted: E::NeighbourNotSorted { node: 0 } => corrupt_section(K::NeighbourIndex, |s| {
+        put_u16(s, 0, 2);
+        put_u16(s, 2, 1);
+    });
+    neighbour_not_reciprocal: E::NeighbourNotReciprocal { node: 1, neighbour: 3 } =>
+        corrupt_section(K::NeighbourIndex, |s| put_u16(s, 4 * 2, 3));
+    ckl_asymmetric: E::CklAsymmetric { node: 0, neighbour: 1 } => corrupt_section(K::NeighbourCkl, |s| {
+        let v = get_f32(s, 4);
+        put_f32(s, 4, 2.0 * v + 1.0e-4);
+    });
+    pair_not_spd: E::PairNotSpd { node: 0, neighbour: 1 } => corrupt_section(K::NeighbourCkl, |s| {
+        // C_01 (entry 0) and C_10 (entry 3, first of row 1) both 0.02 I: consistent, not SPD.
+        for entry in [0, 3] {
+            for i in 0..9 {
+                put_f32(s, entry * 36 + 4 * i, if i % 4 == 0 { 0.02 } else { 0.0 });
+            }
+        }
+    });
+    missing_neighbour: E::MissingNeighbour { node: 1, neighbour: 3 } =>
+        corrupt_section(K::Meta, |s| put_f32(s, 8, 0.02));
+    triangle_edge_not_coupled: E::TriangleEdgeNotCoupled { triangle: 0 } => {
+        let mut x = builder();
+        x.couplings.retain(|&(k, l, _)| (k, l) != (0, 2));
+        match x.build() {
+            Err(BuildError::Rejected(e)) => Err(e),
+            other => panic!("{other:?}"),
+        }
+    };
+    reserved_meta: E::ReservedNotZero { section: K::Meta } => corrupt_section(K::Meta, |s| put_u32(s, 12, 7));
+    bad_truncation_radius: E::BadTruncationRadius => corrupt_section(K::Meta, |s| put_f32(s, 8, -1.0));
+    law_kind: E::LawKind { kind: 7 } => corrupt_section(K::TissueLaw, |s| put_u32(s, 0, 7));
+    law_coefficient_count: E::LawCoefficientCount { count: 17 } =>
+        corrupt_section(K::TissueLaw, |s| put_u32(s, 4, 17));
+    law_unused_coefficient: E::ReservedNotZero { section: K::TissueLaw } =>
+        corrupt_section(K::TissueLaw, |s| put_f32(s, 16 + 4 * 15, 1.0));
+    law_domain: E::LawDomain => corrupt_section(K::TissueLaw, |s| put_f32(s, 8, 6.0));
+    law_not_monotone: E::LawNotMonotone { sample: 0 } =>
+        corrupt_section(K::TissueLaw, |s| put_f32(s, 16 + 4, -2.5));
+    device_shaft_axis: E::Device { field: F::ShaftAxis } => device_f32(DEV_SHAFT + 8, -0.9);
+    device_pitch_axis: E::Device { field: F::PitchAxis } => device_f32(DEV_PITCH, 2.0);
+    device_yaw_axis: E::Device { field: F::YawAxis } => device_f32(DEV_YAW + 4, 0.0);
+    device_axes_not_orthogonal: E::Device { field: F::AxesNotOrthogonal } =>
+        corrupt_section(K::Device, |s| {
+            // Pitch axis = yaw axis: both unit, not orthogonal.
+            put_f32(s, DEV_PITCH, 0.0);
+            put_f32(s, DEV_PITCH + 4, 1.0);
+        });
+    device_joint_range: E::Device { field: F::JointRange { axis: 1 } } => device_f32(DEV_MAX + 4, -0.9);
+    device_joint_range_angle: E::Device { field: F::JointRange { axis: 0 } } => device_f32(DEV_MAX, 4.0);
+    device_joint_range_insertion: E::Device { field: F::JointRange { axis: 2 } } =>
+        device_f32(DEV_MIN + 8, -0.01);
+    device_home_joint: E::Device { field: F::HomeJoint { axis: 2 } } => device_f32(DEV_HOME + 8, 0.5);
+    device_counts_per_rev: E::Device { field: F::CountsPerRev { axis: 1 } } =>
+        corrupt_section(K::Device, |s| put_u32(s, DEV_COUNTS + 4, 0));
+    device_transmission: E::Device { field: F::Transmission { axis: 2 } } => device_f32(DEV_TRANS + 8, 0.0);
+    device_torque_constant: E::Device { field: F::TorqueConstant { axis: 0 } } => device_f32(DEV_KT, -0.03);
+    device_current_limit: E::Device { field: F::CurrentLimit { axis: 2 } } => device_f32(DEV_LIMIT + 8, 25.0);
+    device_max_force: E::Device { field: F::MaxForce } => device_f32(DEV_FORCE, 0.0);
+    device_tip_radius: E::Device { field: F::TipRadius } => device_f32(DEV_TIP, 0.1);
+}
+
+#[test]
+fn error_codes_are_distinct_and_stable() {
+    assert_eq!(E::TooShort { needed: 0, got: 0 }.code(), 1);
+    assert_eq!(E::Device { field: F::MaxForce }.code(), LAST_CODE);
+}

@@ -1,0 +1,356 @@
+//! Host writer -> no_std reader round trip on a hand-made 4-node, 2-triangle bank.
+#![allow(clippy::needless_range_loop)] // index loops read best for 3x3 blocks
+
+mod common;
+
+use bank_format::{
+    AlignedBytes, Bank, BankBuilder, BankError, BuildError, HEADER_LEN, LawKind, MAGIC,
+    SECTION_ENTRY_LEN, SectionKind, TissueLaw, VERSION_MAJOR, bank_crc, reseal,
+};
+use common::*;
+
+fn f32_close(a: f32, b: f64) -> bool {
+    (f64::from(a) - b).abs() <= 1e-6 * b.abs().max(1e-12)
+}
+
+#[test]
+fn every_accessor_returns_what_was_written() {
+    let bytes = valid_bytes();
+    let aligned = AlignedBytes::new(&bytes);
+    let bank = Bank::parse(&aligned).unwrap();
+
+    assert_eq!(&bytes[..8], &MAGIC);
+    assert_eq!(bank.version(), (VERSION_MAJOR, 0));
+    assert_eq!(bank.bytes().len(), bytes.len());
+    assert_eq!(bank.crc(), bank_crc(&bytes));
+    assert_eq!(bank.scene_id(), 0x0123_4567_89ab_cdef);
+    assert_eq!(bank.truncation_radius_m(), 0.012);
+
+    assert_eq!(bank.node_count(), 4);
+    let pos = positions();
+    for (k, p) in bank.positions().iter().enumerate() {
+        for i in 0..3 {
+            assert_eq!(p[i], pos[k][i] as f32);
+        }
+    }
+    assert_eq!(bank.mesh_ids(), &[700, 701, 1000, 42]);
+    assert_eq!(bank.triangles(), &[[0, 1, 2], [0, 2, 3]]);
+    assert_eq!(bank.node_triangles(0), &[0, 1]);
+    assert_eq!(bank.node_triangles(1), &[0]);
+    assert_eq!(bank.node_triangles(2), &[0, 1]);
+    assert_eq!(bank.node_triangles(3), &[1]);
+    assert_eq!(bank.node_triangles(4), &[] as &[u32]);
+
+    // Self-compliance, both forms.
+    for k in 0..4 {
+        let want = block(k, k);
+        let got = bank.c_kk_matrix(k).unwrap();
+        let six = bank.c_kk(k).unwrap();
+        assert_eq!(
+            six,
+            [
+                got[0][0], got[0][1], got[0][2], got[1][1], got[1][2], got[2][2]
+            ]
+        );
+        for i in 0..3 {
+            for j in 0..3 {
+                assert!(f32_close(got[i][j], want[i][j]));
+            }
+        }
+    }
+    assert_eq!(bank.c_kk(4), None);
+
+    // Couplings: both directions, C_lk = C_kl^T exactly, 1-3 truncated.
+    let expected_rows: [&[u16]; 4] = [&[1, 2, 3], &[0, 2], &[0, 1, 3], &[0, 2]];
+    for (k, row) in expected_rows.iter().enumerate() {
+        let (ls, cs) = bank.neighbours(k);
+        assert_eq!(ls, *row);
+        assert_eq!(cs.len(), ls.len());
+        for &l in ls.iter() {
+            let l = usize::from(l);
+            let want = block(k, l);
+            let got = bank.coupling(k, l).unwrap();
+            let back = bank.coupling(l, k).unwrap();
+            for i in 0..3 {
+                for j in 0..3 {
+                    assert!(f32_close(got[i][j], want[i][j]), "C_{k}{l}[{i}][{j}]");
+                    assert_eq!(back[j][i], got[i][j]);
+                }
+            }
+        }
+    }
+    assert_eq!(bank.coupling(1, 3), None);
+    assert_eq!(bank.coupling(0, 9), None);
+    assert_eq!(bank.coupling(2, 2), bank.c_kk_matrix(2));
+    assert_eq!(bank.neighbours(4), (&[] as &[u16], &[] as &[[f32; 9]]));
+
+    // Grid: 8 mm cells, origin half a cell below the minimum, one node per cell.
+    let g = bank.grid();
+    assert_eq!(g.cell_size_m(), 0.008);
+    assert_eq!(g.origin_m(), [-0.004, -0.004, -0.004]);
+    assert_eq!(g.dims(), [2, 2, 1]);
+    assert_eq!(g.cell_count(), 4);
+    assert_eq!(g.starts(), &[0, 1, 2, 3, 4]);
+    assert_eq!(g.items(), &[0, 1, 3, 2]);
+    for (k, p) in bank.positions().iter().enumerate() {
+        let c = g.cell_index(g.cell_of(*p).unwrap()).unwrap();
+        assert_eq!(g.cell_items(c), &[k as u16]);
+    }
+    assert_eq!(g.cell_of([1.0, 0.0, 0.0]), None);
+    assert_eq!(g.cell_of([f32::NAN, 0.0, 0.0]), None);
+    assert_eq!(g.cell_items(99), &[] as &[u16]);
+
+    assert_eq!(bank.tissue_law(), &law());
+    assert_eq!(bank.device(), &device());
+}
+
+#[test]
+fn nearest_node_searches_the_27_buckets() {
+    let aligned = AlignedBytes::new(&valid_bytes());
+    let bank = Bank::parse(&aligned).unwrap();
+    assert_eq!(bank.nearest_node([0.001, 0.0, 0.001]).map(|r| r.0), Some(0));
+    assert_eq!(
+        bank.nearest_node([0.009, 0.0098, 0.0]).map(|r| r.0),
+        Some(2)
+    );
+    let (k, d2) = bank.nearest_node([0.0, 0.011, -0.002]).unwrap();
+    assert_eq!(k, 3);
+    assert!((d2 - (0.001f32 * 0.001 + 0.002 * 0.002)).abs() < 1e-9);
+    // Just outside the grid still finds the corner; far away finds nothing.
+    assert_eq!(
+        bank.nearest_node([-0.006, -0.006, 0.0]).map(|r| r.0),
+        Some(0)
+    );
+    assert_eq!(bank.nearest_node([0.5, 0.5, 0.5]), None);
+    assert_eq!(bank.nearest_node([f32::NAN, 0.0, 0.0]), None);
+}
+
+#[test]
+fn bytes_past_total_len_are_ignored() {
+    // A flash region is erased to 0xFF past the bank.
+    let mut bytes = valid_bytes();
+    let len = bytes.len();
+    bytes.resize(len + 4096, 0xFF);
+    let aligned = AlignedBytes::new(&bytes);
+    let bank = Bank::parse(&aligned).unwrap();
+    assert_eq!(bank.bytes().len(), len);
+}
+
+#[test]
+fn building_is_deterministic_and_sections_are_8_aligned() {
+    let a = valid_bytes();
+    assert_eq!(a, valid_bytes());
+    assert_eq!(a.len() % 8, 0);
+    for kind in SectionKind::REQUIRED {
+        let (_, off, len, count) = section(&a, kind);
+        assert_eq!(off % 8, 0, "{kind:?}");
+        assert_eq!(len, count * kind.element_size().unwrap());
+    }
+}
+
+/// Insert a section table entry of kind 77 (8 bytes at the end), shifting the sections.
+fn with_unknown_section(bytes: &[u8], minor: u16) -> Vec<u8> {
+    let count = u16::from_le_bytes([bytes[14], bytes[15]]) as usize;
+    let table_end = HEADER_LEN + SECTION_ENTRY_LEN * count;
+    let mut out = bytes[..table_end].to_vec();
+    let data = &bytes[table_end..];
+    let new_total = bytes.len() + SECTION_ENTRY_LEN + 8;
+    out.extend_from_slice(&77u32.to_le_bytes());
+    out.extend_from_slice(&((new_total - 8) as u32).to_le_bytes());
+    out.extend_from_slice(&8u32.to_le_bytes());
+    out.extend_from_slice(&1u32.to_le_bytes());
+    for i in 0..count {
+        let at = entry_field(i, 1);
+        let off = u32::from_le_bytes(out[at..at + 4].try_into().unwrap());
+        put_u32(&mut out, at, off + SECTION_ENTRY_LEN as u32);
+    }
+    out.extend_from_slice(data);
+    out.extend_from_slice(&[0xAB; 8]);
+    put_u16(&mut out, 10, minor);
+    put_u16(&mut out, 14, count as u16 + 1);
+    put_u32(&mut out, 16, new_total as u32);
+    assert!(reseal(&mut out));
+    out
+}
+
+#[test]
+fn a_later_minor_version_with_an_unknown_section_is_read() {
+    let bytes = with_unknown_section(&valid_bytes(), 3);
+    let aligned = AlignedBytes::new(&bytes);
+    let bank = Bank::parse(&aligned).unwrap();
+    assert_eq!(bank.version(), (VERSION_MAJOR, 3));
+    assert_eq!(bank.node_count(), 4);
+}
+
+#[test]
+fn tissue_law_is_continuous_monotone_and_linear_outside() {
+    let q = law();
+    assert_eq!(q.kind(), LawKind::Chebyshev);
+    assert_eq!(q.coeffs(), &[2.6, 2.5, 0.1]);
+    // Reference in f64: x = (2f - 5) / 5, Q = 2.6 + 2.5 x + 0.1 (2x^2 - 1).
+    let reference = |f: f64| {
+        let x = (2.0 * f - 5.0) / 5.0;
+        2.6 + 2.5 * x + 0.1 * (2.0 * x * x - 1.0)
+    };
+    let mut prev = f32::NEG_INFINITY;
+    for i in 0..=1000 {
+        let f = -2.0 + 9.0 * i as f32 / 1000.0;
+        let v = q.eval(f);
+        assert!(v > prev, "not increasing at {f}");
+        prev = v;
+        if (0.0..=5.0).contains(&f) {
+            assert!((f64::from(v) - reference(f64::from(f))).abs() < 1e-5);
+        }
+    }
+    // Linear continuation with the end slopes: dQ/df = (2.5 + 0.4 x) * 2 / 5.
+    let lo_slope = (2.5 - 0.4) * 0.4;
+    let hi_slope = (2.5 + 0.4) * 0.4;
+    assert!((q.slope(-1.0) - lo_slope as f32).abs() < 1e-6);
+    assert!((q.slope(9.0) - hi_slope as f32).abs() < 1e-6);
+    assert!((q.slope(2.5) - 1.0).abs() < 1e-6);
+    assert!((f64::from(q.eval(-1.0)) - (0.2 - lo_slope)).abs() < 1e-5);
+    assert!((f64::from(q.eval(7.0)) - (5.2 + 2.0 * hi_slope)).abs() < 1e-5);
+    assert!(q.eval(f32::NAN).is_nan());
+
+    let lin = TissueLaw::linear(0.1, 1.5, [0.0, 4.0]).unwrap();
+    assert_eq!(lin.kind(), LawKind::Linear);
+    assert_eq!(lin.eval(2.0), 0.1 + 3.0);
+    assert_eq!(lin.slope(100.0), 1.5);
+    assert_eq!(TissueLaw::from_record(&lin.to_record()), Ok(lin));
+}
+
+#[test]
+fn tissue_law_constructors_reject_bad_laws() {
+    assert_eq!(
+        TissueLaw::chebyshev(&[], [0.0, 1.0]),
+        Err(BankError::LawCoefficientCount { count: 0 })
+    );
+    assert_eq!(
+        TissueLaw::chebyshev(&[1.0; 17], [0.0, 1.0]),
+        Err(BankError::LawCoefficientCount { count: 17 })
+    );
+    assert_eq!(
+        TissueLaw::chebyshev(&[1.0, 1.0], [1.0, 1.0]),
+        Err(BankError::LawDomain)
+    );
+    // A constant is not increasing.
+    assert_eq!(
+        TissueLaw::chebyshev(&[1.0], [0.0, 1.0]),
+        Err(BankError::LawNotMonotone { sample: 0 })
+    );
+    // 1 + T1 - 0.6 T2: slope 1 - 2.4 x turns negative past x = 1/2.4.
+    assert!(matches!(
+        TissueLaw::chebyshev(&[1.0, 1.0, -0.6], [0.0, 1.0]),
+        Err(BankError::LawNotMonotone { sample }) if sample > 128
+    ));
+    assert_eq!(
+        TissueLaw::linear(0.0, 0.0, [0.0, 1.0]),
+        Err(BankError::LawNotMonotone { sample: 0 })
+    );
+    assert_eq!(
+        TissueLaw::linear(f32::NAN, 1.0, [0.0, 1.0]),
+        Err(BankError::NonFinite {
+            section: SectionKind::TissueLaw,
+            entry: 0
+        })
+    );
+}
+
+#[test]
+fn the_builder_refuses_bad_input() {
+    let b = builder;
+    let mut x = b();
+    x.mesh_ids.pop();
+    assert_eq!(
+        x.build(),
+        Err(BuildError::LengthMismatch { field: "mesh_ids" })
+    );
+    let mut x = b();
+    x.c_kk.push(block(0, 0));
+    assert_eq!(x.build(), Err(BuildError::LengthMismatch { field: "c_kk" }));
+    let mut x = b();
+    x.triangles.push([0, 1, 4]);
+    assert_eq!(
+        x.build(),
+        Err(BuildError::IndexOutOfRange {
+            field: "triangles",
+            entry: 2
+        })
+    );
+    let mut x = b();
+    x.couplings.push((70_000, 1, block(0, 1)));
+    assert_eq!(
+        x.build(),
+        Err(BuildError::IndexOutOfRange {
+            field: "couplings",
+            entry: 5
+        })
+    );
+    let mut x = b();
+    x.couplings.push((2, 2, block(2, 2)));
+    assert_eq!(x.build(), Err(BuildError::SelfCoupling { entry: 5 }));
+    let mut x = b();
+    x.c_kk[1][0][1] *= 2.0;
+    assert_eq!(x.build(), Err(BuildError::AsymmetricCkk { node: 1 }));
+    // The reverse direction may be given too, but must agree.
+    let mut x = b();
+    x.couplings.push((1, 0, block(1, 0)));
+    assert!(x.build().is_ok());
+    x.couplings.push((2, 0, block(0, 2)));
+    assert_eq!(
+        x.build(),
+        Err(BuildError::InconsistentCoupling { entry: 6 })
+    );
+    let mut x = b();
+    x.grid_cell_size_m = 0.0;
+    assert_eq!(x.build(), Err(BuildError::Grid));
+    let mut x = b();
+    x.grid_cell_size_m = 1e-9;
+    assert_eq!(x.build(), Err(BuildError::Grid));
+    let mut x = b();
+    x.positions_m.clear();
+    x.mesh_ids.clear();
+    x.c_kk.clear();
+    assert_eq!(
+        x.build(),
+        Err(BuildError::Rejected(BankError::NodeCount { count: 0 }))
+    );
+    // Whatever the reader would reject, the writer refuses: here a non-finite position.
+    let mut x = b();
+    x.positions_m[2][1] = f64::INFINITY;
+    assert!(x.build().is_err());
+    let mut x = b();
+    x.positions_m[3][2] = f64::NAN;
+    assert!(x.build().is_err());
+}
+
+#[test]
+fn the_builder_refuses_what_the_reader_rejects() {
+    // Dropping the 0-2 coupling (a triangle edge) is refused with the reader's error.
+    let mut x: BankBuilder = builder();
+    x.couplings.retain(|&(k, l, _)| (k, l) != (0, 2));
+    assert_eq!(
+        x.build(),
+        Err(BuildError::Rejected(BankError::TriangleEdgeNotCoupled {
+            triangle: 0
+        }))
+    );
+    // A truncation radius that reaches 1-3 demands that coupling.
+    let mut x = builder();
+    x.truncation_radius_m = 0.02;
+    assert_eq!(
+        x.build(),
+        Err(BuildError::Rejected(BankError::MissingNeighbour {
+            node: 1,
+            neighbour: 3
+        }))
+    );
+    x.couplings.push((1, 3, block(1, 3)));
+    assert!(x.build().is_ok());
+    let mut x = builder();
+    x.device.max_force_n = 0.0;
+    assert!(matches!(
+        x.build(),
+        Err(BuildError::Rejected(BankError::Device { .. }))
+    ));
+}
