@@ -174,3 +174,47 @@ fn bad_requests_are_refused() {
         Err(ComplianceError::Fem(FemError::FixedSetMismatch { .. }))
     ));
 }
+
+#[test]
+fn blocks_within_a_radius_are_the_near_pairs_of_all_blocks() {
+    let mesh = liver();
+    let (body, fixed) = bedded(&mesh);
+    let nodes = free_surface(&mesh, &fixed);
+    let positions: Vec<[f64; 3]> = nodes.iter().map(|&k| mesh.nodes[k]).collect();
+    let c = Compliance::factorize(&body, &fixed).unwrap();
+    let all = c.blocks(&nodes, None).unwrap();
+    let radius = 0.012;
+    let near = c.blocks_within(&nodes, &positions, radius, None).unwrap();
+    let scale = all
+        .iter()
+        .flatten()
+        .flatten()
+        .flatten()
+        .fold(0.0f64, |s, v| s.max(v.abs()));
+    let mut kept = 0;
+    for (a, row) in near.iter().enumerate() {
+        let expected: Vec<usize> = (0..nodes.len())
+            .filter(|&b| {
+                (0..3)
+                    .map(|i| (positions[a][i] - positions[b][i]).powi(2))
+                    .sum::<f64>()
+                    <= radius * radius
+            })
+            .collect();
+        let got: Vec<usize> = row.iter().map(|e| e.0).collect();
+        assert_eq!(got, expected, "pairs of node {}", nodes[a]);
+        for (b, block) in row {
+            for i in 0..3 {
+                for j in 0..3 {
+                    assert!((block[i][j] - all[a][*b][i][j]).abs() <= 1e-14 * scale);
+                }
+            }
+        }
+        kept += row.len();
+    }
+    eprintln!(
+        "{} nodes, {kept} ordered pairs within {radius} m",
+        nodes.len()
+    );
+    assert!(kept > nodes.len() && kept < nodes.len() * nodes.len() / 4);
+}

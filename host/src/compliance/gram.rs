@@ -44,13 +44,17 @@ pub(super) struct Layout {
     r_dofs: Vec<usize>,
     /// For each index of `R`: (position in the request, component).
     owner: Vec<(usize, usize)>,
+    /// The indices into `R` of request position `a` are `node_r[a]..node_r[a + 1]`.
+    node_r: Vec<usize>,
 }
 
 impl Layout {
     pub(super) fn new(dofs: &DofMap, nodes: &[usize]) -> Self {
         let mut r_dofs = Vec::with_capacity(3 * nodes.len());
         let mut owner = Vec::with_capacity(3 * nodes.len());
+        let mut node_r = Vec::with_capacity(nodes.len() + 1);
         for (a, &k) in nodes.iter().enumerate() {
+            node_r.push(r_dofs.len());
             for c in 0..3 {
                 if let Some(d) = dofs.free_dof(k, c) {
                     r_dofs.push(d);
@@ -58,7 +62,12 @@ impl Layout {
                 }
             }
         }
-        Self { r_dofs, owner }
+        node_r.push(r_dofs.len());
+        Self {
+            r_dofs,
+            owner,
+            node_r,
+        }
     }
 }
 
@@ -78,14 +87,96 @@ fn par_for(flops: f64) -> Par {
     if flops > 2e6 { Par::rayon(0) } else { Par::Seq }
 }
 
-/// `C_RR = Y^T Y` accumulated supernode by supernode (see the module documentation).
+/// Where the Gram products go: the upper triangle of the result, one row per requested node
+/// (`C(nodes[a], nodes[b])` for `b >= a`; diagonal blocks need only `i <= j`).
+pub(super) trait GramOut: Send {
+    /// Adds `Y_s^T Y_s` for the active columns `cols` (increasing indices into `R`) of `y`.
+    fn accumulate(&mut self, y: MatRef<'_, f64>, cols: &[usize], layout: &Layout);
+}
+
+/// Every pair: dense panels of the lower triangle of `Y^T Y`.
+impl GramOut for Vec<Vec<Block3>> {
+    fn accumulate(&mut self, y: MatRef<'_, f64>, cols: &[usize], layout: &Layout) {
+        accumulate_gram(y, cols, &layout.owner, self);
+    }
+}
+
+/// A row of selected pairs: `(b, block)` sorted by `b`.
+type NearRow = Vec<(usize, Block3)>;
+
+/// Selected pairs, each row `(b, block)` sorted by `b`: only those products are formed, one
+/// small product `Y_a^T [Y_b ...]` per node, nodes in parallel.
+impl GramOut for Vec<NearRow> {
+    fn accumulate(&mut self, y: MatRef<'_, f64>, cols: &[usize], layout: &Layout) {
+        let w = y.nrows();
+        // Active columns of node `a`: a run of `cols` (request order follows R order).
+        let runs: Vec<(usize, usize, usize)> = {
+            let mut v = Vec::new();
+            let mut j = 0;
+            while j < cols.len() {
+                let a = layout.owner[cols[j]].0;
+                let mut end = j + 1;
+                while end < cols.len() && layout.owner[cols[end]].0 == a {
+                    end += 1;
+                }
+                v.push((a, j, end));
+                j = end;
+            }
+            v
+        };
+        let position = |r: usize| cols.binary_search(&r).ok();
+        let mut rows: Vec<(&mut NearRow, usize, usize)> = Vec::with_capacity(runs.len());
+        let mut rest = self.as_mut_slice();
+        let mut offset = 0;
+        for &(a, j0, j1) in &runs {
+            let (_, tail) = std::mem::take(&mut rest).split_at_mut(a - offset);
+            let (row, after) = tail.split_at_mut(1);
+            rest = after;
+            offset = a + 1;
+            rows.push((&mut row[0], j0, j1));
+        }
+        rows.into_par_iter().for_each(|(row, j0, j1)| {
+            // Targets: (slot in the row, component of b, column of y).
+            let mut targets = Vec::new();
+            for (slot, (b, _)) in row.iter().enumerate() {
+                for r in layout.node_r[*b]..layout.node_r[*b + 1] {
+                    if let Some(col) = position(r) {
+                        targets.push((slot, layout.owner[r].1, col));
+                    }
+                }
+            }
+            if targets.is_empty() {
+                return;
+            }
+            let gathered = Mat::<f64>::from_fn(w, targets.len(), |i, t| y[(i, targets[t].2)]);
+            let mut prod = Mat::<f64>::zeros(j1 - j0, targets.len());
+            matmul(
+                prod.as_mut(),
+                Accum::Replace,
+                y.subcols(j0, j1 - j0).transpose(),
+                gathered.as_ref(),
+                1.0,
+                Par::Seq,
+            );
+            for (ia, j) in (j0..j1).enumerate() {
+                let ca = layout.owner[cols[j]].1;
+                for (t, &(slot, cb, _)) in targets.iter().enumerate() {
+                    row[slot].1[ca][cb] += prod[(ia, t)];
+                }
+            }
+        });
+    }
+}
+
+/// `C_RR = Y^T Y` accumulated supernode by supernode (see the module documentation) into the
+/// upper triangle held by `out` (one row per requested node).
 pub(super) fn gram_blocks(
     symbolic: &SymbolicCholesky<usize>,
     values: &[f64],
     layout: &Layout,
-    m: usize,
+    out: &mut impl GramOut,
     progress: Option<&ProgressBar>,
-) -> Result<Vec<Vec<Block3>>, ComplianceError> {
+) -> Result<(), ComplianceError> {
     let internal = |what: &str| ComplianceError::Factorisation(format!("internal error: {what}"));
     let SymbolicCholeskyRaw::Supernodal(sym) = symbolic.raw() else {
         return Err(internal("expected a supernodal factor"));
@@ -135,8 +226,6 @@ pub(super) fn gram_blocks(
     let mut pending: Vec<Vec<Update<'_>>> = (0..ns).map(|_| Vec::new()).collect();
     let mut col_pos = vec![0usize; n_r];
     let mut row_pos = vec![usize::MAX; nf];
-    // Zeroed rows (allocated lazily by the system), filled on the upper triangle first.
-    let mut out: Vec<Vec<Block3>> = (0..m).map(|_| vec![[[0.0; 3]; 3]; m]).collect();
     if let Some(bar) = progress {
         bar.set_length(ns as u64);
     }
@@ -199,7 +288,7 @@ pub(super) fn gram_blocks(
                 par_for(2.0 * pf * wf * cf),
             );
         }
-        accumulate_gram(y.as_ref(), &cols, &layout.owner, &mut out);
+        out.accumulate(y.as_ref(), &cols, layout);
         drop(y);
         if p > 0 {
             let up = parent[s]
@@ -212,18 +301,7 @@ pub(super) fn gram_blocks(
             });
         }
     }
-    // Mirror the upper triangle (a <= b, and c_a <= c_b within diagonal blocks).
-    for a in 0..m {
-        let (head, tail) = out.split_at_mut(a);
-        let row = &mut tail[0];
-        for (b, other) in head.iter().enumerate() {
-            let block = other[a];
-            row[b] = std::array::from_fn(|i| std::array::from_fn(|j| block[j][i]));
-        }
-        let d = row[a];
-        row[a] = std::array::from_fn(|i| std::array::from_fn(|j| d[i.min(j)][i.max(j)]));
-    }
-    Ok(out)
+    Ok(())
 }
 
 /// `out += Y^T Y` on the upper triangle (`out[a][b]`, `a <= b`), by column panels of the lower

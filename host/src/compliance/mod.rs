@@ -222,6 +222,74 @@ impl Compliance {
         nodes: &[usize],
         progress: Option<&ProgressBar>,
     ) -> Result<Vec<Vec<Block3>>, ComplianceError> {
+        self.check_request(nodes)?;
+        let m = nodes.len();
+        let mut out: Vec<Vec<Block3>> = (0..m).map(|_| vec![[[0.0; 3]; 3]; m]).collect();
+        if self.dofs.free_count() > 0 {
+            let layout = gram::Layout::new(&self.dofs, nodes);
+            gram::gram_blocks(&self.symbolic, &self.values, &layout, &mut out, progress)?;
+        }
+        // Mirror the upper triangle (a <= b, and i <= j within diagonal blocks).
+        for a in 0..m {
+            let (head, tail) = out.split_at_mut(a);
+            let row = &mut tail[0];
+            for (b, other) in head.iter().enumerate() {
+                row[b] = transpose(other[a]);
+            }
+            row[a] = symmetric_from_upper(row[a]);
+        }
+        Ok(out)
+    }
+
+    /// The blocks `C(nodes[a], nodes[b])` for the pairs of nodes at most `radius` metres
+    /// apart (`positions[a]` is the position of `nodes[a]`), each node with itself included:
+    /// `result[a]` lists `(b, C(nodes[a], nodes[b]))` sorted by `b`. Same method and cost as
+    /// [`Compliance::blocks`], but memory grows with the pairs kept, not with `|nodes|^2`: this
+    /// is what a bank's truncated neighbour couplings need.
+    pub fn blocks_within(
+        &self,
+        nodes: &[usize],
+        positions: &[[f64; 3]],
+        radius: f64,
+        progress: Option<&ProgressBar>,
+    ) -> Result<Vec<Vec<(usize, Block3)>>, ComplianceError> {
+        self.check_request(nodes)?;
+        if positions.len() != nodes.len() || radius.is_nan() || radius < 0.0 {
+            return Err(ComplianceError::DegenerateContact(format!(
+                "{} positions for {} nodes, radius {radius}",
+                positions.len(),
+                nodes.len()
+            )));
+        }
+        let upper = pairs_within(positions, radius);
+        let mut out: Vec<Vec<(usize, Block3)>> = upper
+            .iter()
+            .map(|row| row.iter().map(|&b| (b, [[0.0; 3]; 3])).collect())
+            .collect();
+        if self.dofs.free_count() > 0 {
+            let layout = gram::Layout::new(&self.dofs, nodes);
+            gram::gram_blocks(&self.symbolic, &self.values, &layout, &mut out, progress)?;
+        }
+        // Both directions: add the transposes below the diagonal, then sort each row.
+        let mut lower: Vec<Vec<(usize, Block3)>> = vec![Vec::new(); nodes.len()];
+        for (a, row) in out.iter_mut().enumerate() {
+            for (b, block) in row.iter_mut() {
+                if *b == a {
+                    *block = symmetric_from_upper(*block);
+                } else {
+                    lower[*b].push((a, transpose(*block)));
+                }
+            }
+        }
+        for (row, extra) in out.iter_mut().zip(lower) {
+            row.extend(extra);
+            row.sort_unstable_by_key(|e| e.0);
+        }
+        Ok(out)
+    }
+
+    /// Refuses unknown or repeated node ids.
+    fn check_request(&self, nodes: &[usize]) -> Result<(), ComplianceError> {
         self.check_nodes(nodes)?;
         let mut requested = vec![false; self.dofs.nodes()];
         for &k in nodes {
@@ -231,13 +299,59 @@ impl Compliance {
                 )));
             }
         }
-        let m = nodes.len();
-        if self.dofs.free_count() == 0 {
-            return Ok(vec![vec![[[0.0; 3]; 3]; m]; m]);
-        }
-        let layout = gram::Layout::new(&self.dofs, nodes);
-        gram::gram_blocks(&self.symbolic, &self.values, &layout, m, progress)
+        Ok(())
     }
+}
+
+/// For each point `a`, the sorted indices `b >= a` of the points within `radius` (a uniform
+/// grid of cell `radius`, so each query looks at 27 cells).
+fn pairs_within(positions: &[[f64; 3]], radius: f64) -> Vec<Vec<usize>> {
+    use std::collections::HashMap;
+    let cell = |p: &[f64; 3]| -> [i64; 3] {
+        std::array::from_fn(|i| {
+            if radius > 0.0 {
+                (p[i] / radius).floor() as i64
+            } else {
+                0
+            }
+        })
+    };
+    let mut grid: HashMap<[i64; 3], Vec<usize>> = HashMap::new();
+    for (a, p) in positions.iter().enumerate() {
+        grid.entry(cell(p)).or_default().push(a);
+    }
+    let r2 = radius * radius;
+    positions
+        .iter()
+        .enumerate()
+        .map(|(a, p)| {
+            let c = cell(p);
+            let mut near = Vec::new();
+            for dx in -1..=1 {
+                for dy in -1..=1 {
+                    for dz in -1..=1 {
+                        if let Some(list) = grid.get(&[c[0] + dx, c[1] + dy, c[2] + dz]) {
+                            near.extend(list.iter().copied().filter(|&b| {
+                                b >= a
+                                    && (0..3)
+                                        .map(|i| (positions[b][i] - p[i]).powi(2))
+                                        .sum::<f64>()
+                                        <= r2
+                            }));
+                        }
+                    }
+                }
+            }
+            near.sort_unstable();
+            near.dedup();
+            near
+        })
+        .collect()
+}
+
+/// The symmetric block whose upper triangle (`i <= j`) is that of `b`.
+fn symmetric_from_upper(b: Block3) -> Block3 {
+    std::array::from_fn(|i| std::array::from_fn(|j| b[i.min(j)][i.max(j)]))
 }
 
 /// Transpose of a 3x3 block.
