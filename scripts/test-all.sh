@@ -22,4 +22,10 @@ step "no_std crates cross-compile for the MCU"
 cargo build --release -p bank-format -p firmware --target thumbv7em-none-eabihf
 
 step "tests (release: the FEM refinement series is heavy in debug)"
-cargo test --workspace --release
+log=$(mktemp)
+trap 'rm -f "$log"' EXIT
+status=0
+cargo test --workspace --release --no-fail-fast 2>&1 | tee "$log" || status=$?
+# One closing line for the whole suite (cargo prints one per test binary).
+awk '/^test result:/ { p += $4; f += $6 } END { printf "\nsuite: %d passed, %d failed\n", p, f }' "$log"
+exit "$status"
