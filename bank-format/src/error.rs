@@ -83,8 +83,8 @@ impl fmt::Display for DeviceField {
     }
 }
 
-/// Why [`crate::Bank::parse`] rejected a bank. Checks run in the order the variants are listed
-/// (header, CRC, section table, then contents section by section), and the first failure is
+/// Why [`crate::Bank::parse`] rejected a bank. Checks run in the order `SPEC.md` lists them
+/// (header, CRC, section table, then contents section by section) and the first failure is
 /// reported. `entry`, `node`, `cell` and `triangle` are 0-based element indices.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum BankError {

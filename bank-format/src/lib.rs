@@ -10,7 +10,7 @@
 //! reachable region R and writes, for each node k of R: its position, `C_kk`, and `C_kl` for
 //! the neighbours l within a truncation radius (the paper's `T^f_k = C_kk^-1` and mutual
 //! influence `M = C_SS` follow from these), plus R's triangles, a bucket grid for collision,
-//! the tissue force law Q and the device calibration. [`BankBuilder`] (feature `alloc`) writes
+//! the tissue force law Q and the device calibration. `BankBuilder` (feature `alloc`) writes
 //! it; [`Bank::parse`] validates it completely (bounds, indices, finite values, SPD blocks,
 //! symmetric couplings, monotone Q, CRC, ...) without copying, after which every accessor is
 //! a plain slice access. Every failure is a distinct [`BankError`].
@@ -19,6 +19,27 @@
 //!
 //! [`DeviceToHost`] and [`HostToDevice`] messages travel as frames
 //! `COBS(postcard(msg) ++ crc32) ++ 0x00` ([`encode_frame`], [`FrameDecoder`]).
+//!
+//! # Example
+//!
+//! ```
+//! use bank_format::{Bank, BankError, FrameDecoder, HostToDevice, MAX_FRAME, encode_frame};
+//!
+//! // Firmware at boot: validate the bank region once, then read it in place.
+//! fn boot(bank_region: &'static [u8]) -> Result<f32, BankError> {
+//!     let bank = Bank::parse(bank_region)?;
+//!     let (_neighbours, _c_kl) = bank.neighbours(0);
+//!     Ok(bank.tissue_law().eval(1.0))
+//! }
+//! assert_eq!(boot(&[]), Err(BankError::TooShort { needed: 32, got: 0 }));
+//!
+//! // Link: encode a command, decode it from the byte stream.
+//! let mut buf = [0u8; MAX_FRAME];
+//! let frame = encode_frame(&HostToDevice::Arm, &mut buf).unwrap();
+//! let mut rx = FrameDecoder::<HostToDevice>::new();
+//! let got: Vec<_> = rx.feed_slice(frame).collect();
+//! assert_eq!(got, [Ok(HostToDevice::Arm)]);
+//! ```
 //!
 //! All quantities are SI ([`UNITS`]); the format is little-endian and this crate only builds
 //! for little-endian targets (x86-64, Cortex-M).
@@ -47,6 +68,9 @@ pub use frame::{
     FrameError, FrameStats, HostToDevice, MAX_CONTACTS, MAX_FRAME, MAX_MESSAGE, Mode,
     PROTOCOL_VERSION, State, Telemetry, cobs_max_len, decode_frame, encode_frame,
 };
+/// The `heapless` crate the message types use (telemetry's contact list), re-exported so the
+/// firmware and host build `Telemetry` with the same version.
+pub use heapless;
 pub use law::{LAW_SAMPLES, LawKind, TissueLaw};
 pub use layout::{
     BANK_ALIGN, BankHeader, BankMeta, CRC_OFFSET, CRC32, DeviceCalibration, GridHeader, HEADER_LEN,

@@ -128,7 +128,11 @@ pub(crate) fn cell_of(g: &GridHeader, p: [f32; 3]) -> Option<[u16; 3]> {
 fn signed_cell(x: f32, origin: f32, h: f32) -> i64 {
     let t = (x - origin) / h;
     let i = t as i64;
-    if (i as f32) > t { i - 1 } else { i }
+    if (i as f32) > t {
+        i.saturating_sub(1)
+    } else {
+        i
+    }
 }
 
 /// The index range of CSR row `i`.
@@ -187,7 +191,7 @@ impl<'a> Bank<'a> {
         }
         let table_end = HEADER_LEN + SECTION_ENTRY_LEN * section_count;
         let total = header.total_len as usize;
-        if !total.is_multiple_of(SECTION_ALIGN) || total < table_end {
+        if total % SECTION_ALIGN != 0 || total < table_end {
             return Err(BankError::BadTotalLength {
                 total_len: header.total_len,
             });
@@ -784,7 +788,7 @@ fn check_table(table: &[SectionEntry], table_end: usize, total: usize) -> Result
             return Err(BankError::ReservedSectionKind { entry: i as u32 });
         }
         let start = e.offset as usize;
-        if !start.is_multiple_of(SECTION_ALIGN) {
+        if start % SECTION_ALIGN != 0 {
             return Err(BankError::SectionMisaligned { section });
         }
         let end = start
@@ -805,9 +809,10 @@ fn check_table(table: &[SectionEntry], table_end: usize, total: usize) -> Result
         if overlaps {
             return Err(BankError::SectionOverlap { section });
         }
-        if let Some(size) = section.element_size()
-            && (e.count as usize).checked_mul(size) != Some(e.len as usize)
-        {
+        let size_ok = section
+            .element_size()
+            .is_none_or(|size| (e.count as usize).checked_mul(size) == Some(e.len as usize));
+        if !size_ok {
             return Err(BankError::SizeMismatch { section });
         }
     }
@@ -953,6 +958,10 @@ mod tests {
         assert_eq!(signed_cell(-1.0, 0.0, 1.0), -1);
         assert_eq!(signed_cell(0.0, 0.0, 1.0), 0);
         assert_eq!(signed_cell(2.5, 0.0, 1.0), 2);
+        // Saturates instead of overflowing (found by fuzzing).
+        assert_eq!(signed_cell(f32::NEG_INFINITY, 0.0, 1.0), i64::MIN);
+        assert_eq!(signed_cell(-3.0e38, 0.0, 1.0e-30), i64::MIN);
+        assert_eq!(signed_cell(f32::INFINITY, 0.0, 1.0), i64::MAX);
     }
 
     #[test]

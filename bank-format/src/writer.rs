@@ -220,10 +220,9 @@ impl BankBuilder {
             triangles.push(out);
             let t = u32::try_from(t).map_err(|_| BuildError::TooLarge)?;
             for v in out {
-                if let Some(list) = node_tris.get_mut(usize::from(v))
-                    && list.last() != Some(&t)
-                {
-                    list.push(t);
+                match node_tris.get_mut(usize::from(v)) {
+                    Some(list) if list.last() != Some(&t) => list.push(t),
+                    _ => {}
                 }
             }
         }

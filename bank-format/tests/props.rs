@@ -128,6 +128,24 @@ proptest! {
     }
 }
 
+#[test]
+fn huge_truncation_radius_does_not_overflow() {
+    // Regression (cargo-fuzz): a radius of f32::MAX made the grid search's floor overflow.
+    for r in [f32::MAX, 1.0e30, 3.0e38] {
+        let mut bytes = valid_bytes();
+        let (_, off, ..) = section(&bytes, bank_format::SectionKind::Meta);
+        put_f32(&mut bytes, off + 8, r);
+        reseal(&mut bytes);
+        assert_eq!(
+            parse(&bytes),
+            Err(bank_format::BankError::MissingNeighbour {
+                node: 1,
+                neighbour: 3
+            })
+        );
+    }
+}
+
 /// Random well-formed banks: jittered lattice points (never closer than 3 mm), a positive
 /// definite kernel compliance, every pair within the radius and every triangle edge coupled.
 fn random_builder(

@@ -1,6 +1,6 @@
 //! Fuzz `Bank::parse`. The first input byte selects a mode: bit 0 set = recompute the CRC
 //! before parsing (so mutations reach the validation behind the CRC check), bit 1 set = parse
-//! from an odd address (alignment check). The rest is the bank. A bank that parses is then
+//! from an odd address (must be rejected). The rest is the bank. A bank that parses is then
 //! read through every accessor, including out-of-range indices.
 #![no_main]
 
@@ -11,24 +11,18 @@ fuzz_target!(|data: &[u8]| {
     let Some((&mode, rest)) = data.split_first() else {
         return;
     };
-    let mut bytes = Vec::with_capacity(rest.len() + 1);
-    bytes.push(0);
-    bytes.extend_from_slice(rest);
-    let mut aligned = AlignedBytes::new(&bytes);
+    let mut aligned = AlignedBytes::new(rest);
     if mode & 1 != 0 {
-        reseal(&mut aligned.as_mut_slice()[1..]);
+        reseal(aligned.as_mut_slice());
     }
-    let start = if mode & 2 != 0 { 0 } else { 1 };
-    let slice = if start == 0 {
-        // Odd-address view: drop one byte at the front of an aligned copy.
-        let shifted = AlignedBytes::new(&bytes[..]);
-        let _ = Bank::parse(&shifted[1..]);
+    if mode & 2 != 0 {
+        let mut shifted = vec![0u8];
+        shifted.extend_from_slice(&aligned);
+        let shifted = AlignedBytes::new(&shifted);
+        assert!(Bank::parse(&shifted[1..]).is_err());
         return;
-    } else {
-        aligned = AlignedBytes::new(&aligned[1..]);
-        &aligned[..]
-    };
-    let Ok(bank) = Bank::parse(slice) else {
+    }
+    let Ok(bank) = Bank::parse(&aligned) else {
         return;
     };
     let n = bank.node_count();
@@ -55,12 +49,9 @@ fuzz_target!(|data: &[u8]| {
     }
     let law = bank.tissue_law();
     let [a, b] = law.domain();
-    let mut prev = f32::NEG_INFINITY;
     for i in 0..=64 {
         let f = a + (b - a) * (i as f32 / 64.0);
-        let q = law.eval(f);
-        assert!(q.is_finite());
-        prev = prev.max(q);
+        assert!(!law.eval(f).is_nan());
     }
     let _ = bank.device();
 });

@@ -10,7 +10,9 @@ use libfuzzer_sys::fuzz_target;
 
 fn reencode<M: serde::Serialize + serde::de::DeserializeOwned>(msg: &M) {
     let mut buf = [0u8; MAX_FRAME];
-    let frame = encode_frame(msg, &mut buf).expect("a decoded message re-encodes").to_vec();
+    let frame = encode_frame(msg, &mut buf)
+        .expect("a decoded message re-encodes")
+        .to_vec();
     let mut copy = frame.clone();
     let again: M = decode_frame(&mut copy).expect("a re-encoded message decodes");
     let mut buf2 = [0u8; MAX_FRAME];
