@@ -23,17 +23,28 @@ enum Command {
     Demo(cmd::demo::Args),
     /// Compliance blocks C(n, k) of a mesh as one JSON object on stdout.
     Compliance(cmd::compliance::Args),
+    /// Firmware banks: build from a scene file, inspect, sweep the truncation radius.
+    #[command(subcommand)]
+    Bank(cmd::bank::BankCmd),
     /// Benchmarks that print figures.
     #[command(subcommand)]
     Bench(cmd::bench::Bench),
 }
 
 fn main() -> ExitCode {
+    // Behave like other Unix tools when stdout is a closed pipe (`host bank inspect x | head`):
+    // end quietly instead of panicking in `println!`.
+    #[cfg(unix)]
+    // SAFETY: restoring the default disposition of SIGPIPE at start-up, before any thread exists.
+    unsafe {
+        libc::signal(libc::SIGPIPE, libc::SIG_DFL);
+    }
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Demo(args) => cmd::demo::run(args),
         Command::Compliance(args) => cmd::compliance::run(args),
         Command::Bench(bench) => cmd::bench::run(bench),
+        Command::Bank(bank) => cmd::bank::run(bank),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -1,5 +1,6 @@
 //! Subcommands.
 
+pub mod bank;
 pub mod bench;
 pub mod compliance;
 pub mod demo;

@@ -1,0 +1,700 @@
+//! `host bank build | inspect | sweep`: firmware banks from scene files.
+
+use super::compliance::progress_bar;
+use anyhow::{Context, Result, bail};
+use bank_format::{AlignedBytes, Bank, BankBuilder, LawKind, SectionKind};
+use host::compliance::{Block3, Compliance, contact_forces};
+use host::fem::{Elasticity, FixedSet};
+use host::mesh::{Surface, TetMesh};
+use host::reach::{Workspace, reachable};
+use host::scene::Scene;
+use std::collections::{BTreeSet, HashMap};
+use std::io::Write;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+/// The bank region of the STM32F405 flash (`memory.x`: BANK, 768 KiB).
+pub const BANK_REGION_BYTES: usize = 768 * 1024;
+
+/// Bank subcommands.
+#[derive(clap::Subcommand, Debug)]
+pub enum BankCmd {
+    /// Build a bank from a scene file (atomic write: nothing is left behind on error).
+    Build(BuildArgs),
+    /// Validate a bank file and print what it holds; exits non-zero when it is invalid.
+    Inspect(InspectArgs),
+    /// Truncation radius -> couplings kept -> bank bytes -> force error against the full
+    /// compliance, for presses spread over the reachable region.
+    Sweep(SweepArgs),
+}
+
+/// Arguments of `host bank build`.
+#[derive(clap::Args, Debug)]
+pub struct BuildArgs {
+    /// Scene file (TOML; see host/scenes/liver.toml).
+    scene: PathBuf,
+    /// Output bank file.
+    #[arg(short, long)]
+    out: PathBuf,
+    /// Refuse banks larger than this many bytes (default: the 768 KiB bank region of memory.x).
+    #[arg(long, default_value_t = BANK_REGION_BYTES)]
+    region_bytes: usize,
+}
+
+/// Arguments of `host bank inspect`.
+#[derive(clap::Args, Debug)]
+pub struct InspectArgs {
+    /// Bank file.
+    bank: PathBuf,
+    /// Print one JSON object instead of text.
+    #[arg(long)]
+    json: bool,
+}
+
+/// Arguments of `host bank sweep`.
+#[derive(clap::Args, Debug)]
+pub struct SweepArgs {
+    /// Scene file.
+    scene: PathBuf,
+    /// Truncation radii, m, comma separated.
+    #[arg(long, default_value = "0,0.004,0.008,0.012,0.016,0.02,0.03")]
+    radii: String,
+    /// Number of press sites spread over the reachable region.
+    #[arg(long, default_value_t = 20)]
+    sites: usize,
+    /// Press depth along the inward normal, m.
+    #[arg(long, default_value_t = 0.005)]
+    depth: f64,
+}
+
+/// Runs a bank subcommand.
+pub fn run(cmd: BankCmd) -> Result<()> {
+    match cmd {
+        BankCmd::Build(a) => build(a),
+        BankCmd::Inspect(a) => inspect(a),
+        BankCmd::Sweep(a) => sweep(a),
+    }
+}
+
+/// A scene with its mesh, supports, factorised compliance and reachable region.
+struct Prepared {
+    scene: Scene,
+    mesh: TetMesh,
+    mesh_name: String,
+    surface: Surface,
+    compliance: Compliance,
+    scene_id: u64,
+    /// R: mesh node ids, ascending.
+    region: Vec<usize>,
+    /// R's positions.
+    positions: Vec<[f64; 3]>,
+    /// Boundary triangles with all three vertices in R, as indices into `region`.
+    triangles: Vec<[u32; 3]>,
+}
+
+impl Prepared {
+    fn new(path: &Path) -> Result<Prepared> {
+        let scene = Scene::load(path)?;
+        let (mesh, mesh_name, mesh_hash) = scene.load_mesh()?;
+        let surface = host::mesh::boundary(&mesh)?;
+        let fixed: FixedSet = scene.fixed_set(&mesh)?;
+        let workspace = Workspace::from_device(&scene.device);
+        let region = reachable(
+            &workspace,
+            &mesh.nodes,
+            &surface.nodes,
+            |k| (0..3).any(|c| fixed.is_fixed(k, c)),
+            scene.tip_radius_m,
+            scene.bank.reach_margin_m,
+        );
+        if region.is_empty() {
+            bail!(
+                "{}: the tool reaches no free surface node (check device.fulcrum_m, the ranges \
+                 and bank.reach_margin_m)",
+                path.display()
+            );
+        }
+        if region.len() > bank_format::MAX_NODES {
+            bail!(
+                "{}: the reachable region has {} nodes; a bank holds at most {} (u16 indices): \
+                 narrow the device's ranges",
+                path.display(),
+                region.len(),
+                bank_format::MAX_NODES
+            );
+        }
+        let local: HashMap<usize, u32> = region
+            .iter()
+            .enumerate()
+            .map(|(i, &k)| (k, i as u32))
+            .collect();
+        let triangles = surface
+            .triangles
+            .iter()
+            .filter_map(|t| Some([*local.get(&t[0])?, *local.get(&t[1])?, *local.get(&t[2])?]))
+            .collect();
+        let positions = region.iter().map(|&k| mesh.nodes[k]).collect();
+        let body = Elasticity::new(&mesh, scene.material)?;
+        let compliance = Compliance::factorize(&body, &fixed)?;
+        let scene_id = scene.scene_id(mesh_hash);
+        Ok(Prepared {
+            scene,
+            mesh,
+            mesh_name,
+            surface,
+            compliance,
+            scene_id,
+            region,
+            positions,
+            triangles,
+        })
+    }
+
+    fn edges(&self) -> BTreeSet<(usize, usize)> {
+        let mut e = BTreeSet::new();
+        for t in &self.triangles {
+            for i in 0..3 {
+                let (a, b) = (t[i] as usize, t[(i + 1) % 3] as usize);
+                e.insert((a.min(b), a.max(b)));
+            }
+        }
+        e
+    }
+
+    fn dist(&self, a: usize, b: usize) -> f64 {
+        let (p, q) = (self.positions[a], self.positions[b]);
+        (0..3).map(|i| (p[i] - q[i]).powi(2)).sum::<f64>().sqrt()
+    }
+
+    fn mean_edge(&self) -> f64 {
+        let e = self.edges();
+        if e.is_empty() {
+            return 0.0;
+        }
+        e.iter().map(|&(a, b)| self.dist(a, b)).sum::<f64>() / e.len() as f64
+    }
+
+    /// Blocks of R within `radius`, and at least along every triangle edge.
+    fn blocks(&self, radius: f64) -> Result<Vec<Vec<(usize, Block3)>>> {
+        let longest = self
+            .edges()
+            .iter()
+            .map(|&(a, b)| self.dist(a, b))
+            .fold(0.0, f64::max);
+        let progress = progress_bar(0, "supernodes");
+        let rows = self.compliance.blocks_within(
+            &self.region,
+            &self.positions,
+            radius.max(longest),
+            Some(&progress),
+        )?;
+        progress.finish_and_clear();
+        Ok(rows)
+    }
+
+    /// The bank for truncation radius `radius` from `rows` (computed for at least that
+    /// radius); returns the bytes and the number of coupled pairs.
+    fn bank(&self, rows: &[Vec<(usize, Block3)>], radius: f64) -> Result<(Vec<u8>, usize)> {
+        let edges = self.edges();
+        let mut c_kk = Vec::with_capacity(rows.len());
+        let mut couplings = Vec::new();
+        for (a, row) in rows.iter().enumerate() {
+            let mut diag = None;
+            for &(b, block) in row {
+                if b == a {
+                    diag = Some(block);
+                } else if b > a && (self.dist(a, b) <= radius || edges.contains(&(a, b))) {
+                    couplings.push((a as u32, b as u32, block));
+                }
+            }
+            c_kk.push(diag.context("internal: a node's own block is missing")?);
+        }
+        let grid = self
+            .scene
+            .bank
+            .grid_cell_m
+            .unwrap_or_else(|| radius.max(2.0 * self.mean_edge()).max(1e-3));
+        let pairs = couplings.len();
+        let builder = BankBuilder {
+            positions_m: self.positions.clone(),
+            mesh_ids: self.region.iter().map(|&k| k as u32).collect(),
+            triangles: self.triangles.clone(),
+            c_kk,
+            couplings,
+            grid_cell_size_m: grid,
+            truncation_radius_m: radius,
+            scene_id: self.scene_id,
+            law: self.scene.law,
+            device: self.scene.device,
+        };
+        let bytes = builder
+            .build()
+            .map_err(|e| anyhow::anyhow!("the bank writer refused the scene's data: {e}"))?;
+        Ok((bytes, pairs))
+    }
+}
+
+/// `(kind name, offset, len, count)` of each section-table entry (from a validated bank).
+fn section_table(bytes: &[u8]) -> Vec<(String, u32, u32, u32)> {
+    let u32_at = |o: usize| {
+        bytes
+            .get(o..o + 4)
+            .map_or(0, |b| u32::from_le_bytes([b[0], b[1], b[2], b[3]]))
+    };
+    let count = bytes
+        .get(14..16)
+        .map_or(0, |b| u16::from_le_bytes([b[0], b[1]])) as usize;
+    (0..count)
+        .map(|i| {
+            let e = bank_format::HEADER_LEN + i * bank_format::SECTION_ENTRY_LEN;
+            (
+                SectionKind::from_code(u32_at(e)).name().to_string(),
+                u32_at(e + 4),
+                u32_at(e + 8),
+                u32_at(e + 12),
+            )
+        })
+        .collect()
+}
+
+/// Writes `bytes` to `out` atomically: `<out>.tmp` in the same directory, fsync, rename. On any
+/// error the temporary file is removed and `out` is untouched.
+fn write_atomic(out: &Path, bytes: &[u8]) -> Result<()> {
+    let mut tmp_name = out
+        .file_name()
+        .context("output path has no file name")?
+        .to_owned();
+    tmp_name.push(".tmp");
+    let tmp = out.with_file_name(tmp_name);
+    let result = (|| -> std::io::Result<()> {
+        let mut f = std::fs::File::create(&tmp)?;
+        f.write_all(bytes)?;
+        f.sync_all()?;
+        drop(f);
+        std::fs::rename(&tmp, out)?;
+        if let Some(dir) = out.parent().filter(|d| !d.as_os_str().is_empty())
+            && let Ok(d) = std::fs::File::open(dir)
+        {
+            let _ = d.sync_all();
+        }
+        Ok(())
+    })();
+    if let Err(e) = result {
+        let _ = std::fs::remove_file(&tmp);
+        return Err(e).with_context(|| format!("cannot write {}", out.display()));
+    }
+    Ok(())
+}
+
+fn build(args: BuildArgs) -> Result<()> {
+    let t = Instant::now();
+    let prep = Prepared::new(&args.scene)?;
+    let radius = prep.scene.bank.truncation_radius_m;
+    let rows = prep.blocks(radius)?;
+    let (bytes, pairs) = prep.bank(&rows, radius)?;
+    if bytes.len() > args.region_bytes {
+        bail!(
+            "the bank would be {} bytes, more than the {} bytes of the bank region ({} nodes in \
+             R, {pairs} coupled pairs): lower bank.truncation_radius_m or narrow the device's \
+             ranges; nothing was written",
+            bytes.len(),
+            args.region_bytes,
+            prep.region.len()
+        );
+    }
+    write_atomic(&args.out, &bytes)?;
+    // Read back what was written.
+    let written = std::fs::read(&args.out)?;
+    let aligned = AlignedBytes::new(&written);
+    let bank = Bank::parse(&aligned).map_err(|e| {
+        anyhow::anyhow!("{}: written bank fails validation: {e}", args.out.display())
+    })?;
+    let (lo, hi) = prep.mesh.bounding_box();
+    println!(
+        "scene     {} ({}, {} nodes, {} surface nodes, box [{:.3}, {:.3}] x [{:.3}, {:.3}] x \
+         [{:.3}, {:.3}] m)",
+        args.scene.display(),
+        prep.mesh_name,
+        prep.mesh.nodes.len(),
+        prep.surface.nodes.len(),
+        lo[0],
+        hi[0],
+        lo[1],
+        hi[1],
+        lo[2],
+        hi[2]
+    );
+    println!(
+        "region R  {} reachable surface nodes, {} triangles (tip radius {} m, margin {} m)",
+        bank.node_count(),
+        bank.triangles().len(),
+        prep.scene.tip_radius_m,
+        prep.scene.bank.reach_margin_m
+    );
+    println!(
+        "couplings {pairs} pairs kept (truncation radius {radius} m, plus every triangle edge), \
+         {} neighbour entries",
+        2 * pairs
+    );
+    println!("sections  kind                  bytes   count");
+    for (name, _, len, count) in section_table(bank.bytes()) {
+        println!("          {name:<20} {len:>7} {count:>7}");
+    }
+    let region = BANK_REGION_BYTES;
+    println!(
+        "total     {} bytes = {:.1} KiB of the {} KiB bank region ({:.1}%), crc32 {:08x}, \
+         scene id {:016x}",
+        bytes.len(),
+        bytes.len() as f64 / 1024.0,
+        region / 1024,
+        100.0 * bytes.len() as f64 / region as f64,
+        bank.crc(),
+        bank.scene_id()
+    );
+    println!(
+        "written   {} in {:.2} s",
+        args.out.display(),
+        t.elapsed().as_secs_f64()
+    );
+    Ok(())
+}
+
+fn inspect(args: InspectArgs) -> Result<()> {
+    let raw = std::fs::read(&args.bank)
+        .with_context(|| format!("cannot read {}", args.bank.display()))?;
+    let aligned = AlignedBytes::new(&raw);
+    let bank = match Bank::parse(&aligned) {
+        Ok(b) => b,
+        Err(e) => bail!(
+            "{}: invalid bank: {e} (validation code {})",
+            args.bank.display(),
+            e.code()
+        ),
+    };
+    let (major, minor) = bank.version();
+    let law = bank.tissue_law();
+    let law_kind = match law.kind() {
+        LawKind::Linear => "linear",
+        LawKind::Chebyshev => "chebyshev",
+    };
+    let d = bank.device();
+    let pairs = (0..bank.node_count())
+        .map(|k| bank.neighbours(k).0.len())
+        .sum::<usize>()
+        / 2;
+    let sections = section_table(bank.bytes());
+    if args.json {
+        let v = serde_json::json!({
+            "file": args.bank.display().to_string(),
+            "version": [major, minor],
+            "crc32": format!("{:08x}", bank.crc()),
+            "scene_id": format!("{:016x}", bank.scene_id()),
+            "bytes": bank.bytes().len(),
+            "nodes": bank.node_count(),
+            "triangles": bank.triangles().len(),
+            "coupled_pairs": pairs,
+            "truncation_radius_m": bank.truncation_radius_m(),
+            "grid": { "cell_size_m": bank.grid().cell_size_m(), "dims": bank.grid().dims() },
+            "law": { "kind": law_kind, "coeffs": law.coeffs(), "domain_n": law.domain() },
+            "device": {
+                "fulcrum_m": d.fulcrum_m, "shaft_axis": d.shaft_axis,
+                "pitch_axis": d.pitch_axis, "yaw_axis": d.yaw_axis,
+                "joint_min": d.joint_min, "joint_max": d.joint_max, "home_joint": d.home_joint,
+                "counts_per_rev": d.counts_per_rev, "transmission": d.transmission,
+                "torque_constant_nm_per_a": d.torque_constant_nm_per_a,
+                "current_limit_a": d.current_limit_a, "max_force_n": d.max_force_n,
+                "tip_radius_m": d.tip_radius_m,
+            },
+            "sections": sections.iter().map(|(n, o, l, c)| serde_json::json!(
+                { "kind": n, "offset": o, "len": l, "count": c })).collect::<Vec<_>>(),
+        });
+        println!("{v}");
+        return Ok(());
+    }
+    println!(
+        "bank      {} ({} bytes)",
+        args.bank.display(),
+        bank.bytes().len()
+    );
+    println!(
+        "format    {major}.{minor}, crc32 {:08x}, scene id {:016x}",
+        bank.crc(),
+        bank.scene_id()
+    );
+    println!(
+        "region    {} nodes, {} triangles, {pairs} coupled pairs, truncation radius {} m",
+        bank.node_count(),
+        bank.triangles().len(),
+        bank.truncation_radius_m()
+    );
+    println!(
+        "grid      cell {} m, {:?} cells",
+        bank.grid().cell_size_m(),
+        bank.grid().dims()
+    );
+    println!(
+        "law       {law_kind}, coefficients {:?}, domain {:?} N",
+        law.coeffs(),
+        law.domain()
+    );
+    println!(
+        "device    fulcrum {:?} m, shaft {:?}; pitch [{}, {}] rad, yaw [{}, {}] rad, insertion \
+         [{}, {}] m",
+        d.fulcrum_m,
+        d.shaft_axis,
+        d.joint_min[0],
+        d.joint_max[0],
+        d.joint_min[1],
+        d.joint_max[1],
+        d.joint_min[2],
+        d.joint_max[2]
+    );
+    println!(
+        "motors    counts/rev {:?}, transmission {:?}, Kt {:?} N m/A, limits {:?} A; max force \
+         {} N, tip radius {} m",
+        d.counts_per_rev,
+        d.transmission,
+        d.torque_constant_nm_per_a,
+        d.current_limit_a,
+        d.max_force_n,
+        d.tip_radius_m
+    );
+    println!("sections  kind                  offset     bytes   count");
+    for (name, off, len, count) in sections {
+        println!("          {name:<20} {off:>7} {len:>9} {count:>7}");
+    }
+    Ok(())
+}
+
+/// Press sites spread over R: farthest-point sampling from the node nearest R's centroid.
+fn spread_sites(positions: &[[f64; 3]], count: usize) -> Vec<usize> {
+    let n = positions.len();
+    if n == 0 || count == 0 {
+        return Vec::new();
+    }
+    let mut c = [0.0; 3];
+    for p in positions {
+        for i in 0..3 {
+            c[i] += p[i] / n as f64;
+        }
+    }
+    let d2 = |a: [f64; 3], b: [f64; 3]| (0..3).map(|i| (a[i] - b[i]).powi(2)).sum::<f64>();
+    let first = (0..n)
+        .min_by(|&a, &b| d2(positions[a], c).total_cmp(&d2(positions[b], c)))
+        .unwrap_or(0);
+    let mut sites = vec![first];
+    let mut near: Vec<f64> = positions.iter().map(|p| d2(*p, positions[first])).collect();
+    while sites.len() < count.min(n) {
+        let next = (0..n)
+            .max_by(|&a, &b| near[a].total_cmp(&near[b]))
+            .unwrap_or(0);
+        if near[next] == 0.0 {
+            break;
+        }
+        sites.push(next);
+        for (k, p) in positions.iter().enumerate() {
+            near[k] = near[k].min(d2(*p, positions[next]));
+        }
+    }
+    sites
+}
+
+/// Outward unit vertex normals (area-weighted) of the mesh's boundary, indexed by mesh node.
+fn vertex_normals(mesh: &TetMesh, surface: &Surface) -> Vec<[f64; 3]> {
+    let mut n = vec![[0.0; 3]; mesh.nodes.len()];
+    for t in &surface.triangles {
+        let [a, b, c] = t.map(|i| mesh.nodes[i]);
+        let u = [b[0] - a[0], b[1] - a[1], b[2] - a[2]];
+        let v = [c[0] - a[0], c[1] - a[1], c[2] - a[2]];
+        let w = [
+            u[1] * v[2] - u[2] * v[1],
+            u[2] * v[0] - u[0] * v[2],
+            u[0] * v[1] - u[1] * v[0],
+        ];
+        for &i in t {
+            for j in 0..3 {
+                n[i][j] += w[j];
+            }
+        }
+    }
+    for v in &mut n {
+        let l = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
+        if l > 0.0 {
+            *v = v.map(|x| x / l);
+        }
+    }
+    n
+}
+
+/// Relative error of the total tool force with a truncated `C_SS` (`keep(a, b)` says whether
+/// the pair of contact nodes `a`, `b` is stored) against the full one; `None` when the truncated
+/// `C_SS` is not positive definite.
+fn force_error(
+    full: &[Vec<Block3>],
+    keep: impl Fn(usize, usize) -> bool,
+    press: [f64; 3],
+) -> Result<Option<f64>> {
+    let m = full.len();
+    let total = |c: &[Vec<Block3>]| -> Result<Option<[f64; 3]>> {
+        match contact_forces(c, &vec![press; m]) {
+            Ok(s) => Ok(Some(s.forces.iter().fold([0.0; 3], |acc, f| {
+                [acc[0] + f[0], acc[1] + f[1], acc[2] + f[2]]
+            }))),
+            Err(_) => Ok(None),
+        }
+    };
+    let exact = total(full)?.context("the full C_SS is not positive definite")?;
+    let cut: Vec<Vec<Block3>> = (0..m)
+        .map(|a| {
+            (0..m)
+                .map(|b| {
+                    if a == b || keep(a, b) {
+                        full[a][b]
+                    } else {
+                        [[0.0; 3]; 3]
+                    }
+                })
+                .collect()
+        })
+        .collect();
+    let norm = |v: [f64; 3]| (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
+    Ok(total(&cut)?
+        .map(|t| norm([t[0] - exact[0], t[1] - exact[1], t[2] - exact[2]]) / norm(exact)))
+}
+
+#[derive(Default)]
+struct Stat {
+    max: f64,
+    sum: f64,
+    count: usize,
+    not_spd: usize,
+}
+
+impl Stat {
+    fn add(&mut self, e: Option<f64>) {
+        match e {
+            Some(e) => {
+                self.max = self.max.max(e);
+                self.sum += e;
+                self.count += 1;
+            }
+            None => self.not_spd += 1,
+        }
+    }
+    fn show(&self) -> String {
+        let mean = if self.count > 0 {
+            self.sum / self.count as f64
+        } else {
+            f64::NAN
+        };
+        let mut s = format!("{:>7.1}% {:>7.1}%", 100.0 * self.max, 100.0 * mean);
+        if self.not_spd > 0 {
+            s.push_str(&format!(" ({} not SPD)", self.not_spd));
+        }
+        s
+    }
+}
+
+fn sweep(args: SweepArgs) -> Result<()> {
+    let radii = super::fixing::parse_list::<f64>(&args.radii).context("--radii")?;
+    if radii.iter().any(|r| !(r.is_finite() && *r >= 0.0)) {
+        bail!("--radii: every radius must be a number >= 0");
+    }
+    let rmax = radii.iter().copied().fold(0.0, f64::max);
+    let prep = Prepared::new(&args.scene)?;
+    let rows = prep.blocks(rmax)?;
+    let normals = vertex_normals(&prep.mesh, &prep.surface);
+    let edges = prep.edges();
+    let max_contacts = prep.scene.bank.max_contact_nodes as usize;
+
+    // Contact sets per site: one node; one triangle; the node's 1-ring (node + its surface
+    // neighbours in R, nearest first, at most max_contact_nodes).
+    let sites = spread_sites(&prep.positions, args.sites);
+    let mut presses: Vec<([f64; 3], Vec<usize>, Vec<usize>)> = Vec::new();
+    for &k in &sites {
+        let nrm = normals[prep.region[k]];
+        let press = nrm.map(|x| -args.depth * x);
+        let Some(tri) = prep.triangles.iter().find(|t| t.contains(&(k as u32))) else {
+            continue;
+        };
+        let tri: Vec<usize> = tri.iter().map(|&v| v as usize).collect();
+        let mut ring: Vec<usize> = edges
+            .iter()
+            .filter_map(|&(a, b)| {
+                if a == k {
+                    Some(b)
+                } else if b == k {
+                    Some(a)
+                } else {
+                    None
+                }
+            })
+            .collect();
+        ring.sort_by(|&a, &b| prep.dist(k, a).total_cmp(&prep.dist(k, b)));
+        ring.truncate(max_contacts.saturating_sub(1));
+        ring.insert(0, k);
+        presses.push((press, tri, ring));
+    }
+    // Full (untruncated) blocks among every contact node.
+    let mut union: Vec<usize> = presses
+        .iter()
+        .flat_map(|(_, t, r)| t.iter().chain(r).copied())
+        .collect();
+    union.sort_unstable();
+    union.dedup();
+    let mesh_ids: Vec<usize> = union.iter().map(|&a| prep.region[a]).collect();
+    let full = prep.compliance.blocks(&mesh_ids, None)?;
+    let at: HashMap<usize, usize> = union.iter().enumerate().map(|(i, &a)| (a, i)).collect();
+    let sub = |set: &[usize]| -> Vec<Vec<Block3>> {
+        set.iter()
+            .map(|a| set.iter().map(|b| full[at[a]][at[b]]).collect())
+            .collect()
+    };
+
+    println!(
+        "scene {}: |R| = {}, {} press sites, {:.1} mm along the inward normal; relative error \
+         of the total tool force against the full C_SS (max, mean)",
+        args.scene.display(),
+        prep.region.len(),
+        presses.len(),
+        args.depth * 1e3
+    );
+    println!(
+        "| radius (mm) | pairs kept | bank bytes | fits 768 KiB | 1 node | triangle, pairs <= r only | 1-ring, bank pairs (<= r + edges) |"
+    );
+    println!("| ---: | ---: | ---: | :---: | --- | --- | --- |");
+    for &r in &radii {
+        let (bytes, pairs) = prep.bank(&rows, r)?;
+        let (mut one, mut tri, mut ring) = (Stat::default(), Stat::default(), Stat::default());
+        for (press, t, g) in &presses {
+            one.add(force_error(&sub(&t[..1]), |_, _| false, *press)?);
+            tri.add(force_error(
+                &sub(t),
+                |a, b| prep.dist(t[a], t[b]) <= r,
+                *press,
+            )?);
+            ring.add(force_error(
+                &sub(g),
+                |a, b| {
+                    let (x, y) = (g[a].min(g[b]), g[a].max(g[b]));
+                    prep.dist(x, y) <= r || edges.contains(&(x, y))
+                },
+                *press,
+            )?);
+        }
+        println!(
+            "| {:.1} | {pairs} | {} | {} | {} | {} | {} |",
+            r * 1e3,
+            bytes.len(),
+            if bytes.len() <= BANK_REGION_BYTES {
+                "yes"
+            } else {
+                "no"
+            },
+            one.show(),
+            tri.show(),
+            ring.show()
+        );
+    }
+    Ok(())
+}

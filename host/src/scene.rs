@@ -1,0 +1,858 @@
+//! Scene files: everything a bank is built from, in TOML.
+//!
+//! A scene names the organ mesh, its material and supports, the tool, the laparoscopic device
+//! (trocar pose, joint ranges, motors), the tissue force law and the bank options. The shipped
+//! example `host/scenes/liver.toml` documents every key with a comment. Rules:
+//!
+//! - Unknown keys are errors; so are missing required keys and out-of-range values. Every error
+//!   names the file, the line and the key.
+//! - `mesh` is a path relative to the scene file, or `"builtin:liver-1k4"` for the 1.4k-node
+//!   liver embedded in the binary.
+//! - SI units everywhere (m, rad, Pa, N, A, N m/A); angles in radians.
+//! - The device maps onto [`bank_format::DeviceCalibration`]: joints are 0 = pitch, 1 = yaw,
+//!   2 = insertion, and `tip = fulcrum + insertion * Rot(yaw_axis, yaw) Rot(pitch_axis, pitch)
+//!   shaft_axis`.
+
+use crate::fem::{FixedSet, Material};
+use crate::mesh::TetMesh;
+use bank_format::{DeviceCalibration, TissueLaw};
+use serde::Deserialize;
+use std::ops::Range;
+use std::path::{Path, PathBuf};
+use toml::Spanned;
+
+/// The embedded 1.4k-node liver (`mesh = "builtin:liver-1k4"`).
+pub const BUILTIN_LIVER: &[u8] = include_bytes!("../meshes/liver-1k4.msh");
+/// The scene value that selects [`BUILTIN_LIVER`].
+pub const BUILTIN_LIVER_NAME: &str = "builtin:liver-1k4";
+
+/// A scene-file error: file, 1-based line (when known), key and what is wrong.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("{file}:{}: {key}: {message}", line.map_or("?".to_string(), |l| l.to_string()))]
+pub struct SceneError {
+    /// The scene file.
+    pub file: String,
+    /// 1-based line of the offending key or value.
+    pub line: Option<usize>,
+    /// Dotted key path, e.g. `material.young_pa`.
+    pub key: String,
+    /// What is wrong.
+    pub message: String,
+}
+
+/// The scene file as written (fields carry their source spans for error lines).
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawScene {
+    mesh: Spanned<String>,
+    material: RawMaterial,
+    fixed: RawFixed,
+    tool: RawTool,
+    device: RawDevice,
+    law: RawLaw,
+    bank: RawBank,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawMaterial {
+    young_pa: Spanned<f64>,
+    poisson: Spanned<f64>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawFixed {
+    #[serde(default)]
+    boxes: Vec<Spanned<RawBox>>,
+    #[serde(default)]
+    nodes: Option<Spanned<Vec<usize>>>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawBox {
+    min: [f64; 3],
+    max: [f64; 3],
+    #[serde(default)]
+    axes: Option<String>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawTool {
+    tip_radius_m: Spanned<f64>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawDevice {
+    fulcrum_m: Spanned<[f64; 3]>,
+    shaft_axis: Spanned<[f64; 3]>,
+    pitch_axis: Spanned<[f64; 3]>,
+    yaw_axis: Spanned<[f64; 3]>,
+    pitch_range_rad: Spanned<[f64; 2]>,
+    yaw_range_rad: Spanned<[f64; 2]>,
+    insertion_range_m: Spanned<[f64; 2]>,
+    #[serde(default)]
+    home: Option<Spanned<[f64; 3]>>,
+    counts_per_rev: Spanned<[u32; 3]>,
+    gear_ratio: Spanned<[f64; 3]>,
+    torque_constant_nm_per_a: Spanned<[f64; 3]>,
+    current_limit_a: Spanned<[f64; 3]>,
+    max_force_n: Spanned<f64>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawLaw {
+    kind: Spanned<String>,
+    #[serde(default)]
+    gain: Option<Spanned<f64>>,
+    #[serde(default)]
+    offset_n: Option<Spanned<f64>>,
+    #[serde(default)]
+    coeffs: Option<Spanned<Vec<f64>>>,
+    #[serde(default)]
+    domain_n: Option<Spanned<[f64; 2]>>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawBank {
+    truncation_radius_m: Spanned<f64>,
+    #[serde(default)]
+    precision: Option<Spanned<String>>,
+    #[serde(default)]
+    max_contact_nodes: Option<Spanned<u32>>,
+    #[serde(default)]
+    grid_cell_m: Option<Spanned<f64>>,
+    #[serde(default)]
+    reach_margin_m: Option<Spanned<f64>>,
+}
+
+/// Where the organ mesh comes from.
+#[derive(Debug, Clone, PartialEq)]
+pub enum MeshSource {
+    /// The embedded 1.4k-node liver.
+    BuiltinLiver,
+    /// A file (already resolved against the scene file's directory).
+    File(PathBuf),
+}
+
+/// One fixed box: the nodes inside the closed box get the selected components fixed.
+#[derive(Debug, Clone, PartialEq)]
+pub struct FixBox {
+    /// `[xmin, ymin, zmin, xmax, ymax, zmax]`, m.
+    pub bounds: [f64; 6],
+    /// Components fixed (x, y, z).
+    pub axes: [bool; 3],
+    line: usize,
+}
+
+/// The tissue force law as given in the scene.
+#[derive(Debug, Clone, PartialEq)]
+pub enum LawSpec {
+    /// `Q(f) = offset + gain f`.
+    Linear {
+        /// Offset, N.
+        offset_n: f64,
+        /// Gain (dimensionless).
+        gain: f64,
+        /// Range the gain was measured on, N.
+        domain_n: [f64; 2],
+    },
+    /// Chebyshev series on `domain_n`.
+    Chebyshev {
+        /// Coefficients, N.
+        coeffs: Vec<f64>,
+        /// Fitted range, N.
+        domain_n: [f64; 2],
+    },
+}
+
+/// Bank options.
+#[derive(Debug, Clone, PartialEq)]
+pub struct BankOptions {
+    /// Every pair of R closer than this is coupled, m.
+    pub truncation_radius_m: f64,
+    /// Largest contact set the firmware solves (informative; checked against the link's limit).
+    pub max_contact_nodes: u32,
+    /// Collision-grid cell edge, m (`None`: chosen by the builder).
+    pub grid_cell_m: Option<f64>,
+    /// Extra distance beyond the tip radius at which a surface node still counts as reachable.
+    pub reach_margin_m: f64,
+}
+
+/// A validated scene.
+#[derive(Debug, Clone)]
+pub struct Scene {
+    /// The scene file.
+    pub path: PathBuf,
+    /// Organ mesh.
+    pub mesh: MeshSource,
+    /// Material.
+    pub material: Material,
+    /// Fixed boxes.
+    pub fix_boxes: Vec<FixBox>,
+    /// Fully fixed nodes.
+    pub fix_nodes: Vec<usize>,
+    fix_nodes_line: usize,
+    /// Tool tip radius, m.
+    pub tip_radius_m: f64,
+    /// Device calibration (includes the tip radius).
+    pub device: DeviceCalibration,
+    /// Tissue law, validated.
+    pub law: TissueLaw,
+    /// The law as written.
+    pub law_spec: LawSpec,
+    /// Bank options.
+    pub bank: BankOptions,
+    /// Identity of the scene: FNV-1a 64 of the scene file's bytes (the mesh is hashed in when
+    /// the bank is built, see [`Scene::scene_id`]).
+    pub text_hash: u64,
+}
+
+/// 1-based line of byte `offset` in `text`.
+pub fn line_of(text: &str, offset: usize) -> usize {
+    let end = offset.min(text.len());
+    text.as_bytes()[..end]
+        .iter()
+        .filter(|&&b| b == b'\n')
+        .count()
+        + 1
+}
+
+/// FNV-1a, 64 bit.
+pub fn fnv1a(seed: u64, bytes: &[u8]) -> u64 {
+    bytes.iter().fold(seed, |h, &b| {
+        (h ^ u64::from(b)).wrapping_mul(0x0000_0100_0000_01b3)
+    })
+}
+
+/// FNV-1a 64 offset basis.
+pub const FNV_OFFSET: u64 = 0xcbf2_9ce4_8422_2325;
+
+struct Ctx<'a> {
+    file: String,
+    text: &'a str,
+}
+
+impl Ctx<'_> {
+    fn err(&self, span: Range<usize>, key: &str, message: impl Into<String>) -> SceneError {
+        SceneError {
+            file: self.file.clone(),
+            line: Some(line_of(self.text, span.start)),
+            key: key.to_string(),
+            message: message.into(),
+        }
+    }
+}
+
+fn finite<const N: usize>(ctx: &Ctx, v: &Spanned<[f64; N]>, key: &str) -> Result<(), SceneError> {
+    if v.get_ref().iter().all(|x| x.is_finite()) {
+        Ok(())
+    } else {
+        Err(ctx.err(v.span(), key, "values must be finite"))
+    }
+}
+
+fn range(ctx: &Ctx, v: &Spanned<[f64; 2]>, key: &str) -> Result<[f64; 2], SceneError> {
+    finite(ctx, v, key)?;
+    let [a, b] = *v.get_ref();
+    if a >= b {
+        return Err(ctx.err(
+            v.span(),
+            key,
+            format!("empty range [{a}, {b}]: need min < max"),
+        ));
+    }
+    Ok([a, b])
+}
+
+fn unit(ctx: &Ctx, v: &Spanned<[f64; 3]>, key: &str) -> Result<[f64; 3], SceneError> {
+    finite(ctx, v, key)?;
+    let a = *v.get_ref();
+    let n = (a[0] * a[0] + a[1] * a[1] + a[2] * a[2]).sqrt();
+    if (n - 1.0).abs() > 1e-3 {
+        return Err(ctx.err(
+            v.span(),
+            key,
+            format!("must be a unit vector, has length {n}"),
+        ));
+    }
+    Ok(a.map(|x| x / n))
+}
+
+fn positive3(
+    ctx: &Ctx,
+    v: &Spanned<[f64; 3]>,
+    key: &str,
+    max: f64,
+) -> Result<[f32; 3], SceneError> {
+    finite(ctx, v, key)?;
+    for &x in v.get_ref() {
+        if !(x > 0.0 && x <= max) {
+            return Err(ctx.err(
+                v.span(),
+                key,
+                format!("every value must lie in (0, {max}], got {x}"),
+            ));
+        }
+    }
+    Ok(v.get_ref().map(|x| x as f32))
+}
+
+impl Scene {
+    /// Reads and validates a scene file.
+    pub fn load(path: &Path) -> Result<Scene, SceneError> {
+        let text = std::fs::read_to_string(path).map_err(|e| SceneError {
+            file: path.display().to_string(),
+            line: None,
+            key: "(file)".into(),
+            message: format!("cannot read: {e}"),
+        })?;
+        Scene::parse(path, &text)
+    }
+
+    /// Parses and validates scene text; `path` names it in errors and anchors a relative mesh
+    /// path.
+    pub fn parse(path: &Path, text: &str) -> Result<Scene, SceneError> {
+        let ctx = Ctx {
+            file: path.display().to_string(),
+            text,
+        };
+        let raw: RawScene = toml::from_str(text).map_err(|e| {
+            let message = e.message().trim().to_string();
+            let key = message
+                .split('`')
+                .nth(1)
+                .filter(|_| message.contains("field"))
+                .unwrap_or("(syntax)")
+                .to_string();
+            SceneError {
+                file: ctx.file.clone(),
+                line: e.span().map(|s| line_of(text, s.start)),
+                key,
+                message,
+            }
+        })?;
+
+        let mesh = if raw.mesh.get_ref() == BUILTIN_LIVER_NAME {
+            MeshSource::BuiltinLiver
+        } else if raw.mesh.get_ref().starts_with("builtin:") {
+            return Err(ctx.err(
+                raw.mesh.span(),
+                "mesh",
+                format!(
+                    "unknown built-in mesh {:?} (available: {BUILTIN_LIVER_NAME:?})",
+                    raw.mesh.get_ref()
+                ),
+            ));
+        } else {
+            let dir = path.parent().unwrap_or(Path::new("."));
+            MeshSource::File(dir.join(raw.mesh.get_ref()))
+        };
+
+        let m = &raw.material;
+        let (e, nu) = (*m.young_pa.get_ref(), *m.poisson.get_ref());
+        if !(e.is_finite() && e > 0.0) {
+            return Err(ctx.err(
+                m.young_pa.span(),
+                "material.young_pa",
+                format!("Young's modulus must be > 0 Pa, got {e}"),
+            ));
+        }
+        if !(nu > -1.0 && nu < 0.5) {
+            return Err(ctx.err(
+                m.poisson.span(),
+                "material.poisson",
+                format!("Poisson's ratio must lie in (-1, 0.5), got {nu}"),
+            ));
+        }
+        let material = Material::new(e, nu)
+            .map_err(|err| ctx.err(m.young_pa.span(), "material", err.to_string()))?;
+
+        let mut fix_boxes = Vec::new();
+        for b in &raw.fixed.boxes {
+            let key = "fixed.boxes";
+            let r = b.get_ref();
+            let mut bounds = [0.0; 6];
+            bounds[..3].copy_from_slice(&r.min);
+            bounds[3..].copy_from_slice(&r.max);
+            if bounds.iter().any(|v| !v.is_finite()) || (0..3).any(|a| r.min[a] > r.max[a]) {
+                return Err(ctx.err(
+                    b.span(),
+                    key,
+                    "box bounds must be finite with min <= max on every axis",
+                ));
+            }
+            let axes = match &r.axes {
+                None => [true; 3],
+                Some(s) => {
+                    let mut mask = [false; 3];
+                    for ch in s.chars() {
+                        match ch {
+                            'x' => mask[0] = true,
+                            'y' => mask[1] = true,
+                            'z' => mask[2] = true,
+                            other => {
+                                return Err(ctx.err(
+                                    b.span(),
+                                    "fixed.boxes.axes",
+                                    format!("unknown axis {other:?} (use x, y, z)"),
+                                ));
+                            }
+                        }
+                    }
+                    if mask == [false; 3] {
+                        return Err(ctx.err(b.span(), "fixed.boxes.axes", "no axis given"));
+                    }
+                    mask
+                }
+            };
+            fix_boxes.push(FixBox {
+                bounds,
+                axes,
+                line: line_of(text, b.span().start),
+            });
+        }
+        let (fix_nodes, fix_nodes_line) = match &raw.fixed.nodes {
+            Some(n) => (n.get_ref().clone(), line_of(text, n.span().start)),
+            None => (Vec::new(), 0),
+        };
+        if fix_boxes.is_empty() && fix_nodes.is_empty() {
+            return Err(SceneError {
+                file: ctx.file.clone(),
+                line: Some(line_of(text, text.find("[fixed]").unwrap_or(0))),
+                key: "fixed".into(),
+                message: "nothing is fixed: give boxes and/or nodes (the body would float)".into(),
+            });
+        }
+
+        let tip = *raw.tool.tip_radius_m.get_ref();
+        if !(0.0..=0.05).contains(&tip) {
+            return Err(ctx.err(
+                raw.tool.tip_radius_m.span(),
+                "tool.tip_radius_m",
+                format!("must lie in [0, 0.05] m, got {tip}"),
+            ));
+        }
+
+        let d = &raw.device;
+        finite(&ctx, &d.fulcrum_m, "device.fulcrum_m")?;
+        let shaft = unit(&ctx, &d.shaft_axis, "device.shaft_axis")?;
+        let pitch_axis = unit(&ctx, &d.pitch_axis, "device.pitch_axis")?;
+        let yaw_axis = unit(&ctx, &d.yaw_axis, "device.yaw_axis")?;
+        let dot = |a: [f64; 3], b: [f64; 3]| a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+        for (a, b, key, span) in [
+            (shaft, pitch_axis, "device.pitch_axis", d.pitch_axis.span()),
+            (shaft, yaw_axis, "device.yaw_axis", d.yaw_axis.span()),
+            (pitch_axis, yaw_axis, "device.yaw_axis", d.yaw_axis.span()),
+        ] {
+            if dot(a, b).abs() > 1e-3 {
+                return Err(ctx.err(
+                    span,
+                    key,
+                    "shaft_axis, pitch_axis and yaw_axis must be pairwise orthogonal",
+                ));
+            }
+        }
+        let pitch = range(&ctx, &d.pitch_range_rad, "device.pitch_range_rad")?;
+        let yaw = range(&ctx, &d.yaw_range_rad, "device.yaw_range_rad")?;
+        let ins = range(&ctx, &d.insertion_range_m, "device.insertion_range_m")?;
+        let half_pi = std::f64::consts::FRAC_PI_2;
+        if pitch[0] <= -half_pi || pitch[1] >= half_pi {
+            return Err(ctx.err(
+                d.pitch_range_rad.span(),
+                "device.pitch_range_rad",
+                "pitch must stay inside (-pi/2, pi/2)",
+            ));
+        }
+        if yaw[0] < -std::f64::consts::PI || yaw[1] > std::f64::consts::PI {
+            return Err(ctx.err(
+                d.yaw_range_rad.span(),
+                "device.yaw_range_rad",
+                "yaw must stay inside [-pi, pi]",
+            ));
+        }
+        if ins[0] < 0.0 {
+            return Err(ctx.err(
+                d.insertion_range_m.span(),
+                "device.insertion_range_m",
+                "insertion must be >= 0 m",
+            ));
+        }
+        let home = match &d.home {
+            Some(h) => {
+                finite(&ctx, h, "device.home")?;
+                let h3 = *h.get_ref();
+                for (j, r) in [pitch, yaw, ins].iter().enumerate() {
+                    if !(r[0] <= h3[j] && h3[j] <= r[1]) {
+                        return Err(ctx.err(
+                            h.span(),
+                            "device.home",
+                            format!("joint {j} home {} is outside [{}, {}]", h3[j], r[0], r[1]),
+                        ));
+                    }
+                }
+                h3
+            }
+            None => [
+                0.0f64.clamp(pitch[0], pitch[1]),
+                0.0f64.clamp(yaw[0], yaw[1]),
+                ins[0],
+            ],
+        };
+        if d.counts_per_rev.get_ref().contains(&0) {
+            return Err(ctx.err(
+                d.counts_per_rev.span(),
+                "device.counts_per_rev",
+                "counts per revolution must be > 0",
+            ));
+        }
+        finite(&ctx, &d.gear_ratio, "device.gear_ratio")?;
+        if d.gear_ratio.get_ref().iter().any(|g| g.abs() < 1e-6) {
+            return Err(ctx.err(
+                d.gear_ratio.span(),
+                "device.gear_ratio",
+                "gear ratios must be non-zero (|ratio| >= 1e-6; the sign is the motor direction)",
+            ));
+        }
+        let kt = positive3(
+            &ctx,
+            &d.torque_constant_nm_per_a,
+            "device.torque_constant_nm_per_a",
+            f64::MAX,
+        )?;
+        let imax = positive3(&ctx, &d.current_limit_a, "device.current_limit_a", 20.0)?;
+        let fmax = *d.max_force_n.get_ref();
+        if !(fmax > 0.0 && fmax <= 50.0) {
+            return Err(ctx.err(
+                d.max_force_n.span(),
+                "device.max_force_n",
+                format!("must lie in (0, 50] N, got {fmax}"),
+            ));
+        }
+        let f32s = |a: [f64; 3]| a.map(|x| x as f32);
+        let device = DeviceCalibration {
+            fulcrum_m: f32s(*d.fulcrum_m.get_ref()),
+            shaft_axis: f32s(shaft),
+            pitch_axis: f32s(pitch_axis),
+            yaw_axis: f32s(yaw_axis),
+            joint_min: f32s([pitch[0], yaw[0], ins[0]]),
+            joint_max: f32s([pitch[1], yaw[1], ins[1]]),
+            home_joint: f32s(home),
+            counts_per_rev: *d.counts_per_rev.get_ref(),
+            transmission: f32s(*d.gear_ratio.get_ref()),
+            torque_constant_nm_per_a: kt,
+            current_limit_a: imax,
+            max_force_n: fmax as f32,
+            tip_radius_m: tip as f32,
+        };
+        bank_format::validate_device(&device)
+            .map_err(|e| ctx.err(d.fulcrum_m.span(), "device", e.to_string()))?;
+
+        let l = &raw.law;
+        let law_key_span = l.kind.span();
+        let domain = match &l.domain_n {
+            Some(dn) => Some(range(&ctx, dn, "law.domain_n")?),
+            None => None,
+        };
+        let (law_spec, law) = match l.kind.get_ref().as_str() {
+            "linear" => {
+                if let Some(c) = &l.coeffs {
+                    return Err(ctx.err(c.span(), "law.coeffs", "only for kind = \"chebyshev\""));
+                }
+                let gain = l.gain.as_ref().map_or(1.0, |g| *g.get_ref());
+                let offset = l.offset_n.as_ref().map_or(0.0, |o| *o.get_ref());
+                if !(gain > 0.0 && gain.is_finite()) {
+                    let span = l.gain.as_ref().map_or(law_key_span.clone(), |g| g.span());
+                    return Err(ctx.err(span, "law.gain", format!("must be > 0, got {gain}")));
+                }
+                let domain_n = domain.unwrap_or([0.0, fmax]);
+                let law = TissueLaw::linear(offset as f32, gain as f32, domain_n.map(|v| v as f32))
+                    .map_err(|e| ctx.err(law_key_span.clone(), "law", e.to_string()))?;
+                (
+                    LawSpec::Linear {
+                        offset_n: offset,
+                        gain,
+                        domain_n,
+                    },
+                    law,
+                )
+            }
+            "chebyshev" => {
+                for (present, key) in [
+                    (l.gain.as_ref().map(|g| g.span()), "law.gain"),
+                    (l.offset_n.as_ref().map(|g| g.span()), "law.offset_n"),
+                ] {
+                    if let Some(span) = present {
+                        return Err(ctx.err(span, key, "only for kind = \"linear\""));
+                    }
+                }
+                let Some(c) = &l.coeffs else {
+                    return Err(ctx.err(law_key_span, "law.coeffs", "required for chebyshev"));
+                };
+                let Some(domain_n) = domain else {
+                    return Err(ctx.err(law_key_span, "law.domain_n", "required for chebyshev"));
+                };
+                let coeffs: Vec<f32> = c.get_ref().iter().map(|&v| v as f32).collect();
+                let law = TissueLaw::chebyshev(&coeffs, domain_n.map(|v| v as f32))
+                    .map_err(|e| ctx.err(c.span(), "law.coeffs", e.to_string()))?;
+                (
+                    LawSpec::Chebyshev {
+                        coeffs: c.get_ref().clone(),
+                        domain_n,
+                    },
+                    law,
+                )
+            }
+            other => {
+                return Err(ctx.err(
+                    law_key_span,
+                    "law.kind",
+                    format!("unknown law {other:?} (use \"linear\" or \"chebyshev\")"),
+                ));
+            }
+        };
+
+        let b = &raw.bank;
+        let r = *b.truncation_radius_m.get_ref();
+        if !(r.is_finite() && r >= 0.0) {
+            return Err(ctx.err(
+                b.truncation_radius_m.span(),
+                "bank.truncation_radius_m",
+                format!("must be >= 0 m, got {r}"),
+            ));
+        }
+        if let Some(p) = &b.precision
+            && p.get_ref() != "f32"
+        {
+            return Err(ctx.err(
+                p.span(),
+                "bank.precision",
+                format!(
+                    "storage precision {:?} is not supported by bank format 1.0 (only \"f32\")",
+                    p.get_ref()
+                ),
+            ));
+        }
+        let max_contact_nodes = match &b.max_contact_nodes {
+            Some(m) => {
+                let v = *m.get_ref();
+                if v == 0 || v as usize > bank_format::MAX_CONTACTS {
+                    return Err(ctx.err(
+                        m.span(),
+                        "bank.max_contact_nodes",
+                        format!(
+                            "must lie in 1..={} (the link's contact list), got {v}",
+                            bank_format::MAX_CONTACTS
+                        ),
+                    ));
+                }
+                v
+            }
+            None => bank_format::MAX_CONTACTS as u32,
+        };
+        let grid_cell_m = match &b.grid_cell_m {
+            Some(g) => {
+                let v = *g.get_ref();
+                if !(v.is_finite() && v > 0.0) {
+                    return Err(ctx.err(
+                        g.span(),
+                        "bank.grid_cell_m",
+                        format!("must be > 0 m, got {v}"),
+                    ));
+                }
+                Some(v)
+            }
+            None => None,
+        };
+        let reach_margin_m = match &b.reach_margin_m {
+            Some(g) => {
+                let v = *g.get_ref();
+                if !(v.is_finite() && v >= 0.0) {
+                    return Err(ctx.err(
+                        g.span(),
+                        "bank.reach_margin_m",
+                        format!("must be >= 0 m, got {v}"),
+                    ));
+                }
+                v
+            }
+            None => 0.002,
+        };
+
+        Ok(Scene {
+            path: path.to_path_buf(),
+            mesh,
+            material,
+            fix_boxes,
+            fix_nodes,
+            fix_nodes_line,
+            tip_radius_m: tip,
+            device,
+            law,
+            law_spec,
+            bank: BankOptions {
+                truncation_radius_m: r,
+                max_contact_nodes,
+                grid_cell_m,
+                reach_margin_m,
+            },
+            text_hash: fnv1a(FNV_OFFSET, text.as_bytes()),
+        })
+    }
+
+    /// Loads the scene's mesh; returns it with a display name and its bytes' hash.
+    pub fn load_mesh(&self) -> anyhow::Result<(TetMesh, String, u64)> {
+        use anyhow::Context;
+        match &self.mesh {
+            MeshSource::BuiltinLiver => Ok((
+                crate::mesh::parse_msh(BUILTIN_LIVER).context("embedded liver-1k4")?,
+                "embedded liver-1k4.msh".into(),
+                fnv1a(FNV_OFFSET, BUILTIN_LIVER),
+            )),
+            MeshSource::File(p) => {
+                let bytes = std::fs::read(p)
+                    .with_context(|| format!("{}: mesh {}", self.path.display(), p.display()))?;
+                Ok((
+                    crate::mesh::load(p)?,
+                    p.display().to_string(),
+                    fnv1a(FNV_OFFSET, &bytes),
+                ))
+            }
+        }
+    }
+
+    /// The fixed set on `mesh`; errors name the scene line of the box or node list.
+    pub fn fixed_set(&self, mesh: &TetMesh) -> Result<FixedSet, SceneError> {
+        let mut fixed = FixedSet::none(mesh.nodes.len());
+        let err = |line: usize, key: &str, message: String| SceneError {
+            file: self.path.display().to_string(),
+            line: Some(line),
+            key: key.into(),
+            message,
+        };
+        for b in &self.fix_boxes {
+            fixed
+                .fix_box(mesh, b.bounds, b.axes)
+                .map_err(|e| err(b.line, "fixed.boxes", e.to_string()))?;
+        }
+        for &n in &self.fix_nodes {
+            fixed
+                .fix_node(n)
+                .map_err(|e| err(self.fix_nodes_line, "fixed.nodes", e.to_string()))?;
+        }
+        Ok(fixed)
+    }
+
+    /// The bank's scene id: FNV-1a 64 over the scene file's bytes, then the mesh bytes' hash.
+    pub fn scene_id(&self, mesh_hash: u64) -> u64 {
+        fnv1a(self.text_hash, &mesh_hash.to_le_bytes())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn shipped() -> (PathBuf, String) {
+        let p = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/liver.toml");
+        let t = std::fs::read_to_string(&p).unwrap();
+        (p, t)
+    }
+
+    #[test]
+    fn shipped_scene_loads() {
+        let (p, _) = shipped();
+        let s = Scene::load(&p).unwrap();
+        assert_eq!(s.mesh, MeshSource::BuiltinLiver);
+        assert_eq!(s.material.young, 3000.0);
+        assert_eq!(s.material.poisson, 0.45);
+        assert!(!s.fix_boxes.is_empty());
+        assert!(bank_format::validate_device(&s.device).is_ok());
+        let (mesh, _, _) = s.load_mesh().unwrap();
+        assert!(s.fixed_set(&mesh).unwrap().count() > 0);
+    }
+
+    /// Replaces the first line starting with `key =` and returns the text and its line number.
+    fn with_line(text: &str, key: &str, new: &str) -> (String, usize) {
+        let mut line = 0;
+        let out: Vec<String> = text
+            .lines()
+            .enumerate()
+            .map(|(i, l)| {
+                if line == 0 && l.trim_start().starts_with(&format!("{key} =")) {
+                    line = i + 1;
+                    new.to_string()
+                } else {
+                    l.to_string()
+                }
+            })
+            .collect();
+        assert!(line > 0, "{key} not in the shipped scene");
+        (out.join("\n"), line)
+    }
+
+    fn err_of(text: &str) -> SceneError {
+        Scene::parse(Path::new("scene.toml"), text).unwrap_err()
+    }
+
+    #[test]
+    fn unknown_key_names_key_and_line() {
+        let (_, t) = shipped();
+        let (t, line) = with_line(&t, "poisson", "poisson = 0.45\nstiffness = 2");
+        let e = err_of(&t);
+        assert_eq!(e.line, Some(line + 1), "{e}");
+        assert_eq!(e.key, "stiffness", "{e}");
+        assert!(
+            e.to_string().contains(&format!("scene.toml:{}:", line + 1)),
+            "{e}"
+        );
+    }
+
+    #[test]
+    fn out_of_range_values_name_key_and_line() {
+        let (_, t) = shipped();
+        for (key, bad, name) in [
+            ("young_pa", "young_pa = -3000.0", "material.young_pa"),
+            ("poisson", "poisson = 0.5", "material.poisson"),
+            (
+                "insertion_range_m",
+                "insertion_range_m = [0.1, 0.1]",
+                "device.insertion_range_m",
+            ),
+            (
+                "pitch_range_rad",
+                "pitch_range_rad = [0.3, -0.3]",
+                "device.pitch_range_rad",
+            ),
+            ("precision", "precision = \"f16\"", "bank.precision"),
+            (
+                "truncation_radius_m",
+                "truncation_radius_m = -1.0",
+                "bank.truncation_radius_m",
+            ),
+        ] {
+            let (text, line) = with_line(&t, key, bad);
+            let e = err_of(&text);
+            assert_eq!(e.line, Some(line), "{bad}: {e}");
+            assert_eq!(e.key, name, "{bad}: {e}");
+            assert!(
+                e.to_string()
+                    .starts_with(&format!("scene.toml:{line}: {name}:")),
+                "{e}"
+            );
+        }
+    }
+
+    #[test]
+    fn syntax_errors_and_missing_keys_have_lines() {
+        let e = err_of("mesh = \"x.msh\"\n[material\n");
+        assert_eq!(e.line, Some(2), "{e}");
+        let e = err_of("mesh = \"x.msh\"\n");
+        assert!(e.message.contains("missing field"), "{e}");
+    }
+}

@@ -1,0 +1,161 @@
+//! `host bank build` / `inspect` on the shipped liver scene: the bank validates, damaged and
+//! truncated copies are refused without a panic, and a failed build leaves no file behind.
+
+use bank_format::{AlignedBytes, Bank};
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+fn host(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_host"))
+        .args(args)
+        .output()
+        .expect("run host")
+}
+
+fn scene() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/liver.toml")
+}
+
+fn s(p: &Path) -> &str {
+    p.to_str().unwrap()
+}
+
+fn stderr(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+fn files_in(dir: &Path) -> Vec<String> {
+    let mut v: Vec<String> = std::fs::read_dir(dir)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    v.sort();
+    v
+}
+
+#[test]
+fn shipped_scene_builds_a_valid_bank_and_inspect_refuses_damaged_copies() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("liver.bank");
+    let o = host(&["bank", "build", s(&scene()), "-o", s(&out)]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let summary = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        summary.contains("region R") && summary.contains("KiB"),
+        "{summary}"
+    );
+    assert_eq!(
+        files_in(dir.path()),
+        ["liver.bank"],
+        "no temporary file left"
+    );
+
+    let bytes = std::fs::read(&out).unwrap();
+    let aligned = AlignedBytes::new(&bytes);
+    let bank = Bank::parse(&aligned).expect("the built bank validates");
+    // R: a few hundred nodes of the upper surface, none of them on the bed.
+    let n = bank.node_count();
+    assert!((150..=450).contains(&n), "|R| = {n}");
+    assert!(bank.positions().iter().all(|p| p[2] > 0.01));
+    assert!(bank.bytes().len() <= 768 * 1024);
+    assert!(
+        summary.contains(&format!("{n} reachable surface nodes")),
+        "{summary}"
+    );
+
+    let o = host(&["bank", "inspect", s(&out)]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let o = host(&["bank", "inspect", s(&out), "--json"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).expect("one JSON object");
+    assert_eq!(v["nodes"], n);
+    assert_eq!(v["crc32"], format!("{:08x}", bank.crc()));
+
+    // One flipped byte in the middle (C_kl data): the CRC catches it.
+    let mut damaged = bytes.clone();
+    let mid = damaged.len() / 2;
+    damaged[mid] ^= 0x10;
+    let bad = dir.path().join("damaged.bank");
+    std::fs::write(&bad, &damaged).unwrap();
+    // Truncated copy.
+    let short = dir.path().join("short.bank");
+    std::fs::write(&short, &bytes[..bytes.len() - 8]).unwrap();
+    // Empty file.
+    let empty = dir.path().join("empty.bank");
+    std::fs::write(&empty, []).unwrap();
+    for (file, expect) in [(&bad, "CRC"), (&short, "too short"), (&empty, "too short")] {
+        let o = host(&["bank", "inspect", s(file)]);
+        let err = stderr(&o);
+        assert!(!o.status.success(), "{}", file.display());
+        assert_eq!(o.status.code(), Some(1), "{err}");
+        assert!(
+            err.contains("invalid bank") && err.to_lowercase().contains(&expect.to_lowercase()),
+            "{err}"
+        );
+        assert!(!err.contains("panicked"), "{err}");
+        assert!(o.stdout.is_empty());
+    }
+}
+
+#[test]
+fn failed_builds_leave_no_file() {
+    let dir = tempfile::tempdir().unwrap();
+    // Over the size limit: refused before anything is written.
+    let out = dir.path().join("small.bank");
+    let o = host(&[
+        "bank",
+        "build",
+        s(&scene()),
+        "-o",
+        s(&out),
+        "--region-bytes",
+        "4096",
+    ]);
+    assert!(!o.status.success());
+    assert!(stderr(&o).contains("bank region"), "{}", stderr(&o));
+    assert!(
+        files_in(dir.path()).is_empty(),
+        "{:?}",
+        files_in(dir.path())
+    );
+
+    // The rename fails (the output is an existing directory): the temporary file is removed.
+    let target = dir.path().join("occupied");
+    std::fs::create_dir(&target).unwrap();
+    let o = host(&["bank", "build", s(&scene()), "-o", s(&target)]);
+    assert!(!o.status.success());
+    assert!(stderr(&o).contains("cannot write"), "{}", stderr(&o));
+    assert_eq!(files_in(dir.path()), ["occupied"]);
+
+    // A bad scene: error names the line and key, nothing written.
+    let text = std::fs::read_to_string(scene()).unwrap();
+    let bad_scene = dir.path().join("bad.toml");
+    std::fs::write(&bad_scene, text.replace("poisson = 0.45", "poisson = 0.5")).unwrap();
+    let out = dir.path().join("bad.bank");
+    let o = host(&["bank", "build", s(&bad_scene), "-o", s(&out)]);
+    assert!(!o.status.success());
+    assert!(stderr(&o).contains("material.poisson"), "{}", stderr(&o));
+    assert!(!out.exists());
+}
+
+#[test]
+fn sweep_prints_a_row_per_radius() {
+    let o = host(&[
+        "bank",
+        "sweep",
+        s(&scene()),
+        "--radii",
+        "0,0.03",
+        "--sites",
+        "5",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let table = String::from_utf8_lossy(&o.stdout);
+    let rows: Vec<&str> = table
+        .lines()
+        .filter(|l| l.starts_with("| 0.0") || l.starts_with("| 30.0"))
+        .collect();
+    assert_eq!(rows.len(), 2, "{table}");
+    // With every pair within 30 mm the contact sets are complete: exact forces.
+    assert!(rows[1].matches("0.0%").count() >= 6, "{table}");
+}
