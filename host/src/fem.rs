@@ -140,6 +140,24 @@ impl FixedSet {
         Ok(count)
     }
 
+    /// Parses an axis list such as `"xz"` into a component mask for [`FixedSet::fix_box`].
+    /// Errors: the first character that is not x, y or z, or an empty list.
+    pub fn parse_axes(axes: &str) -> Result<[bool; 3], String> {
+        let mut mask = [false; 3];
+        for ch in axes.chars() {
+            match ch {
+                'x' => mask[0] = true,
+                'y' => mask[1] = true,
+                'z' => mask[2] = true,
+                other => return Err(format!("unknown axis {other:?} (use x, y, z)")),
+            }
+        }
+        if mask == [false; 3] {
+            return Err("no axis given".into());
+        }
+        Ok(mask)
+    }
+
     /// Whether component `axis` of `node` is fixed.
     pub fn is_fixed(&self, node: usize, axis: usize) -> bool {
         self.fixed[node][axis]

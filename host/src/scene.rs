@@ -389,27 +389,8 @@ impl Scene {
             }
             let axes = match &r.axes {
                 None => [true; 3],
-                Some(s) => {
-                    let mut mask = [false; 3];
-                    for ch in s.chars() {
-                        match ch {
-                            'x' => mask[0] = true,
-                            'y' => mask[1] = true,
-                            'z' => mask[2] = true,
-                            other => {
-                                return Err(ctx.err(
-                                    b.span(),
-                                    "fixed.boxes.axes",
-                                    format!("unknown axis {other:?} (use x, y, z)"),
-                                ));
-                            }
-                        }
-                    }
-                    if mask == [false; 3] {
-                        return Err(ctx.err(b.span(), "fixed.boxes.axes", "no axis given"));
-                    }
-                    mask
-                }
+                Some(s) => FixedSet::parse_axes(s)
+                    .map_err(|msg| ctx.err(b.span(), "fixed.boxes.axes", msg))?,
             };
             fix_boxes.push(FixBox {
                 bounds,

@@ -64,21 +64,7 @@ fn parse_box(spec: &str) -> Result<([f64; 6], [bool; 3])> {
     }
     let axes = match axes {
         None => [true; 3],
-        Some(a) => {
-            let mut mask = [false; 3];
-            for ch in a.chars() {
-                match ch {
-                    'x' => mask[0] = true,
-                    'y' => mask[1] = true,
-                    'z' => mask[2] = true,
-                    other => bail!("unknown axis {other:?} (use x, y, z)"),
-                }
-            }
-            if mask == [false; 3] {
-                bail!("no axis after ':'");
-            }
-            mask
-        }
+        Some(a) => FixedSet::parse_axes(a).map_err(anyhow::Error::msg)?,
     };
     Ok((bounds, axes))
 }
