@@ -82,6 +82,15 @@ struct Update<'a> {
     val: Mat<f64>,
 }
 
+/// Where an active column of a supernode's right-hand side comes from.
+#[derive(Clone, Copy)]
+enum Source {
+    /// A unit vector with its 1 in this row of the supernode.
+    Own(usize),
+    /// Column `jj` of the update of kid `k`.
+    Kid(usize, usize),
+}
+
 /// Parallelism for a dense kernel of about `flops` operations.
 fn par_for(flops: f64) -> Par {
     if flops > 2e6 { Par::rayon(0) } else { Par::Seq }
@@ -255,26 +264,62 @@ pub(super) fn gram_blocks(
         for (i, &g) in pattern.iter().enumerate() {
             row_pos[g] = i;
         }
-        let mut y = Mat::<f64>::zeros(w, c);
-        let mut u = Mat::<f64>::zeros(p, c);
-        for &r in own_cols {
-            y[(q_of_r[r] - start, col_pos[r])] = 1.0;
-        }
-        for kid in kids {
-            for (jj, &r) in kid.cols.iter().enumerate() {
-                let j = col_pos[r];
-                let src = kid.val.col(jj);
-                for (ii, &g) in kid.rows.iter().enumerate() {
-                    if (start..start + w).contains(&g) {
-                        y[(g - start, j)] += src[ii];
-                    } else if pattern.get(row_pos[g]) == Some(&g) {
-                        u[(row_pos[g], j)] += src[ii];
-                    } else {
-                        return Err(internal("a child's pattern is not in its parent's rows"));
-                    }
+        // Where each kid's rows go: below `w` a row of `y`, from `w` on a row of `u`.
+        let mut dsts = Vec::with_capacity(kids.len());
+        for kid in &kids {
+            let mut dst = Vec::with_capacity(kid.rows.len());
+            for &g in kid.rows {
+                if (start..start + w).contains(&g) {
+                    dst.push(g - start);
+                } else if pattern.get(row_pos[g]) == Some(&g) {
+                    dst.push(w + row_pos[g]);
+                } else {
+                    return Err(internal("a child's pattern is not in its parent's rows"));
                 }
             }
+            dsts.push(dst);
         }
+        // Each active column comes from exactly one place: a unit vector (own) or one column of
+        // one kid's update (the kids' column sets are disjoint). Filled in parallel.
+        let mut source = vec![Source::Own(0); c];
+        for &r in own_cols {
+            source[col_pos[r]] = Source::Own(q_of_r[r] - start);
+        }
+        for (k, kid) in kids.iter().enumerate() {
+            for (jj, &r) in kid.cols.iter().enumerate() {
+                source[col_pos[r]] = Source::Kid(k, jj);
+            }
+        }
+        let mut y = Mat::<f64>::zeros(w, c);
+        let mut u = Mat::<f64>::zeros(p, c);
+        let fill =
+            |(j, (mut ycol, mut ucol)): (usize, (faer::ColMut<'_, f64>, faer::ColMut<'_, f64>))| {
+                match source[j] {
+                    Source::Own(row) => ycol[row] = 1.0,
+                    Source::Kid(k, jj) => {
+                        let src = kids[k].val.col(jj);
+                        for (ii, &d) in dsts[k].iter().enumerate() {
+                            if d < w {
+                                ycol[d] = src[ii];
+                            } else {
+                                ucol[d - w] = src[ii];
+                            }
+                        }
+                    }
+                }
+            };
+        if (w + p) * c > 1 << 16 {
+            y.par_col_iter_mut()
+                .zip(u.par_col_iter_mut())
+                .enumerate()
+                .for_each(fill);
+        } else {
+            y.col_iter_mut()
+                .zip(u.col_iter_mut())
+                .enumerate()
+                .for_each(fill);
+        }
+        drop(kids);
         let (wf, pf, cf) = (w as f64, p as f64, c as f64);
         // Y_s = L_ss^-1 (rhs)_s, then the rows below: U = (rhs)_p - L_ps Y_s.
         solve_lower_triangular_in_place(l.subrows(0, w), y.as_mut(), par_for(wf * wf * cf));
