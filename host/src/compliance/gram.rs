@@ -29,9 +29,10 @@ use crate::fem::DofMap;
 use faer::linalg::matmul::matmul;
 use faer::linalg::matmul::triangular::{self, BlockStructure};
 use faer::linalg::triangular_solve::solve_lower_triangular_in_place;
+use faer::reborrow::{Reborrow, ReborrowMut};
 use faer::sparse::linalg::cholesky::supernodal::SupernodalLltRef;
 use faer::sparse::linalg::cholesky::{SymbolicCholesky, SymbolicCholeskyRaw};
-use faer::{Accum, Mat, MatRef, Par};
+use faer::{Accum, ColMut, Mat, MatMut, MatRef, Par};
 use indicatif::ProgressBar;
 use rayon::prelude::*;
 
@@ -78,8 +79,8 @@ struct Update<'a> {
     cols: Vec<usize>,
     /// Rows (permuted dof ids), the supernode's pattern.
     rows: &'a [usize],
-    /// Values, `rows.len() x cols.len()`.
-    val: Mat<f64>,
+    /// Values, `rows.len() x cols.len()`, column-major.
+    val: Vec<f64>,
 }
 
 /// Where an active column of a supernode's right-hand side comes from.
@@ -290,51 +291,66 @@ pub(super) fn gram_blocks(
                 source[col_pos[r]] = Source::Kid(k, jj);
             }
         }
-        let mut y = Mat::<f64>::zeros(w, c);
-        let mut u = Mat::<f64>::zeros(p, c);
-        let fill =
-            |(j, (mut ycol, mut ucol)): (usize, (faer::ColMut<'_, f64>, faer::ColMut<'_, f64>))| {
-                match source[j] {
-                    Source::Own(row) => ycol[row] = 1.0,
-                    Source::Kid(k, jj) => {
-                        let src = kids[k].val.col(jj);
-                        for (ii, &d) in dsts[k].iter().enumerate() {
-                            if d < w {
-                                ycol[d] = src[ii];
-                            } else {
-                                ucol[d - w] = src[ii];
-                            }
-                        }
+        // Zeroed buffers from the allocator's zeroed pages: a column becomes resident only when
+        // it is written, so filling kid by kid and dropping each kid's update right after keeps
+        // the peak near one copy of the largest front, not two.
+        let mut y_buf = vec![0.0f64; w * c];
+        let mut u_buf = vec![0.0f64; p * c];
+        let mut y = MatMut::from_column_major_slice_mut(&mut y_buf, w, c);
+        let mut u = MatMut::from_column_major_slice_mut(&mut u_buf, p, c);
+        for (j, src) in source.iter().enumerate() {
+            if let Source::Own(row) = *src {
+                y[(row, j)] = 1.0;
+            }
+        }
+        for (k, (kid, dst)) in kids.into_iter().zip(&dsts).enumerate() {
+            let kid_val = MatRef::from_column_major_slice(&kid.val, kid.rows.len(), kid.cols.len());
+            let fill = |(j, (mut ycol, mut ucol)): (usize, (ColMut<'_, f64>, ColMut<'_, f64>))| {
+                let Source::Kid(kk, jj) = source[j] else {
+                    return;
+                };
+                if kk != k {
+                    return;
+                }
+                let src = kid_val.col(jj);
+                for (ii, &d) in dst.iter().enumerate() {
+                    if d < w {
+                        ycol[d] = src[ii];
+                    } else {
+                        ucol[d - w] = src[ii];
                     }
                 }
             };
-        if (w + p) * c > 1 << 16 {
-            y.par_col_iter_mut()
-                .zip(u.par_col_iter_mut())
-                .enumerate()
-                .for_each(fill);
-        } else {
-            y.col_iter_mut()
-                .zip(u.col_iter_mut())
-                .enumerate()
-                .for_each(fill);
+            if (w + p) * kid.cols.len() > 1 << 16 {
+                y.rb_mut()
+                    .par_col_iter_mut()
+                    .zip(u.rb_mut().par_col_iter_mut())
+                    .enumerate()
+                    .for_each(fill);
+            } else {
+                y.rb_mut()
+                    .col_iter_mut()
+                    .zip(u.rb_mut().col_iter_mut())
+                    .enumerate()
+                    .for_each(fill);
+            }
+            drop(kid);
         }
-        drop(kids);
         let (wf, pf, cf) = (w as f64, p as f64, c as f64);
         // Y_s = L_ss^-1 (rhs)_s, then the rows below: U = (rhs)_p - L_ps Y_s.
-        solve_lower_triangular_in_place(l.subrows(0, w), y.as_mut(), par_for(wf * wf * cf));
+        solve_lower_triangular_in_place(l.subrows(0, w), y.rb_mut(), par_for(wf * wf * cf));
         if p > 0 {
             matmul(
-                u.as_mut(),
+                u.rb_mut(),
                 Accum::Add,
                 l.subrows(w, p),
-                y.as_ref(),
+                y.rb(),
                 -1.0,
                 par_for(2.0 * pf * wf * cf),
             );
         }
-        out.accumulate(y.as_ref(), &cols, layout);
-        drop(y);
+        out.accumulate(y.rb(), &cols, layout);
+        drop(y_buf);
         if p > 0 {
             let up = parent[s]
                 .filter(|&up| up > s)
@@ -342,7 +358,7 @@ pub(super) fn gram_blocks(
             pending[up].push(Update {
                 cols,
                 rows: pattern,
-                val: u,
+                val: u_buf,
             });
         }
     }
