@@ -7,3 +7,7 @@
 
 /// Tick period of the force loop, in seconds (1 kHz).
 pub const TICK_PERIOD_S: f32 = 1.0e-3;
+
+pub mod device;
+pub mod safety;
+pub mod solve;

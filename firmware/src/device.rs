@@ -1,0 +1,569 @@
+//! The laparoscopic gimbal (paper, section 2): pitch and yaw about the fulcrum (the trocar),
+//! insertion along the shaft, roll passive. Everything here is `f32`, fixed-size, heap-free and
+//! panic-free; it follows the bank's [`DeviceCalibration`] record (`bank-format/SPEC.md`,
+//! "device") and the host's f64 model (`host/src/reach.rs`).
+//!
+//! - Joints are indexed 0 = pitch (rad), 1 = yaw (rad), 2 = insertion (m, fulcrum to tip).
+//! - Encoder counts `n` give `q = home + 2 pi n / (counts_per_rev * transmission)`; for
+//!   insertion the transmission is in motor rad per metre, so the same formula gives metres.
+//! - Forward kinematics: `tip = fulcrum + insertion * d`,
+//!   `d = Rot(yaw_axis, yaw) Rot(pitch_axis, pitch) shaft_axis`, `Rot(a, t)` the right-handed
+//!   Rodrigues rotation by `t` about `a` (yaw is the outer, ground-fixed axis; pitch the inner
+//!   one, given at rest). The axes are used exactly as stored (not re-normalised), like the host.
+//! - Jacobian `J[r][c] = d tip_r / d q_c` (row-major, columns pitch, yaw, insertion), analytic.
+//!
+//! **Force sign convention.** [`Device::joint_efforts`] takes `force_on_tool`: the force the
+//! tissue exerts on the tool tip, N, scene frame. That is the *negative* of the sum of the contact
+//! forces `f_S` the solve returns (those act on the tissue, as in telemetry's
+//! `Contact::force_n`). The motors produce `tau = J^T force_on_tool`, so the device pushes the
+//! tool (and the hand) exactly as the tissue would: back out of the tissue. By virtual work,
+//! `tau . dq = force_on_tool . (J dq)`.
+//!
+//! Motor currents: `i = tau / (transmission * torque_constant)` per axis (the transmission's
+//! sign is the motor's direction), then clamped to `current_limit_a`.
+
+use bank_format::DeviceCalibration;
+use core::f32::consts::PI;
+use nalgebra::ComplexField;
+
+/// Joint index of pitch (rad).
+pub const PITCH: usize = 0;
+/// Joint index of yaw (rad).
+pub const YAW: usize = 1;
+/// Joint index of insertion (m).
+pub const INSERTION: usize = 2;
+
+/// Joint values of the gimbal.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Joints {
+    /// Pitch, rad (inner gimbal axis).
+    pub pitch: f32,
+    /// Yaw, rad (outer, ground-fixed gimbal axis).
+    pub yaw: f32,
+    /// Insertion, m: distance from the fulcrum to the tip along the shaft.
+    pub insertion: f32,
+}
+
+impl Joints {
+    /// From `[pitch, yaw, insertion]`.
+    pub const fn from_array(q: [f32; 3]) -> Joints {
+        Joints {
+            pitch: q[PITCH],
+            yaw: q[YAW],
+            insertion: q[INSERTION],
+        }
+    }
+
+    /// As `[pitch, yaw, insertion]`.
+    pub const fn to_array(self) -> [f32; 3] {
+        [self.pitch, self.yaw, self.insertion]
+    }
+
+    /// Whether all three values are finite.
+    pub fn is_finite(&self) -> bool {
+        self.pitch.is_finite() && self.yaw.is_finite() && self.insertion.is_finite()
+    }
+}
+
+/// Motor currents for one tick: what the loop asked for and what may be applied.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Currents {
+    /// `tau / (transmission * Kt)` before clamping, A (may be non-finite if the input was).
+    pub requested_a: [f32; 3],
+    /// Clamped to `[-limit, limit]` per motor, A; a non-finite request gives 0.
+    pub applied_a: [f32; 3],
+    /// Which motors were clamped (or zeroed because their request was not finite).
+    pub clamped: [bool; 3],
+}
+
+/// The gimbal model, precomputed from a [`DeviceCalibration`].
+///
+/// Built from a calibration that passed [`bank_format::validate_device`] (every bank the reader
+/// accepts did); with an unvalidated record nothing panics, but results may be non-finite.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Device {
+    cal: DeviceCalibration,
+    /// Joint units per encoder count: `2 pi / (counts_per_rev * transmission)`.
+    per_count: [f32; 3],
+    /// Amperes per unit joint effort: `1 / (transmission * Kt)`.
+    amps_per_effort: [f32; 3],
+}
+
+impl Device {
+    /// The model of a calibration record.
+    pub fn new(cal: &DeviceCalibration) -> Device {
+        let per_count = core::array::from_fn(|j| {
+            let cpr = cal.counts_per_rev.get(j).copied().unwrap_or(1) as f32;
+            let t = cal.transmission.get(j).copied().unwrap_or(1.0);
+            2.0 * PI / (cpr * t)
+        });
+        let amps_per_effort = core::array::from_fn(|j| {
+            let t = cal.transmission.get(j).copied().unwrap_or(1.0);
+            let kt = cal.torque_constant_nm_per_a.get(j).copied().unwrap_or(1.0);
+            1.0 / (t * kt)
+        });
+        Device {
+            cal: *cal,
+            per_count,
+            amps_per_effort,
+        }
+    }
+
+    /// The calibration record this model was built from.
+    pub fn calibration(&self) -> &DeviceCalibration {
+        &self.cal
+    }
+
+    /// Joint units (rad or m) per encoder count, per joint; signed like the transmission.
+    pub fn joint_per_count(&self) -> [f32; 3] {
+        self.per_count
+    }
+
+    /// Joint values from encoder counts: `q = home + counts * 2 pi / (counts_per_rev *
+    /// transmission)`.
+    pub fn joints(&self, counts: [i32; 3]) -> Joints {
+        let mut q = self.cal.home_joint;
+        for ((q, &n), &k) in q.iter_mut().zip(&counts).zip(&self.per_count) {
+            *q += n as f32 * k;
+        }
+        Joints::from_array(q)
+    }
+
+    /// The first joint outside `[joint_min - margin, joint_max + margin]` (or not finite), if any.
+    pub fn out_of_range(&self, q: &Joints, margin: [f32; 3]) -> Option<usize> {
+        let q = q.to_array();
+        (0..3).find(|&j| {
+            let (Some(&v), Some(&lo), Some(&hi), Some(&m)) = (
+                q.get(j),
+                self.cal.joint_min.get(j),
+                self.cal.joint_max.get(j),
+                margin.get(j),
+            ) else {
+                return true;
+            };
+            // Written so that NaN counts as out of range.
+            !(v >= lo - m && v <= hi + m)
+        })
+    }
+
+    /// Unit shaft direction `d = Rot(yaw_axis, yaw) Rot(pitch_axis, pitch) shaft_axis`.
+    pub fn direction(&self, q: &Joints) -> [f32; 3] {
+        let (sp, cp) = sin_cos(q.pitch);
+        let (sy, cy) = sin_cos(q.yaw);
+        let u = rotate(self.cal.pitch_axis, sp, cp, self.cal.shaft_axis);
+        rotate(self.cal.yaw_axis, sy, cy, u)
+    }
+
+    /// Forward kinematics: the tool tip, m, scene frame.
+    pub fn tip(&self, q: &Joints) -> [f32; 3] {
+        let d = self.direction(q);
+        core::array::from_fn(|i| self.fulcrum(i) + q.insertion * d.get(i).copied().unwrap_or(0.0))
+    }
+
+    /// The Jacobian `J[r][c] = d tip_r / d q_c` (columns pitch, yaw, insertion; rows x, y, z).
+    pub fn jacobian(&self, q: &Joints) -> [[f32; 3]; 3] {
+        self.tip_and_jacobian(q).1
+    }
+
+    /// Tip and Jacobian together (one set of sines and cosines).
+    ///
+    /// With `u = Rot(p, pitch) s` and `d = Rot(y, yaw) u`: `d tip / d pitch = insertion *
+    /// Rot(y, yaw) Rot'(p, pitch) s`, `d tip / d yaw = insertion * Rot'(y, yaw) u`,
+    /// `d tip / d insertion = d`, where `Rot'(a, t) v = -sin t v + cos t (a x v) + sin t a (a.v)`
+    /// is the exact derivative of Rodrigues' formula (equal to `a x Rot(a, t) v` for a unit `a`).
+    pub fn tip_and_jacobian(&self, q: &Joints) -> ([f32; 3], [[f32; 3]; 3]) {
+        let (sp, cp) = sin_cos(q.pitch);
+        let (sy, cy) = sin_cos(q.yaw);
+        let (p, y, s) = (self.cal.pitch_axis, self.cal.yaw_axis, self.cal.shaft_axis);
+        let u = rotate(p, sp, cp, s);
+        let d = rotate(y, sy, cy, u);
+        let dd_pitch = rotate(y, sy, cy, rotate_derivative(p, sp, cp, s));
+        let dd_yaw = rotate_derivative(y, sy, cy, u);
+        let tip = core::array::from_fn(|i| self.fulcrum(i) + q.insertion * at(d, i));
+        let jac = core::array::from_fn(|r| {
+            [
+                q.insertion * at(dd_pitch, r),
+                q.insertion * at(dd_yaw, r),
+                at(d, r),
+            ]
+        });
+        (tip, jac)
+    }
+
+    /// Joint efforts `tau = J^T force_on_tool` (N m for pitch and yaw, N for insertion).
+    /// `force_on_tool` is the force the tissue exerts on the tool (see the module notes for the
+    /// sign): the motors then push the tool back out of the tissue.
+    pub fn joint_efforts(&self, q: &Joints, force_on_tool: [f32; 3]) -> [f32; 3] {
+        transpose_mul(&self.jacobian(q), force_on_tool)
+    }
+
+    /// `force` scaled down (direction kept) to at most `max_force_n` in magnitude; a non-finite
+    /// force is returned as is (the safety supervisor faults on it).
+    pub fn limit_force(&self, force: [f32; 3]) -> [f32; 3] {
+        let n = ComplexField::sqrt(dot(force, force));
+        let max = self.cal.max_force_n;
+        if n > max && n.is_finite() {
+            let k = max / n;
+            force.map(|f| f * k)
+        } else {
+            force
+        }
+    }
+
+    /// Unclamped motor currents for joint efforts: `i = tau / (transmission * Kt)`, A.
+    pub fn requested_currents(&self, tau: [f32; 3]) -> [f32; 3] {
+        core::array::from_fn(|j| at(tau, j) * at(self.amps_per_effort, j))
+    }
+
+    /// Clamp currents to `[-current_limit_a, current_limit_a]` per motor and report which were
+    /// clamped. A non-finite request gives 0 A and counts as clamped.
+    pub fn clamp_currents(&self, requested_a: [f32; 3]) -> Currents {
+        let mut applied_a = [0.0; 3];
+        let mut clamped = [false; 3];
+        for (((a, c), &r), &lim) in applied_a
+            .iter_mut()
+            .zip(clamped.iter_mut())
+            .zip(&requested_a)
+            .zip(&self.cal.current_limit_a)
+        {
+            (*a, *c) = clamp_symmetric(r, lim);
+        }
+        Currents {
+            requested_a,
+            applied_a,
+            clamped,
+        }
+    }
+
+    /// The whole output stage for a tick: `tau = J^T force_on_tool`, currents, clamp.
+    /// `force_on_tool` is used as given (call [`Device::limit_force`] first to cap it).
+    pub fn currents_for_force(&self, q: &Joints, force_on_tool: [f32; 3]) -> Currents {
+        self.clamp_currents(self.requested_currents(self.joint_efforts(q, force_on_tool)))
+    }
+
+    fn fulcrum(&self, i: usize) -> f32 {
+        at(self.cal.fulcrum_m, i)
+    }
+}
+
+/// `x` clamped to `[-lim, lim]` and whether it was changed; NaN gives `(0, true)`. Never panics
+/// (unlike `f32::clamp` with a NaN or negative bound).
+pub fn clamp_symmetric(x: f32, lim: f32) -> (f32, bool) {
+    let lim = if lim >= 0.0 { lim } else { 0.0 };
+    if x.is_nan() {
+        (0.0, true)
+    } else if x > lim {
+        (lim, true)
+    } else if x < -lim {
+        (-lim, true)
+    } else {
+        (x, false)
+    }
+}
+
+/// `J^T v` for a row-major 3x3 `J`.
+pub fn transpose_mul(j: &[[f32; 3]; 3], v: [f32; 3]) -> [f32; 3] {
+    let mut out = [0.0; 3];
+    for (row, &vr) in j.iter().zip(&v) {
+        for (o, &jrc) in out.iter_mut().zip(row) {
+            *o += jrc * vr;
+        }
+    }
+    out
+}
+
+fn sin_cos(t: f32) -> (f32, f32) {
+    (ComplexField::sin(t), ComplexField::cos(t))
+}
+
+fn at(v: [f32; 3], i: usize) -> f32 {
+    v.get(i).copied().unwrap_or(0.0)
+}
+
+fn dot(a: [f32; 3], b: [f32; 3]) -> f32 {
+    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+}
+
+fn cross(a: [f32; 3], b: [f32; 3]) -> [f32; 3] {
+    [
+        a[1] * b[2] - a[2] * b[1],
+        a[2] * b[0] - a[0] * b[2],
+        a[0] * b[1] - a[1] * b[0],
+    ]
+}
+
+/// Rodrigues: `v cos t + (a x v) sin t + a (a.v)(1 - cos t)`, given `sin t`, `cos t`.
+fn rotate(a: [f32; 3], s: f32, c: f32, v: [f32; 3]) -> [f32; 3] {
+    let axv = cross(a, v);
+    let adv = dot(a, v) * (1.0 - c);
+    [
+        v[0] * c + axv[0] * s + a[0] * adv,
+        v[1] * c + axv[1] * s + a[1] * adv,
+        v[2] * c + axv[2] * s + a[2] * adv,
+    ]
+}
+
+/// d/dt of [`rotate`]: `-v sin t + (a x v) cos t + a (a.v) sin t`.
+fn rotate_derivative(a: [f32; 3], s: f32, c: f32, v: [f32; 3]) -> [f32; 3] {
+    let axv = cross(a, v);
+    let adv = dot(a, v) * s;
+    [
+        -v[0] * s + axv[0] * c + a[0] * adv,
+        -v[1] * s + axv[1] * c + a[1] * adv,
+        -v[2] * s + axv[2] * c + a[2] * adv,
+    ]
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The liver scene's device (`host/scenes/liver.toml`).
+    pub(crate) fn liver() -> DeviceCalibration {
+        DeviceCalibration {
+            fulcrum_m: [0.0, 0.0, 0.16],
+            shaft_axis: [0.0, 0.0, -1.0],
+            pitch_axis: [1.0, 0.0, 0.0],
+            yaw_axis: [0.0, 1.0, 0.0],
+            joint_min: [-0.35, -0.35, 0.03],
+            joint_max: [0.35, 0.35, 0.14],
+            home_joint: [0.0, 0.0, 0.03],
+            counts_per_rev: [4096, 4096, 4096],
+            transmission: [12.0, 12.0, 400.0],
+            torque_constant_nm_per_a: [0.025, 0.025, 0.025],
+            current_limit_a: [2.0, 2.0, 2.0],
+            max_force_n: 5.0,
+            tip_radius_m: 0.003,
+        }
+    }
+
+    /// A tilted, non-axis-aligned frame with a negative transmission.
+    fn tilted() -> DeviceCalibration {
+        // Orthonormal triad: rotate the standard basis by 0.4 rad about (1, 1, 1)/sqrt 3.
+        let k = 1.0 / 3.0f32.sqrt();
+        let axis = [k, k, k];
+        let (s, c) = sin_cos(0.4);
+        let r = |v| rotate(axis, s, c, v);
+        DeviceCalibration {
+            fulcrum_m: [0.02, -0.01, 0.2],
+            shaft_axis: r([0.0, 0.0, -1.0]),
+            pitch_axis: r([0.0, 1.0, 0.0]),
+            yaw_axis: r([1.0, 0.0, 0.0]),
+            joint_min: [-1.2, -2.5, 0.0],
+            joint_max: [1.2, 2.5, 0.2],
+            home_joint: [0.1, -0.2, 0.05],
+            counts_per_rev: [2000, 1024, 500],
+            transmission: [-8.0, 20.0, -250.0],
+            torque_constant_nm_per_a: [0.03, 0.05, 0.02],
+            current_limit_a: [1.5, 3.0, 2.5],
+            max_force_n: 8.0,
+            tip_radius_m: 0.002,
+        }
+    }
+
+    fn close(a: [f32; 3], b: [f32; 3], tol: f32) -> bool {
+        a.iter().zip(&b).all(|(x, y)| (x - y).abs() <= tol)
+    }
+
+    #[test]
+    fn calibrations_are_valid() {
+        assert_eq!(bank_format::validate_device(&liver()), Ok(()));
+        assert_eq!(bank_format::validate_device(&tilted()), Ok(()));
+    }
+
+    #[test]
+    fn rest_pose_is_along_the_shaft() {
+        for cal in [liver(), tilted()] {
+            let dev = Device::new(&cal);
+            let q = Joints::from_array([0.0, 0.0, 0.1]);
+            let want = core::array::from_fn(|i| cal.fulcrum_m[i] + 0.1 * cal.shaft_axis[i]);
+            assert!(close(dev.tip(&q), want, 1e-7), "{:?}", dev.tip(&q));
+        }
+    }
+
+    #[test]
+    fn hand_computed_poses() {
+        let dev = Device::new(&liver());
+        // Pitch about +x by +pi/2 turns -z into +y: Rot(x, t)(0, 0, -1) = (0, sin t, -cos t).
+        let q = Joints::from_array([PI / 2.0, 0.0, 0.1]);
+        assert!(
+            close(dev.tip(&q), [0.0, 0.1, 0.16], 1e-7),
+            "{:?}",
+            dev.tip(&q)
+        );
+        // Yaw about +y by +pi/2 turns -z into -x: Rot(y, t)(0, 0, -1) = (-sin t, 0, -cos t).
+        let q = Joints::from_array([0.0, PI / 2.0, 0.1]);
+        assert!(close(dev.tip(&q), [-0.1, 0.0, 0.16], 1e-7));
+        // Both: pitch first (inner), then yaw: (0, sin p, -cos p) -> yaw mixes x and z.
+        let (p, y, r) = (0.3f32, -0.2f32, 0.12f32);
+        let want = [
+            -r * p.cos() * y.sin(),
+            r * p.sin(),
+            0.16 - r * p.cos() * y.cos(),
+        ];
+        let got = dev.tip(&Joints::from_array([p, y, r]));
+        assert!(close(got, want, 2e-7), "{got:?} vs {want:?}");
+    }
+
+    #[test]
+    fn joints_from_counts() {
+        let cal = liver();
+        let dev = Device::new(&cal);
+        assert_eq!(dev.joints([0, 0, 0]), Joints::from_array(cal.home_joint));
+        // One motor revolution is 1/12 rad of pitch and yaw, 1/400 rad -> 2 pi / 400 m insertion.
+        let q = dev.joints([4096, -4096, 4096]);
+        assert!((q.pitch - 2.0 * PI / 12.0).abs() < 1e-6);
+        assert!((q.yaw + 2.0 * PI / 12.0).abs() < 1e-6);
+        assert!((q.insertion - (0.03 + 2.0 * PI / 400.0)).abs() < 1e-7);
+        // A negative transmission reverses the direction.
+        let cal = tilted();
+        let dev = Device::new(&cal);
+        let q = dev.joints([2000, 0, -500]);
+        assert!((q.pitch - (0.1 - 2.0 * PI / 8.0)).abs() < 1e-6);
+        assert!((q.insertion - (0.05 + 2.0 * PI / 250.0)).abs() < 1e-6);
+    }
+
+    #[test]
+    fn range_check() {
+        let dev = Device::new(&liver());
+        let m = [0.0; 3];
+        assert_eq!(
+            dev.out_of_range(&Joints::from_array([0.0, 0.0, 0.05]), m),
+            None
+        );
+        assert_eq!(
+            dev.out_of_range(&Joints::from_array([0.4, 0.0, 0.05]), m),
+            Some(0)
+        );
+        assert_eq!(
+            dev.out_of_range(&Joints::from_array([0.4, 0.0, 0.05]), [0.1, 0.0, 0.0]),
+            None
+        );
+        assert_eq!(
+            dev.out_of_range(&Joints::from_array([0.0, -0.4, 0.05]), m),
+            Some(1)
+        );
+        assert_eq!(
+            dev.out_of_range(&Joints::from_array([0.0, 0.0, 0.01]), m),
+            Some(2)
+        );
+        assert_eq!(
+            dev.out_of_range(&Joints::from_array([0.0, 0.0, f32::NAN]), m),
+            Some(2)
+        );
+    }
+
+    fn poses() -> [[f32; 3]; 6] {
+        [
+            [0.0, 0.0, 0.1],
+            [0.3, -0.2, 0.12],
+            [-0.35, 0.35, 0.03],
+            [1.0, 2.0, 0.15],
+            [-1.1, -2.4, 0.07],
+            [0.7, 0.05, 0.19],
+        ]
+    }
+
+    #[test]
+    fn jacobian_matches_central_differences() {
+        for cal in [liver(), tilted()] {
+            let dev = Device::new(&cal);
+            for q0 in poses() {
+                let jac = dev.jacobian(&Joints::from_array(q0));
+                let scale = jac.iter().flatten().fold(0.0f32, |m, v| m.max(v.abs()));
+                for c in 0..3 {
+                    // f32 central differences: the step balances truncation and rounding.
+                    let h = 1e-2;
+                    let mut qp = q0;
+                    let mut qm = q0;
+                    qp[c] += h;
+                    qm[c] -= h;
+                    let tp = dev.tip(&Joints::from_array(qp));
+                    let tm = dev.tip(&Joints::from_array(qm));
+                    for r in 0..3 {
+                        let fd = (tp[r] - tm[r]) / (2.0 * h);
+                        let err = (fd - jac[r][c]).abs();
+                        assert!(
+                            err <= 1e-3 * scale,
+                            "pose {q0:?} J[{r}][{c}] = {} vs fd {fd}",
+                            jac[r][c]
+                        );
+                    }
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn efforts_do_the_same_virtual_work() {
+        let forces = [[1.0, -2.0, 0.5], [0.0, 0.0, 3.0], [-0.7, 0.2, -1.5]];
+        for cal in [liver(), tilted()] {
+            let dev = Device::new(&cal);
+            for q0 in poses() {
+                let q = Joints::from_array(q0);
+                let jac = dev.jacobian(&q);
+                for f in forces {
+                    let tau = dev.joint_efforts(&q, f);
+                    for dq in [
+                        [1e-3, 0.0, 0.0],
+                        [0.0, 1e-3, 0.0],
+                        [0.0, 0.0, 1e-3],
+                        [2e-3, -1e-3, 5e-4],
+                    ] {
+                        let dtip: [f32; 3] = core::array::from_fn(|r| {
+                            jac[r][0] * dq[0] + jac[r][1] * dq[1] + jac[r][2] * dq[2]
+                        });
+                        let w_joint = dot(tau, dq);
+                        let w_tip = dot(f, dtip);
+                        assert!((w_joint - w_tip).abs() <= 1e-6 * (1.0 + w_tip.abs()));
+                    }
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn a_push_out_of_the_tissue_drives_insertion_back() {
+        // Tissue below the liver trocar pushes the tool up (+z): insertion effort is negative
+        // (pull the tool out), and so is the insertion current for a positive transmission.
+        let dev = Device::new(&liver());
+        let q = Joints::from_array([0.0, 0.0, 0.1]);
+        let tau = dev.joint_efforts(&q, [0.0, 0.0, 1.0]);
+        assert!(close(tau, [0.0, 0.0, -1.0], 1e-7), "{tau:?}");
+        let i = dev.currents_for_force(&q, [0.0, 0.0, 1.0]);
+        assert!((i.applied_a[2] + 1.0 / (400.0 * 0.025)).abs() < 1e-7);
+        // A sideways push (+y) at the tip: pitch about +x; d tip / d pitch = 0.1 * (0, 1, 0).
+        let tau = dev.joint_efforts(&q, [0.0, 2.0, 0.0]);
+        assert!(close(tau, [0.2, 0.0, 0.0], 1e-7), "{tau:?}");
+    }
+
+    #[test]
+    fn currents_and_clamps() {
+        let cal = tilted();
+        let dev = Device::new(&cal);
+        let tau = [0.01, -0.05, 0.3];
+        let i = dev.requested_currents(tau);
+        for j in 0..3 {
+            let want = tau[j] / (cal.transmission[j] * cal.torque_constant_nm_per_a[j]);
+            assert!((i[j] - want).abs() <= 1e-6 * want.abs());
+        }
+        let c = dev.clamp_currents([1.0, -3.5, 2.6]);
+        assert_eq!(c.applied_a, [1.0, -3.0, 2.5]);
+        assert_eq!(c.clamped, [false, true, true]);
+        assert_eq!(c.requested_a, [1.0, -3.5, 2.6]);
+        let c = dev.clamp_currents([f32::NAN, f32::INFINITY, f32::NEG_INFINITY]);
+        assert_eq!(c.applied_a, [0.0, 3.0, -2.5]);
+        assert_eq!(c.clamped, [true; 3]);
+        assert_eq!(clamp_symmetric(1.0, f32::NAN), (0.0, true));
+        assert_eq!(clamp_symmetric(-1.0, -2.0), (0.0, true));
+    }
+
+    #[test]
+    fn force_limit_keeps_direction() {
+        let dev = Device::new(&liver());
+        assert_eq!(dev.limit_force([0.0, 3.0, 4.0]), [0.0, 3.0, 4.0]);
+        let f = dev.limit_force([0.0, 6.0, 8.0]);
+        assert!(close(f, [0.0, 3.0, 4.0], 1e-6));
+        assert!(dev.limit_force([f32::NAN, 0.0, 0.0])[0].is_nan());
+    }
+}

@@ -1,0 +1,753 @@
+//! The safety supervisor: part of every tick, it decides which motor currents are applied.
+//!
+//! States: [`State::Disarmed`] (zero current, waiting for an arm command), [`State::Armed`] (the
+//! loop drives the motors) and [`State::Fault`] (zero current, the reason kept until the host
+//! clears it). Every fault path ends at zero current with its [`FaultReason`] and a detail
+//! (bank error code, joint or motor index, else 0); a fault is latched: the first reason stays,
+//! later ones do not overwrite it, and the state leaves `Fault` only on [`Supervisor::clear_fault`]
+//! (to `Disarmed`, never straight to `Armed`).
+//!
+//! Checks per tick ([`Supervisor::tick`]), in this order (the first failing one is reported):
+//!
+//! | check | reason | detail | in |
+//! | --- | --- | --- | --- |
+//! | bank failed validation | `InvalidBank` | `BankError::code()` | Disarmed, Armed |
+//! | the previous tick overran | `Overrun` | 0 | Armed |
+//! | no valid host frame for more than `link_timeout_ticks` ticks | `LinkSilent` | ticks | Armed |
+//! | an encoder moved more than `max_counts_per_tick` since the last tick | `EncoderJump` | joint | Disarmed, Armed |
+//! | NaN or infinity in joints, force or requested currents | `Nan` | 0 | Disarmed, Armed |
+//! | the contact solve failed | `SolveFailed` | 0 | Disarmed, Armed |
+//! | a joint outside its range by more than `joint_limit_margin` | `JointLimit` | joint | Armed |
+//! | a requested current over `current_fault_ratio` x its limit | `CurrentLimit` | motor | Armed |
+//!
+//! Link silence, overruns, joint and current limits only matter while the motors are driven,
+//! so they are checked only when armed: a device waiting for its host on boot does not fault.
+//!
+//! **Current limit: clamp or fault.** The loop caps the tip force at `max_force_n` before
+//! `J^T`, so a correct calibration asks for at most about the limit; a request somewhat over it
+//! (up to `current_fault_ratio`, default 1.25) is clamped to the limit and reported in
+//! [`Output::clamped`]. A request beyond that means a wrong calibration, a diverging solve or a
+//! bad host command, so it is a `CurrentLimit` fault and the motors go to zero (the issue's "a
+//! commanded current over the limit ends at zero current with the fault reported").
+
+use crate::device::clamp_symmetric;
+use bank_format::{DeviceCalibration, FaultReason};
+use core::f32::consts::PI;
+
+/// The supervisor's state.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum State {
+    /// Zero current; waiting for an arm command.
+    Disarmed,
+    /// The loop drives the motors.
+    Armed,
+    /// Zero current until the fault is cleared; the first reason is kept.
+    Fault(FaultReason),
+}
+
+impl State {
+    /// The state as the link reports it (telemetry's `state`).
+    pub fn wire(self) -> bank_format::State {
+        match self {
+            State::Disarmed => bank_format::State::Disarmed,
+            State::Armed => bank_format::State::Armed,
+            State::Fault(_) => bank_format::State::Fault,
+        }
+    }
+
+    /// The fault reason, if any.
+    pub fn fault(self) -> Option<FaultReason> {
+        match self {
+            State::Fault(r) => Some(r),
+            _ => None,
+        }
+    }
+}
+
+/// A fault and its detail (for the link's `Fault { tick, reason, detail }`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Fault {
+    /// Why.
+    pub reason: FaultReason,
+    /// Bank error code, joint or motor index, ticks of link silence; else 0.
+    pub detail: u32,
+}
+
+/// Default largest joint speeds for [`SafetyConfig::from_calibration`]: rad/s, rad/s, m/s (far
+/// above what a hand does; an encoder glitch or a miscount is much faster).
+pub const DEFAULT_MAX_JOINT_SPEED: [f32; 3] = [20.0, 20.0, 2.0];
+/// Default host link timeout in ticks (10 ms at 1 kHz).
+pub const DEFAULT_LINK_TIMEOUT_TICKS: u32 = 10;
+/// Default ratio of requested current to limit beyond which clamping becomes a fault.
+pub const DEFAULT_CURRENT_FAULT_RATIO: f32 = 1.25;
+/// Default tolerance outside the calibrated joint ranges: rad, rad, m.
+pub const DEFAULT_JOINT_LIMIT_MARGIN: [f32; 3] = [0.05, 0.05, 0.005];
+
+/// Thresholds of the supervisor.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SafetyConfig {
+    /// Largest encoder change per tick, counts, per joint; more is an `EncoderJump`.
+    pub max_counts_per_tick: [u32; 3],
+    /// Ticks without a valid host frame tolerated while armed; more is `LinkSilent`.
+    pub link_timeout_ticks: u32,
+    /// A requested current with `|i| > current_fault_ratio * limit` is a `CurrentLimit` fault;
+    /// `limit < |i| <=` that is clamped. Values below 1 are treated as 1.
+    pub current_fault_ratio: f32,
+    /// Current limits per motor, A.
+    pub current_limit_a: [f32; 3],
+    /// Lower joint limits (pitch rad, yaw rad, insertion m).
+    pub joint_min: [f32; 3],
+    /// Upper joint limits.
+    pub joint_max: [f32; 3],
+    /// Tolerance outside `[joint_min, joint_max]` before a `JointLimit` fault.
+    pub joint_limit_margin: [f32; 3],
+}
+
+impl SafetyConfig {
+    /// Thresholds from a calibration: `max_counts_per_tick = max_speed * tick * counts_per_rev *
+    /// |transmission| / (2 pi)` (at least 1), with the defaults above for the rest.
+    pub fn from_calibration(
+        cal: &DeviceCalibration,
+        max_joint_speed: [f32; 3],
+        tick_s: f32,
+    ) -> SafetyConfig {
+        let max_counts_per_tick = core::array::from_fn(|j| {
+            let cpr = cal.counts_per_rev.get(j).copied().unwrap_or(1) as f32;
+            let t = cal.transmission.get(j).copied().unwrap_or(1.0);
+            let v = max_joint_speed.get(j).copied().unwrap_or(0.0);
+            // `as` saturates (NaN -> 0), never panics.
+            let n = (v * tick_s * cpr * if t < 0.0 { -t } else { t } / (2.0 * PI)) as u32;
+            n.max(1)
+        });
+        SafetyConfig {
+            max_counts_per_tick,
+            link_timeout_ticks: DEFAULT_LINK_TIMEOUT_TICKS,
+            current_fault_ratio: DEFAULT_CURRENT_FAULT_RATIO,
+            current_limit_a: cal.current_limit_a,
+            joint_min: cal.joint_min,
+            joint_max: cal.joint_max,
+            joint_limit_margin: DEFAULT_JOINT_LIMIT_MARGIN,
+        }
+    }
+
+    /// [`SafetyConfig::from_calibration`] with [`DEFAULT_MAX_JOINT_SPEED`] at 1 kHz.
+    pub fn new(cal: &DeviceCalibration) -> SafetyConfig {
+        SafetyConfig::from_calibration(cal, DEFAULT_MAX_JOINT_SPEED, crate::TICK_PERIOD_S)
+    }
+}
+
+/// What the loop measured and computed this tick.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct TickInput {
+    /// `None` when the bank is valid, else its `BankError::code()`.
+    pub bank_error: Option<u32>,
+    /// Raw encoder counts.
+    pub counts: [i32; 3],
+    /// Joint values computed from the counts (pitch rad, yaw rad, insertion m).
+    pub joints: [f32; 3],
+    /// The force rendered (on the tool), N.
+    pub force_n: [f32; 3],
+    /// Motor currents requested before clamping, A.
+    pub requested_a: [f32; 3],
+    /// Whether the previous tick overran its period.
+    pub overrun: bool,
+    /// Ticks since the last valid frame from the host.
+    pub ticks_since_host_frame: u32,
+    /// Whether the contact solve failed this tick.
+    pub solve_failed: bool,
+}
+
+impl TickInput {
+    /// A quiet tick: valid bank, everything zero, host just heard.
+    pub const fn quiet() -> TickInput {
+        TickInput {
+            bank_error: None,
+            counts: [0; 3],
+            joints: [0.0; 3],
+            force_n: [0.0; 3],
+            requested_a: [0.0; 3],
+            overrun: false,
+            ticks_since_host_frame: 0,
+            solve_failed: false,
+        }
+    }
+}
+
+/// The supervisor's decision for a tick.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Output {
+    /// State after this tick.
+    pub state: State,
+    /// Currents to write, A: zero unless armed and no fault this tick.
+    pub currents_a: [f32; 3],
+    /// Which motors were clamped to their limit (only when armed).
+    pub clamped: [bool; 3],
+    /// The fault raised this tick, if any (report it to the host once).
+    pub new_fault: Option<Fault>,
+}
+
+/// Why an arm command was refused.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ArmRefused {
+    /// Arming is only possible from `Disarmed`; this is the current state.
+    NotDisarmed(State),
+    /// The bank failed validation.
+    InvalidBank,
+}
+
+/// The state machine.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Supervisor {
+    config: SafetyConfig,
+    state: State,
+    detail: u32,
+    last_counts: Option<[i32; 3]>,
+}
+
+impl Supervisor {
+    /// Disarmed, with no encoder history.
+    pub const fn new(config: SafetyConfig) -> Supervisor {
+        Supervisor {
+            config,
+            state: State::Disarmed,
+            detail: 0,
+            last_counts: None,
+        }
+    }
+
+    /// The thresholds.
+    pub fn config(&self) -> &SafetyConfig {
+        &self.config
+    }
+
+    /// The current state.
+    pub fn state(&self) -> State {
+        self.state
+    }
+
+    /// The latched fault and its detail, if in `Fault`.
+    pub fn fault(&self) -> Option<Fault> {
+        self.state.fault().map(|reason| Fault {
+            reason,
+            detail: self.detail,
+        })
+    }
+
+    /// Arm: only from `Disarmed` and with a valid bank.
+    pub fn arm(&mut self, bank_valid: bool) -> Result<(), ArmRefused> {
+        if self.state != State::Disarmed {
+            return Err(ArmRefused::NotDisarmed(self.state));
+        }
+        if !bank_valid {
+            return Err(ArmRefused::InvalidBank);
+        }
+        self.state = State::Armed;
+        Ok(())
+    }
+
+    /// Disarm: `Armed` -> `Disarmed`. A fault stays latched (clear it instead). Returns whether
+    /// the state changed.
+    pub fn disarm(&mut self) -> bool {
+        if self.state == State::Armed {
+            self.state = State::Disarmed;
+            true
+        } else {
+            false
+        }
+    }
+
+    /// Clear a fault: `Fault` -> `Disarmed`. Returns whether there was a fault. If the cause
+    /// persists, a later tick faults again.
+    pub fn clear_fault(&mut self) -> bool {
+        if let State::Fault(_) = self.state {
+            self.state = State::Disarmed;
+            self.detail = 0;
+            true
+        } else {
+            false
+        }
+    }
+
+    /// Forget the encoder history (after zeroing the encoders, so the reset is not a jump).
+    pub fn rebase_encoders(&mut self) {
+        self.last_counts = None;
+    }
+
+    /// Enter `Fault` from any state (e.g. a fault found outside the tick's inputs). A latched
+    /// fault is kept; returns whether this one was latched.
+    pub fn raise(&mut self, reason: FaultReason, detail: u32) -> bool {
+        if let State::Fault(_) = self.state {
+            return false;
+        }
+        self.state = State::Fault(reason);
+        self.detail = detail;
+        true
+    }
+
+    /// Run the checks for one tick and decide the currents (see the module notes).
+    pub fn tick(&mut self, input: &TickInput) -> Output {
+        let found = self.check(input);
+        self.last_counts = Some(input.counts);
+        let new_fault = found.filter(|f| self.raise(f.reason, f.detail));
+        let mut out = Output {
+            state: self.state,
+            currents_a: [0.0; 3],
+            clamped: [false; 3],
+            new_fault,
+        };
+        if self.state == State::Armed {
+            for (((a, c), &r), &lim) in out
+                .currents_a
+                .iter_mut()
+                .zip(out.clamped.iter_mut())
+                .zip(&input.requested_a)
+                .zip(&self.config.current_limit_a)
+            {
+                (*a, *c) = clamp_symmetric(r, lim);
+            }
+        }
+        out
+    }
+
+    fn check(&self, input: &TickInput) -> Option<Fault> {
+        let armed = self.state == State::Armed;
+        let fault = |reason, detail| Some(Fault { reason, detail });
+        if let Some(code) = input.bank_error {
+            return fault(FaultReason::InvalidBank, code);
+        }
+        if armed && input.overrun {
+            return fault(FaultReason::Overrun, 0);
+        }
+        if armed && input.ticks_since_host_frame > self.config.link_timeout_ticks {
+            return fault(FaultReason::LinkSilent, input.ticks_since_host_frame);
+        }
+        if let Some(prev) = self.last_counts {
+            let jump = (0..3u32)
+                .zip(prev.iter().zip(&input.counts))
+                .find(|(j, (p, n))| {
+                    let max = self.config.max_counts_per_tick.get(*j as usize);
+                    max.is_none_or(|&m| n.abs_diff(**p) > m)
+                });
+            if let Some((j, _)) = jump {
+                return fault(FaultReason::EncoderJump, j);
+            }
+        }
+        let finite = |v: &[f32; 3]| v.iter().all(|x| x.is_finite());
+        if !(finite(&input.joints) && finite(&input.force_n) && finite(&input.requested_a)) {
+            return fault(FaultReason::Nan, 0);
+        }
+        if input.solve_failed {
+            return fault(FaultReason::SolveFailed, 0);
+        }
+        if !armed {
+            return None;
+        }
+        let c = &self.config;
+        for (j, (((&q, &lo), &hi), &m)) in (0..3u32).zip(
+            input
+                .joints
+                .iter()
+                .zip(&c.joint_min)
+                .zip(&c.joint_max)
+                .zip(&c.joint_limit_margin),
+        ) {
+            if !(q >= lo - m && q <= hi + m) {
+                return fault(FaultReason::JointLimit, j);
+            }
+        }
+        let ratio = if c.current_fault_ratio >= 1.0 {
+            c.current_fault_ratio
+        } else {
+            1.0
+        };
+        for (j, (&i, &lim)) in (0..3u32).zip(input.requested_a.iter().zip(&c.current_limit_a)) {
+            // Written so that NaN (in the request or the limit) counts as over.
+            let within = matches!(
+                i.abs().partial_cmp(&(ratio * lim)),
+                Some(core::cmp::Ordering::Less | core::cmp::Ordering::Equal)
+            );
+            if !within {
+                return fault(FaultReason::CurrentLimit, j);
+            }
+        }
+        None
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::device::{Device, Joints};
+
+    fn liver() -> DeviceCalibration {
+        DeviceCalibration {
+            fulcrum_m: [0.0, 0.0, 0.16],
+            shaft_axis: [0.0, 0.0, -1.0],
+            pitch_axis: [1.0, 0.0, 0.0],
+            yaw_axis: [0.0, 1.0, 0.0],
+            joint_min: [-0.35, -0.35, 0.03],
+            joint_max: [0.35, 0.35, 0.14],
+            home_joint: [0.0, 0.0, 0.03],
+            counts_per_rev: [4096, 4096, 4096],
+            transmission: [12.0, 12.0, 400.0],
+            torque_constant_nm_per_a: [0.025, 0.025, 0.025],
+            current_limit_a: [2.0, 2.0, 2.0],
+            max_force_n: 5.0,
+            tip_radius_m: 0.003,
+        }
+    }
+
+    /// A plausible tick at encoder zero (home pose, inside the ranges).
+    fn ok_tick() -> TickInput {
+        TickInput {
+            joints: liver().home_joint,
+            requested_a: [0.5, -0.5, 1.0],
+            ..TickInput::quiet()
+        }
+    }
+
+    fn armed() -> Supervisor {
+        let mut s = Supervisor::new(SafetyConfig::new(&liver()));
+        assert_eq!(s.arm(true), Ok(()));
+        let out = s.tick(&ok_tick());
+        assert_eq!(out.state, State::Armed);
+        s
+    }
+
+    #[test]
+    fn config_from_calibration() {
+        let c = SafetyConfig::new(&liver());
+        // 20 rad/s * 1 ms * 4096 * 12 / 2 pi = 156.4; 2 m/s * 1 ms * 4096 * 400 / 2 pi = 521.5.
+        assert_eq!(c.max_counts_per_tick, [156, 156, 521]);
+        assert_eq!(c.link_timeout_ticks, 10);
+        let c = SafetyConfig::from_calibration(&liver(), [0.0, f32::NAN, -1.0], 1e-3);
+        assert_eq!(c.max_counts_per_tick, [1, 1, 1]);
+    }
+
+    #[test]
+    fn arm_disarm_clear_transitions() {
+        let mut s = Supervisor::new(SafetyConfig::new(&liver()));
+        assert_eq!(s.state(), State::Disarmed);
+        // Disarmed: zero current whatever is requested.
+        let out = s.tick(&ok_tick());
+        assert_eq!(
+            (out.state, out.currents_a, out.new_fault),
+            (State::Disarmed, [0.0; 3], None)
+        );
+        // Arm refused with an invalid bank.
+        assert_eq!(s.arm(false), Err(ArmRefused::InvalidBank));
+        assert_eq!(s.state(), State::Disarmed);
+        // Disarmed -> Armed: the requested currents are applied.
+        assert_eq!(s.arm(true), Ok(()));
+        let out = s.tick(&ok_tick());
+        assert_eq!(out.state, State::Armed);
+        assert_eq!(out.currents_a, [0.5, -0.5, 1.0]);
+        // Arm again: refused, still armed.
+        assert_eq!(s.arm(true), Err(ArmRefused::NotDisarmed(State::Armed)));
+        // Armed -> Disarmed.
+        assert!(s.disarm());
+        assert!(!s.disarm());
+        assert_eq!(s.tick(&ok_tick()).currents_a, [0.0; 3]);
+        // Clear without a fault does nothing.
+        assert!(!s.clear_fault());
+        // Armed -> Fault -> (disarm and arm refused) -> clear -> Disarmed -> Armed.
+        s.arm(true).unwrap();
+        let out = s.tick(&TickInput {
+            overrun: true,
+            ..ok_tick()
+        });
+        assert_eq!(out.state, State::Fault(FaultReason::Overrun));
+        assert!(!s.disarm());
+        assert_eq!(
+            s.arm(true),
+            Err(ArmRefused::NotDisarmed(State::Fault(FaultReason::Overrun)))
+        );
+        assert_eq!(s.state().wire(), bank_format::State::Fault);
+        assert!(s.clear_fault());
+        assert_eq!(s.state(), State::Disarmed);
+        assert_eq!(s.fault(), None);
+        assert_eq!(s.arm(true), Ok(()));
+        assert_eq!(s.tick(&ok_tick()).currents_a, [0.5, -0.5, 1.0]);
+        assert_eq!(s.state().wire(), bank_format::State::Armed);
+    }
+
+    /// Each fault input, armed: zero current this tick and after, the reason and detail kept.
+    #[test]
+    fn every_fault_reason_ends_at_zero_current() {
+        let cases: [(TickInput, FaultReason, u32); 12] = [
+            (
+                TickInput {
+                    bank_error: Some(7),
+                    ..ok_tick()
+                },
+                FaultReason::InvalidBank,
+                7,
+            ),
+            (
+                TickInput {
+                    overrun: true,
+                    ..ok_tick()
+                },
+                FaultReason::Overrun,
+                0,
+            ),
+            (
+                TickInput {
+                    ticks_since_host_frame: 11,
+                    ..ok_tick()
+                },
+                FaultReason::LinkSilent,
+                11,
+            ),
+            (
+                TickInput {
+                    counts: [0, -157, 0],
+                    ..ok_tick()
+                },
+                FaultReason::EncoderJump,
+                1,
+            ),
+            (
+                TickInput {
+                    joints: [0.0, 0.0, f32::NAN],
+                    ..ok_tick()
+                },
+                FaultReason::Nan,
+                0,
+            ),
+            (
+                TickInput {
+                    force_n: [f32::INFINITY, 0.0, 0.0],
+                    ..ok_tick()
+                },
+                FaultReason::Nan,
+                0,
+            ),
+            (
+                TickInput {
+                    requested_a: [0.0, f32::NAN, 0.0],
+                    ..ok_tick()
+                },
+                FaultReason::Nan,
+                0,
+            ),
+            (
+                TickInput {
+                    solve_failed: true,
+                    ..ok_tick()
+                },
+                FaultReason::SolveFailed,
+                0,
+            ),
+            (
+                TickInput {
+                    joints: [0.41, 0.0, 0.05],
+                    ..ok_tick()
+                },
+                FaultReason::JointLimit,
+                0,
+            ),
+            (
+                TickInput {
+                    joints: [0.0, 0.0, 0.0249],
+                    ..ok_tick()
+                },
+                FaultReason::JointLimit,
+                2,
+            ),
+            (
+                TickInput {
+                    requested_a: [0.0, 0.0, -2.6],
+                    ..ok_tick()
+                },
+                FaultReason::CurrentLimit,
+                2,
+            ),
+            (
+                TickInput {
+                    requested_a: [100.0, 0.0, 0.0],
+                    ..ok_tick()
+                },
+                FaultReason::CurrentLimit,
+                0,
+            ),
+        ];
+        for (input, reason, detail) in cases {
+            let mut s = armed();
+            let out = s.tick(&input);
+            assert_eq!(out.state, State::Fault(reason), "{input:?}");
+            assert_eq!(out.currents_a, [0.0; 3]);
+            assert_eq!(out.new_fault, Some(Fault { reason, detail }));
+            assert_eq!(s.fault(), Some(Fault { reason, detail }));
+            // Latched: a good tick keeps zero current and the first reason; a second fault
+            // does not overwrite it and is not reported again.
+            let out = s.tick(&TickInput {
+                overrun: true,
+                counts: input.counts,
+                ..ok_tick()
+            });
+            assert_eq!(out.state, State::Fault(reason));
+            assert_eq!((out.currents_a, out.new_fault), ([0.0; 3], None));
+            let out = s.tick(&TickInput {
+                counts: input.counts,
+                ..ok_tick()
+            });
+            assert_eq!(
+                (out.state, out.currents_a),
+                (State::Fault(reason), [0.0; 3])
+            );
+            assert_eq!(s.fault(), Some(Fault { reason, detail }));
+        }
+    }
+
+    #[test]
+    fn slight_overcurrent_is_clamped_not_a_fault() {
+        let mut s = armed();
+        let out = s.tick(&TickInput {
+            requested_a: [2.4, -2.5, 1.9],
+            ..ok_tick()
+        });
+        assert_eq!(out.state, State::Armed);
+        assert_eq!(out.currents_a, [2.0, -2.0, 1.9]);
+        assert_eq!(out.clamped, [true, true, false]);
+        assert_eq!(out.new_fault, None);
+    }
+
+    #[test]
+    fn disarmed_checks_only_data_faults() {
+        let mut s = Supervisor::new(SafetyConfig::new(&liver()));
+        // Drive-only conditions while disarmed: no fault.
+        let out = s.tick(&TickInput {
+            overrun: true,
+            ticks_since_host_frame: 1000,
+            joints: [3.0, 0.0, 0.0],
+            requested_a: [50.0, 0.0, 0.0],
+            ..ok_tick()
+        });
+        assert_eq!((out.state, out.currents_a), (State::Disarmed, [0.0; 3]));
+        // Data faults while disarmed: latched.
+        let out = s.tick(&TickInput {
+            bank_error: Some(3),
+            ..ok_tick()
+        });
+        assert_eq!(out.state, State::Fault(FaultReason::InvalidBank));
+        assert!(s.clear_fault());
+        let out = s.tick(&TickInput {
+            force_n: [f32::NAN; 3],
+            ..ok_tick()
+        });
+        assert_eq!(out.state, State::Fault(FaultReason::Nan));
+        assert!(s.clear_fault());
+        let out = s.tick(&TickInput {
+            counts: [0, 0, 100_000],
+            ..ok_tick()
+        });
+        assert_eq!(out.state, State::Fault(FaultReason::EncoderJump));
+        assert_eq!(s.fault().map(|f| f.detail), Some(2));
+    }
+
+    #[test]
+    fn encoder_moves_within_the_limit_and_rebase() {
+        let mut s = armed();
+        // 156 counts per tick on pitch and yaw, 521 on insertion are allowed.
+        let mut counts = [0i32; 3];
+        for _ in 0..5 {
+            counts = [counts[0] + 156, counts[1] - 156, counts[2] + 521];
+            let out = s.tick(&TickInput {
+                counts,
+                ..ok_tick()
+            });
+            assert_eq!(out.state, State::Armed);
+        }
+        // Wrap-around of the i32 counter is a huge jump, not a small one.
+        let mut s = armed();
+        s.tick(&TickInput {
+            counts: [i32::MAX, 0, 0],
+            ..ok_tick()
+        });
+        assert!(s.clear_fault());
+        let out = s.tick(&TickInput {
+            counts: [i32::MIN, 0, 0],
+            ..ok_tick()
+        });
+        assert_eq!(out.state, State::Fault(FaultReason::EncoderJump));
+        // After zeroing the encoders, the reset is not a jump.
+        let mut s = armed();
+        s.tick(&TickInput {
+            counts: [100, 100, 500],
+            ..ok_tick()
+        });
+        s.rebase_encoders();
+        s.tick(&TickInput {
+            counts: [0, 0, 0],
+            ..ok_tick()
+        });
+        s.tick(&TickInput {
+            counts: [100, 100, 500],
+            ..ok_tick()
+        });
+        s.rebase_encoders();
+        let out = s.tick(&TickInput {
+            counts: [-30_000, 30_000, 9],
+            ..ok_tick()
+        });
+        assert_eq!(out.state, State::Armed);
+    }
+
+    #[test]
+    fn link_timeout_boundary() {
+        let mut s = armed();
+        let out = s.tick(&TickInput {
+            ticks_since_host_frame: 10,
+            ..ok_tick()
+        });
+        assert_eq!(out.state, State::Armed);
+        let out = s.tick(&TickInput {
+            ticks_since_host_frame: 11,
+            ..ok_tick()
+        });
+        assert_eq!(out.state, State::Fault(FaultReason::LinkSilent));
+    }
+
+    #[test]
+    fn raise_from_outside_the_tick() {
+        let mut s = armed();
+        assert!(s.raise(FaultReason::InvalidBank, 42));
+        assert!(!s.raise(FaultReason::Nan, 0));
+        assert_eq!(
+            s.fault(),
+            Some(Fault {
+                reason: FaultReason::InvalidBank,
+                detail: 42
+            })
+        );
+        assert_eq!(s.tick(&ok_tick()).currents_a, [0.0; 3]);
+    }
+
+    /// The device model and the supervisor together: a hard press at full insertion asks for
+    /// more than the pitch limit, which is clamped.
+    #[test]
+    fn device_and_supervisor_together() {
+        let cal = liver();
+        let dev = Device::new(&cal);
+        let mut s = armed();
+        let q = Joints::from_array([0.0, 0.0, 0.14]);
+        let counts = [0, 0, ((0.14 - 0.03) / dev.joint_per_count()[2]) as i32];
+        assert!((dev.joints(counts).insertion - 0.14).abs() < 1e-5);
+        s.rebase_encoders();
+        let f = dev.limit_force([0.0, 9.0, 0.0]);
+        let c = dev.currents_for_force(&q, f);
+        // 5 N * 0.14 m / (12 * 0.025) = 2.33 A: over the 2 A limit, under 1.25 x.
+        assert!((c.requested_a[0] - 7.0 / 3.0).abs() < 1e-5);
+        let out = s.tick(&TickInput {
+            counts,
+            joints: dev.joints(counts).to_array(),
+            force_n: f,
+            requested_a: c.requested_a,
+            ..TickInput::quiet()
+        });
+        assert_eq!(out.state, State::Armed);
+        assert_eq!(out.currents_a, c.applied_a);
+        assert_eq!(out.clamped, [true, false, false]);
+    }
+}

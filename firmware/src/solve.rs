@@ -1,0 +1,868 @@
+//! The contact solve in compliance form (paper eqs. 2 and 8, compliance form in the design
+//! notes): with displacements `u*_S` imposed on a contact set `S` of at most
+//! [`MAX_CONTACT_NODES`] nodes and every other node force-free, the contact forces are
+//! `f_S = C_SS^-1 u*_S`. Then the quasi non-linear law Q (eqs. 3-6) on the tool force.
+//!
+//! Fixed sizes, f32, no heap, no panics: `C_SS` is assembled into a `9 x 9` matrix (the unused
+//! part is a decoupled diagonal block that does not touch the solution), factored by Cholesky.
+//!
+//! Two ways to spread the tool-tip displacement `d` over a contact triangle with barycentric
+//! coordinates `k = (k1, k2, k3)` of the contact point:
+//!
+//! - [`solve_triangle_alpha`], the paper's section 5: `u*_v = alpha_v d` with
+//!   `alpha_v = k_v + 1 - (k1^2 + k2^2 + k3^2)`; then `f_S = C_SS^-1 u*_S` (a 9 x 9 solve). The
+//!   contact point `sum_v k_v u_v` follows the tip exactly when `sum_v k_v = 1`.
+//! - [`solve_triangle_barycentric`], energy-minimal: one 3-dof constraint `B u_S = d` on the
+//!   contact point with `B = [k1 I, k2 I, k3 I]`, so `f_tool = (B C_SS B^T)^-1 d` (a 3 x 3 solve)
+//!   and `f_v = k_v f_tool`. It never needs `C_SS^-1`, so nearly coincident vertices (a nearly
+//!   singular `C_SS`) do not hurt it.
+//!
+//! Sign convention: forces are those applied *to the tissue* at the contact nodes (as in the
+//! host's `contact_forces`); [`ContactForces::tool_force_n`] is their sum, the force the tool
+//! exerts on the tissue. The force the user feels is its opposite.
+
+use bank_format::{Bank, TissueLaw};
+use nalgebra::{Cholesky, ComplexField, Const, SMatrix, SVector};
+
+/// Most nodes in one contact set (one triangle).
+pub const MAX_CONTACT_NODES: usize = 3;
+/// Degrees of freedom of the largest contact set.
+pub const MAX_DOFS: usize = 3 * MAX_CONTACT_NODES;
+/// Smallest Cholesky pivot (`L_ii^2`) accepted, relative to the largest diagonal entry of the
+/// matrix factored. Below it an f32 solve loses more than about two significant digits, so the
+/// solve reports [`SolveError::IllConditioned`] instead of returning forces.
+pub const MIN_PIVOT_REL: f32 = 1.0e-5;
+/// Tolerance on `|k1 + k2 + k3 - 1|` for barycentric coordinates.
+pub const BARYCENTRIC_SUM_TOL: f32 = 1.0e-3;
+
+/// `C_SS` padded to the largest contact set.
+pub type CssMatrix = SMatrix<f32, MAX_DOFS, MAX_DOFS>;
+
+/// Why a contact solve gave no forces.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum SolveError {
+    /// The contact set is empty.
+    NoNodes,
+    /// More than [`MAX_CONTACT_NODES`] nodes.
+    TooManyNodes {
+        /// Nodes given.
+        count: usize,
+    },
+    /// As many imposed displacements as nodes are needed.
+    LengthMismatch {
+        /// Nodes given.
+        nodes: usize,
+        /// Displacements given.
+        imposed: usize,
+    },
+    /// A node index is not in the bank's region R.
+    NodeOutOfRange {
+        /// The node.
+        node: u16,
+    },
+    /// A node appears twice in the contact set.
+    DuplicateNode {
+        /// The node.
+        node: u16,
+    },
+    /// The bank does not couple two nodes of the contact set (they are farther apart than its
+    /// truncation radius). Treating the block as zero would be wrong by up to 180%.
+    MissingCoupling {
+        /// First node.
+        k: u16,
+        /// Second node.
+        l: u16,
+    },
+    /// A NaN or infinite input, compliance entry or result.
+    NonFinite,
+    /// Barycentric coordinates that do not sum to 1 (within [`BARYCENTRIC_SUM_TOL`]).
+    BadBarycentric,
+    /// The matrix to factor is not positive definite at f32 precision.
+    NotPositiveDefinite,
+    /// The smallest Cholesky pivot relative to the largest diagonal entry is below
+    /// [`MIN_PIVOT_REL`] (e.g. two nearly coincident contact nodes).
+    IllConditioned {
+        /// That ratio.
+        pivot_rel: f32,
+    },
+}
+
+impl core::fmt::Display for SolveError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            SolveError::NoNodes => f.write_str("empty contact set"),
+            SolveError::TooManyNodes { count } => {
+                write!(f, "{count} contact nodes, at most {MAX_CONTACT_NODES}")
+            }
+            SolveError::LengthMismatch { nodes, imposed } => {
+                write!(
+                    f,
+                    "{nodes} contact nodes but {imposed} imposed displacements"
+                )
+            }
+            SolveError::NodeOutOfRange { node } => write!(f, "node {node} is not in the bank"),
+            SolveError::DuplicateNode { node } => write!(f, "node {node} given twice"),
+            SolveError::MissingCoupling { k, l } => {
+                write!(f, "the bank does not couple nodes {k} and {l}")
+            }
+            SolveError::NonFinite => f.write_str("NaN or infinite value"),
+            SolveError::BadBarycentric => f.write_str("barycentric coordinates do not sum to 1"),
+            SolveError::NotPositiveDefinite => f.write_str("matrix not positive definite"),
+            SolveError::IllConditioned { pivot_rel } => {
+                write!(
+                    f,
+                    "ill-conditioned solve (smallest pivot {pivot_rel:e} relative)"
+                )
+            }
+        }
+    }
+}
+
+/// Forces of one contact solve.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ContactForces {
+    nodes: [u16; MAX_CONTACT_NODES],
+    len: usize,
+    forces: [[f32; 3]; MAX_CONTACT_NODES],
+    /// Sum of the node forces: the force the tool exerts on the tissue, N.
+    pub tool_force_n: [f32; 3],
+    /// Condition estimate of the matrix factored (see [`Factor::condition`]).
+    pub condition: f32,
+}
+
+impl ContactForces {
+    /// The contact nodes, in the order given.
+    pub fn nodes(&self) -> &[u16] {
+        self.nodes.get(..self.len).unwrap_or(&[])
+    }
+
+    /// The force at each contact node (applied to the tissue), N, in the order of
+    /// [`ContactForces::nodes`].
+    pub fn forces(&self) -> &[[f32; 3]] {
+        self.forces.get(..self.len).unwrap_or(&[])
+    }
+}
+
+/// A Cholesky factorisation of a fixed-size SPD matrix of which the leading `active` rows and
+/// columns are used, with its pivot statistics.
+#[derive(Clone, Copy, Debug)]
+pub struct Factor<const D: usize> {
+    chol: Cholesky<f32, Const<D>>,
+    min_pivot: f32,
+    max_pivot: f32,
+    max_diag: f32,
+}
+
+impl<const D: usize> Factor<D> {
+    /// Factors `a` (only its lower triangle is read). Fails on NaN or infinite entries or when
+    /// Cholesky breaks down; does *not* apply [`MIN_PIVOT_REL`] (see [`Factor::check`]).
+    pub fn new(a: SMatrix<f32, D, D>, active: usize) -> Result<Factor<D>, SolveError> {
+        if !a.iter().all(|x| x.is_finite()) {
+            return Err(SolveError::NonFinite);
+        }
+        let active = active.min(D);
+        let max_diag = a
+            .diagonal()
+            .iter()
+            .take(active)
+            .fold(0.0f32, |m, &x| m.max(x));
+        let chol = Cholesky::new(a).ok_or(SolveError::NotPositiveDefinite)?;
+        let (mut min_pivot, mut max_pivot) = (f32::INFINITY, 0.0f32);
+        for &l in chol.l_dirty().diagonal().iter().take(active) {
+            let p = l * l;
+            min_pivot = min_pivot.min(p);
+            max_pivot = max_pivot.max(p);
+        }
+        if !(min_pivot > 0.0 && max_pivot.is_finite() && max_diag > 0.0) {
+            return Err(SolveError::NotPositiveDefinite);
+        }
+        Ok(Factor {
+            chol,
+            min_pivot,
+            max_pivot,
+            max_diag,
+        })
+    }
+
+    /// Condition estimate: largest over smallest squared Cholesky pivot `L_ii^2` (the LDL^T
+    /// pivots). A lower bound on the 2-norm condition number, cheap and adequate to compare two
+    /// formulations and to spot near-singularity.
+    pub fn condition(&self) -> f32 {
+        self.max_pivot / self.min_pivot
+    }
+
+    /// Smallest pivot relative to the largest diagonal entry.
+    pub fn pivot_rel(&self) -> f32 {
+        self.min_pivot / self.max_diag
+    }
+
+    /// `Ok` when the smallest pivot passes [`MIN_PIVOT_REL`].
+    pub fn check(&self) -> Result<(), SolveError> {
+        let pivot_rel = self.pivot_rel();
+        if pivot_rel >= MIN_PIVOT_REL {
+            Ok(())
+        } else {
+            Err(SolveError::IllConditioned { pivot_rel })
+        }
+    }
+
+    /// `a^-1 b`.
+    pub fn solve(&self, b: &SVector<f32, D>) -> Result<SVector<f32, D>, SolveError> {
+        let x = self.chol.solve(b);
+        if x.iter().all(|v| v.is_finite()) {
+            Ok(x)
+        } else {
+            Err(SolveError::NonFinite)
+        }
+    }
+}
+
+fn check_nodes(bank: &Bank, nodes: &[u16]) -> Result<(), SolveError> {
+    if nodes.is_empty() {
+        return Err(SolveError::NoNodes);
+    }
+    if nodes.len() > MAX_CONTACT_NODES {
+        return Err(SolveError::TooManyNodes { count: nodes.len() });
+    }
+    for (a, &k) in nodes.iter().enumerate() {
+        if usize::from(k) >= bank.node_count() {
+            return Err(SolveError::NodeOutOfRange { node: k });
+        }
+        if nodes.iter().skip(a + 1).any(|&l| l == k) {
+            return Err(SolveError::DuplicateNode { node: k });
+        }
+    }
+    Ok(())
+}
+
+/// Assembles `C_SS` (m/N) for the contact set `nodes`: block `(a, b)` is
+/// `bank.coupling(nodes[a], nodes[b])`. Rows and columns past `3 * nodes.len()` hold the mean
+/// active diagonal on the diagonal and zeros elsewhere, so a factorisation of the padded matrix
+/// solves the active part exactly. A pair the bank does not couple is an error, never zero.
+pub fn assemble_css(bank: &Bank, nodes: &[u16]) -> Result<CssMatrix, SolveError> {
+    check_nodes(bank, nodes)?;
+    let mut c = CssMatrix::zeros();
+    for (a, &k) in nodes.iter().enumerate() {
+        for (b, &l) in nodes.iter().enumerate() {
+            let block = bank
+                .coupling(usize::from(k), usize::from(l))
+                .ok_or(SolveError::MissingCoupling { k, l })?;
+            for (i, row) in block.iter().enumerate() {
+                for (j, &v) in row.iter().enumerate() {
+                    if !v.is_finite() {
+                        return Err(SolveError::NonFinite);
+                    }
+                    if let Some(e) = c.get_mut((3 * a + i, 3 * b + j)) {
+                        *e = v;
+                    }
+                }
+            }
+        }
+    }
+    let active = 3 * nodes.len();
+    let mean = c.diagonal().iter().take(active).sum::<f32>() / active as f32;
+    let pad = if mean > 0.0 && mean.is_finite() {
+        mean
+    } else {
+        1.0
+    };
+    for r in active..MAX_DOFS {
+        if let Some(e) = c.get_mut((r, r)) {
+            *e = pad;
+        }
+    }
+    Ok(c)
+}
+
+/// Factorisation of `C_SS` for `nodes` (no pivot threshold applied).
+pub fn factor_css(bank: &Bank, nodes: &[u16]) -> Result<Factor<MAX_DOFS>, SolveError> {
+    let c = assemble_css(bank, nodes)?;
+    Factor::new(c, 3 * nodes.len())
+}
+
+/// `f_S = C_SS^-1 u*_S`: the forces (N) at the contact nodes that impose the displacements
+/// `imposed_m[a]` (m) on `nodes[a]`, all other nodes force-free.
+pub fn solve_imposed(
+    bank: &Bank,
+    nodes: &[u16],
+    imposed_m: &[[f32; 3]],
+) -> Result<ContactForces, SolveError> {
+    if imposed_m.len() != nodes.len() {
+        return Err(SolveError::LengthMismatch {
+            nodes: nodes.len(),
+            imposed: imposed_m.len(),
+        });
+    }
+    if !imposed_m.iter().flatten().all(|v| v.is_finite()) {
+        return Err(SolveError::NonFinite);
+    }
+    let factor = factor_css(bank, nodes)?;
+    factor.check()?;
+    let mut u = SVector::<f32, MAX_DOFS>::zeros();
+    for (a, d) in imposed_m.iter().enumerate() {
+        for (i, &v) in d.iter().enumerate() {
+            if let Some(e) = u.get_mut(3 * a + i) {
+                *e = v;
+            }
+        }
+    }
+    let f = factor.solve(&u)?;
+    let mut out = ContactForces {
+        nodes: [0; MAX_CONTACT_NODES],
+        len: nodes.len(),
+        forces: [[0.0; 3]; MAX_CONTACT_NODES],
+        tool_force_n: [0.0; 3],
+        condition: factor.condition(),
+    };
+    for (a, (slot, &k)) in out.nodes.iter_mut().zip(nodes).enumerate() {
+        *slot = k;
+        if let Some(fa) = out.forces.get_mut(a) {
+            for (i, v) in fa.iter_mut().enumerate() {
+                *v = f.get(3 * a + i).copied().unwrap_or(0.0);
+            }
+            for (t, v) in out.tool_force_n.iter_mut().zip(fa.iter()) {
+                *t += *v;
+            }
+        }
+    }
+    Ok(out)
+}
+
+/// Point contact: the force (N) that moves `node` by `d_m` (m).
+pub fn solve_point(bank: &Bank, node: u16, d_m: [f32; 3]) -> Result<ContactForces, SolveError> {
+    solve_imposed(bank, &[node], &[d_m])
+}
+
+fn check_barycentric(k: [f32; 3]) -> Result<(), SolveError> {
+    if !k.iter().all(|v| v.is_finite()) {
+        return Err(SolveError::NonFinite);
+    }
+    let s = k[0] + k[1] + k[2];
+    if (s - 1.0).abs() <= BARYCENTRIC_SUM_TOL {
+        Ok(())
+    } else {
+        Err(SolveError::BadBarycentric)
+    }
+}
+
+/// The paper's weights `alpha_v = k_v + 1 - (k1^2 + k2^2 + k3^2)` for barycentric coordinates
+/// `k` of the contact point. With `sum k_v = 1`, `sum_v k_v alpha_v = 1`: the contact point
+/// moves with the tip.
+pub fn alpha_weights(k: [f32; 3]) -> [f32; 3] {
+    let s2 = k[0] * k[0] + k[1] * k[1] + k[2] * k[2];
+    [k[0] + 1.0 - s2, k[1] + 1.0 - s2, k[2] + 1.0 - s2]
+}
+
+/// Triangle contact, the paper's form: the tip displacement `d_m` imposed on vertex `v` of
+/// `triangle` scaled by [`alpha_weights`]`(bary)[v]`; `f_S = C_SS^-1 u*_S` (9 x 9).
+pub fn solve_triangle_alpha(
+    bank: &Bank,
+    triangle: [u16; 3],
+    bary: [f32; 3],
+    d_m: [f32; 3],
+) -> Result<ContactForces, SolveError> {
+    check_barycentric(bary)?;
+    let alpha = alpha_weights(bary);
+    let imposed = alpha.map(|a| d_m.map(|x| a * x));
+    solve_imposed(bank, &triangle, &imposed)
+}
+
+/// `B C_SS B^T = sum_ab k_a k_b C_ab` (3 x 3, m/N).
+fn reduced_compliance(
+    bank: &Bank,
+    triangle: [u16; 3],
+    bary: [f32; 3],
+) -> Result<SMatrix<f32, 3, 3>, SolveError> {
+    check_barycentric(bary)?;
+    let c = assemble_css(bank, &triangle)?;
+    let mut m = SMatrix::<f32, 3, 3>::zeros();
+    for (a, &ka) in bary.iter().enumerate() {
+        for (b, &kb) in bary.iter().enumerate() {
+            let w = ka * kb;
+            for i in 0..3 {
+                for j in 0..3 {
+                    let cij = c.get((3 * a + i, 3 * b + j)).copied().unwrap_or(0.0);
+                    if let Some(e) = m.get_mut((i, j)) {
+                        *e += w * cij;
+                    }
+                }
+            }
+        }
+    }
+    // Symmetrise: the bank's C_kl and C_lk^T agree only to its symmetry tolerance.
+    Ok((m + m.transpose()) * 0.5)
+}
+
+/// Triangle contact, energy-minimal form: the single constraint `B u_S = d_m` on the contact
+/// point, `f_tool = (B C_SS B^T)^-1 d_m`, `f_v = k_v f_tool` (3 x 3 solve).
+pub fn solve_triangle_barycentric(
+    bank: &Bank,
+    triangle: [u16; 3],
+    bary: [f32; 3],
+    d_m: [f32; 3],
+) -> Result<ContactForces, SolveError> {
+    if !d_m.iter().all(|v| v.is_finite()) {
+        return Err(SolveError::NonFinite);
+    }
+    let m = reduced_compliance(bank, triangle, bary)?;
+    let factor = Factor::new(m, 3)?;
+    factor.check()?;
+    let f = factor.solve(&SVector::<f32, 3>::from(d_m))?;
+    let tool = [f.x, f.y, f.z];
+    let mut out = ContactForces {
+        nodes: triangle,
+        len: 3,
+        forces: [[0.0; 3]; MAX_CONTACT_NODES],
+        tool_force_n: [0.0; 3],
+        condition: factor.condition(),
+    };
+    for (fv, &k) in out.forces.iter_mut().zip(bary.iter()) {
+        *fv = tool.map(|t| k * t);
+    }
+    // Sum of the vertex forces (equals f_tool up to rounding when sum k = 1).
+    for fv in out.forces.iter() {
+        for (t, v) in out.tool_force_n.iter_mut().zip(fv) {
+            *t += *v;
+        }
+    }
+    Ok(out)
+}
+
+/// Condition estimate ([`Factor::condition`]) of the paper's form: `C_SS` of the triangle.
+pub fn condition_alpha(bank: &Bank, triangle: [u16; 3]) -> Result<f32, SolveError> {
+    Ok(factor_css(bank, &triangle)?.condition())
+}
+
+/// Condition estimate ([`Factor::condition`]) of the energy-minimal form: `B C_SS B^T`.
+pub fn condition_barycentric(
+    bank: &Bank,
+    triangle: [u16; 3],
+    bary: [f32; 3],
+) -> Result<f32, SolveError> {
+    let m = reduced_compliance(bank, triangle, bary)?;
+    Ok(Factor::new(m, 3)?.condition())
+}
+
+fn dot(a: [f32; 3], b: [f32; 3]) -> f32 {
+    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+}
+
+/// The quasi non-linear law (paper eqs. 5-6) on a force `f` (N) produced by imposing the
+/// displacement `d` (m): `f = f_t + f_r` with `f_t = (f . d^) d^` along the imposed direction;
+/// `|f_t|` is replaced by `law.eval(|f_t|)` (linear continuation outside the fitted domain),
+/// `f_r` is kept. `d = 0` has no direction: `f` is returned unchanged; `f_t = 0` has none
+/// either: only `f_r` is returned. NaN or infinite input or result is an error.
+pub fn apply_tissue_law(law: &TissueLaw, f: [f32; 3], d: [f32; 3]) -> Result<[f32; 3], SolveError> {
+    if !f.iter().chain(d.iter()).all(|v| v.is_finite()) {
+        return Err(SolveError::NonFinite);
+    }
+    let dd = dot(d, d);
+    if !dd.is_finite() {
+        return Err(SolveError::NonFinite);
+    }
+    if dd <= 0.0 {
+        return Ok(f);
+    }
+    let norm = ComplexField::sqrt(dd);
+    let dh = d.map(|x| x / norm);
+    let s = dot(f, dh);
+    let ft = dh.map(|x| s * x);
+    let fr = [f[0] - ft[0], f[1] - ft[1], f[2] - ft[2]];
+    if s == 0.0 {
+        return Ok(fr);
+    }
+    let q = law.eval(s.abs());
+    let qs = if s > 0.0 { q } else { -q };
+    let out = [fr[0] + qs * dh[0], fr[1] + qs * dh[1], fr[2] + qs * dh[2]];
+    if out.iter().all(|v| v.is_finite()) {
+        Ok(out)
+    } else {
+        Err(SolveError::NonFinite)
+    }
+}
+
+/// [`apply_tissue_law`] with the bank's law on a solve's tool force.
+pub fn tool_force_with_law(
+    bank: &Bank,
+    forces: &ContactForces,
+    d: [f32; 3],
+) -> Result<[f32; 3], SolveError> {
+    apply_tissue_law(bank.tissue_law(), forces.tool_force_n, d)
+}
+
+#[cfg(test)]
+#[allow(clippy::needless_range_loop)]
+mod tests {
+    extern crate std;
+    use super::*;
+    use bank_format::{AlignedBytes, BankBuilder, DeviceCalibration, TissueLaw};
+    use std::vec;
+    use std::vec::Vec;
+
+    fn device() -> DeviceCalibration {
+        DeviceCalibration {
+            fulcrum_m: [0.005, 0.005, 0.1],
+            shaft_axis: [0.0, 0.0, -1.0],
+            pitch_axis: [1.0, 0.0, 0.0],
+            yaw_axis: [0.0, 1.0, 0.0],
+            joint_min: [-0.8, -0.8, 0.02],
+            joint_max: [0.8, 0.8, 0.2],
+            home_joint: [0.0, 0.0, 0.05],
+            counts_per_rev: [4096, 4096, 2048],
+            transmission: [10.0, -10.0, 100.0],
+            torque_constant_nm_per_a: [0.03, 0.03, 0.025],
+            current_limit_a: [2.0, 2.0, 1.5],
+            max_force_n: 5.0,
+            tip_radius_m: 0.002,
+        }
+    }
+
+    /// `C_kl = exp(-|x_k - x_l| / L) M` (an SPD kernel times an SPD 3x3), m/N.
+    fn block(p: &[[f64; 3]], k: usize, l: usize) -> [[f64; 3]; 3] {
+        let m = [
+            [1.0e-3, 0.1e-3, 0.0],
+            [0.1e-3, 1.2e-3, 0.05e-3],
+            [0.0, 0.05e-3, 2.0e-3],
+        ];
+        let d = (0..3)
+            .map(|i| (p[k][i] - p[l][i]).powi(2))
+            .sum::<f64>()
+            .sqrt();
+        let kern = (-d / 0.02).exp();
+        m.map(|r| r.map(|v| kern * v))
+    }
+
+    /// A bank over `positions` with triangle [0, 1, 2], coupling the pairs `pairs`.
+    fn bank_bytes(positions: Vec<[f64; 3]>, pairs: &[(u32, u32)], radius: f64) -> AlignedBytes {
+        let n = positions.len();
+        let b = BankBuilder {
+            c_kk: (0..n).map(|k| block(&positions, k, k)).collect(),
+            couplings: pairs
+                .iter()
+                .map(|&(k, l)| (k, l, block(&positions, k as usize, l as usize)))
+                .collect(),
+            mesh_ids: (0..n as u32).collect(),
+            triangles: vec![[0, 1, 2]],
+            positions_m: positions,
+            grid_cell_size_m: 0.008,
+            truncation_radius_m: radius,
+            scene_id: 1,
+            law: TissueLaw::chebyshev(&[2.6, 2.5, 0.1], [0.0, 5.0]).unwrap(),
+            device: device(),
+        };
+        AlignedBytes::new(&b.build().unwrap())
+    }
+
+    fn triangle_bank() -> AlignedBytes {
+        let p = vec![[0.0, 0.0, 0.0], [0.01, 0.0, 0.0], [0.0, 0.01, 0.0]];
+        bank_bytes(p, &[(0, 1), (0, 2), (1, 2)], 0.02)
+    }
+
+    /// Dense `C_SS` in f64 from the bank's (f32) blocks.
+    fn css64(bank: &Bank, nodes: &[u16]) -> Vec<Vec<f64>> {
+        let m = 3 * nodes.len();
+        let mut c = vec![vec![0.0; m]; m];
+        for (a, &k) in nodes.iter().enumerate() {
+            for (b, &l) in nodes.iter().enumerate() {
+                let blk = bank.coupling(k as usize, l as usize).unwrap();
+                for i in 0..3 {
+                    for j in 0..3 {
+                        c[3 * a + i][3 * b + j] = f64::from(blk[i][j]);
+                    }
+                }
+            }
+        }
+        c
+    }
+
+    /// Gaussian elimination with partial pivoting, f64.
+    fn gauss(mut a: Vec<Vec<f64>>, mut b: Vec<f64>) -> Vec<f64> {
+        let n = b.len();
+        for c in 0..n {
+            let p = (c..n)
+                .max_by(|&i, &j| a[i][c].abs().total_cmp(&a[j][c].abs()))
+                .unwrap();
+            a.swap(c, p);
+            b.swap(c, p);
+            for r in c + 1..n {
+                let f = a[r][c] / a[c][c];
+                for k in c..n {
+                    a[r][k] -= f * a[c][k];
+                }
+                b[r] -= f * b[c];
+            }
+        }
+        let mut x = vec![0.0; n];
+        for r in (0..n).rev() {
+            let s: f64 = (r + 1..n).map(|k| a[r][k] * x[k]).sum();
+            x[r] = (b[r] - s) / a[r][r];
+        }
+        x
+    }
+
+    fn rel_err(got: &[[f32; 3]], want: &[f64]) -> f64 {
+        let g: Vec<f64> = got.iter().flatten().map(|&v| f64::from(v)).collect();
+        let num: f64 = g.iter().zip(want).map(|(a, b)| (a - b).powi(2)).sum();
+        let den: f64 = want.iter().map(|b| b * b).sum();
+        (num / den).sqrt()
+    }
+
+    #[test]
+    fn point_contact_matches_f64() {
+        let bytes = triangle_bank();
+        let bank = Bank::parse(&bytes).unwrap();
+        let d = [0.001f32, -0.002, -0.005];
+        let got = solve_point(&bank, 1, d).unwrap();
+        let want = gauss(
+            css64(&bank, &[1]),
+            d.iter().map(|&v| f64::from(v)).collect(),
+        );
+        let e = rel_err(got.forces(), &want);
+        std::println!("point: rel err {e:.2e}, condition {:.3}", got.condition);
+        assert!(e <= 1e-4, "{e}");
+        assert_eq!(got.nodes(), &[1]);
+        assert_eq!(got.tool_force_n, got.forces()[0]);
+    }
+
+    #[test]
+    fn triangle_alpha_matches_f64_and_follows_the_tip() {
+        let bytes = triangle_bank();
+        let bank = Bank::parse(&bytes).unwrap();
+        let tri = [0u16, 1, 2];
+        let d = [0.0005f32, 0.001, -0.004];
+        for bary in [
+            [0.2f32, 0.3, 0.5],
+            [1.0 / 3.0; 3],
+            [0.9, 0.05, 0.05],
+            [1.0, 0.0, 0.0],
+        ] {
+            let alpha = alpha_weights(bary);
+            // The paper's claim: the contact point sum k_v u_v moves by d.
+            let s: f32 = alpha.iter().zip(bary).map(|(a, k)| a * k).sum();
+            assert!((s - 1.0).abs() < 1e-6, "{s}");
+            let got = solve_triangle_alpha(&bank, tri, bary, d).unwrap();
+            let mut u = Vec::new();
+            for a in alpha {
+                u.extend(d.iter().map(|&v| f64::from(a) * f64::from(v)));
+            }
+            let c = css64(&bank, &tri);
+            let want = gauss(c.clone(), u.clone());
+            let e = rel_err(got.forces(), &want);
+            // The solved forces reproduce u*_S, hence B u_S = d.
+            let f: Vec<f64> = got
+                .forces()
+                .iter()
+                .flatten()
+                .map(|&v| f64::from(v))
+                .collect();
+            let mut point = [0.0f64; 3];
+            for r in 0..9 {
+                let ur: f64 = (0..9).map(|j| c[r][j] * f[j]).sum();
+                point[r % 3] += f64::from(bary[r / 3]) * ur;
+            }
+            for i in 0..3 {
+                assert!(
+                    (point[i] - f64::from(d[i])).abs() <= 1e-4 * 0.005,
+                    "{point:?}"
+                );
+            }
+            std::println!(
+                "alpha {bary:?}: rel err {e:.2e}, condition {:.1}",
+                got.condition
+            );
+            assert!(e <= 1e-4, "{e}");
+        }
+    }
+
+    #[test]
+    fn triangle_barycentric_matches_f64_and_meets_the_constraint() {
+        let bytes = triangle_bank();
+        let bank = Bank::parse(&bytes).unwrap();
+        let tri = [0u16, 1, 2];
+        let d = [0.0005f32, 0.001, -0.004];
+        for bary in [[0.2f32, 0.3, 0.5], [1.0 / 3.0; 3], [0.9, 0.05, 0.05]] {
+            let got = solve_triangle_barycentric(&bank, tri, bary, d).unwrap();
+            let c = css64(&bank, &tri);
+            let mut m = vec![vec![0.0; 3]; 3];
+            for a in 0..3 {
+                for b in 0..3 {
+                    let w = f64::from(bary[a]) * f64::from(bary[b]);
+                    for i in 0..3 {
+                        for j in 0..3 {
+                            m[i][j] += w * c[3 * a + i][3 * b + j];
+                        }
+                    }
+                }
+            }
+            let ft = gauss(m, d.iter().map(|&v| f64::from(v)).collect());
+            let want: Vec<f64> = (0..9).map(|r| f64::from(bary[r / 3]) * ft[r % 3]).collect();
+            let e = rel_err(got.forces(), &want);
+            // B u_S = d with u_S = C_SS f_S.
+            let f: Vec<f64> = got
+                .forces()
+                .iter()
+                .flatten()
+                .map(|&v| f64::from(v))
+                .collect();
+            let mut point = [0.0f64; 3];
+            for r in 0..9 {
+                let ur: f64 = (0..9).map(|j| c[r][j] * f[j]).sum();
+                point[r % 3] += f64::from(bary[r / 3]) * ur;
+            }
+            for i in 0..3 {
+                assert!(
+                    (point[i] - f64::from(d[i])).abs() <= 1e-4 * 0.005,
+                    "{point:?}"
+                );
+            }
+            let ca = condition_alpha(&bank, tri).unwrap();
+            let cb = condition_barycentric(&bank, tri, bary).unwrap();
+            std::println!(
+                "barycentric {bary:?}: rel err {e:.2e}; condition alpha form {ca:.1}, \
+                 barycentric form {cb:.1}"
+            );
+            assert_eq!(cb, got.condition);
+            assert!(e <= 1e-4, "{e}");
+        }
+    }
+
+    #[test]
+    fn nearly_coincident_nodes_error_or_stay_finite() {
+        for gap in [1.0e-3, 1.0e-5, 1.0e-7] {
+            let p = vec![[0.0, 0.0, 0.0], [gap, 0.0, 0.0], [0.0, 0.01, 0.0]];
+            let bytes = bank_bytes(p, &[(0, 1), (0, 2), (1, 2)], 0.02);
+            let bank = Bank::parse(&bytes).unwrap();
+            let tri = [0u16, 1, 2];
+            let bary = [0.4f32, 0.4, 0.2];
+            let d = [0.0f32, 0.0, -0.005];
+            let ca = condition_alpha(&bank, tri);
+            let cb = condition_barycentric(&bank, tri, bary).unwrap();
+            let alpha = solve_triangle_alpha(&bank, tri, bary, d);
+            std::println!(
+                "gap {gap:e} m: condition alpha {ca:?}, barycentric {cb:.1}; alpha solve {:?}",
+                alpha.map(|f| f.tool_force_n)
+            );
+            match alpha {
+                Ok(f) => {
+                    assert!(f.forces().iter().flatten().all(|v| v.is_finite()));
+                    assert!(f.tool_force_n.iter().all(|v| v.abs() < 1e3));
+                }
+                Err(e) => assert!(
+                    matches!(
+                        e,
+                        SolveError::IllConditioned { .. } | SolveError::NotPositiveDefinite
+                    ),
+                    "{e:?}"
+                ),
+            }
+            // The energy-minimal form does not invert C_SS: always fine here.
+            let b = solve_triangle_barycentric(&bank, tri, bary, d).unwrap();
+            assert!(b.forces().iter().flatten().all(|v| v.is_finite()));
+        }
+        // The tightest gap must be refused by the alpha form.
+        let p = vec![[0.0, 0.0, 0.0], [1.0e-7, 0.0, 0.0], [0.0, 0.01, 0.0]];
+        let bytes = bank_bytes(p, &[(0, 1), (0, 2), (1, 2)], 0.02);
+        let bank = Bank::parse(&bytes).unwrap();
+        assert!(
+            solve_triangle_alpha(&bank, [0, 1, 2], [0.4, 0.4, 0.2], [0.0, 0.0, -0.005]).is_err()
+        );
+    }
+
+    #[test]
+    fn bad_inputs_are_errors() {
+        let p = vec![
+            [0.0, 0.0, 0.0],
+            [0.01, 0.0, 0.0],
+            [0.0, 0.01, 0.0],
+            [0.05, 0.05, 0.0],
+        ];
+        // Node 3 is 50+ mm from the others, beyond the 15 mm radius: not coupled.
+        let bytes = bank_bytes(p, &[(0, 1), (0, 2), (1, 2)], 0.015);
+        let bank = Bank::parse(&bytes).unwrap();
+        let d = [0.0f32, 0.0, -0.001];
+        assert_eq!(
+            solve_imposed(&bank, &[0, 3], &[d, d]).unwrap_err(),
+            SolveError::MissingCoupling { k: 0, l: 3 }
+        );
+        assert_eq!(
+            solve_imposed(&bank, &[], &[]).unwrap_err(),
+            SolveError::NoNodes
+        );
+        assert_eq!(
+            solve_imposed(&bank, &[0, 1, 2, 3], &[d; 4]).unwrap_err(),
+            SolveError::TooManyNodes { count: 4 }
+        );
+        assert_eq!(
+            solve_imposed(&bank, &[0, 0], &[d, d]).unwrap_err(),
+            SolveError::DuplicateNode { node: 0 }
+        );
+        assert_eq!(
+            solve_point(&bank, 9, d).unwrap_err(),
+            SolveError::NodeOutOfRange { node: 9 }
+        );
+        assert_eq!(
+            solve_imposed(&bank, &[0, 1], &[d]).unwrap_err(),
+            SolveError::LengthMismatch {
+                nodes: 2,
+                imposed: 1
+            }
+        );
+        assert_eq!(
+            solve_point(&bank, 0, [f32::NAN, 0.0, 0.0]).unwrap_err(),
+            SolveError::NonFinite
+        );
+        assert_eq!(
+            solve_triangle_alpha(&bank, [0, 1, 2], [0.5, 0.5, 0.5], d).unwrap_err(),
+            SolveError::BadBarycentric
+        );
+        assert_eq!(
+            solve_triangle_barycentric(&bank, [0, 1, 2], [f32::NAN, 0.5, 0.5], d).unwrap_err(),
+            SolveError::NonFinite
+        );
+        // Zero displacement: zero force.
+        let z = solve_point(&bank, 0, [0.0; 3]).unwrap();
+        assert_eq!(z.tool_force_n, [0.0; 3]);
+    }
+
+    #[test]
+    fn tissue_law_splits_along_the_imposed_direction() {
+        let law = TissueLaw::chebyshev(&[2.6, 2.5, 0.1], [0.0, 5.0]).unwrap();
+        let d = [0.0f32, 0.0, -0.002];
+        let f = [0.3f32, -0.1, -1.5];
+        let out = apply_tissue_law(&law, f, d).unwrap();
+        // f_r = (0.3, -0.1, 0) kept; |f_t| = 1.5 along -z replaced by Q(1.5).
+        let q = law.eval(1.5);
+        assert_eq!(&out[..2], &f[..2]);
+        assert!((out[2] + q).abs() <= 1e-6 * q.abs(), "{out:?} {q}");
+        // A pulling force (against d) keeps its sign.
+        let pull = apply_tissue_law(&law, [0.0, 0.0, 0.7], d).unwrap();
+        assert!((pull[2] - law.eval(0.7)).abs() <= 1e-6);
+        // Outside the domain: the law's linear continuation, still finite.
+        let big = apply_tissue_law(&law, [0.0, 0.0, -50.0], d).unwrap();
+        assert!((big[2] + law.eval(50.0)).abs() <= 1e-4 * law.eval(50.0).abs());
+        // Oblique d.
+        let d2 = [1.0f32, 1.0, 0.0];
+        let o = apply_tissue_law(&law, [2.0, 0.0, 1.0], d2).unwrap();
+        let s = 2.0f32 / 2.0f32.sqrt();
+        let q2 = law.eval(s);
+        let h = 1.0 / 2.0f32.sqrt();
+        let want = [1.0 + q2 * h, -1.0 + q2 * h, 1.0];
+        for i in 0..3 {
+            assert!((o[i] - want[i]).abs() <= 1e-5, "{o:?} {want:?}");
+        }
+        // d = 0: unchanged; NaN: error; f_t = 0: only f_r.
+        assert_eq!(apply_tissue_law(&law, f, [0.0; 3]).unwrap(), f);
+        assert_eq!(
+            apply_tissue_law(&law, [f32::NAN, 0.0, 0.0], d).unwrap_err(),
+            SolveError::NonFinite
+        );
+        assert_eq!(
+            apply_tissue_law(&law, f, [0.0, f32::INFINITY, 0.0]).unwrap_err(),
+            SolveError::NonFinite
+        );
+        assert_eq!(
+            apply_tissue_law(&law, [1.0, 0.0, 0.0], d).unwrap(),
+            [1.0, 0.0, 0.0]
+        );
+    }
+}

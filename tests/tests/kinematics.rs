@@ -1,0 +1,138 @@
+//! The firmware's f32 gimbal kinematics against an independent f64 reference (Rodrigues'
+//! formula written out here, the convention of `host/src/reach.rs` and the bank's SPEC:
+//! `tip = fulcrum + insertion * Rot(yaw_axis, yaw) Rot(pitch_axis, pitch) shaft_axis`), over a
+//! grid of joint values covering the calibrated ranges.
+
+use bank_format::DeviceCalibration;
+use firmware::device::{Device, Joints};
+
+fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
+    [
+        a[1] * b[2] - a[2] * b[1],
+        a[2] * b[0] - a[0] * b[2],
+        a[0] * b[1] - a[1] * b[0],
+    ]
+}
+
+fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
+    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+}
+
+/// Right-handed rotation of `v` by `t` about the unit axis `a`, f64.
+fn rotate(a: [f64; 3], t: f64, v: [f64; 3]) -> [f64; 3] {
+    let (s, c) = t.sin_cos();
+    let axv = cross(a, v);
+    let adv = dot(a, v);
+    std::array::from_fn(|i| v[i] * c + axv[i] * s + a[i] * adv * (1.0 - c))
+}
+
+fn tip_f64(cal: &DeviceCalibration, q: [f64; 3]) -> [f64; 3] {
+    let f = |a: [f32; 3]| a.map(f64::from);
+    let d = rotate(
+        f(cal.yaw_axis),
+        q[1],
+        rotate(f(cal.pitch_axis), q[0], f(cal.shaft_axis)),
+    );
+    std::array::from_fn(|i| f64::from(cal.fulcrum_m[i]) + q[2] * d[i])
+}
+
+/// The liver scene's device (`host/scenes/liver.toml`).
+fn liver() -> DeviceCalibration {
+    DeviceCalibration {
+        fulcrum_m: [0.0, 0.0, 0.16],
+        shaft_axis: [0.0, 0.0, -1.0],
+        pitch_axis: [1.0, 0.0, 0.0],
+        yaw_axis: [0.0, 1.0, 0.0],
+        joint_min: [-0.35, -0.35, 0.03],
+        joint_max: [0.35, 0.35, 0.14],
+        home_joint: [0.0, 0.0, 0.03],
+        counts_per_rev: [4096, 4096, 4096],
+        transmission: [12.0, 12.0, 400.0],
+        torque_constant_nm_per_a: [0.025, 0.025, 0.025],
+        current_limit_a: [2.0, 2.0, 2.0],
+        max_force_n: 5.0,
+        tip_radius_m: 0.003,
+    }
+}
+
+/// A tilted frame, wide ranges, the fulcrum away from the origin.
+fn tilted() -> DeviceCalibration {
+    let k = 1.0 / 3.0f64.sqrt();
+    let r = |v: [f64; 3]| rotate([k, k, k], 0.4, v).map(|x| x as f32);
+    DeviceCalibration {
+        fulcrum_m: [0.12, -0.05, 0.3],
+        shaft_axis: r([0.0, 0.0, -1.0]),
+        pitch_axis: r([0.0, 1.0, 0.0]),
+        yaw_axis: r([1.0, 0.0, 0.0]),
+        joint_min: [-1.5, -3.1, 0.0],
+        joint_max: [1.5, 3.1, 0.25],
+        home_joint: [0.0, 0.0, 0.05],
+        counts_per_rev: [2000, 1024, 500],
+        transmission: [-8.0, 20.0, -250.0],
+        torque_constant_nm_per_a: [0.03, 0.05, 0.02],
+        current_limit_a: [1.5, 3.0, 2.5],
+        max_force_n: 8.0,
+        tip_radius_m: 0.002,
+    }
+}
+
+#[test]
+fn f32_forward_kinematics_matches_f64_over_the_ranges() {
+    const N: usize = 21;
+    for (name, cal) in [("liver", liver()), ("tilted", tilted())] {
+        assert_eq!(bank_format::validate_device(&cal), Ok(()));
+        let dev = Device::new(&cal);
+        let lerp = |j: usize, k: usize| {
+            let (lo, hi) = (f64::from(cal.joint_min[j]), f64::from(cal.joint_max[j]));
+            lo + (hi - lo) * k as f64 / (N - 1) as f64
+        };
+        let mut max_err = 0.0f64;
+        let mut worst = [0.0; 3];
+        for a in 0..N {
+            for b in 0..N {
+                for c in 0..N {
+                    // The f32 joints, and the reference at exactly those values.
+                    let q32 = [lerp(0, a) as f32, lerp(1, b) as f32, lerp(2, c) as f32];
+                    let q64 = q32.map(f64::from);
+                    let got = dev.tip(&Joints::from_array(q32));
+                    let want = tip_f64(&cal, q64);
+                    let err = (0..3)
+                        .map(|i| (f64::from(got[i]) - want[i]).powi(2))
+                        .sum::<f64>()
+                        .sqrt();
+                    if err > max_err {
+                        max_err = err;
+                        worst = q64;
+                    }
+                }
+            }
+        }
+        eprintln!(
+            "{name}: f32 FK vs f64 over {} poses: max error {max_err:.3e} m at {worst:?}",
+            N * N * N
+        );
+        assert!(max_err < 1e-5, "{name}: {max_err} m");
+    }
+}
+
+#[test]
+fn joints_from_counts_match_f64() {
+    // Counts over the liver device's whole ranges: q = home + 2 pi n / (cpr * transmission).
+    let cal = liver();
+    let dev = Device::new(&cal);
+    let mut max_err = [0.0f64; 3];
+    for n in (-30_000..=30_000).step_by(37) {
+        let q = dev.joints([n, -n, n.abs()]).to_array();
+        for (j, c) in [n, -n, n.abs()].into_iter().enumerate() {
+            let want = f64::from(cal.home_joint[j])
+                + 2.0 * std::f64::consts::PI * f64::from(c)
+                    / (f64::from(cal.counts_per_rev[j]) * f64::from(cal.transmission[j]));
+            max_err[j] = max_err[j].max((f64::from(q[j]) - want).abs());
+        }
+    }
+    eprintln!(
+        "joints from counts: max error {:.3e} rad, {:.3e} rad, {:.3e} m",
+        max_err[0], max_err[1], max_err[2]
+    );
+    assert!(max_err[0] < 1e-6 && max_err[1] < 1e-6 && max_err[2] < 1e-7);
+}
