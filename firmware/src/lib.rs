@@ -8,6 +8,7 @@
 /// Tick period of the force loop, in seconds (1 kHz).
 pub const TICK_PERIOD_S: f32 = 1.0e-3;
 
+pub mod contact;
 pub mod device;
 pub mod safety;
 pub mod solve;

@@ -1,0 +1,919 @@
+//! Contact detection and tracking for the 1 kHz loop (paper section 5), `no_std`, f32, no heap.
+//!
+//! The tool tip is a point. While free, each tick tests the segment `[prev_tip, tip]` against the
+//! triangles of R found through the bank's bucket grid ([`detect`]); while touching, the contact
+//! point sticks to the tip and the imposed displacement is `tip - anchor` ([`ContactTracker`]).
+//!
+//! # Detection
+//!
+//! The segment is clipped to the grid's box (every node, hence every triangle, lies in it) and
+//! sampled every quarter cell (Chebyshev norm), so a 5 cm move in one tick is followed cell by
+//! cell and cannot tunnel. Around each sample the buckets within `reach` cells are scanned; a
+//! node is kept if it lies within `rho` of the segment, where `rho^2 = max_edge^2 / 3` bounds, for
+//! every triangle of the bank, the distance from any point of the triangle to its nearest
+//! vertex. `reach` is the smallest number of cells (1 = the paper's 27 buckets) that provably
+//! covers every node within `rho` of the segment; it is computed once from the bank by
+//! [`ContactTracker::new`]. The triangles around the kept nodes are tested with a plane-crossing
+//! test equivalent to Moller-Trumbore: only *entering* crossings count (the segment goes from the
+//! outer side, `(p0 - a) . n >= 0`, to the inner side, `(p1 - a) . n <= 0`, against the outward
+//! normal), motions within [`PARALLEL_TOL`] of the plane are grazing and ignored, and the
+//! crossing point's barycentric coordinates are accepted within [`BARY_TOL`] of the triangle and
+//! then clamped to `[0, 1]` and renormalised. A hit exactly on an edge or a vertex is accepted by
+//! every triangle around it; the first hit along the segment wins, ties going to the lowest
+//! triangle index, so it is reported once and deterministically.
+//!
+//! # Tracking and sliding (friction-free)
+//!
+//! While touching, the anchor (the rest-surface point where contact began) and its triangle are
+//! kept as long as the tip's projection onto the triangle's rest plane stays inside the triangle:
+//! the surface point sticks to the tip and `displacement = tip - anchor`. When the projection
+//! leaves the triangle, the contact slides without friction: a descent over the triangles around
+//! the current triangle's vertices finds the rest-surface triangle closest to the tip, and the
+//! anchor jumps to the tip's closest point on it (its projection when that lies inside). So the
+//! tangential displacement stays within one triangle and is released at each triangle boundary
+//! (a saw-tooth in the tangential force while sliding); the normal displacement is continuous.
+//! Contact ends when `(tip - anchor) . n > 0` for the contact triangle's outward rest normal `n`
+//! (the contact would pull), checked before and after any slide.
+
+// `!(x > 0.0)` is deliberate throughout: it also rejects NaN.
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
+
+use bank_format::Bank;
+
+/// Grazing threshold: a segment whose direction makes `|cos| <= PARALLEL_TOL` with a triangle's
+/// normal is treated as parallel to it (no hit).
+pub const PARALLEL_TOL: f32 = 1.0e-4;
+/// Barycentric tolerance: a crossing point whose smallest barycentric coordinate is at least
+/// `-BARY_TOL` is inside the triangle (edges and vertices are shared by their triangles).
+pub const BARY_TOL: f32 = 1.0e-5;
+/// Largest bucket neighbourhood radius, in cells, [`ContactTracker::new`] will choose.
+pub const MAX_REACH_CELLS: u16 = 3;
+/// Cap on the number of samples along one segment (bounds the worst-case tick time).
+pub const MAX_SAMPLES: u32 = 2048;
+/// Cap on the triangle-to-triangle steps of one slide.
+pub const MAX_SLIDE_STEPS: u32 = 32;
+
+/// What the contact solve needs this tick.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum ContactState {
+    /// No contact: no force.
+    Free,
+    /// The tip presses on the surface.
+    Touching {
+        /// Index into `bank.triangles()`.
+        triangle: u32,
+        /// The triangle's nodes (same order as `bary`).
+        nodes: [u16; 3],
+        /// Barycentric coordinates of `anchor` in the triangle: each in `[0, 1]`, sum 1.
+        bary: [f32; 3],
+        /// The rest-surface point the tip holds, m.
+        anchor: [f32; 3],
+        /// `tip - anchor`, m: the displacement imposed on the contact point.
+        displacement: [f32; 3],
+    },
+}
+
+/// A segment-surface crossing found by [`detect`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Hit {
+    /// Index into `bank.triangles()`.
+    pub triangle: u32,
+    /// The triangle's nodes.
+    pub nodes: [u16; 3],
+    /// Parameter along the segment, `0..=1`.
+    pub t: f32,
+    /// Crossing point on the triangle (from the clamped barycentric coordinates), m.
+    pub point: [f32; 3],
+    /// Barycentric coordinates of `point`, each in `[0, 1]`, sum 1.
+    pub bary: [f32; 3],
+}
+
+/// How far around a sample [`detect`] looks, derived from the bank's geometry.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SearchParams {
+    /// Bucket neighbourhood radius in cells (1: the paper's 27 buckets).
+    pub reach: u16,
+    /// Squared node-to-segment distance within which a node's triangles are tested, m^2.
+    pub rho2: f32,
+    /// `false` if the bank's triangles are so large relative to the cells that
+    /// [`MAX_REACH_CELLS`] does not guarantee finding every hit.
+    pub complete: bool,
+}
+
+impl SearchParams {
+    /// Derive the search radius from the longest triangle edge and the grid's cell size.
+    pub fn for_bank(bank: &Bank) -> SearchParams {
+        let p = bank.positions();
+        let mut max_e2 = 0.0f32;
+        for tri in bank.triangles() {
+            let v = tri.map(|i| p.get(usize::from(i)).copied().unwrap_or([0.0; 3]));
+            for (a, b) in [(v[0], v[1]), (v[1], v[2]), (v[2], v[0])] {
+                let e = sub(b, a);
+                max_e2 = max_e2.max(dot(e, e));
+            }
+        }
+        // Nearest-vertex distance from any point of a triangle <= longest edge / sqrt(3); pad
+        // for rounding.
+        let rho2 = max_e2 / 3.0 * 1.001 + 1.0e-12;
+        let h = bank.grid().cell_size_m();
+        let step = h * SAMPLE_STEP_CELLS;
+        // Reach R covers a node within rho of any segment point when rho + step / 2 < R h.
+        for reach in 1..=MAX_REACH_CELLS {
+            let margin = f32::from(reach) * h - 0.5 * step;
+            if margin * margin > rho2 {
+                return SearchParams {
+                    reach,
+                    rho2,
+                    complete: true,
+                };
+            }
+        }
+        SearchParams {
+            reach: MAX_REACH_CELLS,
+            rho2,
+            complete: false,
+        }
+    }
+}
+
+/// Sample spacing along a segment, in cells (Chebyshev norm).
+const SAMPLE_STEP_CELLS: f32 = 0.25;
+
+/// The contact state kept between ticks.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ContactTracker {
+    params: SearchParams,
+    active: Option<Active>,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct Active {
+    triangle: u32,
+    nodes: [u16; 3],
+    bary: [f32; 3],
+    anchor: [f32; 3],
+}
+
+impl ContactTracker {
+    /// A free tracker for `bank` (computes [`SearchParams::for_bank`]: O(triangles), call once).
+    pub fn new(bank: &Bank) -> ContactTracker {
+        ContactTracker {
+            params: SearchParams::for_bank(bank),
+            active: None,
+        }
+    }
+
+    /// The search parameters in use.
+    pub fn params(&self) -> SearchParams {
+        self.params
+    }
+
+    /// Whether a contact is held.
+    pub fn is_touching(&self) -> bool {
+        self.active.is_some()
+    }
+
+    /// Drop any contact (e.g. after a fault or a bank change).
+    pub fn reset(&mut self) {
+        self.active = None;
+    }
+
+    /// One tick: the tip moved from `prev_tip` to `tip` (m, bank frame). A non-finite tip drops
+    /// the contact and reports [`ContactState::Free`].
+    pub fn update(&mut self, bank: &Bank, prev_tip: [f32; 3], tip: [f32; 3]) -> ContactState {
+        if !finite(tip) {
+            self.active = None;
+            return ContactState::Free;
+        }
+        if let Some(active) = self.active {
+            self.active = track(bank, active, tip);
+        } else if let Some(hit) = detect(bank, &self.params, prev_tip, tip) {
+            self.active = Some(Active {
+                triangle: hit.triangle,
+                nodes: hit.nodes,
+                bary: hit.bary,
+                anchor: hit.point,
+            });
+        }
+        match self.active {
+            Some(a) => ContactState::Touching {
+                triangle: a.triangle,
+                nodes: a.nodes,
+                bary: a.bary,
+                anchor: a.anchor,
+                displacement: sub(tip, a.anchor),
+            },
+            None => ContactState::Free,
+        }
+    }
+}
+
+/// The first entering crossing of the segment `[p0, p1]` with R's surface, if any.
+pub fn detect(bank: &Bank, params: &SearchParams, p0: [f32; 3], p1: [f32; 3]) -> Option<Hit> {
+    if !finite(p0) || !finite(p1) {
+        return None;
+    }
+    let grid = bank.grid();
+    let h = grid.cell_size_m();
+    let origin = grid.origin_m();
+    let dims = grid.dims();
+    let dir = sub(p1, p0);
+    // Clip to the grid box (padded by a hundredth of a cell).
+    let pad = 0.01 * h;
+    let (mut ta, mut tb) = (0.0f32, 1.0f32);
+    for axis in 0..3 {
+        let lo = origin[axis] - pad;
+        let hi = origin[axis] + f32::from(dims[axis]) * h + pad;
+        let (p, d) = (p0[axis], dir[axis]);
+        if d == 0.0 {
+            if p < lo || p > hi {
+                return None;
+            }
+        } else {
+            let (u, v) = ((lo - p) / d, (hi - p) / d);
+            ta = ta.max(u.min(v));
+            tb = tb.min(u.max(v));
+        }
+    }
+    if !(ta <= tb) {
+        return None;
+    }
+    let cheb = dir.iter().fold(0.0f32, |m, v| m.max(v.abs())) * (tb - ta);
+    let q = cheb / (h * SAMPLE_STEP_CELLS);
+    let n = if q < MAX_SAMPLES as f32 {
+        (q as u32 + 1).min(MAX_SAMPLES)
+    } else {
+        MAX_SAMPLES
+    };
+    let reach = i32::from(params.reach);
+    let positions = bank.positions();
+    let triangles = bank.triangles();
+    let mut best: Option<Hit> = None;
+    let mut prev_cell: Option<[i32; 3]> = None;
+    for i in 0..=n {
+        let t = ta + (tb - ta) * (i as f32 / n as f32);
+        let s = add(p0, scale(dir, t));
+        let Some(cell) = signed_cell(s, origin, h) else {
+            continue;
+        };
+        if prev_cell == Some(cell) {
+            continue;
+        }
+        let mut lo = [0i32; 3];
+        let mut hi = [0i32; 3];
+        for axis in 0..3 {
+            lo[axis] = (cell[axis] - reach).max(0);
+            hi[axis] = (cell[axis] + reach).min(i32::from(dims[axis]) - 1);
+        }
+        for cz in lo[2]..=hi[2] {
+            for cy in lo[1]..=hi[1] {
+                for cx in lo[0]..=hi[0] {
+                    let c = [cx, cy, cz];
+                    // Already scanned around the previous sample.
+                    let seen =
+                        prev_cell.is_some_and(|pc| (0..3).all(|a| (c[a] - pc[a]).abs() <= reach));
+                    if seen {
+                        continue;
+                    }
+                    let Some(index) = grid.cell_index([cx as u16, cy as u16, cz as u16]) else {
+                        continue;
+                    };
+                    for &node in grid.cell_items(index) {
+                        let Some(&v) = positions.get(usize::from(node)) else {
+                            continue;
+                        };
+                        if point_segment_dist2(v, p0, dir) > params.rho2 {
+                            continue;
+                        }
+                        for &ti in bank.node_triangles(usize::from(node)) {
+                            let Some(&tri) = triangles.get(ti as usize) else {
+                                continue;
+                            };
+                            let Some(hit) = intersect(positions, ti, tri, p0, p1) else {
+                                continue;
+                            };
+                            let better = best.is_none_or(|b| {
+                                hit.t < b.t || (hit.t == b.t && hit.triangle < b.triangle)
+                            });
+                            if better {
+                                best = Some(hit);
+                            }
+                        }
+                    }
+                }
+            }
+        }
+        prev_cell = Some(cell);
+    }
+    best
+}
+
+/// Entering crossing of `[p0, p1]` with triangle `tri` (index `ti`).
+fn intersect(
+    positions: &[[f32; 3]],
+    ti: u32,
+    tri: [u16; 3],
+    p0: [f32; 3],
+    p1: [f32; 3],
+) -> Option<Hit> {
+    let [a, b, c] = vertices(positions, tri)?;
+    let n = cross(sub(b, a), sub(c, a));
+    let nn = dot(n, n);
+    if !(nn > 0.0) {
+        return None;
+    }
+    let dir = sub(p1, p0);
+    let dn = dot(dir, n);
+    // Entering only, and not grazing.
+    if !(dn < 0.0) || dn * dn <= PARALLEL_TOL * PARALLEL_TOL * dot(dir, dir) * nn {
+        return None;
+    }
+    let s0 = dot(sub(p0, a), n);
+    let s1 = dot(sub(p1, a), n);
+    if !(s0 >= 0.0 && s1 <= 0.0 && s0 > s1) {
+        return None;
+    }
+    let t = (s0 / (s0 - s1)).clamp(0.0, 1.0);
+    let x = add(p0, scale(dir, t));
+    let k = plane_bary(a, b, c, n, nn, x);
+    if !(k[0] >= -BARY_TOL && k[1] >= -BARY_TOL && k[2] >= -BARY_TOL) {
+        return None;
+    }
+    let bary = normalise(k)?;
+    Some(Hit {
+        triangle: ti,
+        nodes: tri,
+        t,
+        point: combine(a, b, c, bary),
+        bary,
+    })
+}
+
+/// Next tracking state, `None` when the contact is released.
+fn track(bank: &Bank, active: Active, tip: [f32; 3]) -> Option<Active> {
+    let positions = bank.positions();
+    let [a, b, c] = vertices(positions, active.nodes)?;
+    let n = cross(sub(b, a), sub(c, a));
+    let nn = dot(n, n);
+    if !(nn > 0.0) || dot(sub(tip, active.anchor), n) > 0.0 {
+        return None;
+    }
+    let k = plane_bary(a, b, c, n, nn, tip);
+    if k[0] >= -BARY_TOL && k[1] >= -BARY_TOL && k[2] >= -BARY_TOL {
+        return Some(active);
+    }
+    // Slide: descend to the triangle closest to the tip.
+    let triangles = bank.triangles();
+    let mut cur = active.triangle;
+    let mut cur_nodes = active.nodes;
+    let (mut point, mut bary, mut d2) = closest_on_triangle(tip, a, b, c)?;
+    for _ in 0..MAX_SLIDE_STEPS {
+        let mut moved = false;
+        for v in cur_nodes {
+            for &ti in bank.node_triangles(usize::from(v)) {
+                if ti == cur {
+                    continue;
+                }
+                let Some(&tri) = triangles.get(ti as usize) else {
+                    continue;
+                };
+                let Some([ta, tb, tc]) = vertices(positions, tri) else {
+                    continue;
+                };
+                let Some((p, k, e2)) = closest_on_triangle(tip, ta, tb, tc) else {
+                    continue;
+                };
+                if e2 < d2 {
+                    (point, bary, d2) = (p, k, e2);
+                    cur = ti;
+                    cur_nodes = tri;
+                    moved = true;
+                }
+            }
+        }
+        if !moved {
+            break;
+        }
+    }
+    let [a, b, c] = vertices(positions, cur_nodes)?;
+    let n = cross(sub(b, a), sub(c, a));
+    if dot(sub(tip, point), n) > 0.0 {
+        return None;
+    }
+    Some(Active {
+        triangle: cur,
+        nodes: cur_nodes,
+        bary,
+        anchor: point,
+    })
+}
+
+/// Closest point of triangle `abc` to `p` (Ericson, Real-Time Collision Detection 5.1.5): the
+/// point, its barycentric coordinates, and the squared distance.
+fn closest_on_triangle(
+    p: [f32; 3],
+    a: [f32; 3],
+    b: [f32; 3],
+    c: [f32; 3],
+) -> Option<([f32; 3], [f32; 3], f32)> {
+    let ab = sub(b, a);
+    let ac = sub(c, a);
+    let ap = sub(p, a);
+    let d1 = dot(ab, ap);
+    let d2 = dot(ac, ap);
+    let bp = sub(p, b);
+    let d3 = dot(ab, bp);
+    let d4 = dot(ac, bp);
+    let cp = sub(p, c);
+    let d5 = dot(ab, cp);
+    let d6 = dot(ac, cp);
+    let vc = d1 * d4 - d3 * d2;
+    let vb = d5 * d2 - d1 * d6;
+    let va = d3 * d6 - d5 * d4;
+    let k = if d1 <= 0.0 && d2 <= 0.0 {
+        [1.0, 0.0, 0.0]
+    } else if d3 >= 0.0 && d4 <= d3 {
+        [0.0, 1.0, 0.0]
+    } else if vc <= 0.0 && d1 >= 0.0 && d3 <= 0.0 {
+        let v = ratio(d1, d1 - d3);
+        [1.0 - v, v, 0.0]
+    } else if d6 >= 0.0 && d5 <= d6 {
+        [0.0, 0.0, 1.0]
+    } else if vb <= 0.0 && d2 >= 0.0 && d6 <= 0.0 {
+        let w = ratio(d2, d2 - d6);
+        [1.0 - w, 0.0, w]
+    } else if va <= 0.0 && d4 - d3 >= 0.0 && d5 - d6 >= 0.0 {
+        let w = ratio(d4 - d3, (d4 - d3) + (d5 - d6));
+        [0.0, 1.0 - w, w]
+    } else {
+        let s = va + vb + vc;
+        if !(s > 0.0) {
+            return None;
+        }
+        [va / s, vb / s, vc / s]
+    };
+    let k = normalise(k)?;
+    let q = combine(a, b, c, k);
+    let d = sub(p, q);
+    let d2 = dot(d, d);
+    d2.is_finite().then_some((q, k, d2))
+}
+
+/// `num / den` clamped to `[0, 1]`, 0 when `den` is not positive.
+fn ratio(num: f32, den: f32) -> f32 {
+    if den > 0.0 {
+        (num / den).clamp(0.0, 1.0)
+    } else {
+        0.0
+    }
+}
+
+/// Barycentric coordinates of `x`'s projection onto the plane of `abc` (`n = ab x ac`,
+/// `nn = n . n > 0`).
+fn plane_bary(
+    a: [f32; 3],
+    b: [f32; 3],
+    c: [f32; 3],
+    n: [f32; 3],
+    nn: f32,
+    x: [f32; 3],
+) -> [f32; 3] {
+    let (xa, xb, xc) = (sub(a, x), sub(b, x), sub(c, x));
+    [
+        dot(cross(xb, xc), n) / nn,
+        dot(cross(xc, xa), n) / nn,
+        dot(cross(xa, xb), n) / nn,
+    ]
+}
+
+/// Clamp to `[0, 1]` and rescale to sum 1; `None` for NaN or an all-zero input.
+fn normalise(k: [f32; 3]) -> Option<[f32; 3]> {
+    let k = k.map(|v| v.clamp(0.0, 1.0));
+    let s = k[0] + k[1] + k[2];
+    if !(s > 0.0) || !s.is_finite() {
+        return None;
+    }
+    let k = k.map(|v| v / s);
+    // Put the rounding residue on the largest coordinate.
+    let mut out = k;
+    let big = if k[0] >= k[1] && k[0] >= k[2] {
+        0
+    } else if k[1] >= k[2] {
+        1
+    } else {
+        2
+    };
+    let rest: f32 = (0..3).filter(|&i| i != big).map(|i| out[i]).sum();
+    if let Some(v) = out.get_mut(big) {
+        *v = (1.0 - rest).clamp(0.0, 1.0);
+    }
+    Some(out)
+}
+
+fn vertices(positions: &[[f32; 3]], tri: [u16; 3]) -> Option<[[f32; 3]; 3]> {
+    Some([
+        *positions.get(usize::from(tri[0]))?,
+        *positions.get(usize::from(tri[1]))?,
+        *positions.get(usize::from(tri[2]))?,
+    ])
+}
+
+fn signed_cell(p: [f32; 3], origin: [f32; 3], h: f32) -> Option<[i32; 3]> {
+    let mut out = [0i32; 3];
+    for axis in 0..3 {
+        let t = (p[axis] - origin[axis]) / h;
+        if !t.is_finite() {
+            return None;
+        }
+        let t = t.clamp(-1.0e6, 1.0e6);
+        let i = t as i32;
+        out[axis] = if (i as f32) > t { i - 1 } else { i };
+    }
+    Some(out)
+}
+
+fn point_segment_dist2(v: [f32; 3], p0: [f32; 3], dir: [f32; 3]) -> f32 {
+    let w = sub(v, p0);
+    let l2 = dot(dir, dir);
+    let u = if l2 > 0.0 {
+        (dot(w, dir) / l2).clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
+    let d = sub(w, scale(dir, u));
+    dot(d, d)
+}
+
+fn combine(a: [f32; 3], b: [f32; 3], c: [f32; 3], k: [f32; 3]) -> [f32; 3] {
+    core::array::from_fn(|i| k[0] * a[i] + k[1] * b[i] + k[2] * c[i])
+}
+
+fn finite(p: [f32; 3]) -> bool {
+    p.iter().all(|v| v.is_finite())
+}
+
+fn sub(a: [f32; 3], b: [f32; 3]) -> [f32; 3] {
+    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
+}
+
+fn add(a: [f32; 3], b: [f32; 3]) -> [f32; 3] {
+    [a[0] + b[0], a[1] + b[1], a[2] + b[2]]
+}
+
+fn scale(a: [f32; 3], s: f32) -> [f32; 3] {
+    [a[0] * s, a[1] * s, a[2] * s]
+}
+
+fn dot(a: [f32; 3], b: [f32; 3]) -> f32 {
+    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+}
+
+fn cross(a: [f32; 3], b: [f32; 3]) -> [f32; 3] {
+    [
+        a[1] * b[2] - a[2] * b[1],
+        a[2] * b[0] - a[0] * b[2],
+        a[0] * b[1] - a[1] * b[0],
+    ]
+}
+
+#[cfg(test)]
+mod tests {
+    extern crate std;
+    use super::*;
+    use bank_format::{AlignedBytes, BankBuilder, DeviceCalibration, TissueLaw};
+    use std::vec::Vec;
+
+    const SPACING: f64 = 0.01;
+
+    fn device() -> DeviceCalibration {
+        DeviceCalibration {
+            fulcrum_m: [0.02, 0.02, 0.1],
+            shaft_axis: [0.0, 0.0, -1.0],
+            pitch_axis: [1.0, 0.0, 0.0],
+            yaw_axis: [0.0, 1.0, 0.0],
+            joint_min: [-0.8, -0.8, 0.02],
+            joint_max: [0.8, 0.8, 0.2],
+            home_joint: [0.0, 0.0, 0.05],
+            counts_per_rev: [4096, 4096, 2048],
+            transmission: [10.0, -10.0, 100.0],
+            torque_constant_nm_per_a: [0.03, 0.03, 0.025],
+            current_limit_a: [2.0, 2.0, 1.5],
+            max_force_n: 5.0,
+            tip_radius_m: 0.002,
+        }
+    }
+
+    fn block(p: &[[f64; 3]], k: usize, l: usize) -> [[f64; 3]; 3] {
+        let d = (0..3)
+            .map(|i| (p[k][i] - p[l][i]).powi(2))
+            .sum::<f64>()
+            .sqrt();
+        let kern = (-d / 0.02).exp() * 1.0e-3 + if k == l { 0.3e-3 } else { 0.0 };
+        let mut m = [[0.0; 3]; 3];
+        for (i, row) in m.iter_mut().enumerate() {
+            row[i] = kern;
+        }
+        m
+    }
+
+    /// A flat 5 x 5 patch at z = 0, 1 cm spacing, outward normal +z.
+    fn patch() -> AlignedBytes {
+        let mut p = Vec::new();
+        for j in 0..5 {
+            for i in 0..5 {
+                p.push([SPACING * i as f64, SPACING * j as f64, 0.0]);
+            }
+        }
+        let id = |i: u32, j: u32| i + 5 * j;
+        let mut triangles = Vec::new();
+        for j in 0..4 {
+            for i in 0..4 {
+                let (a, b, c, d) = (id(i, j), id(i + 1, j), id(i + 1, j + 1), id(i, j + 1));
+                triangles.push([a, b, c]);
+                triangles.push([a, c, d]);
+            }
+        }
+        let radius = 0.015;
+        let n = p.len();
+        let mut couplings = Vec::new();
+        for k in 0..n {
+            for l in k + 1..n {
+                let d2: f64 = (0..3).map(|i| (p[k][i] - p[l][i]).powi(2)).sum();
+                if d2.sqrt() < radius * 1.01 {
+                    couplings.push((k as u32, l as u32, block(&p, k, l)));
+                }
+            }
+        }
+        let b = BankBuilder {
+            c_kk: (0..n).map(|k| block(&p, k, k)).collect(),
+            couplings,
+            mesh_ids: (0..n as u32).collect(),
+            triangles,
+            positions_m: p,
+            grid_cell_size_m: SPACING,
+            truncation_radius_m: radius,
+            scene_id: 3,
+            law: TissueLaw::chebyshev(&[2.6, 2.5, 0.1], [0.0, 5.0]).unwrap(),
+            device: device(),
+        };
+        AlignedBytes::new(&b.build().unwrap())
+    }
+
+    fn assert_valid(state: &ContactState, tip: [f32; 3]) {
+        if let ContactState::Touching {
+            bary,
+            anchor,
+            displacement,
+            ..
+        } = *state
+        {
+            assert!(bary.iter().all(|&k| (-1.0e-6..=1.0 + 1.0e-6).contains(&k)));
+            assert!((bary[0] + bary[1] + bary[2] - 1.0).abs() < 1.0e-5);
+            assert!(finite(anchor) && finite(displacement));
+            for i in 0..3 {
+                assert!((displacement[i] - (tip[i] - anchor[i])).abs() < 1.0e-7);
+            }
+        }
+    }
+
+    /// Run a polyline of tips from `start`; returns the states.
+    fn run(
+        bank: &Bank,
+        tr: &mut ContactTracker,
+        start: [f32; 3],
+        tips: &[[f32; 3]],
+    ) -> Vec<ContactState> {
+        let mut prev = start;
+        let mut out = Vec::new();
+        for &tip in tips {
+            let s = tr.update(bank, prev, tip);
+            assert_valid(&s, tip);
+            out.push(s);
+            prev = tip;
+        }
+        out
+    }
+
+    fn touching(s: &ContactState) -> bool {
+        matches!(s, ContactState::Touching { .. })
+    }
+
+    #[test]
+    fn params_use_27_buckets_for_this_patch() {
+        let bytes = patch();
+        let bank = Bank::parse(&bytes).unwrap();
+        let p = SearchParams::for_bank(&bank);
+        assert_eq!(p.reach, 1);
+        assert!(p.complete);
+    }
+
+    #[test]
+    fn press_and_release() {
+        let bytes = patch();
+        let bank = Bank::parse(&bytes).unwrap();
+        let mut tr = ContactTracker::new(&bank);
+        let (x, y) = (0.013f32, 0.017f32);
+        let zs = [
+            0.003, 0.001, -0.001, -0.002, -0.003, -0.001, 0.0, 0.0005, 0.002, -0.0005,
+        ];
+        let tips: Vec<[f32; 3]> = zs.iter().map(|&z| [x, y, z]).collect();
+        let states = run(&bank, &mut tr, [x, y, 0.005], &tips);
+        let t: Vec<bool> = states.iter().map(touching).collect();
+        assert_eq!(
+            t,
+            [
+                false, false, true, true, true, true, true, false, false, true
+            ]
+        );
+        for (s, tip) in states.iter().zip(&tips) {
+            if let ContactState::Touching {
+                anchor,
+                displacement,
+                nodes,
+                triangle,
+                ..
+            } = *s
+            {
+                assert!((anchor[0] - x).abs() < 1.0e-6 && (anchor[1] - y).abs() < 1.0e-6);
+                assert_eq!(anchor[2], 0.0);
+                assert!((displacement[2] - tip[2]).abs() < 1.0e-7);
+                assert_eq!(bank.triangles()[triangle as usize], nodes);
+            }
+        }
+    }
+
+    fn single_hit(bank: &Bank, from: [f32; 3], to: [f32; 3]) -> ([f32; 3], [f32; 3]) {
+        let mut tr = ContactTracker::new(bank);
+        match tr.update(bank, from, to) {
+            ContactState::Touching { bary, anchor, .. } => {
+                assert!(bary.iter().all(|k| k.is_finite()));
+                assert!((bary.iter().sum::<f32>() - 1.0).abs() < 1.0e-6);
+                (bary, anchor)
+            }
+            ContactState::Free => panic!("no hit from {from:?} to {to:?}"),
+        }
+    }
+
+    #[test]
+    fn hits_on_edges_and_vertices_count_once() {
+        let bytes = patch();
+        let bank = Bank::parse(&bytes).unwrap();
+        let params = SearchParams::for_bank(&bank);
+        // Axis edge, diagonal edge, interior vertex, boundary vertex; vertical and slanted.
+        for (x, y) in [
+            (0.015f32, 0.01f32),
+            (0.015, 0.015),
+            (0.01, 0.01),
+            (0.0, 0.0),
+            (0.02, 0.04),
+        ] {
+            for (dx, dy) in [(0.0f32, 0.0f32), (0.003, -0.002)] {
+                let from = [x + dx, y + dy, 0.002];
+                let to = [x - 0.5 * dx, y - 0.5 * dy, -0.001];
+                let (bary, anchor) = single_hit(&bank, from, to);
+                let hit = detect(&bank, &params, from, to).unwrap();
+                assert_eq!(hit.bary, bary);
+                assert!((anchor[0] - x).abs() < 1.0e-6, "{anchor:?}");
+                assert!((anchor[1] - y).abs() < 1.0e-6, "{anchor:?}");
+                assert!(bary.iter().any(|&k| k < 1.0e-5), "on an edge: {bary:?}");
+            }
+        }
+        let (bary, _) = single_hit(&bank, [0.01, 0.01, 0.002], [0.01, 0.01, -0.002]);
+        assert!(
+            bary.iter().any(|&k| k > 1.0 - 1.0e-5),
+            "on a vertex: {bary:?}"
+        );
+    }
+
+    #[test]
+    fn grazing_motion_makes_no_contact() {
+        let bytes = patch();
+        let bank = Bank::parse(&bytes).unwrap();
+        for z in [1.0e-6f32, 0.0] {
+            let mut tr = ContactTracker::new(&bank);
+            let tips: Vec<[f32; 3]> = (0..60)
+                .map(|i| [-0.005 + 0.001 * i as f32, 0.013, z])
+                .collect();
+            let states = run(&bank, &mut tr, [-0.006, 0.013, z], &tips);
+            assert!(states.iter().all(|s| *s == ContactState::Free), "z = {z}");
+            // One long tick along the plane too.
+            assert_eq!(
+                tr.update(&bank, [-0.01, 0.02, z], [0.05, 0.021, z]),
+                ContactState::Free
+            );
+        }
+    }
+
+    #[test]
+    fn fast_strike_does_not_tunnel() {
+        let bytes = patch();
+        let bank = Bank::parse(&bytes).unwrap();
+        // 5 cm in one tick, ending just below the surface, and straight through it.
+        for (from, to) in [
+            ([0.021f32, 0.018, 0.05], [0.019f32, 0.022, -0.001]),
+            ([0.005, 0.035, 0.03], [0.035, 0.005, -0.03]),
+            ([-0.02, 0.02, 0.045], [0.03, 0.02, -0.005]),
+        ] {
+            let mut tr = ContactTracker::new(&bank);
+            let s = tr.update(&bank, from, to);
+            let ContactState::Touching { anchor, .. } = s else {
+                panic!("tunnelled from {from:?} to {to:?}");
+            };
+            assert_valid(&s, to);
+            let t = from[2] / (from[2] - to[2]);
+            for i in 0..2 {
+                let want = from[i] + t * (to[i] - from[i]);
+                assert!((anchor[i] - want).abs() < 1.0e-5, "{anchor:?}");
+            }
+            assert_eq!(anchor[2], 0.0);
+        }
+        // Fully outside the grid: no contact, no panic.
+        let mut tr = ContactTracker::new(&bank);
+        assert_eq!(
+            tr.update(&bank, [1.0, 1.0, 1.0], [2.0, -3.0, 0.5]),
+            ContactState::Free
+        );
+        assert_eq!(
+            tr.update(&bank, [0.01, 0.01, 0.01], [f32::NAN, 0.0, 0.0]),
+            ContactState::Free
+        );
+    }
+
+    #[test]
+    fn slide_across_many_triangles() {
+        let bytes = patch();
+        let bank = Bank::parse(&bytes).unwrap();
+        let mut tr = ContactTracker::new(&bank);
+        let depth = -0.002f32;
+        let mut tips = std::vec![[0.004f32, 0.006, 0.001], [0.004, 0.006, depth]];
+        for i in 1..=70 {
+            let u = i as f32 / 70.0;
+            tips.push([0.004 + 0.032 * u, 0.006 + 0.012 * u, depth]);
+        }
+        let states = run(&bank, &mut tr, [0.004, 0.006, 0.004], &tips);
+        assert_eq!(states[0], ContactState::Free);
+        let mut seen = Vec::new();
+        for (s, tip) in states.iter().zip(&tips).skip(1) {
+            let ContactState::Touching {
+                triangle,
+                anchor,
+                displacement,
+                ..
+            } = *s
+            else {
+                panic!("contact lost at {tip:?}");
+            };
+            assert_eq!(anchor[2], 0.0);
+            assert!((displacement[2] - depth).abs() < 1.0e-7);
+            // Tangential displacement stays within one triangle.
+            let dt = (displacement[0].powi(2) + displacement[1].powi(2)).sqrt();
+            assert!(dt < 1.5 * SPACING as f32, "{dt}");
+            if seen.last() != Some(&triangle) {
+                seen.push(triangle);
+            }
+        }
+        assert!(seen.len() >= 6, "{seen:?}");
+        // Lifting the tip releases the contact.
+        assert_eq!(
+            tr.update(&bank, [0.036, 0.018, depth], [0.036, 0.018, 0.0001]),
+            ContactState::Free
+        );
+    }
+
+    #[test]
+    fn no_contact_from_behind() {
+        let bytes = patch();
+        let bank = Bank::parse(&bytes).unwrap();
+        let mut tr = ContactTracker::new(&bank);
+        let tips = [
+            [0.013f32, 0.017, 0.002],
+            [0.013, 0.017, 0.004],
+            [0.02, 0.02, -0.001],
+        ];
+        let states = run(&bank, &mut tr, [0.013, 0.017, -0.002], &tips);
+        // Exiting from behind is ignored; coming back down from above is a contact.
+        let t: Vec<bool> = states.iter().map(touching).collect();
+        assert_eq!(t, [false, false, true]);
+        // Moving around below the surface.
+        let mut tr = ContactTracker::new(&bank);
+        let tips = [[0.02f32, 0.02, -0.003], [0.03, 0.01, -0.001]];
+        let states = run(&bank, &mut tr, [0.013, 0.017, -0.002], &tips);
+        assert!(states.iter().all(|s| *s == ContactState::Free));
+    }
+
+    #[test]
+    fn closest_point_and_normalise() {
+        let (a, b, c) = ([0.0f32, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]);
+        let (q, k, d2) = closest_on_triangle([2.0, -1.0, 0.5], a, b, c).unwrap();
+        assert_eq!(q, b);
+        assert_eq!(k, [0.0, 1.0, 0.0]);
+        assert!((d2 - 2.25).abs() < 1.0e-6);
+        let (q, _, _) = closest_on_triangle([0.2, 0.3, -1.0], a, b, c).unwrap();
+        assert!((q[0] - 0.2).abs() < 1.0e-6 && (q[1] - 0.3).abs() < 1.0e-6);
+        assert!(closest_on_triangle([0.0; 3], a, a, a).is_some());
+        assert_eq!(normalise([f32::NAN, 0.0, 0.0]), None);
+        assert_eq!(normalise([0.0, 0.0, 0.0]), None);
+        let k = normalise([-1.0e-7, 0.5, 0.5]).unwrap();
+        assert_eq!(k[0] + k[1] + k[2], 1.0);
+    }
+}
