@@ -1,8 +1,11 @@
 //! The portable 1 kHz haptic loop. It holds no hardware: the same code will run in the QEMU
 //! software-in-the-loop image, on the board and inside the host's virtual device.
 //!
-//! The loop itself arrives with the portable-loop issue; this crate currently only builds for
-//! the host and for `thumbv7em-none-eabihf` so the workspace layout is fixed from day one.
+//! One tick ([`tick::HapticLoop::tick`]), following the paper's pipeline: encoder counts ->
+//! gimbal forward kinematics ([`device`]) -> contact detection and tracking on the bank's
+//! reachable surface ([`contact`], paper section 5) -> contact solve in compliance form and the
+//! tissue law Q ([`solve`], eqs. 3-8) -> `J^T F` -> motor currents -> limits and the safety
+//! supervisor ([`safety`]). `no_std`, no heap, f32; the QEMU and board images are not written yet.
 #![no_std]
 
 /// Tick period of the force loop, in seconds (1 kHz).
@@ -12,3 +15,4 @@ pub mod contact;
 pub mod device;
 pub mod safety;
 pub mod solve;
+pub mod tick;

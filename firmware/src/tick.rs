@@ -1,0 +1,768 @@
+//! One tick of the 1 kHz haptic loop ([`HapticLoop::tick`]), assembled from the crate's pieces
+//! (design notes, "The 1 kHz loop"). Portable: no hardware, no heap, no panics, f32.
+//!
+//! Per tick, in this order:
+//!
+//! 1. encoder counts (minus the offset set by [`HapticLoop::zero_encoders`]) -> joints
+//!    ([`Device::joints`]) -> tip and Jacobian ([`Device::tip_and_jacobian`]);
+//! 2. contact update on the segment `[previous tip, tip]` ([`ContactTracker::update`]; the
+//!    first tick, and the first after zeroing the encoders, use a zero-length segment, so a
+//!    pose jump is never swept for contacts);
+//! 3. when touching: the **energy-minimal barycentric** triangle solve
+//!    ([`solve_triangle_barycentric`]): `f_tool = (B C_SS B^T)^-1 d` with `B = [k1 I, k2 I,
+//!    k3 I]`, `d = tip - anchor`, `f_v = k_v f_tool`. It is chosen over the paper's alpha form
+//!    because it is the better-conditioned one: it factors the 3 x 3 matrix `B C_SS B^T` (a
+//!    barycentric average of the triangle's blocks, about as well conditioned as one `C_kk`)
+//!    and never needs `C_SS^-1`, so a small or skinny triangle (nearly dependent columns of
+//!    `C_SS`, a 9 x 9 factorisation losing digits in f32) does not hurt it; at a vertex both
+//!    forms agree. The node forces `f_S` (on the tissue, linear model) are what telemetry
+//!    reports, so the host's `u = C f_S` displays the surface that follows the tip;
+//! 4. the tissue law Q on the tool force ([`apply_tissue_law`], bank's law), except in
+//!    [`Mode::LinearLaw`]; the force on the tool is the *opposite* of the force on the tissue
+//!    (sign convention of [`crate::device`]); it is capped by [`Device::limit_force`];
+//! 5. `tau = J^T F`, requested currents ([`Device::requested_currents`]);
+//! 6. [`Supervisor::tick`]: NaN, encoder jumps, joint and current limits, link silence,
+//!    overruns and a failed solve end at zero current with the fault latched; otherwise the
+//!    clamped currents are applied (only when armed).
+//!
+//! A solve or law error (not positive definite, ill-conditioned, missing coupling, non-finite)
+//! is reported as [`FaultReason::SolveFailed`](bank_format::FaultReason::SolveFailed): the force
+//! and currents of that tick are zero and the supervisor latches the fault.
+//!
+//! Modes ([`HapticLoop::set_mode`]): `Render` (the above), `LinearLaw` (Q bypassed),
+//! `Transparent` (tracking and telemetry, zero force) and `ConstantCurrent` (the given currents,
+//! clamped to the limits, still under the supervisor).
+
+#![deny(
+    clippy::unwrap_used,
+    clippy::expect_used,
+    clippy::panic,
+    clippy::indexing_slicing,
+    clippy::unreachable,
+    clippy::todo
+)]
+
+use bank_format::{Bank, Contact, Counters, MAX_CONTACTS, Mode, Telemetry, heapless};
+
+use crate::contact::{ContactState, ContactTracker};
+use crate::device::{Device, transpose_mul};
+use crate::safety::{ArmRefused, Fault, SafetyConfig, State, Supervisor, TickInput};
+use crate::solve::{SolveError, apply_tissue_law, solve_triangle_barycentric};
+
+/// The contact set and its forces, as sent in telemetry.
+pub type Contacts = heapless::Vec<Contact, MAX_CONTACTS>;
+
+/// What the hardware (or the plant simulator) gives one tick.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct LoopInput {
+    /// Raw encoder counts (pitch, yaw, insertion).
+    pub encoder_counts: [i32; 3],
+    /// Whether the previous tick overran its period.
+    pub overrun: bool,
+    /// Ticks since the last valid frame from the host.
+    pub ticks_since_host_frame: u32,
+}
+
+/// The result of one tick.
+#[derive(Clone, Debug, PartialEq)]
+pub struct LoopOutput {
+    /// Tick number (1 for the first tick; wraps).
+    pub tick: u32,
+    /// Motor currents to write, A: zero unless armed and no fault.
+    pub currents_a: [f32; 3],
+    /// Which motors were clamped to their limit.
+    pub clamped: [bool; 3],
+    /// Safety state after this tick.
+    pub state: State,
+    /// Tool tip, m (bank frame).
+    pub tip_m: [f32; 3],
+    /// The contact tracker's state this tick.
+    pub contact: ContactState,
+    /// Contact nodes and the (linear-model) forces on the tissue at them, N; empty when free or
+    /// when the solve failed.
+    pub contacts: Contacts,
+    /// The force rendered on the tool (what the user feels when armed), N: opposite to the
+    /// force on the tissue, after the law Q and [`Device::limit_force`]. The motors produce it
+    /// only when `state` is `Armed`; zero after a solve error.
+    pub tool_force_n: [f32; 3],
+    /// The latched fault, if in `Fault`.
+    pub fault: Option<Fault>,
+    /// A fault raised by this tick (send `DeviceToHost::Fault` once).
+    pub new_fault: Option<Fault>,
+    /// The solve or law error of this tick, if any (it raised `SolveFailed`).
+    pub solve_error: Option<SolveError>,
+}
+
+/// What the last tick produced, kept for [`HapticLoop::telemetry`].
+#[derive(Clone, Debug)]
+struct Last {
+    tip_m: [f32; 3],
+    contacts: Contacts,
+    currents_a: [f32; 3],
+}
+
+/// The portable haptic loop over one validated bank.
+#[derive(Clone, Debug)]
+pub struct HapticLoop<'b> {
+    bank: &'b Bank<'b>,
+    device: Device,
+    supervisor: Supervisor,
+    tracker: ContactTracker,
+    mode: Mode,
+    encoder_offset: [i32; 3],
+    last_raw_counts: Option<[i32; 3]>,
+    prev_tip: Option<[f32; 3]>,
+    tick: u32,
+    counters: Counters,
+    last: Last,
+}
+
+impl<'b> HapticLoop<'b> {
+    /// A disarmed loop with the bank's device calibration and the default safety thresholds
+    /// ([`SafetyConfig::new`]).
+    pub fn new(bank: &'b Bank<'b>) -> HapticLoop<'b> {
+        HapticLoop::with_config(bank, SafetyConfig::new(bank.device()))
+    }
+
+    /// A disarmed loop with explicit safety thresholds.
+    pub fn with_config(bank: &'b Bank<'b>, config: SafetyConfig) -> HapticLoop<'b> {
+        HapticLoop {
+            bank,
+            device: Device::new(bank.device()),
+            supervisor: Supervisor::new(config),
+            tracker: ContactTracker::new(bank),
+            mode: Mode::Render,
+            encoder_offset: [0; 3],
+            last_raw_counts: None,
+            prev_tip: None,
+            tick: 0,
+            counters: Counters::default(),
+            last: Last {
+                tip_m: [0.0; 3],
+                contacts: Contacts::new(),
+                currents_a: [0.0; 3],
+            },
+        }
+    }
+
+    /// The bank.
+    pub fn bank(&self) -> &'b Bank<'b> {
+        self.bank
+    }
+
+    /// The gimbal model.
+    pub fn device(&self) -> &Device {
+        &self.device
+    }
+
+    /// The safety supervisor.
+    pub fn supervisor(&self) -> &Supervisor {
+        &self.supervisor
+    }
+
+    /// The safety state.
+    pub fn state(&self) -> State {
+        self.supervisor.state()
+    }
+
+    /// The rendering mode.
+    pub fn mode(&self) -> Mode {
+        self.mode
+    }
+
+    /// Ticks run so far (wraps).
+    pub fn tick_count(&self) -> u32 {
+        self.tick
+    }
+
+    /// The counters sent in telemetry.
+    pub fn counters(&self) -> Counters {
+        self.counters
+    }
+
+    /// The counters, for the link layer to update `rx_frames`, `rx_errors` and
+    /// `max_tick_cycles` (the loop itself counts `overruns`).
+    pub fn counters_mut(&mut self) -> &mut Counters {
+        &mut self.counters
+    }
+
+    /// Arm (host command): only from `Disarmed`; the bank was validated when parsed.
+    pub fn arm(&mut self) -> Result<(), ArmRefused> {
+        self.supervisor.arm(true)
+    }
+
+    /// Disarm (host command): `Armed` -> `Disarmed`; returns whether the state changed.
+    pub fn disarm(&mut self) -> bool {
+        self.supervisor.disarm()
+    }
+
+    /// Clear a latched fault (host command): `Fault` -> `Disarmed`; returns whether there was
+    /// one.
+    pub fn clear_fault(&mut self) -> bool {
+        self.supervisor.clear_fault()
+    }
+
+    /// Select the rendering mode (host command), effective from the next tick.
+    pub fn set_mode(&mut self, mode: Mode) {
+        self.mode = mode;
+    }
+
+    /// Declare the current pose (the last tick's raw counts) the calibration's home pose (host
+    /// command). Refused (returns `false`) while armed, since the tip would jump under the
+    /// user's hand. Rebases the supervisor's jump check and drops any contact; the next tick
+    /// does not sweep the jump for contacts.
+    pub fn zero_encoders(&mut self) -> bool {
+        if self.supervisor.state() == State::Armed {
+            return false;
+        }
+        if let Some(raw) = self.last_raw_counts {
+            self.encoder_offset = raw;
+        }
+        self.supervisor.rebase_encoders();
+        self.tracker.reset();
+        self.prev_tip = None;
+        true
+    }
+
+    /// One tick (see the module notes). Never panics.
+    pub fn tick(&mut self, input: LoopInput) -> LoopOutput {
+        self.tick = self.tick.wrapping_add(1);
+        if input.overrun {
+            self.counters.overruns = self.counters.overruns.wrapping_add(1);
+        }
+        self.last_raw_counts = Some(input.encoder_counts);
+        let counts = sub_wrapping(input.encoder_counts, self.encoder_offset);
+        let q = self.device.joints(counts);
+        let (tip, jac) = self.device.tip_and_jacobian(&q);
+        let prev = self.prev_tip.unwrap_or(tip);
+        let contact = self.tracker.update(self.bank, prev, tip);
+        self.prev_tip = Some(tip);
+
+        let (contacts, force_on_tool, solve_error) = match self.contact_force(&contact) {
+            Ok((contacts, f)) => (contacts, self.device.limit_force(f), None),
+            Err(e) => (Contacts::new(), [0.0; 3], Some(e)),
+        };
+        let requested_a = match self.mode {
+            Mode::ConstantCurrent { currents_a } => {
+                self.device.clamp_currents(currents_a).applied_a
+            }
+            _ if solve_error.is_some() => [0.0; 3],
+            _ => self
+                .device
+                .requested_currents(transpose_mul(&jac, force_on_tool)),
+        };
+        let out = self.supervisor.tick(&TickInput {
+            bank_error: None,
+            counts,
+            joints: q.to_array(),
+            force_n: force_on_tool,
+            requested_a,
+            overrun: input.overrun,
+            ticks_since_host_frame: input.ticks_since_host_frame,
+            solve_failed: solve_error.is_some(),
+        });
+
+        self.last = Last {
+            tip_m: tip,
+            contacts: contacts.clone(),
+            currents_a: out.currents_a,
+        };
+        LoopOutput {
+            tick: self.tick,
+            currents_a: out.currents_a,
+            clamped: out.clamped,
+            state: out.state,
+            tip_m: tip,
+            contact,
+            contacts,
+            tool_force_n: force_on_tool,
+            fault: self.supervisor.fault(),
+            new_fault: out.new_fault,
+            solve_error,
+        }
+    }
+
+    /// Telemetry of the last tick (for decimated sending).
+    pub fn telemetry(&self) -> Telemetry {
+        Telemetry {
+            tick: self.tick,
+            state: self.supervisor.state().wire(),
+            mode: self.mode,
+            fault: self.supervisor.state().fault(),
+            tip_m: self.last.tip_m,
+            contacts: self.last.contacts.clone(),
+            currents_a: self.last.currents_a,
+            counters: self.counters,
+        }
+    }
+
+    /// Contact forces on the tissue (linear model) and the force on the tool (N) for the mode.
+    fn contact_force(&self, contact: &ContactState) -> Result<(Contacts, [f32; 3]), SolveError> {
+        let ContactState::Touching {
+            nodes,
+            bary,
+            displacement,
+            ..
+        } = *contact
+        else {
+            return Ok((Contacts::new(), [0.0; 3]));
+        };
+        let forces = solve_triangle_barycentric(self.bank, nodes, bary, displacement)?;
+        let mut contacts = Contacts::new();
+        for (&node, &force_n) in forces.nodes().iter().zip(forces.forces()) {
+            // MAX_CONTACTS (8) >= MAX_CONTACT_NODES (3): never full.
+            if contacts.push(Contact { node, force_n }).is_err() {
+                break;
+            }
+        }
+        let on_tissue = match self.mode {
+            Mode::Render => {
+                apply_tissue_law(self.bank.tissue_law(), forces.tool_force_n, displacement)?
+            }
+            Mode::LinearLaw => forces.tool_force_n,
+            Mode::Transparent | Mode::ConstantCurrent { .. } => [0.0; 3],
+        };
+        Ok((contacts, on_tissue.map(|f| -f)))
+    }
+}
+
+/// `a - b` per joint, wrapping (encoder counters wrap).
+fn sub_wrapping(a: [i32; 3], b: [i32; 3]) -> [i32; 3] {
+    let mut out = a;
+    for (o, &x) in out.iter_mut().zip(&b) {
+        *o = o.wrapping_sub(x);
+    }
+    out
+}
+
+#[cfg(test)]
+#[allow(
+    clippy::unwrap_used,
+    clippy::expect_used,
+    clippy::panic,
+    clippy::indexing_slicing,
+    clippy::needless_range_loop
+)]
+mod tests {
+    extern crate std;
+    use super::*;
+    use crate::device::Joints;
+    use bank_format::{AlignedBytes, BankBuilder, DeviceCalibration, FaultReason, TissueLaw};
+    use std::vec::Vec;
+
+    const H: f64 = 0.01;
+    const N: usize = 5;
+
+    /// Fulcrum 10 cm above the middle of the patch, shaft pointing down (liver-like gimbal).
+    fn device() -> DeviceCalibration {
+        DeviceCalibration {
+            fulcrum_m: [0.02, 0.02, 0.1],
+            shaft_axis: [0.0, 0.0, -1.0],
+            pitch_axis: [1.0, 0.0, 0.0],
+            yaw_axis: [0.0, 1.0, 0.0],
+            joint_min: [-0.35, -0.35, 0.03],
+            joint_max: [0.35, 0.35, 0.14],
+            home_joint: [0.0, 0.0, 0.05],
+            counts_per_rev: [4096, 4096, 4096],
+            transmission: [12.0, 12.0, 400.0],
+            torque_constant_nm_per_a: [0.025, 0.025, 0.025],
+            current_limit_a: [2.0, 2.0, 2.0],
+            max_force_n: 5.0,
+            tip_radius_m: 0.003,
+        }
+    }
+
+    /// `C_kl = exp(-|x_k - x_l| / L) M (+ 0.3e-3 I on the diagonal)`: SPD, m/N.
+    fn block(p: &[[f64; 3]], k: usize, l: usize) -> [[f64; 3]; 3] {
+        let m = [
+            [1.0e-3, 0.1e-3, 0.0],
+            [0.1e-3, 1.2e-3, 0.05e-3],
+            [0.0, 0.05e-3, 2.0e-3],
+        ];
+        let d = (0..3)
+            .map(|i| (p[k][i] - p[l][i]).powi(2))
+            .sum::<f64>()
+            .sqrt();
+        let kern = (-d / 0.015).exp();
+        core::array::from_fn(|i| {
+            core::array::from_fn(|j| kern * m[i][j] + if k == l && i == j { 0.3e-3 } else { 0.0 })
+        })
+    }
+
+    /// A flat 5 x 5 patch at z = 0, 1 cm spacing, every pair coupled.
+    fn patch() -> AlignedBytes {
+        let mut p = Vec::new();
+        for j in 0..N {
+            for i in 0..N {
+                p.push([H * i as f64, H * j as f64, 0.0]);
+            }
+        }
+        let id = |i: usize, j: usize| (i + N * j) as u32;
+        let mut triangles = Vec::new();
+        for j in 0..N - 1 {
+            for i in 0..N - 1 {
+                let (a, b, c, d) = (id(i, j), id(i + 1, j), id(i + 1, j + 1), id(i, j + 1));
+                triangles.push([a, b, c]);
+                triangles.push([a, c, d]);
+            }
+        }
+        let n = p.len();
+        let mut couplings = Vec::new();
+        for k in 0..n {
+            for l in k + 1..n {
+                couplings.push((k as u32, l as u32, block(&p, k, l)));
+            }
+        }
+        let b = BankBuilder {
+            c_kk: (0..n).map(|k| block(&p, k, k)).collect(),
+            couplings,
+            mesh_ids: (0..n as u32).collect(),
+            triangles,
+            positions_m: p,
+            grid_cell_size_m: H,
+            truncation_radius_m: 0.06,
+            scene_id: 7,
+            law: TissueLaw::chebyshev(&[2.6, 2.5, -0.1], [0.0, 5.0]).unwrap(),
+            device: device(),
+        };
+        AlignedBytes::new(&b.build().unwrap())
+    }
+
+    /// Encoder counts for insertion `s` (m) straight down from the rest pose.
+    fn counts_for_insertion(dev: &Device, s: f32) -> [i32; 3] {
+        let k = dev.joint_per_count()[2];
+        [0, 0, ((s - 0.05) / k).round() as i32]
+    }
+
+    fn input(counts: [i32; 3]) -> LoopInput {
+        LoopInput {
+            encoder_counts: counts,
+            overrun: false,
+            ticks_since_host_frame: 0,
+        }
+    }
+
+    fn norm(v: [f32; 3]) -> f32 {
+        v.iter().map(|x| x * x).sum::<f32>().sqrt()
+    }
+
+    /// Invariants of every tick.
+    fn check(out: &LoopOutput, cal: &DeviceCalibration) {
+        for (i, &lim) in out.currents_a.iter().zip(&cal.current_limit_a) {
+            assert!(i.is_finite() && i.abs() <= lim, "{out:?}");
+        }
+        assert!(out.tip_m.iter().all(|x| x.is_finite()), "{out:?}");
+        assert!(out.tool_force_n.iter().all(|x| x.is_finite()), "{out:?}");
+        assert!(norm(out.tool_force_n) <= cal.max_force_n * (1.0 + 1e-5));
+        if out.state != State::Armed {
+            assert_eq!(out.currents_a, [0.0; 3]);
+        }
+    }
+
+    #[test]
+    fn press_and_release() {
+        let bytes = patch();
+        let bank = Bank::parse(bytes.as_slice()).unwrap();
+        let cal = device();
+        let mut lp = HapticLoop::new(&bank);
+        assert_eq!(lp.arm(), Ok(()));
+        let dev = *lp.device();
+        // Down from 5 mm above the surface to 4 mm deep, 0.05 mm per tick, and back up.
+        let down: Vec<f32> = (0..=180).map(|t| 0.095 + 0.05e-3 * t as f32).collect();
+        let path: Vec<f32> = down.iter().chain(down.iter().rev()).copied().collect();
+        let mut fz = Vec::new();
+        for &s in &path {
+            let out = lp.tick(input(counts_for_insertion(&dev, s)));
+            check(&out, &cal);
+            assert_eq!(out.state, State::Armed, "{out:?}");
+            let depth = -out.tip_m[2];
+            if depth > 1e-4 {
+                assert!(
+                    matches!(out.contact, ContactState::Touching { .. }),
+                    "{out:?}"
+                );
+                assert_eq!(out.contacts.len(), 3);
+                // The tool is pushed back up, out of the tissue.
+                assert!(out.tool_force_n[2] > 0.0, "{out:?}");
+                // Insertion motor pushes the shaft back: negative effort along +insertion.
+                assert!(out.currents_a[2] < 0.0, "{out:?}");
+            }
+            if depth < -1e-6 {
+                assert_eq!(out.contact, ContactState::Free);
+                assert_eq!(out.tool_force_n, [0.0; 3]);
+                assert_eq!(out.currents_a, [0.0; 3]);
+                assert!(out.contacts.is_empty());
+            }
+            fz.push(out.tool_force_n[2]);
+        }
+        // Rises while pressing (monotone within rounding), peaks at the bottom, back to zero.
+        let peak = fz.iter().copied().fold(0.0f32, f32::max);
+        assert!(peak > 0.5 && peak <= cal.max_force_n, "peak {peak}");
+        for w in fz[..down.len()].windows(2) {
+            assert!(w[1] >= w[0] - 1e-4, "{w:?}");
+        }
+        assert_eq!(*fz.last().unwrap(), 0.0);
+        let tel = lp.telemetry();
+        assert_eq!(tel.tick, path.len() as u32);
+        assert_eq!(tel.state, bank_format::State::Armed);
+        assert!(tel.contacts.is_empty());
+    }
+
+    #[test]
+    fn linear_law_and_transparent_modes() {
+        let bytes = patch();
+        let bank = Bank::parse(bytes.as_slice()).unwrap();
+        let mut lp = HapticLoop::new(&bank);
+        lp.arm().unwrap();
+        let dev = *lp.device();
+        for t in 0..=100 {
+            lp.tick(input(counts_for_insertion(
+                &dev,
+                0.099 + 0.03e-3 * t as f32,
+            )));
+        }
+        let s = counts_for_insertion(&dev, 0.102);
+        let render = lp.tick(input(s));
+        lp.set_mode(Mode::LinearLaw);
+        let linear = lp.tick(input(s));
+        // The node forces (linear model) sum to minus the linear tool force.
+        let sum: [f32; 3] =
+            core::array::from_fn(|i| linear.contacts.iter().map(|c| c.force_n[i]).sum());
+        for i in 0..3 {
+            assert!(
+                (sum[i] + linear.tool_force_n[i]).abs() < 1e-4,
+                "{sum:?} {linear:?}"
+            );
+        }
+        assert_eq!(render.contacts, linear.contacts);
+        assert!((render.tool_force_n[2] - linear.tool_force_n[2]).abs() > 1e-3);
+        lp.set_mode(Mode::Transparent);
+        let out = lp.tick(input(s));
+        assert_eq!(out.currents_a, [0.0; 3]);
+        assert_eq!(out.contacts.len(), 3);
+        lp.set_mode(Mode::ConstantCurrent {
+            currents_a: [0.5, -9.0, f32::NAN],
+        });
+        let out = lp.tick(input(s));
+        assert_eq!(out.currents_a, [0.5, -2.0, 0.0]);
+        assert_eq!(out.state, State::Armed);
+    }
+
+    #[test]
+    fn strike_in_one_tick() {
+        let bytes = patch();
+        let bank = Bank::parse(bytes.as_slice()).unwrap();
+        let cal = device();
+        // Default thresholds: 5 cm in 1 ms is an encoder jump -> fault, zero current.
+        let mut lp = HapticLoop::new(&bank);
+        lp.arm().unwrap();
+        let dev = *lp.device();
+        check(&lp.tick(input(counts_for_insertion(&dev, 0.08))), &cal);
+        let out = lp.tick(input(counts_for_insertion(&dev, 0.13)));
+        check(&out, &cal);
+        assert!(matches!(out.contact, ContactState::Touching { .. }));
+        assert_eq!(out.state, State::Fault(FaultReason::EncoderJump));
+        assert_eq!(out.new_fault.unwrap().detail, 2);
+        assert_eq!(out.currents_a, [0.0; 3]);
+        assert!((norm(out.tool_force_n) - cal.max_force_n).abs() < 1e-3);
+
+        // With the jump check relaxed, the strike is rendered: force capped at max_force_n,
+        // currents within the limits.
+        let mut config = SafetyConfig::new(&cal);
+        config.max_counts_per_tick = [u32::MAX; 3];
+        let mut lp = HapticLoop::with_config(&bank, config);
+        lp.arm().unwrap();
+        check(&lp.tick(input(counts_for_insertion(&dev, 0.08))), &cal);
+        let out = lp.tick(input(counts_for_insertion(&dev, 0.13)));
+        check(&out, &cal);
+        assert!(matches!(out.contact, ContactState::Touching { .. }));
+        assert_eq!(out.state, State::Armed, "{out:?}");
+        assert!((norm(out.tool_force_n) - cal.max_force_n).abs() < 1e-3);
+        assert!(out.currents_a[2] < 0.0);
+    }
+
+    #[test]
+    fn disarmed_gives_zero_current() {
+        let bytes = patch();
+        let bank = Bank::parse(bytes.as_slice()).unwrap();
+        let cal = device();
+        let mut lp = HapticLoop::new(&bank);
+        let dev = *lp.device();
+        for t in 0..200 {
+            let out = lp.tick(LoopInput {
+                encoder_counts: counts_for_insertion(&dev, 0.095 + 0.05e-3 * t as f32),
+                overrun: false,
+                // No host at all: not a fault while disarmed.
+                ticks_since_host_frame: t,
+            });
+            check(&out, &cal);
+            assert_eq!(out.state, State::Disarmed);
+            assert_eq!(out.currents_a, [0.0; 3]);
+        }
+        // Pressed 5 mm: a force is computed but not applied.
+        assert!(lp.telemetry().contacts.len() == 3);
+        assert_eq!(lp.telemetry().currents_a, [0.0; 3]);
+        // Arm, then disarm: zero again.
+        lp.arm().unwrap();
+        let s = counts_for_insertion(&dev, 0.105);
+        assert!(lp.tick(input(s)).currents_a[2] < 0.0);
+        assert!(lp.disarm());
+        assert_eq!(lp.tick(input(s)).currents_a, [0.0; 3]);
+    }
+
+    #[test]
+    fn link_silence_faults() {
+        let bytes = patch();
+        let bank = Bank::parse(bytes.as_slice()).unwrap();
+        let mut lp = HapticLoop::new(&bank);
+        lp.arm().unwrap();
+        let dev = *lp.device();
+        for t in 0..=100 {
+            lp.tick(input(counts_for_insertion(
+                &dev,
+                0.098 + 0.05e-3 * t as f32,
+            )));
+        }
+        let s = counts_for_insertion(&dev, 0.103);
+        for silent in 0..=10 {
+            let out = lp.tick(LoopInput {
+                encoder_counts: s,
+                overrun: false,
+                ticks_since_host_frame: silent,
+            });
+            assert_eq!(out.state, State::Armed);
+            assert!(out.currents_a[2] < 0.0);
+        }
+        let out = lp.tick(LoopInput {
+            encoder_counts: s,
+            overrun: false,
+            ticks_since_host_frame: 11,
+        });
+        assert_eq!(out.state, State::Fault(FaultReason::LinkSilent));
+        assert_eq!(out.new_fault.unwrap().reason, FaultReason::LinkSilent);
+        assert_eq!(out.currents_a, [0.0; 3]);
+        assert_eq!(lp.telemetry().fault, Some(FaultReason::LinkSilent));
+        assert_eq!(lp.telemetry().state, bank_format::State::Fault);
+        // Latched until cleared; then disarmed, and arming works again.
+        assert_eq!(lp.tick(input(s)).currents_a, [0.0; 3]);
+        assert_eq!(lp.tick(input(s)).new_fault, None);
+        assert!(lp.clear_fault());
+        assert_eq!(lp.tick(input(s)).state, State::Disarmed);
+        lp.arm().unwrap();
+        assert!(lp.tick(input(s)).currents_a[2] < 0.0);
+    }
+
+    #[test]
+    fn encoder_jump_faults() {
+        let bytes = patch();
+        let bank = Bank::parse(bytes.as_slice()).unwrap();
+        let cal = device();
+        let mut lp = HapticLoop::new(&bank);
+        lp.arm().unwrap();
+        lp.tick(input([0, 0, 0]));
+        let out = lp.tick(input([i32::MAX, i32::MIN, 0]));
+        check(&out, &cal);
+        assert_eq!(out.state, State::Fault(FaultReason::EncoderJump));
+        assert_eq!(out.currents_a, [0.0; 3]);
+        let out = lp.tick(input([0, 0, 0]));
+        assert_eq!(out.currents_a, [0.0; 3]);
+    }
+
+    #[test]
+    fn overrun_faults() {
+        let bytes = patch();
+        let bank = Bank::parse(bytes.as_slice()).unwrap();
+        let mut lp = HapticLoop::new(&bank);
+        lp.arm().unwrap();
+        let dev = *lp.device();
+        let s = counts_for_insertion(&dev, 0.103);
+        lp.tick(input(s));
+        let out = lp.tick(LoopInput {
+            encoder_counts: s,
+            overrun: true,
+            ticks_since_host_frame: 0,
+        });
+        assert_eq!(out.state, State::Fault(FaultReason::Overrun));
+        assert_eq!(out.currents_a, [0.0; 3]);
+        assert_eq!(lp.counters().overruns, 1);
+        assert_eq!(lp.telemetry().counters.overruns, 1);
+    }
+
+    #[test]
+    fn zero_encoders_rebases() {
+        let bytes = patch();
+        let bank = Bank::parse(bytes.as_slice()).unwrap();
+        let mut lp = HapticLoop::new(&bank);
+        lp.tick(input([100_000, 0, 5]));
+        lp.arm().unwrap();
+        assert!(!lp.zero_encoders(), "refused while armed");
+        lp.disarm();
+        assert!(lp.zero_encoders());
+        // The same raw counts are now the home pose, and the re-zero is not a jump.
+        let out = lp.tick(input([100_000, 0, 5]));
+        assert_eq!(out.state, State::Disarmed);
+        let home = lp.device().tip(&Joints::from_array(device().home_joint));
+        assert_eq!(out.tip_m, home);
+    }
+
+    #[test]
+    fn solve_failure_faults_with_zero_current() {
+        // Every pair of nodes has an SPD 6 x 6 compliance (what the bank checks), but the
+        // triangle's 9 x 9 `C_SS` (kernel [[1, -a, -a], [-a, 1, -a], [-a, -a, 1]], a = 0.6) is
+        // indefinite: at the centroid `B C_SS B^T` is negative definite and the solve fails.
+        let p = std::vec![[0.0, 0.0, 0.0], [0.01, 0.0, 0.0], [0.0, 0.01, 0.0]];
+        let c = 1.0e-3;
+        let diag = |v: f64| {
+            core::array::from_fn(|i| core::array::from_fn(|j| if i == j { v } else { 0.0 }))
+        };
+        let b = BankBuilder {
+            c_kk: std::vec![diag(c); 3],
+            couplings: std::vec![
+                (0, 1, diag(-0.6 * c)),
+                (0, 2, diag(-0.6 * c)),
+                (1, 2, diag(-0.6 * c)),
+            ],
+            mesh_ids: std::vec![0, 1, 2],
+            triangles: std::vec![[0, 1, 2]],
+            positions_m: p,
+            grid_cell_size_m: 0.005,
+            truncation_radius_m: 0.005,
+            scene_id: 1,
+            law: TissueLaw::chebyshev(&[2.6, 2.5, -0.1], [0.0, 5.0]).unwrap(),
+            device: DeviceCalibration {
+                fulcrum_m: [0.01 / 3.0, 0.01 / 3.0, 0.1],
+                ..device()
+            },
+        };
+        let bytes = AlignedBytes::new(&b.build().unwrap());
+        let bank = Bank::parse(bytes.as_slice()).unwrap();
+        let cal = bank.device();
+        let mut lp = HapticLoop::new(&bank);
+        lp.arm().unwrap();
+        let dev = *lp.device();
+        let mut fault = None;
+        for t in 0..=100 {
+            let out = lp.tick(input(counts_for_insertion(
+                &dev,
+                0.098 + 0.04e-3 * t as f32,
+            )));
+            check(&out, cal);
+            if matches!(out.contact, ContactState::Touching { .. }) {
+                assert_eq!(out.tool_force_n, [0.0; 3]);
+                assert_eq!(out.currents_a, [0.0; 3]);
+                assert!(out.contacts.is_empty());
+                fault = fault.or(out.new_fault.map(|f| (f, out.solve_error)));
+            }
+        }
+        let (f, e) = fault.expect("the press must fault");
+        assert_eq!(f.reason, FaultReason::SolveFailed);
+        assert!(
+            matches!(
+                e,
+                Some(SolveError::NotPositiveDefinite | SolveError::IllConditioned { .. })
+            ),
+            "{e:?}"
+        );
+        assert_eq!(lp.telemetry().fault, Some(FaultReason::SolveFailed));
+    }
+}

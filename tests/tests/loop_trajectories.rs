@@ -1,0 +1,176 @@
+//! The whole haptic loop ([`firmware::tick::HapticLoop`]) on a flat 5 x 5-node patch (z = 0,
+//! 1 cm spacing, every pair coupled), driven by encoder counts computed here by inverse
+//! kinematics: a press followed by a 500-tick slide across the patch and a lift. Every tick:
+//! no NaN, the force within `max_force_n`, the currents within their limits.
+
+#![allow(clippy::needless_range_loop)]
+
+use bank_format::{AlignedBytes, Bank, BankBuilder, DeviceCalibration, TissueLaw};
+use firmware::contact::ContactState;
+use firmware::device::Device;
+use firmware::safety::State;
+use firmware::tick::{HapticLoop, LoopInput, LoopOutput};
+
+const H: f64 = 0.01;
+const N: usize = 5;
+
+/// Fulcrum 10 cm above the middle of the patch, shaft pointing down (liver-like gimbal).
+fn device() -> DeviceCalibration {
+    DeviceCalibration {
+        fulcrum_m: [0.02, 0.02, 0.1],
+        shaft_axis: [0.0, 0.0, -1.0],
+        pitch_axis: [1.0, 0.0, 0.0],
+        yaw_axis: [0.0, 1.0, 0.0],
+        joint_min: [-0.35, -0.35, 0.03],
+        joint_max: [0.35, 0.35, 0.14],
+        home_joint: [0.0, 0.0, 0.05],
+        counts_per_rev: [4096, 4096, 4096],
+        transmission: [12.0, 12.0, 400.0],
+        torque_constant_nm_per_a: [0.025, 0.025, 0.025],
+        current_limit_a: [2.0, 2.0, 2.0],
+        max_force_n: 5.0,
+        tip_radius_m: 0.003,
+    }
+}
+
+/// `C_kl = exp(-|x_k - x_l| / L) M (+ 0.3e-3 I on the diagonal)`: SPD, m/N.
+fn block(p: &[[f64; 3]], k: usize, l: usize) -> [[f64; 3]; 3] {
+    let m = [
+        [1.0e-3, 0.1e-3, 0.0],
+        [0.1e-3, 1.2e-3, 0.05e-3],
+        [0.0, 0.05e-3, 2.0e-3],
+    ];
+    let d = (0..3)
+        .map(|i| (p[k][i] - p[l][i]).powi(2))
+        .sum::<f64>()
+        .sqrt();
+    let kern = (-d / 0.015).exp();
+    std::array::from_fn(|i| {
+        std::array::from_fn(|j| kern * m[i][j] + if k == l && i == j { 0.3e-3 } else { 0.0 })
+    })
+}
+
+fn patch() -> AlignedBytes {
+    let mut p = Vec::new();
+    for j in 0..N {
+        for i in 0..N {
+            p.push([H * i as f64, H * j as f64, 0.0]);
+        }
+    }
+    let id = |i: usize, j: usize| (i + N * j) as u32;
+    let mut triangles = Vec::new();
+    for j in 0..N - 1 {
+        for i in 0..N - 1 {
+            let (a, b, c, d) = (id(i, j), id(i + 1, j), id(i + 1, j + 1), id(i, j + 1));
+            triangles.push([a, b, c]);
+            triangles.push([a, c, d]);
+        }
+    }
+    let n = p.len();
+    let mut couplings = Vec::new();
+    for k in 0..n {
+        for l in k + 1..n {
+            couplings.push((k as u32, l as u32, block(&p, k, l)));
+        }
+    }
+    let b = BankBuilder {
+        c_kk: (0..n).map(|k| block(&p, k, k)).collect(),
+        couplings,
+        mesh_ids: (0..n as u32).collect(),
+        triangles,
+        positions_m: p,
+        grid_cell_size_m: H,
+        truncation_radius_m: 0.06,
+        scene_id: 7,
+        law: TissueLaw::chebyshev(&[2.6, 2.5, -0.1], [0.0, 5.0]).unwrap(),
+        device: device(),
+    };
+    AlignedBytes::new(&b.build().unwrap())
+}
+
+/// Inverse kinematics of this gimbal (`d = (-cos p sin y, sin p, -cos p cos y)`): the encoder
+/// counts that put the tip at `tip`.
+fn counts_for_tip(dev: &Device, cal: &DeviceCalibration, tip: [f64; 3]) -> [i32; 3] {
+    let r: [f64; 3] = std::array::from_fn(|i| tip[i] - f64::from(cal.fulcrum_m[i]));
+    let len = r.iter().map(|x| x * x).sum::<f64>().sqrt();
+    let pitch = (r[1] / len).asin();
+    let yaw = (-r[0]).atan2(-r[2]);
+    let q = [pitch, yaw, len];
+    let k = dev.joint_per_count();
+    std::array::from_fn(|j| {
+        ((q[j] - f64::from(cal.home_joint[j])) / f64::from(k[j])).round() as i32
+    })
+}
+
+fn lerp(a: [f64; 3], b: [f64; 3], t: f64) -> [f64; 3] {
+    std::array::from_fn(|i| a[i] + (b[i] - a[i]) * t)
+}
+
+fn check(out: &LoopOutput, cal: &DeviceCalibration) {
+    assert!(out.tip_m.iter().all(|x| x.is_finite()), "{out:?}");
+    assert!(out.tool_force_n.iter().all(|x| x.is_finite()), "{out:?}");
+    let f = out.tool_force_n.iter().map(|x| x * x).sum::<f32>().sqrt();
+    assert!(f <= cal.max_force_n * (1.0 + 1e-5), "{out:?}");
+    for (i, &lim) in out.currents_a.iter().zip(&cal.current_limit_a) {
+        assert!(i.is_finite() && i.abs() <= lim, "{out:?}");
+    }
+    for c in &out.contacts {
+        assert!(c.force_n.iter().all(|x| x.is_finite()), "{out:?}");
+    }
+    assert_eq!(out.state, State::Armed, "{out:?}");
+}
+
+#[test]
+fn slide_across_the_patch_while_pressed() {
+    let bytes = patch();
+    let bank = Bank::parse(bytes.as_slice()).unwrap();
+    let cal = device();
+    let mut lp = HapticLoop::new(&bank);
+    lp.arm().unwrap();
+    let dev = *lp.device();
+
+    let above = [0.008, 0.012, 0.002];
+    let start = [0.008, 0.012, -0.003];
+    let end = [0.032, 0.028, -0.003];
+    let mut path = Vec::new();
+    path.extend((0..=50).map(|t| lerp(above, start, t as f64 / 50.0)));
+    let slide_from = path.len();
+    path.extend((1..=500).map(|t| lerp(start, end, t as f64 / 500.0)));
+    let slide_to = path.len();
+    let lifted = [end[0], end[1], 0.002];
+    path.extend((1..=50).map(|t| lerp(end, lifted, t as f64 / 50.0)));
+
+    let mut triangles = std::collections::BTreeSet::new();
+    let mut max_f = 0.0f32;
+    for (n, &p) in path.iter().enumerate() {
+        let out = lp.tick(LoopInput {
+            encoder_counts: counts_for_tip(&dev, &cal, p),
+            overrun: false,
+            ticks_since_host_frame: 0,
+        });
+        check(&out, &cal);
+        for i in 0..3 {
+            assert!(
+                (f64::from(out.tip_m[i]) - p[i]).abs() < 1e-4,
+                "{out:?} vs {p:?}"
+            );
+        }
+        if (slide_from..slide_to).contains(&n) {
+            let ContactState::Touching { triangle, .. } = out.contact else {
+                panic!("contact lost while sliding at tick {n}: {out:?}");
+            };
+            triangles.insert(triangle);
+            assert_eq!(out.contacts.len(), 3);
+            // Pressed 3 mm: the tool is pushed up, out of the tissue.
+            assert!(out.tool_force_n[2] > 0.1, "{out:?}");
+            max_f = max_f.max(out.tool_force_n[2]);
+        }
+    }
+    // The slide crossed several triangles; the last ticks are above the surface, force-free.
+    assert!(triangles.len() >= 4, "{triangles:?}");
+    assert!(max_f > 1.0, "{max_f}");
+    let tel = lp.telemetry();
+    assert_eq!(tel.tick, path.len() as u32);
+    assert!(tel.contacts.is_empty());
+    assert_eq!(tel.currents_a, [0.0; 3]);
+}
