@@ -159,3 +159,20 @@ fn sweep_prints_a_row_per_radius() {
     // With every pair within 30 mm the contact sets are complete: exact forces.
     assert!(rows[1].matches("0.0%").count() >= 6, "{table}");
 }
+
+#[test]
+fn the_firmware_loop_runs_on_the_shipped_bank_without_faults() {
+    let dir = tempfile::tempdir().unwrap();
+    let bank = dir.path().join("liver.bank");
+    let built = host(&["bank", "build", s(&scene()), "-o", s(&bank)]);
+    assert!(built.status.success(), "{}", stderr(&built));
+    let out = host(&["bench", "tick", s(&bank), "--ticks", "3000"]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(text.contains("ns per tick"), "{text}");
+    assert!(text.contains("faults 0"), "{text}");
+    assert!(
+        !text.contains("(0 in contact"),
+        "the scripted press must touch: {text}"
+    );
+}
