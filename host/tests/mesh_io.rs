@@ -522,28 +522,3 @@ fn large_mesh_is_fast() {
     assert_eq!(s.triangles.len(), 6 * 46 * 46 * 2);
     assert!(dt.as_secs_f64() < 10.0, "{dt:?}");
 }
-
-/// Full load (parse + validate) of the large mesh from MSH 4.1 ASCII and binary-free formats.
-/// Run with `cargo test --release -p host --test mesh_io -- --ignored --nocapture`.
-#[test]
-#[ignore = "timing; writes ~40 MB to the temp dir"]
-fn large_mesh_file_load_timing() {
-    let m = mesh::structured::box_mesh([0.1, 0.1, 0.1], [46, 46, 46]);
-    let path = std::env::temp_dir().join(format!("mesh_io_large_{}.msh", std::process::id()));
-    let mut w = std::io::BufWriter::new(std::fs::File::create(&path).unwrap());
-    m.write_msh4_ascii(&mut w).unwrap();
-    drop(w);
-    let t = Instant::now();
-    let back = mesh::load(&path).unwrap();
-    let t_load = t.elapsed();
-    let s = mesh::boundary(&back).unwrap();
-    let t_all = t.elapsed();
-    std::fs::remove_file(&path).unwrap();
-    assert_eq!(back, m);
-    println!(
-        "load {t_load:?}, load + boundary {t_all:?} ({} nodes, {} tets, {} triangles)",
-        m.nodes.len(),
-        m.tets.len(),
-        s.triangles.len()
-    );
-}
