@@ -317,25 +317,7 @@ fn rotate_derivative(a: [f32; 3], s: f32, c: f32, v: [f32; 3]) -> [f32; 3] {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    /// The liver scene's device (`host/scenes/liver.toml`).
-    pub(crate) fn liver() -> DeviceCalibration {
-        DeviceCalibration {
-            fulcrum_m: [0.0, 0.0, 0.16],
-            shaft_axis: [0.0, 0.0, -1.0],
-            pitch_axis: [1.0, 0.0, 0.0],
-            yaw_axis: [0.0, 1.0, 0.0],
-            joint_min: [-0.35, -0.35, 0.03],
-            joint_max: [0.35, 0.35, 0.14],
-            home_joint: [0.0, 0.0, 0.03],
-            counts_per_rev: [4096, 4096, 4096],
-            transmission: [12.0, 12.0, 400.0],
-            torque_constant_nm_per_a: [0.025, 0.025, 0.025],
-            current_limit_a: [2.0, 2.0, 2.0],
-            max_force_n: 5.0,
-            tip_radius_m: 0.003,
-        }
-    }
+    use crate::fixtures::liver_device;
 
     /// A tilted, non-axis-aligned frame with a negative transmission.
     fn tilted() -> DeviceCalibration {
@@ -367,13 +349,13 @@ mod tests {
 
     #[test]
     fn calibrations_are_valid() {
-        assert_eq!(bank_format::validate_device(&liver()), Ok(()));
+        assert_eq!(bank_format::validate_device(&liver_device()), Ok(()));
         assert_eq!(bank_format::validate_device(&tilted()), Ok(()));
     }
 
     #[test]
     fn rest_pose_is_along_the_shaft() {
-        for cal in [liver(), tilted()] {
+        for cal in [liver_device(), tilted()] {
             let dev = Device::new(&cal);
             let q = Joints::from_array([0.0, 0.0, 0.1]);
             let want = core::array::from_fn(|i| cal.fulcrum_m[i] + 0.1 * cal.shaft_axis[i]);
@@ -383,7 +365,7 @@ mod tests {
 
     #[test]
     fn hand_computed_poses() {
-        let dev = Device::new(&liver());
+        let dev = Device::new(&liver_device());
         // Pitch about +x by +pi/2 turns -z into +y: Rot(x, t)(0, 0, -1) = (0, sin t, -cos t).
         let q = Joints::from_array([PI / 2.0, 0.0, 0.1]);
         assert!(
@@ -407,7 +389,7 @@ mod tests {
 
     #[test]
     fn joints_from_counts() {
-        let cal = liver();
+        let cal = liver_device();
         let dev = Device::new(&cal);
         assert_eq!(dev.joints([0, 0, 0]), Joints::from_array(cal.home_joint));
         // One motor revolution is 1/12 rad of pitch and yaw, 1/400 rad -> 2 pi / 400 m insertion.
@@ -425,7 +407,7 @@ mod tests {
 
     #[test]
     fn range_check() {
-        let dev = Device::new(&liver());
+        let dev = Device::new(&liver_device());
         let m = [0.0; 3];
         assert_eq!(
             dev.out_of_range(&Joints::from_array([0.0, 0.0, 0.05]), m),
@@ -466,7 +448,7 @@ mod tests {
 
     #[test]
     fn jacobian_matches_central_differences() {
-        for cal in [liver(), tilted()] {
+        for cal in [liver_device(), tilted()] {
             let dev = Device::new(&cal);
             for q0 in poses() {
                 let jac = dev.jacobian(&Joints::from_array(q0));
@@ -497,7 +479,7 @@ mod tests {
     #[test]
     fn efforts_do_the_same_virtual_work() {
         let forces = [[1.0, -2.0, 0.5], [0.0, 0.0, 3.0], [-0.7, 0.2, -1.5]];
-        for cal in [liver(), tilted()] {
+        for cal in [liver_device(), tilted()] {
             let dev = Device::new(&cal);
             for q0 in poses() {
                 let q = Joints::from_array(q0);
@@ -526,7 +508,7 @@ mod tests {
     fn a_push_out_of_the_tissue_drives_insertion_back() {
         // Tissue below the liver trocar pushes the tool up (+z): insertion effort is negative
         // (pull the tool out), and so is the insertion current for a positive transmission.
-        let dev = Device::new(&liver());
+        let dev = Device::new(&liver_device());
         let q = Joints::from_array([0.0, 0.0, 0.1]);
         let tau = dev.joint_efforts(&q, [0.0, 0.0, 1.0]);
         assert!(close(tau, [0.0, 0.0, -1.0], 1e-7), "{tau:?}");
@@ -560,7 +542,7 @@ mod tests {
 
     #[test]
     fn force_limit_keeps_direction() {
-        let dev = Device::new(&liver());
+        let dev = Device::new(&liver_device());
         assert_eq!(dev.limit_force([0.0, 3.0, 4.0]), [0.0, 3.0, 4.0]);
         let f = dev.limit_force([0.0, 6.0, 8.0]);
         assert!(close(f, [0.0, 3.0, 4.0], 1e-6));

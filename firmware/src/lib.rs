@@ -13,6 +13,8 @@ pub const TICK_PERIOD_S: f32 = 1.0e-3;
 
 pub mod contact;
 pub mod device;
+#[cfg(any(test, feature = "test-fixtures"))]
+pub mod fixtures;
 pub mod safety;
 pub mod solve;
 pub mod tick;

@@ -378,36 +378,19 @@ impl Supervisor {
 mod tests {
     use super::*;
     use crate::device::{Device, Joints};
-
-    fn liver() -> DeviceCalibration {
-        DeviceCalibration {
-            fulcrum_m: [0.0, 0.0, 0.16],
-            shaft_axis: [0.0, 0.0, -1.0],
-            pitch_axis: [1.0, 0.0, 0.0],
-            yaw_axis: [0.0, 1.0, 0.0],
-            joint_min: [-0.35, -0.35, 0.03],
-            joint_max: [0.35, 0.35, 0.14],
-            home_joint: [0.0, 0.0, 0.03],
-            counts_per_rev: [4096, 4096, 4096],
-            transmission: [12.0, 12.0, 400.0],
-            torque_constant_nm_per_a: [0.025, 0.025, 0.025],
-            current_limit_a: [2.0, 2.0, 2.0],
-            max_force_n: 5.0,
-            tip_radius_m: 0.003,
-        }
-    }
+    use crate::fixtures::liver_device;
 
     /// A plausible tick at encoder zero (home pose, inside the ranges).
     fn ok_tick() -> TickInput {
         TickInput {
-            joints: liver().home_joint,
+            joints: liver_device().home_joint,
             requested_a: [0.5, -0.5, 1.0],
             ..TickInput::quiet()
         }
     }
 
     fn armed() -> Supervisor {
-        let mut s = Supervisor::new(SafetyConfig::new(&liver()));
+        let mut s = Supervisor::new(SafetyConfig::new(&liver_device()));
         assert_eq!(s.arm(true), Ok(()));
         let out = s.tick(&ok_tick());
         assert_eq!(out.state, State::Armed);
@@ -416,17 +399,17 @@ mod tests {
 
     #[test]
     fn config_from_calibration() {
-        let c = SafetyConfig::new(&liver());
+        let c = SafetyConfig::new(&liver_device());
         // 20 rad/s * 1 ms * 4096 * 12 / 2 pi = 156.4; 2 m/s * 1 ms * 4096 * 400 / 2 pi = 521.5.
         assert_eq!(c.max_counts_per_tick, [156, 156, 521]);
         assert_eq!(c.link_timeout_ticks, 10);
-        let c = SafetyConfig::from_calibration(&liver(), [0.0, f32::NAN, -1.0], 1e-3);
+        let c = SafetyConfig::from_calibration(&liver_device(), [0.0, f32::NAN, -1.0], 1e-3);
         assert_eq!(c.max_counts_per_tick, [1, 1, 1]);
     }
 
     #[test]
     fn arm_disarm_clear_transitions() {
-        let mut s = Supervisor::new(SafetyConfig::new(&liver()));
+        let mut s = Supervisor::new(SafetyConfig::new(&liver_device()));
         assert_eq!(s.state(), State::Disarmed);
         // Disarmed: zero current whatever is requested.
         let out = s.tick(&ok_tick());
@@ -615,7 +598,7 @@ mod tests {
 
     #[test]
     fn disarmed_checks_only_data_faults() {
-        let mut s = Supervisor::new(SafetyConfig::new(&liver()));
+        let mut s = Supervisor::new(SafetyConfig::new(&liver_device()));
         // Drive-only conditions while disarmed: no fault.
         let out = s.tick(&TickInput {
             overrun: true,
@@ -728,7 +711,7 @@ mod tests {
     /// more than the pitch limit, which is clamped.
     #[test]
     fn device_and_supervisor_together() {
-        let cal = liver();
+        let cal = liver_device();
         let dev = Device::new(&cal);
         let mut s = armed();
         let q = Joints::from_array([0.0, 0.0, 0.14]);

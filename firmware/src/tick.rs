@@ -347,86 +347,9 @@ mod tests {
     extern crate std;
     use super::*;
     use crate::device::Joints;
+    use crate::fixtures::{flat_patch, patch_device};
     use bank_format::{AlignedBytes, BankBuilder, DeviceCalibration, FaultReason, TissueLaw};
     use std::vec::Vec;
-
-    const H: f64 = 0.01;
-    const N: usize = 5;
-
-    /// Fulcrum 10 cm above the middle of the patch, shaft pointing down (liver-like gimbal).
-    fn device() -> DeviceCalibration {
-        DeviceCalibration {
-            fulcrum_m: [0.02, 0.02, 0.1],
-            shaft_axis: [0.0, 0.0, -1.0],
-            pitch_axis: [1.0, 0.0, 0.0],
-            yaw_axis: [0.0, 1.0, 0.0],
-            joint_min: [-0.35, -0.35, 0.03],
-            joint_max: [0.35, 0.35, 0.14],
-            home_joint: [0.0, 0.0, 0.05],
-            counts_per_rev: [4096, 4096, 4096],
-            transmission: [12.0, 12.0, 400.0],
-            torque_constant_nm_per_a: [0.025, 0.025, 0.025],
-            current_limit_a: [2.0, 2.0, 2.0],
-            max_force_n: 5.0,
-            tip_radius_m: 0.003,
-        }
-    }
-
-    /// `C_kl = exp(-|x_k - x_l| / L) M (+ 0.3e-3 I on the diagonal)`: SPD, m/N.
-    fn block(p: &[[f64; 3]], k: usize, l: usize) -> [[f64; 3]; 3] {
-        let m = [
-            [1.0e-3, 0.1e-3, 0.0],
-            [0.1e-3, 1.2e-3, 0.05e-3],
-            [0.0, 0.05e-3, 2.0e-3],
-        ];
-        let d = (0..3)
-            .map(|i| (p[k][i] - p[l][i]).powi(2))
-            .sum::<f64>()
-            .sqrt();
-        let kern = (-d / 0.015).exp();
-        core::array::from_fn(|i| {
-            core::array::from_fn(|j| kern * m[i][j] + if k == l && i == j { 0.3e-3 } else { 0.0 })
-        })
-    }
-
-    /// A flat 5 x 5 patch at z = 0, 1 cm spacing, every pair coupled.
-    fn patch() -> AlignedBytes {
-        let mut p = Vec::new();
-        for j in 0..N {
-            for i in 0..N {
-                p.push([H * i as f64, H * j as f64, 0.0]);
-            }
-        }
-        let id = |i: usize, j: usize| (i + N * j) as u32;
-        let mut triangles = Vec::new();
-        for j in 0..N - 1 {
-            for i in 0..N - 1 {
-                let (a, b, c, d) = (id(i, j), id(i + 1, j), id(i + 1, j + 1), id(i, j + 1));
-                triangles.push([a, b, c]);
-                triangles.push([a, c, d]);
-            }
-        }
-        let n = p.len();
-        let mut couplings = Vec::new();
-        for k in 0..n {
-            for l in k + 1..n {
-                couplings.push((k as u32, l as u32, block(&p, k, l)));
-            }
-        }
-        let b = BankBuilder {
-            c_kk: (0..n).map(|k| block(&p, k, k)).collect(),
-            couplings,
-            mesh_ids: (0..n as u32).collect(),
-            triangles,
-            positions_m: p,
-            grid_cell_size_m: H,
-            truncation_radius_m: 0.06,
-            scene_id: 7,
-            law: TissueLaw::chebyshev(&[2.6, 2.5, -0.1], [0.0, 5.0]).unwrap(),
-            device: device(),
-        };
-        AlignedBytes::new(&b.build().unwrap())
-    }
 
     /// Encoder counts for insertion `s` (m) straight down from the rest pose.
     fn counts_for_insertion(dev: &Device, s: f32) -> [i32; 3] {
@@ -461,9 +384,9 @@ mod tests {
 
     #[test]
     fn press_and_release() {
-        let bytes = patch();
+        let bytes = flat_patch();
         let bank = Bank::parse(bytes.as_slice()).unwrap();
-        let cal = device();
+        let cal = patch_device();
         let mut lp = HapticLoop::new(&bank);
         assert_eq!(lp.arm(), Ok(()));
         let dev = *lp.device();
@@ -510,7 +433,7 @@ mod tests {
 
     #[test]
     fn linear_law_and_transparent_modes() {
-        let bytes = patch();
+        let bytes = flat_patch();
         let bank = Bank::parse(bytes.as_slice()).unwrap();
         let mut lp = HapticLoop::new(&bank);
         lp.arm().unwrap();
@@ -550,9 +473,9 @@ mod tests {
 
     #[test]
     fn strike_in_one_tick() {
-        let bytes = patch();
+        let bytes = flat_patch();
         let bank = Bank::parse(bytes.as_slice()).unwrap();
-        let cal = device();
+        let cal = patch_device();
         // Default thresholds: 5 cm in 1 ms is an encoder jump -> fault, zero current.
         let mut lp = HapticLoop::new(&bank);
         lp.arm().unwrap();
@@ -583,9 +506,9 @@ mod tests {
 
     #[test]
     fn disarmed_gives_zero_current() {
-        let bytes = patch();
+        let bytes = flat_patch();
         let bank = Bank::parse(bytes.as_slice()).unwrap();
-        let cal = device();
+        let cal = patch_device();
         let mut lp = HapticLoop::new(&bank);
         let dev = *lp.device();
         for t in 0..200 {
@@ -612,7 +535,7 @@ mod tests {
 
     #[test]
     fn link_silence_faults() {
-        let bytes = patch();
+        let bytes = flat_patch();
         let bank = Bank::parse(bytes.as_slice()).unwrap();
         let mut lp = HapticLoop::new(&bank);
         lp.arm().unwrap();
@@ -654,9 +577,9 @@ mod tests {
 
     #[test]
     fn encoder_jump_faults() {
-        let bytes = patch();
+        let bytes = flat_patch();
         let bank = Bank::parse(bytes.as_slice()).unwrap();
-        let cal = device();
+        let cal = patch_device();
         let mut lp = HapticLoop::new(&bank);
         lp.arm().unwrap();
         lp.tick(input([0, 0, 0]));
@@ -670,7 +593,7 @@ mod tests {
 
     #[test]
     fn overrun_faults() {
-        let bytes = patch();
+        let bytes = flat_patch();
         let bank = Bank::parse(bytes.as_slice()).unwrap();
         let mut lp = HapticLoop::new(&bank);
         lp.arm().unwrap();
@@ -690,7 +613,7 @@ mod tests {
 
     #[test]
     fn zero_encoders_rebases() {
-        let bytes = patch();
+        let bytes = flat_patch();
         let bank = Bank::parse(bytes.as_slice()).unwrap();
         let mut lp = HapticLoop::new(&bank);
         lp.tick(input([100_000, 0, 5]));
@@ -701,7 +624,9 @@ mod tests {
         // The same raw counts are now the home pose, and the re-zero is not a jump.
         let out = lp.tick(input([100_000, 0, 5]));
         assert_eq!(out.state, State::Disarmed);
-        let home = lp.device().tip(&Joints::from_array(device().home_joint));
+        let home = lp
+            .device()
+            .tip(&Joints::from_array(patch_device().home_joint));
         assert_eq!(out.tip_m, home);
     }
 
@@ -731,7 +656,7 @@ mod tests {
             law: TissueLaw::chebyshev(&[2.6, 2.5, -0.1], [0.0, 5.0]).unwrap(),
             device: DeviceCalibration {
                 fulcrum_m: [0.01 / 3.0, 0.01 / 3.0, 0.1],
-                ..device()
+                ..patch_device()
             },
         };
         let bytes = AlignedBytes::new(&b.build().unwrap());

@@ -5,6 +5,7 @@
 
 use bank_format::DeviceCalibration;
 use firmware::device::{Device, Joints};
+use firmware::fixtures::liver_device;
 
 fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
     [
@@ -36,25 +37,6 @@ fn tip_f64(cal: &DeviceCalibration, q: [f64; 3]) -> [f64; 3] {
     std::array::from_fn(|i| f64::from(cal.fulcrum_m[i]) + q[2] * d[i])
 }
 
-/// The liver scene's device (`host/scenes/liver.toml`).
-fn liver() -> DeviceCalibration {
-    DeviceCalibration {
-        fulcrum_m: [0.0, 0.0, 0.16],
-        shaft_axis: [0.0, 0.0, -1.0],
-        pitch_axis: [1.0, 0.0, 0.0],
-        yaw_axis: [0.0, 1.0, 0.0],
-        joint_min: [-0.35, -0.35, 0.03],
-        joint_max: [0.35, 0.35, 0.14],
-        home_joint: [0.0, 0.0, 0.03],
-        counts_per_rev: [4096, 4096, 4096],
-        transmission: [12.0, 12.0, 400.0],
-        torque_constant_nm_per_a: [0.025, 0.025, 0.025],
-        current_limit_a: [2.0, 2.0, 2.0],
-        max_force_n: 5.0,
-        tip_radius_m: 0.003,
-    }
-}
-
 /// A tilted frame, wide ranges, the fulcrum away from the origin.
 fn tilted() -> DeviceCalibration {
     let k = 1.0 / 3.0f64.sqrt();
@@ -79,7 +61,7 @@ fn tilted() -> DeviceCalibration {
 #[test]
 fn f32_forward_kinematics_matches_f64_over_the_ranges() {
     const N: usize = 21;
-    for (name, cal) in [("liver", liver()), ("tilted", tilted())] {
+    for (name, cal) in [("liver", liver_device()), ("tilted", tilted())] {
         assert_eq!(bank_format::validate_device(&cal), Ok(()));
         let dev = Device::new(&cal);
         let lerp = |j: usize, k: usize| {
@@ -118,7 +100,7 @@ fn f32_forward_kinematics_matches_f64_over_the_ranges() {
 #[test]
 fn joints_from_counts_match_f64() {
     // Counts over the liver device's whole ranges: q = home + 2 pi n / (cpr * transmission).
-    let cal = liver();
+    let cal = liver_device();
     let dev = Device::new(&cal);
     let mut max_err = [0.0f64; 3];
     for n in (-30_000..=30_000).step_by(37) {

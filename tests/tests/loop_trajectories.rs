@@ -5,88 +5,12 @@
 
 #![allow(clippy::needless_range_loop)]
 
-use bank_format::{AlignedBytes, Bank, BankBuilder, DeviceCalibration, TissueLaw};
+use bank_format::{Bank, DeviceCalibration};
 use firmware::contact::ContactState;
 use firmware::device::Device;
+use firmware::fixtures::{flat_patch, patch_device};
 use firmware::safety::State;
 use firmware::tick::{HapticLoop, LoopInput, LoopOutput};
-
-const H: f64 = 0.01;
-const N: usize = 5;
-
-/// Fulcrum 10 cm above the middle of the patch, shaft pointing down (liver-like gimbal).
-fn device() -> DeviceCalibration {
-    DeviceCalibration {
-        fulcrum_m: [0.02, 0.02, 0.1],
-        shaft_axis: [0.0, 0.0, -1.0],
-        pitch_axis: [1.0, 0.0, 0.0],
-        yaw_axis: [0.0, 1.0, 0.0],
-        joint_min: [-0.35, -0.35, 0.03],
-        joint_max: [0.35, 0.35, 0.14],
-        home_joint: [0.0, 0.0, 0.05],
-        counts_per_rev: [4096, 4096, 4096],
-        transmission: [12.0, 12.0, 400.0],
-        torque_constant_nm_per_a: [0.025, 0.025, 0.025],
-        current_limit_a: [2.0, 2.0, 2.0],
-        max_force_n: 5.0,
-        tip_radius_m: 0.003,
-    }
-}
-
-/// `C_kl = exp(-|x_k - x_l| / L) M (+ 0.3e-3 I on the diagonal)`: SPD, m/N.
-fn block(p: &[[f64; 3]], k: usize, l: usize) -> [[f64; 3]; 3] {
-    let m = [
-        [1.0e-3, 0.1e-3, 0.0],
-        [0.1e-3, 1.2e-3, 0.05e-3],
-        [0.0, 0.05e-3, 2.0e-3],
-    ];
-    let d = (0..3)
-        .map(|i| (p[k][i] - p[l][i]).powi(2))
-        .sum::<f64>()
-        .sqrt();
-    let kern = (-d / 0.015).exp();
-    std::array::from_fn(|i| {
-        std::array::from_fn(|j| kern * m[i][j] + if k == l && i == j { 0.3e-3 } else { 0.0 })
-    })
-}
-
-fn patch() -> AlignedBytes {
-    let mut p = Vec::new();
-    for j in 0..N {
-        for i in 0..N {
-            p.push([H * i as f64, H * j as f64, 0.0]);
-        }
-    }
-    let id = |i: usize, j: usize| (i + N * j) as u32;
-    let mut triangles = Vec::new();
-    for j in 0..N - 1 {
-        for i in 0..N - 1 {
-            let (a, b, c, d) = (id(i, j), id(i + 1, j), id(i + 1, j + 1), id(i, j + 1));
-            triangles.push([a, b, c]);
-            triangles.push([a, c, d]);
-        }
-    }
-    let n = p.len();
-    let mut couplings = Vec::new();
-    for k in 0..n {
-        for l in k + 1..n {
-            couplings.push((k as u32, l as u32, block(&p, k, l)));
-        }
-    }
-    let b = BankBuilder {
-        c_kk: (0..n).map(|k| block(&p, k, k)).collect(),
-        couplings,
-        mesh_ids: (0..n as u32).collect(),
-        triangles,
-        positions_m: p,
-        grid_cell_size_m: H,
-        truncation_radius_m: 0.06,
-        scene_id: 7,
-        law: TissueLaw::chebyshev(&[2.6, 2.5, -0.1], [0.0, 5.0]).unwrap(),
-        device: device(),
-    };
-    AlignedBytes::new(&b.build().unwrap())
-}
 
 /// Inverse kinematics of this gimbal (`d = (-cos p sin y, sin p, -cos p cos y)`): the encoder
 /// counts that put the tip at `tip`.
@@ -122,9 +46,9 @@ fn check(out: &LoopOutput, cal: &DeviceCalibration) {
 
 #[test]
 fn slide_across_the_patch_while_pressed() {
-    let bytes = patch();
+    let bytes = flat_patch();
     let bank = Bank::parse(bytes.as_slice()).unwrap();
-    let cal = device();
+    let cal = patch_device();
     let mut lp = HapticLoop::new(&bank);
     lp.arm().unwrap();
     let dev = *lp.device();

@@ -1,0 +1,103 @@
+//! Test fixtures shared by the firmware's unit tests and the cross-crate tests in `tests/`:
+//! device calibrations and a small hand-made bank. Compiled only for tests or with the
+//! `test-fixtures` feature (which needs `bank-format/alloc`); never in a firmware image.
+
+extern crate alloc;
+
+use alloc::vec::Vec;
+use bank_format::{AlignedBytes, BankBuilder, DeviceCalibration, TissueLaw};
+
+/// The liver scene's device (`host/scenes/liver.toml`).
+pub fn liver_device() -> DeviceCalibration {
+    DeviceCalibration {
+        fulcrum_m: [0.0, 0.0, 0.16],
+        shaft_axis: [0.0, 0.0, -1.0],
+        pitch_axis: [1.0, 0.0, 0.0],
+        yaw_axis: [0.0, 1.0, 0.0],
+        joint_min: [-0.35, -0.35, 0.03],
+        joint_max: [0.35, 0.35, 0.14],
+        home_joint: [0.0, 0.0, 0.03],
+        counts_per_rev: [4096, 4096, 4096],
+        transmission: [12.0, 12.0, 400.0],
+        torque_constant_nm_per_a: [0.025, 0.025, 0.025],
+        current_limit_a: [2.0, 2.0, 2.0],
+        max_force_n: 5.0,
+        tip_radius_m: 0.003,
+    }
+}
+
+/// Spacing of [`flat_patch`], m.
+pub const PATCH_SPACING_M: f64 = 0.01;
+/// Nodes per side of [`flat_patch`].
+pub const PATCH_SIDE: usize = 5;
+
+/// The liver-like gimbal with its fulcrum 10 cm above the middle of [`flat_patch`], shaft
+/// pointing down, home insertion 5 cm.
+pub fn patch_device() -> DeviceCalibration {
+    DeviceCalibration {
+        fulcrum_m: [0.02, 0.02, 0.1],
+        home_joint: [0.0, 0.0, 0.05],
+        ..liver_device()
+    }
+}
+
+/// `C_kl = exp(-|x_k - x_l| / 15 mm) M (+ 0.3e-3 I on the diagonal)`: SPD, m/N.
+pub fn kernel_block(p: &[[f64; 3]], k: usize, l: usize) -> [[f64; 3]; 3] {
+    let m = [
+        [1.0e-3, 0.1e-3, 0.0],
+        [0.1e-3, 1.2e-3, 0.05e-3],
+        [0.0, 0.05e-3, 2.0e-3],
+    ];
+    let d = (0..3)
+        .map(|i| (p[k][i] - p[l][i]).powi(2))
+        .sum::<f64>()
+        .sqrt();
+    let kern = (-d / 0.015).exp();
+    core::array::from_fn(|i| {
+        core::array::from_fn(|j| kern * m[i][j] + if k == l && i == j { 0.3e-3 } else { 0.0 })
+    })
+}
+
+/// A flat 5 x 5-node patch at z = 0 (outward normal +z), 1 cm spacing, every pair coupled with
+/// [`kernel_block`], the [`patch_device`] and a Chebyshev tissue law.
+///
+/// # Panics
+/// Only if the builder rejects it, which would be a bug in this fixture.
+pub fn flat_patch() -> AlignedBytes {
+    let (n_side, h) = (PATCH_SIDE, PATCH_SPACING_M);
+    let mut p = Vec::new();
+    for j in 0..n_side {
+        for i in 0..n_side {
+            p.push([h * i as f64, h * j as f64, 0.0]);
+        }
+    }
+    let id = |i: usize, j: usize| (i + n_side * j) as u32;
+    let mut triangles = Vec::new();
+    for j in 0..n_side - 1 {
+        for i in 0..n_side - 1 {
+            let (a, b, c, d) = (id(i, j), id(i + 1, j), id(i + 1, j + 1), id(i, j + 1));
+            triangles.push([a, b, c]);
+            triangles.push([a, c, d]);
+        }
+    }
+    let n = p.len();
+    let mut couplings = Vec::new();
+    for k in 0..n {
+        for l in k + 1..n {
+            couplings.push((k as u32, l as u32, kernel_block(&p, k, l)));
+        }
+    }
+    let b = BankBuilder {
+        c_kk: (0..n).map(|k| kernel_block(&p, k, k)).collect(),
+        couplings,
+        mesh_ids: (0..n as u32).collect(),
+        triangles,
+        positions_m: p,
+        grid_cell_size_m: h,
+        truncation_radius_m: 0.06,
+        scene_id: 7,
+        law: TissueLaw::chebyshev(&[2.6, 2.5, -0.1], [0.0, 5.0]).expect("valid law"),
+        device: patch_device(),
+    };
+    AlignedBytes::new(&b.build().expect("valid fixture bank"))
+}
