@@ -26,6 +26,18 @@ pub struct DofPermutation {
     pub inverse: Vec<usize>,
 }
 
+/// The dof permutation of `ordering`, or `None` for faer's built-in AMD.
+pub fn permutation(
+    ordering: Ordering,
+    body: &Elasticity,
+    dofs: &DofMap,
+) -> Result<Option<DofPermutation>, String> {
+    match ordering {
+        Ordering::Amd => Ok(None),
+        Ordering::NestedDissection => nested_dissection(body, dofs).map(Some),
+    }
+}
+
 /// Nested dissection of the node graph of the nodes that have a free dof, expanded to dofs.
 pub fn nested_dissection(body: &Elasticity, dofs: &DofMap) -> Result<DofPermutation, String> {
     let n = body.nodes();

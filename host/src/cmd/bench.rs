@@ -3,7 +3,7 @@
 use anyhow::{Context, Result};
 use host::compliance::Compliance;
 use host::fem::{DofMap, Elasticity, FixedSet, Material};
-use host::ordering::{Ordering, nested_dissection};
+use host::ordering::{Ordering, permutation};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
@@ -189,12 +189,7 @@ fn measure(path: &Path, material: Material, args: &ComplianceArgs) -> Result<Rep
     let assemble_s = t.elapsed().as_secs_f64();
 
     let t = Instant::now();
-    let perm = match args.ordering {
-        Ordering::Amd => None,
-        Ordering::NestedDissection => {
-            Some(nested_dissection(&body, &dofs).map_err(anyhow::Error::msg)?)
-        }
-    };
+    let perm = permutation(args.ordering, &body, &dofs).map_err(anyhow::Error::msg)?;
     let c = Compliance::factorize_matrix(dofs, &k, perm.as_ref())?;
     drop((k, perm));
     let factor_s = t.elapsed().as_secs_f64();

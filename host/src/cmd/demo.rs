@@ -10,9 +10,6 @@ use host::fem::{Elasticity, FixedSet, Material};
 use std::path::PathBuf;
 use std::time::Instant;
 
-/// The paper-sized liver (about 1,400 nodes), embedded so the demo runs from any directory.
-const DEFAULT_LIVER: &[u8] = include_bytes!("../../meshes/liver-1k4.msh");
-
 /// Arguments of `host demo`.
 #[derive(clap::Args, Debug)]
 pub struct Args {
@@ -41,7 +38,7 @@ pub fn run(args: Args) -> Result<()> {
     let (mesh, name) = match &args.mesh {
         Some(p) => (host::mesh::load(p)?, p.display().to_string()),
         None => (
-            host::mesh::parse_msh(DEFAULT_LIVER).context("embedded default liver")?,
+            host::mesh::parse_msh(host::scene::BUILTIN_LIVER).context("embedded default liver")?,
             "embedded liver-1k4.msh".to_string(),
         ),
     };

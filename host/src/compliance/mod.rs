@@ -12,7 +12,7 @@
 mod gram;
 
 use crate::fem::{DofMap, Elasticity, FemError, FixedSet};
-use crate::ordering::{DofPermutation, Ordering, nested_dissection};
+use crate::ordering::{DofPermutation, Ordering, permutation};
 use faer::dyn_stack::{MemBuffer, MemStack};
 use faer::linalg::solvers::Solve;
 use faer::perm::PermRef;
@@ -95,12 +95,7 @@ impl Compliance {
     ) -> Result<Self, ComplianceError> {
         body.check_rigid_motions(fixed)?;
         let dofs = DofMap::new(fixed);
-        let perm = match ordering {
-            Ordering::Amd => None,
-            Ordering::NestedDissection => {
-                Some(nested_dissection(body, &dofs).map_err(ComplianceError::Factorisation)?)
-            }
-        };
+        let perm = permutation(ordering, body, &dofs).map_err(ComplianceError::Factorisation)?;
         let k = body.stiffness(&dofs);
         Self::factorize_matrix(dofs, &k, perm.as_ref())
     }
