@@ -26,6 +26,7 @@ pub const TRUNCATION_SLACK: f64 = 1.0e-4;
 pub struct Bank<'a> {
     bytes: &'a [u8],
     header: &'a BankHeader,
+    sections: &'a [SectionEntry],
     meta: &'a BankMeta,
     positions: &'a [[f32; 3]],
     mesh_ids: &'a [u32],
@@ -419,6 +420,7 @@ impl<'a> Bank<'a> {
         let bank = Bank {
             bytes: bank,
             header,
+            sections: table,
             meta,
             positions,
             mesh_ids,
@@ -566,6 +568,11 @@ impl<'a> Bank<'a> {
     /// The bank's bytes (exactly `total_len` of them).
     pub fn bytes(&self) -> &'a [u8] {
         self.bytes
+    }
+
+    /// The validated section table, in file order (see `SPEC.md`).
+    pub fn sections(&self) -> &'a [SectionEntry] {
+        self.sections
     }
 
     /// The bank's CRC-32, which also serves as its identity on the link.

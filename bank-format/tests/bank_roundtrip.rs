@@ -148,6 +148,26 @@ fn building_is_deterministic_and_sections_are_8_aligned() {
     }
 }
 
+#[test]
+fn the_reader_exposes_the_section_table_as_written() {
+    let bytes = valid_bytes();
+    let aligned = AlignedBytes::new(&bytes);
+    let bank = Bank::parse(&aligned).unwrap();
+    assert_eq!(bank.sections().len(), SectionKind::REQUIRED.len());
+    for kind in SectionKind::REQUIRED {
+        let (_, off, len, count) = section(&bytes, kind);
+        let e = bank
+            .sections()
+            .iter()
+            .find(|e| e.kind == kind.code())
+            .unwrap();
+        assert_eq!(
+            (e.offset as usize, e.len as usize, e.count as usize),
+            (off, len, count)
+        );
+    }
+}
+
 /// Insert a section table entry of kind 77 (8 bytes at the end), shifting the sections.
 fn with_unknown_section(bytes: &[u8], minor: u16) -> Vec<u8> {
     let count = u16::from_le_bytes([bytes[14], bytes[15]]) as usize;

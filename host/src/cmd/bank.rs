@@ -234,24 +234,16 @@ impl Prepared {
     }
 }
 
-/// `(kind name, offset, len, count)` of each section-table entry (from a validated bank).
-fn section_table(bytes: &[u8]) -> Vec<(String, u32, u32, u32)> {
-    let u32_at = |o: usize| {
-        bytes
-            .get(o..o + 4)
-            .map_or(0, |b| u32::from_le_bytes([b[0], b[1], b[2], b[3]]))
-    };
-    let count = bytes
-        .get(14..16)
-        .map_or(0, |b| u16::from_le_bytes([b[0], b[1]])) as usize;
-    (0..count)
-        .map(|i| {
-            let e = bank_format::HEADER_LEN + i * bank_format::SECTION_ENTRY_LEN;
+/// `(kind name, offset, len, count)` of each entry of the bank's section table.
+fn section_table(bank: &Bank) -> Vec<(&'static str, u32, u32, u32)> {
+    bank.sections()
+        .iter()
+        .map(|e| {
             (
-                SectionKind::from_code(u32_at(e)).name().to_string(),
-                u32_at(e + 4),
-                u32_at(e + 8),
-                u32_at(e + 12),
+                SectionKind::from_code(e.kind).name(),
+                e.offset,
+                e.len,
+                e.count,
             )
         })
         .collect()
@@ -337,7 +329,7 @@ fn build(args: BuildArgs) -> Result<()> {
         2 * pairs
     );
     println!("sections  kind                  bytes   count");
-    for (name, _, len, count) in section_table(bank.bytes()) {
+    for (name, _, len, count) in section_table(&bank) {
         println!("          {name:<20} {len:>7} {count:>7}");
     }
     let region = BANK_REGION_BYTES;
@@ -382,7 +374,7 @@ fn inspect(args: InspectArgs) -> Result<()> {
         .map(|k| bank.neighbours(k).0.len())
         .sum::<usize>()
         / 2;
-    let sections = section_table(bank.bytes());
+    let sections = section_table(&bank);
     if args.json {
         let v = serde_json::json!({
             "file": args.bank.display().to_string(),
