@@ -6,6 +6,7 @@ extern crate alloc;
 
 use alloc::vec::Vec;
 use bank_format::{AlignedBytes, BankBuilder, DeviceCalibration, TissueLaw};
+use nalgebra::ComplexField;
 
 /// The liver scene's device (`host/scenes/liver.toml`).
 pub fn liver_device() -> DeviceCalibration {
@@ -48,11 +49,13 @@ pub fn kernel_block(p: &[[f64; 3]], k: usize, l: usize) -> [[f64; 3]; 3] {
         [0.1e-3, 1.2e-3, 0.05e-3],
         [0.0, 0.05e-3, 2.0e-3],
     ];
-    let d = (0..3)
-        .map(|i| (p[k][i] - p[l][i]).powi(2))
-        .sum::<f64>()
-        .sqrt();
-    let kern = (-d / 0.015).exp();
+    // libm through nalgebra: this module is `no_std` too.
+    let d = ComplexField::sqrt(
+        (0..3)
+            .map(|i| (p[k][i] - p[l][i]) * (p[k][i] - p[l][i]))
+            .sum::<f64>(),
+    );
+    let kern = ComplexField::exp(-d / 0.015);
     core::array::from_fn(|i| {
         core::array::from_fn(|j| kern * m[i][j] + if k == l && i == j { 0.3e-3 } else { 0.0 })
     })
@@ -60,11 +63,17 @@ pub fn kernel_block(p: &[[f64; 3]], k: usize, l: usize) -> [[f64; 3]; 3] {
 
 /// A flat 5 x 5-node patch at z = 0 (outward normal +z), 1 cm spacing, every pair coupled with
 /// [`kernel_block`], the [`patch_device`] and a Chebyshev tissue law.
+pub fn flat_patch() -> AlignedBytes {
+    grid_patch(PATCH_SIDE, PATCH_SPACING_M, 0.06)
+}
+
+/// A flat `n_side x n_side`-node grid at z = 0 (outward normal +z) with spacing `h` (m), two
+/// triangles per square (every interior node has six, lumped area `h^2`), the pairs closer than
+/// `truncation_m` coupled with [`kernel_block`], the [`patch_device`] and a Chebyshev law.
 ///
 /// # Panics
 /// Only if the builder rejects it, which would be a bug in this fixture.
-pub fn flat_patch() -> AlignedBytes {
-    let (n_side, h) = (PATCH_SIDE, PATCH_SPACING_M);
+pub fn grid_patch(n_side: usize, h: f64, truncation_m: f64) -> AlignedBytes {
     let mut p = Vec::new();
     for j in 0..n_side {
         for i in 0..n_side {
@@ -84,7 +93,12 @@ pub fn flat_patch() -> AlignedBytes {
     let mut couplings = Vec::new();
     for k in 0..n {
         for l in k + 1..n {
-            couplings.push((k as u32, l as u32, kernel_block(&p, k, l)));
+            let d2: f64 = (0..3)
+                .map(|i| (p[k][i] - p[l][i]) * (p[k][i] - p[l][i]))
+                .sum();
+            if d2 < truncation_m * truncation_m {
+                couplings.push((k as u32, l as u32, kernel_block(&p, k, l)));
+            }
         }
     }
     let b = BankBuilder {
@@ -94,7 +108,7 @@ pub fn flat_patch() -> AlignedBytes {
         triangles,
         positions_m: p,
         grid_cell_size_m: h,
-        truncation_radius_m: 0.06,
+        truncation_radius_m: truncation_m,
         scene_id: 7,
         law: TissueLaw::chebyshev(&[2.6, 2.5, -0.1], [0.0, 5.0]).expect("valid law"),
         device: patch_device(),

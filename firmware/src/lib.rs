@@ -15,6 +15,7 @@ pub mod contact;
 pub mod device;
 #[cfg(any(test, feature = "test-fixtures"))]
 pub mod fixtures;
+pub mod patch;
 pub mod safety;
 pub mod solve;
 pub mod tick;
