@@ -363,10 +363,50 @@ fn track(bank: &Bank, active: Active, tip: [f32; 3]) -> Option<Active> {
         return Some(active);
     }
     // Slide: descend to the triangle closest to the tip.
+    let near = closest_surface_point(bank, active.triangle, active.nodes, tip)?;
+    let (cur, cur_nodes, point, bary) = (near.triangle, near.nodes, near.point, near.bary);
+    let [a, b, c] = vertices(positions, cur_nodes)?;
+    let n = cross(sub(b, a), sub(c, a));
+    if dot(sub(tip, point), n) > 0.0 {
+        return None;
+    }
+    Some(Active {
+        triangle: cur,
+        nodes: cur_nodes,
+        bary,
+        anchor: point,
+    })
+}
+
+/// A point of R's rest surface found by [`closest_surface_point`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SurfacePoint {
+    /// Index into `bank.triangles()`.
+    pub triangle: u32,
+    /// The triangle's nodes.
+    pub nodes: [u16; 3],
+    /// Barycentric coordinates of `point`, each in `[0, 1]`, sum 1.
+    pub bary: [f32; 3],
+    /// The point, m.
+    pub point: [f32; 3],
+}
+
+/// The rest-surface point closest to `p`, by descent from triangle `start` (nodes
+/// `start_nodes`): move to whichever triangle around the current triangle's vertices has a
+/// closer point, at most [`MAX_SLIDE_STEPS`] times. A local search: it finds the closest point
+/// of the surface patch around `start`, not of a fold elsewhere.
+pub fn closest_surface_point(
+    bank: &Bank,
+    start: u32,
+    start_nodes: [u16; 3],
+    p: [f32; 3],
+) -> Option<SurfacePoint> {
+    let positions = bank.positions();
     let triangles = bank.triangles();
-    let mut cur = active.triangle;
-    let mut cur_nodes = active.nodes;
-    let (mut point, mut bary, mut d2) = closest_on_triangle(tip, a, b, c)?;
+    let [a, b, c] = vertices(positions, start_nodes)?;
+    let mut cur = start;
+    let mut cur_nodes = start_nodes;
+    let (mut point, mut bary, mut d2) = closest_on_triangle(p, a, b, c)?;
     for _ in 0..MAX_SLIDE_STEPS {
         let mut moved = false;
         for v in cur_nodes {
@@ -380,11 +420,11 @@ fn track(bank: &Bank, active: Active, tip: [f32; 3]) -> Option<Active> {
                 let Some([ta, tb, tc]) = vertices(positions, tri) else {
                     continue;
                 };
-                let Some((p, k, e2)) = closest_on_triangle(tip, ta, tb, tc) else {
+                let Some((q, k, e2)) = closest_on_triangle(p, ta, tb, tc) else {
                     continue;
                 };
                 if e2 < d2 {
-                    (point, bary, d2) = (p, k, e2);
+                    (point, bary, d2) = (q, k, e2);
                     cur = ti;
                     cur_nodes = tri;
                     moved = true;
@@ -395,16 +435,11 @@ fn track(bank: &Bank, active: Active, tip: [f32; 3]) -> Option<Active> {
             break;
         }
     }
-    let [a, b, c] = vertices(positions, cur_nodes)?;
-    let n = cross(sub(b, a), sub(c, a));
-    if dot(sub(tip, point), n) > 0.0 {
-        return None;
-    }
-    Some(Active {
+    Some(SurfacePoint {
         triangle: cur,
         nodes: cur_nodes,
         bary,
-        anchor: point,
+        point,
     })
 }
 

