@@ -73,16 +73,21 @@ impl Patch {
 pub const QUADRATURE: [(f32, f32, f32); 12] = {
     const S: [f32; 2] = [0.393_765_36, 0.803_087_3];
     const W: [f32; 2] = [0.636_082_06 / 6.0, 0.363_917_94 / 6.0];
-    const PI_3: f32 = core::f32::consts::FRAC_PI_3;
-    const PI_6: f32 = core::f32::consts::FRAC_PI_6;
-    let mut q = [(0.0, 0.0, 0.0); 12];
-    let mut i = 0;
-    while i < 6 {
-        q[i] = (S[0], W[0], PI_3 * i as f32);
-        q[i + 6] = (S[1], W[1], PI_6 + PI_3 * i as f32);
-        i += 1;
-    }
-    q
+    const D: f32 = core::f32::consts::PI / 180.0;
+    [
+        (S[0], W[0], 0.0),
+        (S[0], W[0], 60.0 * D),
+        (S[0], W[0], 120.0 * D),
+        (S[0], W[0], 180.0 * D),
+        (S[0], W[0], 240.0 * D),
+        (S[0], W[0], 300.0 * D),
+        (S[1], W[1], 30.0 * D),
+        (S[1], W[1], 90.0 * D),
+        (S[1], W[1], 150.0 * D),
+        (S[1], W[1], 210.0 * D),
+        (S[1], W[1], 270.0 * D),
+        (S[1], W[1], 330.0 * D),
+    ]
 };
 
 /// Cosine and sine of each [`QUADRATURE`] angle.

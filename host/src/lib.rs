@@ -6,6 +6,7 @@
 //! (scene files) and [`reach`] (the region the tool can touch) feed the bank builder.
 
 pub mod compliance;
+pub mod contact;
 pub mod fem;
 pub mod mesh;
 pub mod ordering;

@@ -16,6 +16,9 @@ pub enum Bench {
     /// Nanoseconds per tick of the firmware's portable loop run natively on a bank, along a
     /// scripted press-slide-release trajectory.
     Tick(TickArgs),
+    /// The same tool press on one organ meshed at several sizes: point contact against the
+    /// finite tool tip (the point contact's force falls under refinement, the tip's converges).
+    Refinement(super::refinement::Args),
 }
 
 /// Arguments of `host bench tick`.
@@ -87,10 +90,12 @@ pub fn run(bench: Bench) -> Result<()> {
     match bench {
         Bench::Compliance(args) => compliance(args),
         Bench::Tick(args) => tick(args),
+        Bench::Refinement(args) => super::refinement::run(args),
     }
 }
 
-fn default_meshes() -> Vec<PathBuf> {
+/// The shipped livers, coarse to fine, and the generated 100k one when present.
+pub fn default_meshes() -> Vec<PathBuf> {
     let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("meshes");
     let mut v = vec![dir.join("liver-1k4.msh"), dir.join("liver-10k.msh")];
     let big = dir.join("generated/liver-100k.msh");
