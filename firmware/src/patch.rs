@@ -15,9 +15,12 @@
 //! contact triangle) and its weight is spread over that triangle's vertices by barycentric
 //! coordinates. When the tip is much smaller than the triangles every point falls in the
 //! contact triangle and the weights are the anchor's barycentric coordinates (the paper's
-//! point contact, exactly the consistent load of a pressure inside one triangle); when it
-//! covers many triangles the weights follow the pressure. As the anchor slides, each point and
-//! its barycentric coordinates move continuously, and so does the force.
+//! point contact, exactly the consistent load of a pressure inside one triangle). Twelve points
+//! are twelve point loads, though, which a fine mesh again resolves as singular; so once the
+//! mesh resolves the tip ([`resolution`]: enough nodes under it) the weights blend into the
+//! nodal quadrature `a_k p(rho_k)` (`a_k` the node's lumped area, a third of its triangles'),
+//! which converges under refinement. As the anchor slides, the points, their barycentric
+//! coordinates and the nodal pressures move continuously, and so does the force.
 //!
 //! Normalised to sum 1, these are the weights `w` of the energy-minimal solve
 //! ([`crate::solve::WeightedSolve`]): `f_k = w_k f_tool` and the tool displacement is imposed on
@@ -121,7 +124,7 @@ pub fn tool_patch(
     anchor: [f32; 3],
     radius_m: f32,
 ) -> Patch {
-    let mut acc = Accumulator::default();
+    let mut quad = Accumulator::default();
     match tangent_basis(bank, nodes) {
         Some((e1, e2)) if radius_m > 0.0 && radius_m.is_finite() => {
             for (&(s, w, _), &(c, sn)) in QUADRATURE.iter().zip(&DIRECTIONS) {
@@ -132,14 +135,90 @@ pub fn tool_patch(
                     anchor[2] + x * e1[2] + y * e2[2],
                 ];
                 match closest_surface_point(bank, triangle, nodes, q) {
-                    Some(sp) => acc.add_bary(sp.nodes, sp.bary, w),
-                    None => acc.add_bary(nodes, bary, w),
+                    Some(sp) => quad.add_bary(sp.nodes, sp.bary, w),
+                    None => quad.add_bary(nodes, bary, w),
                 }
             }
         }
-        _ => acc.add_bary(nodes, bary, 1.0),
+        _ => {
+            quad.add_bary(nodes, bary, 1.0);
+            return quad.finish(bank);
+        }
     }
+    let (nodal, n_eff) = nodal_loads(bank, nodes, bary, anchor, radius_m);
+    let theta = resolution(n_eff);
+    let mut acc = Accumulator::default();
+    acc.merge_scaled(&quad, 1.0 - theta);
+    acc.merge_scaled(&nodal, theta);
     acc.finish(bank)
+}
+
+/// How well the mesh resolves the tip, from `n_eff = sum_k (1 - rho_k^2 / r^2)` over the nodes
+/// within `r` of the anchor (continuous as the anchor moves: nodes enter at zero): the share
+/// `theta` of the nodal quadrature in the weights. 0 up to [`RESOLVED_FROM`] (the 12 points
+/// carry the load), rising linearly to 1 at [`RESOLVED_AT`] (the nodes do).
+pub fn resolution(n_eff: f32) -> f32 {
+    ((n_eff - RESOLVED_FROM) / (RESOLVED_AT - RESOLVED_FROM)).clamp(0.0, 1.0)
+}
+
+/// Below this `n_eff` the disk quadrature alone gives the weights.
+pub const RESOLVED_FROM: f32 = 2.0;
+/// From this `n_eff` the nodal quadrature alone gives the weights.
+pub const RESOLVED_AT: f32 = 6.0;
+
+/// The nodal quadrature `a_k (1 - rho_k^2 / r^2)` (normalised later) over the nodes within `r`
+/// of the anchor, among the bank's neighbours of the contact triangle's vertex nearest to it,
+/// and `n_eff` (see [`resolution`]).
+fn nodal_loads(
+    bank: &Bank,
+    nodes: [u16; 3],
+    bary: [f32; 3],
+    anchor: [f32; 3],
+    radius_m: f32,
+) -> (Accumulator, f32) {
+    let mut acc = Accumulator::default();
+    let r2 = radius_m * radius_m;
+    let nearest = nodes
+        .iter()
+        .zip(bary)
+        .fold(
+            (nodes[0], -1.0f32),
+            |best, (&k, b)| {
+                if b > best.1 { (k, b) } else { best }
+            },
+        )
+        .0;
+    let (neighbours, _) = bank.neighbours(usize::from(nearest));
+    let mut n_eff = 0.0f32;
+    for &k in core::iter::once(&nearest).chain(neighbours) {
+        let Some(&x) = bank.positions().get(usize::from(k)) else {
+            continue;
+        };
+        let d = sub(x, anchor);
+        let rho2 = d[0] * d[0] + d[1] * d[1] + d[2] * d[2];
+        if rho2 < r2 {
+            let p = 1.0 - rho2 / r2;
+            n_eff += p;
+            acc.add(k, lumped_area(bank, k) * p);
+        }
+    }
+    (acc, n_eff)
+}
+
+/// A third of the area of the bank's triangles around node `k`, m^2.
+fn lumped_area(bank: &Bank, k: u16) -> f32 {
+    let p = bank.positions();
+    let tris = bank.triangles();
+    let mut twice = 0.0f32;
+    for &t in bank.node_triangles(usize::from(k)) {
+        let Some(tri) = tris.get(t as usize) else {
+            continue;
+        };
+        let [a, b, c] = tri.map(|i| p.get(usize::from(i)).copied().unwrap_or([0.0; 3]));
+        let n = cross(sub(b, a), sub(c, a));
+        twice += ComplexField::sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
+    }
+    twice / 6.0
 }
 
 /// Orthonormal `(e1, e2)` spanning the plane of triangle `nodes`, with `e1` the projection of a
@@ -174,7 +253,7 @@ struct Accumulator {
 }
 
 /// Candidates kept before choosing the heaviest [`MAX_CONTACT_NODES`].
-const CANDIDATES: usize = 3 * QUADRATURE.len();
+const CANDIDATES: usize = 64;
 
 impl Default for Accumulator {
     fn default() -> Accumulator {
@@ -188,6 +267,18 @@ impl Default for Accumulator {
 }
 
 impl Accumulator {
+    /// Adds `other`'s loads, normalised to sum `s`.
+    fn merge_scaled(&mut self, other: &Accumulator, s: f32) {
+        let total = other.loads.iter().take(other.len).sum::<f32>() + other.overflow;
+        if !(s > 0.0 && total > 0.0) {
+            return;
+        }
+        for (&k, &q) in other.nodes.iter().zip(&other.loads).take(other.len) {
+            self.add(k, s * q / total);
+        }
+        self.overflow += s * other.overflow / total;
+    }
+
     /// Adds `w` spread over triangle `nodes` by barycentric coordinates `bary`.
     fn add_bary(&mut self, nodes: [u16; 3], bary: [f32; 3], w: f32) {
         for (&k, &b) in nodes.iter().zip(&bary) {
@@ -323,19 +414,35 @@ mod tests {
         }
     }
 
-    /// The consistent load of the quadrature on the flat grid, in f64, located directly.
+    /// The weights on the flat grid, in f64, with the quadrature points located directly and
+    /// the interior nodes' lumped area `h^2`.
     fn reference(n: usize, h: f64, x: f64, y: f64, r: f64) -> Vec<f64> {
-        let mut w = vec![0.0; n * n];
+        let mut quad = vec![0.0; n * n];
         for &(s, wq, angle) in &QUADRATURE {
             let (s, wq, angle) = (f64::from(s), f64::from(wq), f64::from(angle));
-            // The fixture's first triangle edge is +x, its normal +z: e1 = x, e2 = y.
+            // The fixture's normal is +z, so e1 = x and e2 = y.
             let (qx, qy) = (x + r * s * angle.cos(), y + r * s * angle.sin());
             let (_, tri, bary) = locate(n, h, qx, qy);
             for (k, b) in tri.iter().zip(bary) {
-                w[usize::from(*k)] += wq * b;
+                quad[usize::from(*k)] += wq * b;
             }
         }
-        w
+        let mut nodal = vec![0.0; n * n];
+        for j in 0..n {
+            for i in 0..n {
+                let rho2 = (i as f64 * h - x).powi(2) + (j as f64 * h - y).powi(2);
+                if rho2 < r * r {
+                    assert!(i > 0 && j > 0 && i < n - 1 && j < n - 1, "interior only");
+                    nodal[usize::from(id(n, i, j))] = 1.0 - rho2 / (r * r);
+                }
+            }
+        }
+        let n_eff: f64 = nodal.iter().sum();
+        let theta = ((n_eff - 2.0) / 4.0).clamp(0.0, 1.0);
+        quad.iter()
+            .zip(&nodal)
+            .map(|(q, p)| (1.0 - theta) * q + if n_eff > 0.0 { theta * p / n_eff } else { 0.0 })
+            .collect()
     }
 
     fn dense(p: &Patch, n: usize) -> Vec<f64> {

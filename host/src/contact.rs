@@ -11,11 +11,13 @@
 use crate::compliance::{Block3, Compliance, ComplianceError};
 use crate::mesh::{Surface, TetMesh};
 
-/// A mesh's boundary surface with what contact needs: positions and triangles.
+/// A mesh's boundary surface with what contact needs: positions, triangles, lumped areas.
 #[derive(Debug, Clone)]
 pub struct ContactSurface {
     positions: Vec<[f64; 3]>,
     triangles: Vec<[usize; 3]>,
+    /// A third of the area of each node's boundary triangles (0 off the surface), m^2.
+    lumped_area: Vec<f64>,
 }
 
 /// Where a ray first enters the surface.
@@ -34,9 +36,18 @@ pub struct SurfaceHit {
 impl ContactSurface {
     /// The contact surface of `mesh` with boundary `surface`.
     pub fn new(mesh: &TetMesh, surface: &Surface) -> ContactSurface {
+        let mut lumped_area = vec![0.0; mesh.nodes.len()];
+        for t in &surface.triangles {
+            let v = t.map(|i| mesh.nodes[i]);
+            let a = norm(cross(sub(v[1], v[0]), sub(v[2], v[0]))) / 2.0;
+            for &i in t {
+                lumped_area[i] += a / 3.0;
+            }
+        }
         ContactSurface {
             positions: mesh.nodes.clone(),
             triangles: surface.triangles.clone(),
+            lumped_area,
         }
     }
 
@@ -157,11 +168,36 @@ impl ContactSurface {
         } else {
             add(hit.nodes, hit.bary, 1.0);
         }
-        loads.retain(|l| l.1 > 0.0);
-        let total: f64 = loads.iter().map(|l| l.1).sum();
-        for l in &mut loads {
-            l.1 /= total;
+        normalise(&mut loads);
+        // Resolved tips: blend in the nodal quadrature (see `firmware::patch`).
+        let r2 = radius * radius;
+        let mut nodal: Vec<(usize, f64)> = Vec::new();
+        let mut n_eff = 0.0;
+        if r2 > 0.0 {
+            for (k, &a) in self.lumped_area.iter().enumerate() {
+                let rho2 = dist2(self.positions[k], hit.point);
+                if a > 0.0 && rho2 < r2 {
+                    let p = 1.0 - rho2 / r2;
+                    n_eff += p;
+                    if keep(k) {
+                        nodal.push((k, a * p));
+                    }
+                }
+            }
         }
+        let theta = firmware::patch::resolution(n_eff as f32) as f64;
+        if theta > 0.0 && normalise(&mut nodal) {
+            for l in &mut loads {
+                l.1 *= 1.0 - theta;
+            }
+            for (k, w) in nodal {
+                match loads.iter_mut().find(|l| l.0 == k) {
+                    Some(l) => l.1 += theta * w,
+                    None => loads.push((k, theta * w)),
+                }
+            }
+        }
+        loads.retain(|l| l.1 > 0.0);
         loads.sort_by(|a, b| b.1.total_cmp(&a.1).then(a.0.cmp(&b.0)));
         loads
     }
@@ -182,6 +218,16 @@ impl ContactSurface {
             })
             .fold(0.0, f64::max)
     }
+}
+
+/// Scales the weights to sum 1 after dropping non-positive ones; `false` if none is left.
+fn normalise(loads: &mut Vec<(usize, f64)>) -> bool {
+    loads.retain(|l| l.1 > 0.0);
+    let total: f64 = loads.iter().map(|l| l.1).sum();
+    for l in loads.iter_mut() {
+        l.1 /= total;
+    }
+    total > 0.0
 }
 
 /// The energy-minimal weighted solve (firmware `solve::WeightedSolve`) in f64: `M = sum_ab w_a
