@@ -70,20 +70,33 @@ pub fn flat_patch() -> AlignedBytes {
 /// A flat `n_side x n_side`-node grid at z = 0 (outward normal +z) with spacing `h` (m), two
 /// triangles per square (every interior node has six, lumped area `h^2`), the pairs closer than
 /// `truncation_m` coupled with [`kernel_block`], the [`patch_device`] and a Chebyshev law.
+pub fn grid_patch(n_side: usize, h: f64, truncation_m: f64) -> AlignedBytes {
+    let ticks: Vec<f64> = (0..n_side).map(|i| h * i as f64).collect();
+    grid_patch_at(&ticks, &ticks, truncation_m)
+}
+
+/// [`grid_patch`] with node columns at `xs` and rows at `ys` (increasing, m): uneven grids,
+/// e.g. two rows a few micrometres apart (sliver triangles, nearly coincident contact nodes).
 ///
 /// # Panics
 /// Only if the builder rejects it, which would be a bug in this fixture.
-pub fn grid_patch(n_side: usize, h: f64, truncation_m: f64) -> AlignedBytes {
+pub fn grid_patch_at(xs: &[f64], ys: &[f64], truncation_m: f64) -> AlignedBytes {
+    let (nx, ny) = (xs.len(), ys.len());
     let mut p = Vec::new();
-    for j in 0..n_side {
-        for i in 0..n_side {
-            p.push([h * i as f64, h * j as f64, 0.0]);
+    for &y in ys {
+        for &x in xs {
+            p.push([x, y, 0.0]);
         }
     }
-    let id = |i: usize, j: usize| (i + n_side * j) as u32;
+    let h = xs
+        .windows(2)
+        .chain(ys.windows(2))
+        .map(|w| w[1] - w[0])
+        .fold(0.0, f64::max);
+    let id = |i: usize, j: usize| (i + nx * j) as u32;
     let mut triangles = Vec::new();
-    for j in 0..n_side - 1 {
-        for i in 0..n_side - 1 {
+    for j in 0..ny - 1 {
+        for i in 0..nx - 1 {
             let (a, b, c, d) = (id(i, j), id(i + 1, j), id(i + 1, j + 1), id(i, j + 1));
             triangles.push([a, b, c]);
             triangles.push([a, c, d]);
