@@ -22,18 +22,18 @@
 //! every triangle around it; the first hit along the segment wins, ties going to the lowest
 //! triangle index, so it is reported once and deterministically.
 //!
-//! # Tracking and sliding (friction-free)
+//! # Tracking and sliding (a stick cone)
 //!
-//! While touching, the anchor (the rest-surface point where contact began) and its triangle are
-//! kept as long as the tip's projection onto the triangle's rest plane stays inside the triangle:
-//! the surface point sticks to the tip and `displacement = tip - anchor`. When the projection
-//! leaves the triangle, the contact slides without friction: a descent over the triangles around
-//! the current triangle's vertices finds the rest-surface triangle closest to the tip, and the
-//! anchor jumps to the tip's closest point on it (its projection when that lies inside). So the
-//! tangential displacement stays within one triangle and is released at each triangle boundary
-//! (a saw-tooth in the tangential force while sliding); the normal displacement is continuous.
-//! Contact ends when `(tip - anchor) . n > 0` for the contact triangle's outward rest normal `n`
-//! (the contact would pull), checked before and after any slide.
+//! While touching, the anchor (the rest-surface point the tool holds) sticks to the tip and
+//! `displacement = tip - anchor`, as long as the displacement stays inside the stick cone
+//! around the contact triangle's inward normal: tangential part at most [`STICK_SLOPE`] times
+//! the normal part (a Coulomb-like friction cone, on displacements). When the tip leaves the
+//! cone, the contact slides: the anchor moves along the surface just far enough to put the
+//! displacement back on the cone (the target point is found on the rest surface by
+//! [`closest_surface_point`], a descent over the triangles around the current one), so the
+//! tangential force is bounded by the slope and changes continuously, with no saw-tooth at
+//! triangle edges. Contact ends when `(tip - anchor) . n > 0` for the contact triangle's outward
+//! rest normal `n` (the contact would pull), checked before and after any slide.
 
 // `!(x > 0.0)` is deliberate throughout: it also rejects NaN.
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
@@ -52,6 +52,10 @@ pub const MAX_REACH_CELLS: u16 = 3;
 pub const MAX_SAMPLES: u32 = 2048;
 /// Cap on the triangle-to-triangle steps of one slide.
 pub const MAX_SLIDE_STEPS: u32 = 32;
+/// The stick cone: while touching, the tangential displacement may reach this many times the
+/// normal displacement before the contact slides (about the friction coefficient of an
+/// instrument on wet tissue).
+pub const STICK_SLOPE: f32 = 0.2;
 
 /// What the contact solve needs this tick.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -355,26 +359,31 @@ fn track(bank: &Bank, active: Active, tip: [f32; 3]) -> Option<Active> {
     let [a, b, c] = vertices(positions, active.nodes)?;
     let n = cross(sub(b, a), sub(c, a));
     let nn = dot(n, n);
-    if !(nn > 0.0) || dot(sub(tip, active.anchor), n) > 0.0 {
+    let d = sub(tip, active.anchor);
+    if !(nn > 0.0) || dot(d, n) > 0.0 {
         return None;
     }
-    let k = plane_bary(a, b, c, n, nn, tip);
-    if k[0] >= -BARY_TOL && k[1] >= -BARY_TOL && k[2] >= -BARY_TOL {
+    // Normal (inward, >= 0) and tangential parts of the displacement.
+    let depth = -dot(d, n) / sqrt(nn);
+    let dt = add(d, scale(n, depth / sqrt(nn)));
+    let t = sqrt(dot(dt, dt));
+    let allowed = STICK_SLOPE * depth;
+    if !(t > allowed) {
         return Some(active);
     }
-    // Slide: descend to the triangle closest to the tip.
-    let near = closest_surface_point(bank, active.triangle, active.nodes, tip)?;
-    let (cur, cur_nodes, point, bary) = (near.triangle, near.nodes, near.point, near.bary);
-    let [a, b, c] = vertices(positions, cur_nodes)?;
+    // Slide: move the anchor along the tangential displacement onto the cone's edge.
+    let target = add(active.anchor, scale(dt, 1.0 - allowed / t));
+    let near = closest_surface_point(bank, active.triangle, active.nodes, target)?;
+    let [a, b, c] = vertices(positions, near.nodes)?;
     let n = cross(sub(b, a), sub(c, a));
-    if dot(sub(tip, point), n) > 0.0 {
+    if dot(sub(tip, near.point), n) > 0.0 {
         return None;
     }
     Some(Active {
-        triangle: cur,
-        nodes: cur_nodes,
-        bary,
-        anchor: point,
+        triangle: near.triangle,
+        nodes: near.nodes,
+        bary: near.bary,
+        anchor: near.point,
     })
 }
 
@@ -585,6 +594,10 @@ fn combine(a: [f32; 3], b: [f32; 3], c: [f32; 3], k: [f32; 3]) -> [f32; 3] {
 
 fn finite(p: [f32; 3]) -> bool {
     p.iter().all(|v| v.is_finite())
+}
+
+fn sqrt(x: f32) -> f32 {
+    nalgebra::ComplexField::sqrt(x)
 }
 
 fn sub(a: [f32; 3], b: [f32; 3]) -> [f32; 3] {
@@ -900,9 +913,9 @@ mod tests {
             };
             assert_eq!(anchor[2], 0.0);
             assert!((displacement[2] - depth).abs() < 1.0e-7);
-            // Tangential displacement stays within one triangle.
+            // Tangential displacement stays within the stick cone.
             let dt = (displacement[0].powi(2) + displacement[1].powi(2)).sqrt();
-            assert!(dt < 1.5 * SPACING as f32, "{dt}");
+            assert!(dt <= STICK_SLOPE * -depth * 1.001, "{dt}");
             if seen.last() != Some(&triangle) {
                 seen.push(triangle);
             }

@@ -42,7 +42,9 @@ pub fn patch_device() -> DeviceCalibration {
     }
 }
 
-/// `C_kl = exp(-|x_k - x_l| / 15 mm) M (+ 0.3e-3 I on the diagonal)`: SPD, m/N.
+/// `C_kl = exp(-|x_k - x_l| / 15 mm) M + 0.3e-3 exp(-|x_k - x_l| / 1 mm) I`: SPD (a sum of
+/// exponential kernels times SPD matrices), m/N, and continuous in the positions, so nodes a
+/// few micrometres apart have nearly equal blocks, as an elastic body's would.
 pub fn kernel_block(p: &[[f64; 3]], k: usize, l: usize) -> [[f64; 3]; 3] {
     let m = [
         [1.0e-3, 0.1e-3, 0.0],
@@ -56,8 +58,9 @@ pub fn kernel_block(p: &[[f64; 3]], k: usize, l: usize) -> [[f64; 3]; 3] {
             .sum::<f64>(),
     );
     let kern = ComplexField::exp(-d / 0.015);
+    let local = 0.3e-3 * ComplexField::exp(-d / 0.001);
     core::array::from_fn(|i| {
-        core::array::from_fn(|j| kern * m[i][j] + if k == l && i == j { 0.3e-3 } else { 0.0 })
+        core::array::from_fn(|j| kern * m[i][j] + if i == j { local } else { 0.0 })
     })
 }
 
