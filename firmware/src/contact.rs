@@ -52,6 +52,9 @@ pub const MAX_REACH_CELLS: u16 = 3;
 pub const MAX_SAMPLES: u32 = 2048;
 /// Cap on the triangle-to-triangle steps of one slide.
 pub const MAX_SLIDE_STEPS: u32 = 32;
+/// Squared distance (m^2) under which a point counts as on the surface: (0.1 um)^2, far below
+/// any mesh size and above f32 rounding of positions within a metre.
+pub const ON_SURFACE_D2: f32 = 1.0e-14;
 /// The stick cone: while touching, the tangential displacement may reach this many times the
 /// normal displacement before the contact slides (about the friction coefficient of an
 /// instrument on wet tissue).
@@ -417,6 +420,10 @@ pub fn closest_surface_point(
     let mut cur_nodes = start_nodes;
     let (mut point, mut bary, mut d2) = closest_on_triangle(p, a, b, c)?;
     for _ in 0..MAX_SLIDE_STEPS {
+        // On the surface already (within rounding): nothing can be closer.
+        if d2 <= ON_SURFACE_D2 {
+            break;
+        }
         let mut moved = false;
         for v in cur_nodes {
             for &ti in bank.node_triangles(usize::from(v)) {

@@ -124,32 +124,37 @@ pub fn tool_patch(
     anchor: [f32; 3],
     radius_m: f32,
 ) -> Patch {
-    let mut quad = Accumulator::default();
-    match tangent_basis(bank, nodes) {
-        Some((e1, e2)) if radius_m > 0.0 && radius_m.is_finite() => {
-            for (&(s, w, _), &(c, sn)) in QUADRATURE.iter().zip(&DIRECTIONS) {
-                let (x, y) = (radius_m * s * c, radius_m * s * sn);
-                let q = [
-                    anchor[0] + x * e1[0] + y * e2[0],
-                    anchor[1] + x * e1[1] + y * e2[1],
-                    anchor[2] + x * e1[2] + y * e2[2],
-                ];
-                match closest_surface_point(bank, triangle, nodes, q) {
-                    Some(sp) => quad.add_bary(sp.nodes, sp.bary, w),
-                    None => quad.add_bary(nodes, bary, w),
-                }
-            }
-        }
-        _ => {
-            quad.add_bary(nodes, bary, 1.0);
-            return quad.finish(bank);
-        }
-    }
-    let (nodal, n_eff) = nodal_loads(bank, nodes, bary, anchor, radius_m);
+    let basis = tangent_basis(bank, nodes).filter(|_| radius_m > 0.0 && radius_m.is_finite());
+    let Some((e1, e2)) = basis else {
+        let mut acc = Accumulator::default();
+        acc.add_bary(nodes, bary, 1.0);
+        return acc.finish(bank);
+    };
+    // The nodal pressures first: they say how far the mesh resolves the tip, and the costly
+    // parts (lumped areas, locating the 12 points) are skipped when their share is zero.
+    let (mut nodal, n_eff) = nodal_pressures(bank, nodes, bary, anchor, radius_m);
     let theta = resolution(n_eff);
     let mut acc = Accumulator::default();
-    acc.merge_scaled(&quad, 1.0 - theta);
-    acc.merge_scaled(&nodal, theta);
+    if theta > 0.0 {
+        nodal.weight_by_lumped_area(bank);
+        acc.merge_scaled(&nodal, theta);
+    }
+    if theta < 1.0 {
+        let mut quad = Accumulator::default();
+        for (&(s, w, _), &(c, sn)) in QUADRATURE.iter().zip(&DIRECTIONS) {
+            let (x, y) = (radius_m * s * c, radius_m * s * sn);
+            let q = [
+                anchor[0] + x * e1[0] + y * e2[0],
+                anchor[1] + x * e1[1] + y * e2[1],
+                anchor[2] + x * e1[2] + y * e2[2],
+            ];
+            match closest_surface_point(bank, triangle, nodes, q) {
+                Some(sp) => quad.add_bary(sp.nodes, sp.bary, w),
+                None => quad.add_bary(nodes, bary, w),
+            }
+        }
+        acc.merge_scaled(&quad, 1.0 - theta);
+    }
     acc.finish(bank)
 }
 
@@ -166,10 +171,10 @@ pub const RESOLVED_FROM: f32 = 2.0;
 /// From this `n_eff` the nodal quadrature alone gives the weights.
 pub const RESOLVED_AT: f32 = 6.0;
 
-/// The nodal quadrature `a_k (1 - rho_k^2 / r^2)` (normalised later) over the nodes within `r`
-/// of the anchor, among the bank's neighbours of the contact triangle's vertex nearest to it,
-/// and `n_eff` (see [`resolution`]).
-fn nodal_loads(
+/// The pressures `1 - rho_k^2 / r^2` at the nodes within `r` of the anchor, among the bank's
+/// neighbours of the contact triangle's vertex nearest to it, and their sum `n_eff` (see
+/// [`resolution`]).
+fn nodal_pressures(
     bank: &Bank,
     nodes: [u16; 3],
     bary: [f32; 3],
@@ -199,7 +204,7 @@ fn nodal_loads(
         if rho2 < r2 {
             let p = 1.0 - rho2 / r2;
             n_eff += p;
-            acc.add(k, lumped_area(bank, k) * p);
+            acc.add(k, p);
         }
     }
     (acc, n_eff)
@@ -267,6 +272,13 @@ impl Default for Accumulator {
 }
 
 impl Accumulator {
+    /// Nodal pressures to the nodal quadrature's loads `a_k p_k`.
+    fn weight_by_lumped_area(&mut self, bank: &Bank) {
+        for (&k, q) in self.nodes.iter().zip(self.loads.iter_mut()).take(self.len) {
+            *q *= lumped_area(bank, k);
+        }
+    }
+
     /// Adds `other`'s loads, normalised to sum `s`.
     fn merge_scaled(&mut self, other: &Accumulator, s: f32) {
         let total = other.loads.iter().take(other.len).sum::<f32>() + other.overflow;

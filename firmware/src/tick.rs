@@ -121,7 +121,14 @@ pub struct HapticLoop<'b> {
     held: Option<Held>,
 }
 
-/// The factored contact solve of the current anchor (reused while the contact does not slide).
+/// A sliding contact keeps its patch (weights and factored solve) until the anchor has moved
+/// this fraction of the tip radius from where the patch was built: the displacement still
+/// follows the anchor every tick, and rebuilding the patch (quadrature points located on the
+/// surface, a new factor) costs far more than a tick should.
+pub const REPATCH_FRACTION: f32 = 0.1;
+
+/// The factored contact solve of the anchor it was built at (reused while the contact presses
+/// in place or slides less than [`REPATCH_FRACTION`] of the tip radius).
 #[derive(Clone, Copy, Debug)]
 struct Held {
     triangle: u32,
@@ -325,11 +332,12 @@ impl<'b> HapticLoop<'b> {
             self.held = None;
             return Ok((Contacts::new(), [0.0; 3]));
         };
+        let radius = self.bank.device().tip_radius_m;
         let solve = match self.held {
             Some(h) if h.triangle == triangle && h.anchor == anchor => h.solve,
+            Some(h) if dist2(h.anchor, anchor) < sq(REPATCH_FRACTION * radius) => h.solve,
             _ => {
                 self.held = None;
-                let radius = self.bank.device().tip_radius_m;
                 let patch = tool_patch(self.bank, triangle, nodes, bary, anchor, radius);
                 let solve = WeightedSolve::new(self.bank, patch.nodes(), patch.weights())?;
                 self.held = Some(Held {
@@ -357,6 +365,15 @@ impl<'b> HapticLoop<'b> {
         };
         Ok((contacts, on_tissue.map(|f| -f)))
     }
+}
+
+fn dist2(a: [f32; 3], b: [f32; 3]) -> f32 {
+    let d = [a[0] - b[0], a[1] - b[1], a[2] - b[2]];
+    d[0] * d[0] + d[1] * d[1] + d[2] * d[2]
+}
+
+fn sq(x: f32) -> f32 {
+    x * x
 }
 
 /// `a - b` per joint, wrapping (encoder counters wrap).
