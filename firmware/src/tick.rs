@@ -94,6 +94,8 @@ pub struct LoopOutput {
     pub new_fault: Option<Fault>,
     /// The solve or law error of this tick, if any (it raised `SolveFailed`).
     pub solve_error: Option<SolveError>,
+    /// Where the contact patch in use was built, when touching.
+    pub patch: Option<PatchOrigin>,
 }
 
 /// What the last tick produced, kept for [`HapticLoop::telemetry`].
@@ -131,9 +133,23 @@ pub const REPATCH_FRACTION: f32 = 0.1;
 /// in place or slides less than [`REPATCH_FRACTION`] of the tip radius).
 #[derive(Clone, Copy, Debug)]
 struct Held {
-    triangle: u32,
-    anchor: [f32; 3],
+    origin: PatchOrigin,
     solve: WeightedSolve,
+}
+
+/// Where the current contact patch was built ([`crate::patch::tool_patch`]'s arguments): the
+/// contact triangle and the rest-surface point, which lags the anchor by less than
+/// [`REPATCH_FRACTION`] of the tip radius while the contact slides.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PatchOrigin {
+    /// Index into `bank.triangles()`.
+    pub triangle: u32,
+    /// The triangle's nodes.
+    pub nodes: [u16; 3],
+    /// Barycentric coordinates of `anchor` in the triangle.
+    pub bary: [f32; 3],
+    /// The point, m.
+    pub anchor: [f32; 3],
 }
 
 impl<'b> HapticLoop<'b> {
@@ -299,6 +315,7 @@ impl<'b> HapticLoop<'b> {
             fault: self.supervisor.fault(),
             new_fault: out.new_fault,
             solve_error,
+            patch: self.held.map(|h| h.origin),
         }
     }
 
@@ -334,15 +351,19 @@ impl<'b> HapticLoop<'b> {
         };
         let radius = self.bank.device().tip_radius_m;
         let solve = match self.held {
-            Some(h) if h.triangle == triangle && h.anchor == anchor => h.solve,
-            Some(h) if dist2(h.anchor, anchor) < sq(REPATCH_FRACTION * radius) => h.solve,
+            Some(h) if h.origin.triangle == triangle && h.origin.anchor == anchor => h.solve,
+            Some(h) if dist2(h.origin.anchor, anchor) < sq(REPATCH_FRACTION * radius) => h.solve,
             _ => {
                 self.held = None;
                 let patch = tool_patch(self.bank, triangle, nodes, bary, anchor, radius);
                 let solve = WeightedSolve::new(self.bank, patch.nodes(), patch.weights())?;
                 self.held = Some(Held {
-                    triangle,
-                    anchor,
+                    origin: PatchOrigin {
+                        triangle,
+                        nodes,
+                        bary,
+                        anchor,
+                    },
                     solve,
                 });
                 solve
