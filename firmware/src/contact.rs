@@ -228,10 +228,9 @@ pub fn detect(bank: &Bank, params: &SearchParams, p0: [f32; 3], p1: [f32; 3]) ->
     // Clip to the grid box (padded by a hundredth of a cell).
     let pad = 0.01 * h;
     let (mut ta, mut tb) = (0.0f32, 1.0f32);
-    for axis in 0..3 {
-        let lo = origin[axis] - pad;
-        let hi = origin[axis] + f32::from(dims[axis]) * h + pad;
-        let (p, d) = (p0[axis], dir[axis]);
+    for (((&o, &n), &p), &d) in origin.iter().zip(&dims).zip(&p0).zip(&dir) {
+        let lo = o - pad;
+        let hi = o + f32::from(n) * h + pad;
         if d == 0.0 {
             if p < lo || p > hi {
                 return None;
@@ -266,19 +265,19 @@ pub fn detect(bank: &Bank, params: &SearchParams, p0: [f32; 3], p1: [f32; 3]) ->
         if prev_cell == Some(cell) {
             continue;
         }
-        let mut lo = [0i32; 3];
-        let mut hi = [0i32; 3];
-        for axis in 0..3 {
-            lo[axis] = (cell[axis] - reach).max(0);
-            hi[axis] = (cell[axis] + reach).min(i32::from(dims[axis]) - 1);
-        }
-        for cz in lo[2]..=hi[2] {
-            for cy in lo[1]..=hi[1] {
-                for cx in lo[0]..=hi[0] {
+        let [lx, ly, lz] = cell.map(|c| (c - reach).max(0));
+        let [hx, hy, hz] = [0, 1, 2].map(|a| {
+            let (c, n) = (cell.get(a).copied(), dims.get(a).copied());
+            c.zip(n)
+                .map_or(-1, |(c, n)| (c + reach).min(i32::from(n) - 1))
+        });
+        for cz in lz..=hz {
+            for cy in ly..=hy {
+                for cx in lx..=hx {
                     let c = [cx, cy, cz];
                     // Already scanned around the previous sample.
-                    let seen =
-                        prev_cell.is_some_and(|pc| (0..3).all(|a| (c[a] - pc[a]).abs() <= reach));
+                    let seen = prev_cell
+                        .is_some_and(|pc| c.iter().zip(&pc).all(|(a, b)| (a - b).abs() <= reach));
                     if seen {
                         continue;
                     }
@@ -554,7 +553,12 @@ fn normalise(k: [f32; 3]) -> Option<[f32; 3]> {
     } else {
         2
     };
-    let rest: f32 = (0..3).filter(|&i| i != big).map(|i| out[i]).sum();
+    let rest: f32 = out
+        .iter()
+        .enumerate()
+        .filter(|&(i, _)| i != big)
+        .map(|(_, v)| v)
+        .sum();
     if let Some(v) = out.get_mut(big) {
         *v = (1.0 - rest).clamp(0.0, 1.0);
     }
@@ -571,14 +575,14 @@ fn vertices(positions: &[[f32; 3]], tri: [u16; 3]) -> Option<[[f32; 3]; 3]> {
 
 fn signed_cell(p: [f32; 3], origin: [f32; 3], h: f32) -> Option<[i32; 3]> {
     let mut out = [0i32; 3];
-    for axis in 0..3 {
-        let t = (p[axis] - origin[axis]) / h;
+    for ((o, &x), &x0) in out.iter_mut().zip(&p).zip(&origin) {
+        let t = (x - x0) / h;
         if !t.is_finite() {
             return None;
         }
         let t = t.clamp(-1.0e6, 1.0e6);
         let i = t as i32;
-        out[axis] = if (i as f32) > t { i - 1 } else { i };
+        *o = if (i as f32) > t { i - 1 } else { i };
     }
     Some(out)
 }
@@ -596,7 +600,12 @@ fn point_segment_dist2(v: [f32; 3], p0: [f32; 3], dir: [f32; 3]) -> f32 {
 }
 
 fn combine(a: [f32; 3], b: [f32; 3], c: [f32; 3], k: [f32; 3]) -> [f32; 3] {
-    core::array::from_fn(|i| k[0] * a[i] + k[1] * b[i] + k[2] * c[i])
+    let [k0, k1, k2] = k;
+    let mut out = [0.0; 3];
+    for (((o, &x), &y), &z) in out.iter_mut().zip(&a).zip(&b).zip(&c) {
+        *o = k0 * x + k1 * y + k2 * z;
+    }
+    out
 }
 
 fn finite(p: [f32; 3]) -> bool {

@@ -2,6 +2,9 @@
 //! device calibrations and a small hand-made bank. Compiled only for tests or with the
 //! `test-fixtures` feature (which needs `bank-format/alloc`); never in a firmware image.
 
+// Test data only, never in an image: the crate's no-panic lints do not apply.
+#![allow(clippy::indexing_slicing, clippy::expect_used)]
+
 extern crate alloc;
 
 use alloc::vec::Vec;

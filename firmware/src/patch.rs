@@ -31,15 +31,6 @@
 //! an edge); the weight dropped is reported. The patch depends only on the anchor, so the loop
 //! computes it when the contact starts or slides, not while it presses in place.
 
-#![deny(
-    clippy::unwrap_used,
-    clippy::expect_used,
-    clippy::panic,
-    clippy::indexing_slicing,
-    clippy::unreachable,
-    clippy::todo
-)]
-
 use bank_format::Bank;
 use nalgebra::ComplexField;
 

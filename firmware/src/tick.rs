@@ -35,15 +35,6 @@
 //! `Transparent` (tracking and telemetry, zero force) and `ConstantCurrent` (the given currents,
 //! clamped to the limits, still under the supervisor).
 
-#![deny(
-    clippy::unwrap_used,
-    clippy::expect_used,
-    clippy::panic,
-    clippy::indexing_slicing,
-    clippy::unreachable,
-    clippy::todo
-)]
-
 use bank_format::{Bank, Contact, Counters, MAX_CONTACTS, Mode, Telemetry, heapless};
 
 use crate::contact::{ContactState, ContactTracker};
