@@ -10,6 +10,7 @@
 
 use crate::compliance::{Block3, Compliance, ComplianceError};
 use crate::mesh::{Surface, TetMesh};
+use crate::vec3::{add, cross, dist2, dot, norm, scale, sub};
 
 /// A mesh's boundary surface with what contact needs: positions, triangles, lumped areas.
 #[derive(Debug, Clone)]
@@ -80,7 +81,7 @@ impl ContactSurface {
             if s < 0.0 || best.is_some_and(|(b, _)| s >= b) {
                 continue;
             }
-            let p = add3(origin, scale(dir, s));
+            let p = add(origin, scale(dir, s));
             let Some(bary) = barycentric(v, p) else {
                 continue;
             };
@@ -114,7 +115,7 @@ impl ContactSurface {
         keep: impl Fn(usize) -> bool,
     ) -> Vec<(usize, f64)> {
         let mut loads: Vec<(usize, f64)> = Vec::new();
-        let mut add = |nodes: [usize; 3], bary: [f64; 3], w: f64| {
+        let mut load = |nodes: [usize; 3], bary: [f64; 3], w: f64| {
             for (&k, &b) in nodes.iter().zip(&bary) {
                 if b > 0.0 && keep(k) {
                     match loads.iter_mut().find(|l| l.0 == k) {
@@ -145,9 +146,9 @@ impl ContactSurface {
                 .collect();
             for &(s, w, angle) in &firmware::patch::QUADRATURE {
                 let (s, w, angle) = (f64::from(s), f64::from(w), f64::from(angle));
-                let q = add3(
+                let q = add(
                     hit.point,
-                    add3(
+                    add(
                         scale(e1, radius * s * angle.cos()),
                         scale(e2, radius * s * angle.sin()),
                     ),
@@ -161,12 +162,12 @@ impl ContactSurface {
                     })
                     .min_by(|a, b| a.0.total_cmp(&b.0));
                 match best {
-                    Some((_, tri, k)) => add(tri, k, w),
-                    None => add(hit.nodes, hit.bary, w),
+                    Some((_, tri, k)) => load(tri, k, w),
+                    None => load(hit.nodes, hit.bary, w),
                 }
             }
         } else {
-            add(hit.nodes, hit.bary, 1.0);
+            load(hit.nodes, hit.bary, 1.0);
         }
         normalise(&mut loads);
         // Resolved tips: blend in the nodal quadrature (see `firmware::patch`).
@@ -285,7 +286,7 @@ fn closest_on_triangle(q: [f64; 3], v: [[f64; 3]; 3]) -> ([f64; 3], [f64; 3]) {
         } else {
             0.0
         };
-        let p = add3(v[a], scale(e, t));
+        let p = add(v[a], scale(e, t));
         let d = dist2(p, q);
         if d < best.0 {
             let mut k = [0.0; 3];
@@ -311,39 +312,6 @@ fn barycentric(v: [[f64; 3]; 3], p: [f64; 3]) -> Option<[f64; 3]> {
     Some([1.0 - b1 - b2, b1, b2])
 }
 
-fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
-}
-
-fn add3(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [a[0] + b[0], a[1] + b[1], a[2] + b[2]]
-}
-
-fn scale(a: [f64; 3], s: f64) -> [f64; 3] {
-    a.map(|x| x * s)
-}
-
-fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-}
-
-fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [
-        a[1] * b[2] - a[2] * b[1],
-        a[2] * b[0] - a[0] * b[2],
-        a[0] * b[1] - a[1] * b[0],
-    ]
-}
-
-fn norm(a: [f64; 3]) -> f64 {
-    dot(a, a).sqrt()
-}
-
 fn unit(a: [f64; 3]) -> [f64; 3] {
     scale(a, 1.0 / norm(a))
-}
-
-fn dist2(a: [f64; 3], b: [f64; 3]) -> f64 {
-    let d = sub(a, b);
-    dot(d, d)
 }

@@ -12,3 +12,4 @@ pub mod mesh;
 pub mod ordering;
 pub mod reach;
 pub mod scene;
+pub mod vec3;

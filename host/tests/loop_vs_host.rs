@@ -4,38 +4,62 @@
 
 use bank_format::{AlignedBytes, Bank};
 use host::compliance::{Compliance, contact_forces};
-use host::fem::Elasticity;
+use host::fem::{Elasticity, FixedSet};
+use host::mesh::TetMesh;
 use host::scene::Scene;
 use std::path::Path;
 use std::process::Command;
 
+/// The shipped liver scene: its bank built by `host bank build`, and the host's f64 reference
+/// (the full, untruncated compliance of the same scene).
+struct Liver {
+    bank_bytes: AlignedBytes,
+    mesh: TetMesh,
+    fixed: FixedSet,
+    compliance: Compliance,
+}
+
+impl Liver {
+    fn build() -> Liver {
+        let scene_path = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/liver.toml");
+        let dir = tempfile::tempdir().unwrap();
+        let bank_path = dir.path().join("liver.bank");
+        let built = Command::new(env!("CARGO_BIN_EXE_host"))
+            .args(["bank", "build"])
+            .arg(&scene_path)
+            .arg("-o")
+            .arg(&bank_path)
+            .output()
+            .unwrap();
+        assert!(
+            built.status.success(),
+            "{}",
+            String::from_utf8_lossy(&built.stderr)
+        );
+        let bank_bytes = AlignedBytes::new(&std::fs::read(&bank_path).unwrap());
+        let scene = Scene::load(&scene_path).unwrap();
+        let (mesh, _, _) = scene.load_mesh().unwrap();
+        let fixed = scene.fixed_set(&mesh).unwrap();
+        let body = Elasticity::new(&mesh, scene.material).unwrap();
+        let compliance = Compliance::factorize(&body, &fixed).unwrap();
+        Liver {
+            bank_bytes,
+            mesh,
+            fixed,
+            compliance,
+        }
+    }
+
+    fn bank(&self) -> Bank<'_> {
+        Bank::parse(&self.bank_bytes).unwrap()
+    }
+}
+
 #[test]
 fn firmware_forces_match_the_host_f64_reference_on_the_liver_bank() {
-    let scene_path = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/liver.toml");
-    let dir = tempfile::tempdir().unwrap();
-    let bank_path = dir.path().join("liver.bank");
-    let built = Command::new(env!("CARGO_BIN_EXE_host"))
-        .args(["bank", "build"])
-        .arg(&scene_path)
-        .arg("-o")
-        .arg(&bank_path)
-        .output()
-        .unwrap();
-    assert!(
-        built.status.success(),
-        "{}",
-        String::from_utf8_lossy(&built.stderr)
-    );
-    let bytes = std::fs::read(&bank_path).unwrap();
-    let aligned = AlignedBytes::new(&bytes);
-    let bank = Bank::parse(&aligned).unwrap();
-
-    // The host's reference: the full (untruncated) compliance of the same scene.
-    let scene = Scene::load(&scene_path).unwrap();
-    let (mesh, _, _) = scene.load_mesh().unwrap();
-    let fixed = scene.fixed_set(&mesh).unwrap();
-    let body = Elasticity::new(&mesh, scene.material).unwrap();
-    let compliance = Compliance::factorize(&body, &fixed).unwrap();
+    let liver = Liver::build();
+    let bank = liver.bank();
+    let compliance = &liver.compliance;
     let ids: Vec<usize> = bank.mesh_ids().iter().map(|&i| i as usize).collect();
 
     let d = [0.0f32, 0.0, -0.005];
@@ -90,25 +114,9 @@ fn full_tick_forces_match_the_host_f64_reference_on_the_liver_bank() {
     use firmware::tick::{HapticLoop, LoopInput};
     use host::contact::{ContactSurface, SurfaceHit, patch_force};
 
-    let scene_path = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/liver.toml");
-    let dir = tempfile::tempdir().unwrap();
-    let bank_path = dir.path().join("liver.bank");
-    let built = Command::new(env!("CARGO_BIN_EXE_host"))
-        .args(["bank", "build"])
-        .arg(&scene_path)
-        .arg("-o")
-        .arg(&bank_path)
-        .output()
-        .unwrap();
-    assert!(built.status.success());
-    let bytes = std::fs::read(&bank_path).unwrap();
-    let aligned = AlignedBytes::new(&bytes);
-    let bank = Bank::parse(&aligned).unwrap();
-    let scene = Scene::load(&scene_path).unwrap();
-    let (mesh, _, _) = scene.load_mesh().unwrap();
-    let fixed = scene.fixed_set(&mesh).unwrap();
-    let body = Elasticity::new(&mesh, scene.material).unwrap();
-    let compliance = Compliance::factorize(&body, &fixed).unwrap();
+    let liver = Liver::build();
+    let bank = liver.bank();
+    let (mesh, fixed, compliance) = (&liver.mesh, &liver.fixed, &liver.compliance);
     let ids: Vec<usize> = bank.mesh_ids().iter().map(|&i| i as usize).collect();
     // The bank's surface (R's triangles) in mesh ids: the patch lives on it.
     let region = host::mesh::Surface {

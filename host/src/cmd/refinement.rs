@@ -17,16 +17,8 @@ pub struct Args {
     /// host/meshes/generated/liver-100k.msh when present.
     #[arg(long)]
     mesh: Vec<PathBuf>,
-    /// Young's modulus in Pa.
-    #[arg(long, default_value_t = 3.0e3)]
-    young: f64,
-    /// Poisson's ratio.
-    #[arg(long, default_value_t = 0.45)]
-    poisson: f64,
-    /// The organ rests on a bed: nodes less than this height (m) above its lowest point are
-    /// fixed (as in the shipped scene).
-    #[arg(long, default_value_t = 0.01)]
-    bed: f64,
+    #[command(flatten)]
+    organ: super::bench::OrganArgs,
     /// Where the tool enters: a point above the organ, m (the shipped scene's trocar).
     #[arg(long, value_delimiter = ',', default_value = "0,0,0.16")]
     from: Vec<f64>,
@@ -63,13 +55,13 @@ pub fn run(args: Args) -> Result<()> {
     let [fx, fy, fz] = args.from[..] else {
         anyhow::bail!("--from needs three numbers x,y,z, got {:?}", args.from);
     };
-    let material = Material::new(args.young, args.poisson)?;
+    let material = Material::new(args.organ.young, args.organ.poisson)?;
     if !args.json {
         println!(
             "press {:.1} mm straight down from ({fx}, {fy}, {fz}); E = {} Pa, nu = {}; force on the tool, N",
             args.depth * 1e3,
-            args.young,
-            args.poisson
+            args.organ.young,
+            args.organ.poisson
         );
         let tips: Vec<String> = args
             .radius
@@ -93,7 +85,7 @@ pub fn run(args: Args) -> Result<()> {
         let mut fixed = FixedSet::none(mesh.nodes.len());
         fixed.fix_box(
             &mesh,
-            [lo[0], lo[1], lo[2], hi[0], hi[1], lo[2] + args.bed],
+            [lo[0], lo[1], lo[2], hi[0], hi[1], lo[2] + args.organ.bed],
             [true; 3],
         )?;
         let body = Elasticity::new(&mesh, material)?;
