@@ -127,7 +127,7 @@ fn full_tick_forces_match_the_host_f64_reference_on_the_liver_bank() {
             .collect(),
         nodes: ids.clone(),
     };
-    let surface = ContactSurface::new(&mesh, &region);
+    let surface = ContactSurface::new(mesh, &region);
     let cal = *bank.device();
 
     let mut lp = HapticLoop::new(&bank);
@@ -199,8 +199,8 @@ fn full_tick_forces_match_the_host_f64_reference_on_the_liver_bank() {
             .map(|g| (g.0, patch.iter().find(|p| p.0 == g.0).unwrap().1 / kept))
             .collect();
         let d3 = [d[0], d[1], d[2]];
-        let f_tool = patch_force(&compliance, &reduced, d3).unwrap();
-        let f_full = patch_force(&compliance, &patch, d3).unwrap();
+        let f_tool = patch_force(compliance, &reduced, d3).unwrap();
+        let f_full = patch_force(compliance, &patch, d3).unwrap();
         let want: Vec<[f64; 3]> = reduced.iter().map(|(_, w)| f_tool.map(|f| w * f)).collect();
         let got_f: Vec<[f32; 3]> = got.iter().map(|g| g.1).collect();
         let err = relative(&got_f, &want);
