@@ -11,3 +11,4 @@ pub mod mesh;
 pub mod ordering;
 pub mod reach;
 pub mod scene;
+pub mod sil;

@@ -5,3 +5,4 @@ pub mod bench;
 pub mod compliance;
 pub mod demo;
 pub mod fixing;
+pub mod sil;
