@@ -26,7 +26,8 @@ use crate::tick::{HapticLoop, LoopInput};
 
 /// Telemetry goes out every this many ticks (100 Hz at 1 kHz).
 pub const TELEMETRY_EVERY_TICKS: u32 = 10;
-/// At most this many link bytes are read per tick, so a flood cannot stretch a tick.
+/// At most this many link bytes are read at each of the two reads per tick, so a flood cannot
+/// stretch a tick.
 pub const MAX_RX_BYTES_PER_TICK: usize = 64;
 /// Outgoing bytes buffered per tick (a message that does not fit is dropped).
 const TX_CAPACITY: usize = 3 * MAX_FRAME;
@@ -104,10 +105,7 @@ impl<'b> App<'b> {
     ) -> Result<Actuation, P::Error> {
         let tick = self.tick_count().wrapping_add(1);
         let counts = plant.read_encoders(tick)?;
-        for _ in 0..MAX_RX_BYTES_PER_TICK {
-            let Some(byte) = link.read_byte() else { break };
-            self.receive(byte);
-        }
+        self.poll_link(link);
         let start = clock.cycles();
         let input = LoopInput {
             encoder_counts: counts,
@@ -161,6 +159,9 @@ impl<'b> App<'b> {
         };
         self.ticks_since_host_frame = self.ticks_since_host_frame.saturating_add(1);
         plant.actuate(&out)?;
+        // Again after the plant exchange: a UART holding one byte at a time (QEMU's) may have
+        // received another meanwhile; what arrives now applies from the next tick.
+        self.poll_link(link);
         if let Some(f) = new_fault {
             self.queue(&DeviceToHost::Fault {
                 tick: out.tick,
@@ -168,12 +169,20 @@ impl<'b> App<'b> {
                 detail: f.detail,
             });
         }
-        if out.tick % TELEMETRY_EVERY_TICKS == 0 {
+        if out.tick.is_multiple_of(TELEMETRY_EVERY_TICKS) {
             self.queue(&DeviceToHost::Telemetry(self.telemetry()));
         }
         link.write(&self.tx);
         self.tx.clear();
         Ok(out)
+    }
+
+    /// Read and apply what the link has received, at most [`MAX_RX_BYTES_PER_TICK`] bytes.
+    fn poll_link<L: LinkPort>(&mut self, link: &mut L) {
+        for _ in 0..MAX_RX_BYTES_PER_TICK {
+            let Some(byte) = link.read_byte() else { break };
+            self.receive(byte);
+        }
     }
 
     /// Ticks run so far.

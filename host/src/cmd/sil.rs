@@ -20,6 +20,10 @@ pub struct Args {
     /// Print one JSON object instead of text.
     #[arg(long)]
     pub json: bool,
+    /// Also write every tick (counts, joints, currents, force, state, instructions) to this
+    /// file as JSON lines.
+    #[arg(long)]
+    pub trace: Option<PathBuf>,
     #[command(flatten)]
     pub setup: SetupArgs,
 }
@@ -179,6 +183,14 @@ pub fn run(args: Args) -> Result<()> {
         .map_err(|e| anyhow::anyhow!("{}: invalid bank: {e}", setup.bank.display()))?;
     let session = Session::new(&bank, args.script, args.seconds)?;
     let run = harness::run(&setup, &session)?;
+    if let Some(path) = &args.trace {
+        let mut text = String::new();
+        for t in &run.ticks {
+            text.push_str(&serde_json::to_string(t)?);
+            text.push('\n');
+        }
+        write_atomic(path, text.as_bytes())?;
+    }
     let s = Summary::new(args.script, &run);
     if args.json {
         println!("{}", serde_json::to_string(&s)?);

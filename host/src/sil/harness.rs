@@ -85,7 +85,7 @@ pub struct Session {
 
 impl Session {
     /// `script` for `seconds` on `bank`: `Hello` at tick 1, `Arm` at [`ARM_TICK`], a heartbeat
-    /// every 2 ticks.
+    /// every 5 ticks.
     pub fn new(bank: &Bank, script: Script, seconds: f64) -> Result<Session> {
         if !(seconds.is_finite() && seconds > 0.0 && seconds <= 3600.0) {
             bail!("--seconds must be in (0, 3600], got {seconds}");
@@ -99,7 +99,7 @@ impl Session {
                 (1, LinkSend::Command(HostToDevice::Hello)),
                 (ARM_TICK, LinkSend::Command(HostToDevice::Arm)),
             ],
-            heartbeat_every: 2,
+            heartbeat_every: 5,
             heartbeat_until: None,
             encoder_override: Vec::new(),
         })
@@ -395,7 +395,7 @@ fn exchange(
             send_link(&mut link_tx, send)?;
         }
         let beat = session.heartbeat_every > 0
-            && tick % session.heartbeat_every == 0
+            && tick.is_multiple_of(session.heartbeat_every)
             && session.heartbeat_until.is_none_or(|u| tick < u);
         if beat {
             send_link(&mut link_tx, &LinkSend::Command(HostToDevice::Heartbeat))?;

@@ -147,8 +147,8 @@ mod tests {
         for _ in 0..2000 {
             g.step([0.0; 3], target, target);
         }
-        for j in 0..3 {
-            assert!((g.joints()[j] - target[j]).abs() < 1e-6, "{:?}", g.joints());
+        for (q, t) in g.joints().iter().zip(&target) {
+            assert!((q - t).abs() < 1e-6, "{:?}", g.joints());
         }
         // 0.05 m of insertion at 4096 * 400 / 2 pi counts per m.
         let expect = (0.05 * 4096.0 * 400.0 / (2.0 * std::f64::consts::PI)).round() as i32;
