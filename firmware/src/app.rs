@@ -337,3 +337,184 @@ fn no_bank_config() -> SafetyConfig {
         joint_limit_margin: [0.0; 3],
     }
 }
+
+#[cfg(test)]
+#[allow(clippy::unwrap_used, clippy::indexing_slicing, clippy::panic)]
+mod tests {
+    extern crate std;
+    use super::*;
+    use crate::fixtures::flat_patch;
+    use bank_format::{FrameDecoder, State as WireState};
+    use std::vec::Vec;
+
+    /// Encoders from a list (then held), currents recorded.
+    struct FakePlant {
+        counts: [i32; 3],
+        out: Vec<Actuation>,
+        fail_at: Option<u32>,
+    }
+
+    impl Plant for FakePlant {
+        type Error = u32;
+        fn read_encoders(&mut self, tick: u32) -> Result<[i32; 3], u32> {
+            match self.fail_at {
+                Some(t) if t == tick => Err(tick),
+                _ => Ok(self.counts),
+            }
+        }
+        fn actuate(&mut self, out: &Actuation) -> Result<(), u32> {
+            self.out.push(*out);
+            Ok(())
+        }
+    }
+
+    #[derive(Default)]
+    struct FakeLink {
+        rx: Vec<u8>,
+        tx: FrameDecoder<DeviceToHost>,
+        sent: Vec<DeviceToHost>,
+    }
+
+    impl FakeLink {
+        fn send(&mut self, cmd: &HostToDevice) {
+            let mut buf = [0u8; MAX_FRAME];
+            self.rx
+                .extend_from_slice(encode_frame(cmd, &mut buf).unwrap());
+        }
+    }
+
+    impl LinkPort for FakeLink {
+        fn read_byte(&mut self) -> Option<u8> {
+            (!self.rx.is_empty()).then(|| self.rx.remove(0))
+        }
+        fn write(&mut self, bytes: &[u8]) {
+            for r in self.tx.feed_slice(bytes) {
+                self.sent.push(r.unwrap());
+            }
+        }
+    }
+
+    /// Advances 100 cycles per reading.
+    struct FakeClock(core::cell::Cell<u32>);
+
+    impl CycleCounter for FakeClock {
+        fn cycles(&self) -> u32 {
+            self.0.set(self.0.get() + 100);
+            self.0.get()
+        }
+    }
+
+    fn rig() -> (FakePlant, FakeLink, FakeClock) {
+        let plant = FakePlant {
+            counts: [0, 0, 0],
+            out: Vec::new(),
+            fail_at: None,
+        };
+        (
+            plant,
+            FakeLink::default(),
+            FakeClock(core::cell::Cell::new(0)),
+        )
+    }
+
+    #[test]
+    fn commands_arm_and_telemetry_flows() {
+        let bytes = flat_patch();
+        let bank = Bank::parse(bytes.as_slice()).unwrap();
+        let mut app = App::new(Ok(&bank));
+        let (mut plant, mut link, clock) = rig();
+        link.send(&HostToDevice::Hello);
+        link.send(&HostToDevice::Arm);
+        // A corrupt frame between them is dropped and counted.
+        link.rx.extend_from_slice(&[0x03, 0x11, 0x22, 0x00]);
+        link.send(&HostToDevice::SetMode(Mode::Transparent));
+        for _ in 0..20 {
+            app.tick(&mut plant, &mut link, &clock, false).unwrap();
+            link.send(&HostToDevice::Heartbeat);
+        }
+        let hello = DeviceToHost::Hello {
+            protocol: PROTOCOL_VERSION,
+            bank_crc: Some(bank.crc()),
+            scene_id: bank.scene_id(),
+            node_count: bank.node_count() as u16,
+        };
+        // Boot Hello, the requested Hello, telemetry at ticks 10 and 20.
+        assert_eq!(link.sent[..2], [hello.clone(), hello]);
+        let tel: Vec<_> = link.sent[2..]
+            .iter()
+            .map(|m| match m {
+                DeviceToHost::Telemetry(t) => t.clone(),
+                other => panic!("{other:?}"),
+            })
+            .collect();
+        assert_eq!(tel.iter().map(|t| t.tick).collect::<Vec<_>>(), [10, 20]);
+        assert_eq!(tel[1].state, WireState::Armed);
+        assert_eq!(tel[1].mode, Mode::Transparent);
+        // Hello, Arm, SetMode and the 19 heartbeats read so far.
+        assert_eq!(tel[1].counters.rx_frames, 3 + 19);
+        assert_eq!(tel[1].counters.rx_errors, 1);
+        assert_eq!(plant.out.len(), 20);
+        assert!(plant.out.iter().all(|a| a.state == WireState::Armed));
+        // The body was measured between two readings of the clock.
+        assert!(plant.out.iter().all(|a| a.body_cycles == 100));
+    }
+
+    #[test]
+    fn silence_while_armed_faults_and_reports_once() {
+        let bytes = flat_patch();
+        let bank = Bank::parse(bytes.as_slice()).unwrap();
+        let mut app = App::new(Ok(&bank));
+        let (mut plant, mut link, clock) = rig();
+        link.send(&HostToDevice::Arm);
+        for _ in 0..30 {
+            app.tick(&mut plant, &mut link, &clock, false).unwrap();
+        }
+        let faults: Vec<_> = link
+            .sent
+            .iter()
+            .filter(|m| matches!(m, DeviceToHost::Fault { .. }))
+            .collect();
+        // The frame arrived at tick 1; tick 12 is the 11th without one.
+        assert_eq!(
+            faults,
+            [&DeviceToHost::Fault {
+                tick: 12,
+                reason: FaultReason::LinkSilent,
+                detail: 11
+            }]
+        );
+        assert!(plant.out[11..].iter().all(|a| a.currents_a == [0.0; 3]));
+        // A plant error stops the tick and is returned.
+        plant.fail_at = Some(31);
+        assert_eq!(app.tick(&mut plant, &mut link, &clock, false), Err(31));
+    }
+
+    #[test]
+    fn invalid_bank_refuses_to_arm_and_says_why() {
+        let mut app = App::new(Err(BankError::BadMagic));
+        assert!(app.haptic_loop().is_none());
+        let (mut plant, mut link, clock) = rig();
+        link.send(&HostToDevice::Arm);
+        link.send(&HostToDevice::Hello);
+        for _ in 0..3 {
+            app.tick(&mut plant, &mut link, &clock, false).unwrap();
+        }
+        let code = u32::from(BankError::BadMagic.code());
+        let no_bank = DeviceToHost::Hello {
+            protocol: PROTOCOL_VERSION,
+            bank_crc: None,
+            scene_id: 0,
+            node_count: 0,
+        };
+        let fault = |tick| DeviceToHost::Fault {
+            tick,
+            reason: FaultReason::InvalidBank,
+            detail: code,
+        };
+        // Boot Hello; the arm refusal (before tick 1 ran); the Hello reply; the tick-1 fault.
+        assert_eq!(link.sent, [no_bank.clone(), fault(0), no_bank, fault(1)]);
+        assert!(plant.out.iter().all(|a| a.currents_a == [0.0; 3]));
+        assert!(plant.out.iter().all(|a| a.state == WireState::Fault));
+        assert_eq!(app.telemetry().fault, Some(FaultReason::InvalidBank));
+    }
+}
