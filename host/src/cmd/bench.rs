@@ -429,8 +429,15 @@ fn sil(args: SilArgs) -> Result<()> {
         args.seconds
     );
     println!(
-        "{:<16} {:>7} {:>10} {:>10} {:>10} {:>10}",
-        "contact nodes", "ticks", "body mean", "body max", "tick mean", "tick max"
+        "{:<16} {:>7} {:>10} {:>9} {:>9} {:>9} {:>10} {:>9}",
+        "contact nodes",
+        "ticks",
+        "body mean",
+        "body p50",
+        "body p99",
+        "body max",
+        "tick mean",
+        "tick max"
     );
     for (k, g) in &groups {
         let name = if *k == 0 {
@@ -439,8 +446,8 @@ fn sil(args: SilArgs) -> Result<()> {
             k.to_string()
         };
         println!(
-            "{:<16} {:>7} {:>10.0} {:>10} {:>10.0} {:>10}",
-            name, g.ticks, g.body_mean, g.body_max, g.tick_mean, g.tick_max
+            "{:<16} {:>7} {:>10.0} {:>9} {:>9} {:>9} {:>10.0} {:>9}",
+            name, g.ticks, g.body_mean, g.body_p50, g.body_p99, g.body_max, g.tick_mean, g.tick_max
         );
     }
     println!("worst case       body {worst}, whole tick {worst_tick}");

@@ -14,6 +14,10 @@ pub struct CostStats {
     pub ticks: usize,
     /// Mean loop-body instructions.
     pub body_mean: f64,
+    /// Median loop-body instructions.
+    pub body_p50: u32,
+    /// 99th percentile of loop-body instructions.
+    pub body_p99: u32,
     /// Largest loop-body instructions.
     pub body_max: u32,
     /// Mean whole-tick instructions (executor, link and plant I/O included).
@@ -23,10 +27,13 @@ pub struct CostStats {
 }
 
 impl CostStats {
-    fn of<'a>(records: impl Iterator<Item = (&'a TickRecord, u32)>) -> CostStats {
+    /// The statistics of `(record, its whole-tick instructions)` pairs.
+    pub fn of<'a>(records: impl Iterator<Item = (&'a TickRecord, u32)>) -> CostStats {
         let mut s = CostStats::default();
         let (mut body, mut tick) = (0.0, 0.0);
+        let mut bodies = Vec::new();
         for (r, whole) in records {
+            bodies.push(r.body_instructions);
             s.ticks += 1;
             body += f64::from(r.body_instructions);
             tick += f64::from(whole);
@@ -36,6 +43,9 @@ impl CostStats {
         if s.ticks > 0 {
             s.body_mean = body / s.ticks as f64;
             s.tick_mean = tick / s.ticks as f64;
+            bodies.sort_unstable();
+            let at = |q: f64| bodies[((bodies.len() - 1) as f64 * q).round() as usize];
+            (s.body_p50, s.body_p99) = (at(0.5), at(0.99));
         }
         s
     }
@@ -110,4 +120,56 @@ pub fn image_size(path: &Path, ram_start: u32, ram_len: u32) -> Result<ImageSize
         }
     }
     Ok(size)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn rec(tick: u32, nodes: u8, body: u32, prev_tick: u32, state: State) -> TickRecord {
+        TickRecord {
+            tick,
+            encoder_counts: [0; 3],
+            joints: [0.0; 3],
+            currents_a: [0.0; 3],
+            force_n: [0.0; 3],
+            state,
+            contact_nodes: nodes,
+            body_instructions: body,
+            tick_instructions: prev_tick,
+        }
+    }
+
+    #[test]
+    fn groups_by_contact_nodes_with_the_successors_tick_cost() {
+        let r = [
+            rec(1, 0, 500, 0, State::Disarmed),
+            rec(2, 0, 1000, 9, State::Armed),
+            rec(3, 3, 4000, 3000, State::Armed),
+            rec(4, 3, 6000, 7000, State::Armed),
+            rec(5, 0, 1200, 9000, State::Armed),
+        ];
+        let g = by_contact_nodes(&r);
+        assert_eq!(g.len(), 2);
+        let idle = g[&0];
+        // Tick 1 is disarmed, tick 5 has no successor: only tick 2 counts.
+        assert_eq!((idle.ticks, idle.body_max, idle.tick_max), (1, 1000, 3000));
+        let three = g[&3];
+        assert_eq!(three.ticks, 2);
+        assert_eq!(three.body_mean, 5000.0);
+        assert_eq!(
+            (three.body_p50, three.body_p99, three.body_max),
+            (6000, 6000, 6000)
+        );
+        assert_eq!((three.tick_mean, three.tick_max), (8000.0, 9000));
+    }
+
+    #[test]
+    fn image_size_rejects_a_non_elf_file() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("x");
+        std::fs::write(&p, b"not an elf").unwrap();
+        let e = image_size(&p, 0x2000_0000, 1024).unwrap_err().to_string();
+        assert!(e.contains("not a little-endian ELF32"), "{e}");
+    }
 }

@@ -306,7 +306,16 @@ pub fn run(setup: &Setup, session: &Session) -> Result<Run> {
         })
     });
     let started = Instant::now();
-    let result = exchange(&mut child, &listener, &in_path, &out_path, session);
+    // On its own thread with SIGPIPE blocked: a write to the pipe of an image that died is
+    // then an EPIPE error, not the end of a process whose SIGPIPE is at its default (`host`).
+    let result = std::thread::scope(|s| {
+        s.spawn(|| {
+            block_sigpipe();
+            exchange(&mut child, &listener, &in_path, &out_path, session)
+        })
+        .join()
+        .unwrap_or_else(|_| Err(anyhow::anyhow!("the plant exchange thread panicked")))
+    });
     // Closing the pipes (inside `exchange`) ends the image; give it a moment, then kill.
     let exit_code = wait_or_kill(&mut child, Duration::from_secs(10));
     let stderr = stderr.and_then(|h| h.join().ok()).unwrap_or_default();
@@ -577,6 +586,18 @@ fn wait_or_kill(child: &mut Child, timeout: Duration) -> Option<i32> {
                 return child.wait().ok().and_then(|s| s.code());
             }
         }
+    }
+}
+
+/// Block SIGPIPE for the calling thread (a write to a closed pipe then fails with EPIPE).
+fn block_sigpipe() {
+    // SAFETY: sigset_t is plain data initialised by sigemptyset; pthread_sigmask only changes
+    // the calling thread's mask.
+    unsafe {
+        let mut set: libc::sigset_t = std::mem::zeroed();
+        libc::sigemptyset(&mut set);
+        libc::sigaddset(&mut set, libc::SIGPIPE);
+        libc::pthread_sigmask(libc::SIG_BLOCK, &set, std::ptr::null_mut());
     }
 }
 
