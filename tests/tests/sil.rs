@@ -353,3 +353,25 @@ fn current_over_the_limit_faults_or_is_clamped() {
     assert!(norm(run.ticks[tick as usize - 1].force_n) > 0.0);
     assert_zero_from(&run, tick);
 }
+
+#[test]
+fn overrun_faults_to_zero_current() {
+    let (setup, bytes) = setup();
+    let bank = Bank::parse(&bytes).unwrap();
+    // A virtual CPU 16 times slower (128 ns per instruction, 7,812 per 1 ms period): idle ticks
+    // (about 3,500 instructions) still fit, ticks near or in contact do not.
+    let mut session = Session::new(&bank, Script::Press, 1.5).unwrap();
+    session.icount_shift = 7;
+    let run = qemu(&setup, &session);
+    let faults = run.faults();
+    assert_eq!(faults.len(), 1, "{faults:?}");
+    let (tick, reason, _) = faults[0];
+    assert_eq!(reason, FaultReason::Overrun);
+    // Armed and idle first: the overrun comes with the work near the surface.
+    assert!(tick > ARM_TICK + 100, "{tick}");
+    assert_eq!(run.ticks[tick as usize - 2].state, State::Armed);
+    assert_zero_from(&run, tick);
+    let last = run.telemetry().last().copied().cloned().unwrap();
+    assert!(last.counters.overruns >= 1, "{:?}", last.counters);
+    assert_eq!(last.fault, Some(FaultReason::Overrun));
+}

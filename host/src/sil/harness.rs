@@ -37,7 +37,7 @@ use std::time::{Duration, Instant};
 
 /// Flash address of the bank region (`memory.x`: BANK).
 pub const BANK_ADDR: u32 = 0x0804_0000;
-/// Instructions per 1 ms tick under `-icount shift=3` (8 ns each).
+/// Instructions per 1 ms tick under `-icount shift=3` (8 ns each; see [`Session::icount_shift`]).
 pub const INSTRUCTIONS_PER_TICK: u32 = 125_000;
 /// Tick at which the default session arms the device.
 pub const ARM_TICK: u32 = 20;
@@ -81,6 +81,10 @@ pub struct Session {
     pub heartbeat_until: Option<u32>,
     /// `(tick, counts)`: encoder counts fed instead of the plant's at that tick.
     pub encoder_override: Vec<(u32, [i32; 3])>,
+    /// QEMU's `-icount shift`: each instruction takes 2^shift ns of virtual time. 3 (a
+    /// 125 MIPS core) is what the image's instruction counter assumes; a larger shift slows the
+    /// virtual CPU 2^(shift - 3) times, to provoke overruns.
+    pub icount_shift: u8,
 }
 
 impl Session {
@@ -102,6 +106,7 @@ impl Session {
             heartbeat_every: 5,
             heartbeat_until: None,
             encoder_override: Vec::new(),
+            icount_shift: 3,
         })
     }
 }
@@ -276,7 +281,8 @@ pub fn run(setup: &Setup, session: &Session) -> Result<Run> {
 
     let mut child = Command::new(&setup.qemu)
         .args(["-M", "netduinoplus2", "-nographic", "-monitor", "none"])
-        .args(["-icount", "shift=3,sleep=off"])
+        .arg("-icount")
+        .arg(format!("shift={},sleep=off", session.icount_shift))
         .args(["-semihosting-config", "enable=on,target=native"])
         .arg("-serial")
         .arg(format!("tcp:127.0.0.1:{port}"))
