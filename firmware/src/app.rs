@@ -26,9 +26,9 @@ use crate::tick::{HapticLoop, LoopInput};
 
 /// Telemetry goes out every this many ticks (100 Hz at 1 kHz).
 pub const TELEMETRY_EVERY_TICKS: u32 = 10;
-/// At most this many link bytes are read at each of the two reads per tick, so a flood cannot
-/// stretch a tick.
-pub const MAX_RX_BYTES_PER_TICK: usize = 64;
+/// At most this many link bytes are read at each of the two link polls of a tick, so a flood
+/// cannot stretch a tick.
+pub const MAX_RX_BYTES_PER_POLL: usize = 64;
 /// Outgoing bytes buffered per tick (a message that does not fit is dropped).
 const TX_CAPACITY: usize = 3 * MAX_FRAME;
 
@@ -177,9 +177,9 @@ impl<'b> App<'b> {
         Ok(out)
     }
 
-    /// Read and apply what the link has received, at most [`MAX_RX_BYTES_PER_TICK`] bytes.
+    /// Read and apply what the link has received, at most [`MAX_RX_BYTES_PER_POLL`] bytes.
     fn poll_link<L: LinkPort>(&mut self, link: &mut L) {
-        for _ in 0..MAX_RX_BYTES_PER_TICK {
+        for _ in 0..MAX_RX_BYTES_PER_POLL {
             let Some(byte) = link.read_byte() else { break };
             self.receive(byte);
         }
