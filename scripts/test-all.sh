@@ -14,12 +14,28 @@ for c in rustfmt clippy; do
     rustup component list --installed | grep -q "^$c" || rustup component add "$c"
 done
 
+step "qemu-system-arm (software-in-the-loop tests)"
+if ! command -v qemu-system-arm >/dev/null; then
+    sudo=""
+    [ "$(id -u)" -eq 0 ] || sudo="sudo"
+    $sudo apt-get update
+    $sudo DEBIAN_FRONTEND=noninteractive apt-get install -y qemu-system-arm
+fi
+qemu-system-arm --version | head -n 1
+
 step "format and lints"
 cargo fmt --all --check
 cargo clippy --workspace --all-targets --release -- -D warnings
+# The QEMU image is its own workspace (it only builds for the MCU).
+(cd firmware/qemu && cargo fmt --check && cargo clippy --release -- -D warnings)
 
-step "no_std crates cross-compile for the MCU"
+step "no_std crates cross-compile for the MCU; the QEMU image links against memory.x"
 cargo build --release -p bank-format -p firmware --target thumbv7em-none-eabihf
+(cd firmware/qemu && cargo build --release)
+
+step "the liver bank the software-in-the-loop tests load into QEMU's flash"
+mkdir -p target/sil
+cargo run --release -q -p host -- bank build host/scenes/liver.toml -o target/sil/liver.bank
 
 step "tests (release: the FEM refinement series is heavy in debug)"
 log=$(mktemp)

@@ -12,7 +12,7 @@ use serde::de::DeserializeOwned;
 use serde::{Deserialize, Serialize};
 
 /// Version of the message set below; the device reports it in [`DeviceToHost::Hello`].
-pub const PROTOCOL_VERSION: u16 = 1;
+pub const PROTOCOL_VERSION: u16 = 2;
 /// Most contact nodes one telemetry message carries.
 pub const MAX_CONTACTS: usize = 8;
 /// Upper bound on a postcard-encoded message, bytes (the largest, a full telemetry message, is
@@ -137,12 +137,24 @@ pub enum DeviceToHost {
     },
     /// Periodic status.
     Telemetry(Telemetry),
-    /// Software-in-the-loop: the currents the firmware commands this tick, A.
+    /// Software-in-the-loop: what the firmware commands this tick (the motor currents), with
+    /// the tick's outcome for the harness (sent over the lockstep plant channel, not the link).
     Plant {
         /// Tick the currents belong to.
         tick: u32,
-        /// Motor currents, A.
+        /// Motor currents, A (zero unless armed).
         currents_a: [f32; 3],
+        /// Force rendered on the tool this tick, N (produced by the motors only when armed).
+        force_n: [f32; 3],
+        /// Safety state after this tick.
+        state: State,
+        /// Contact nodes this tick (0 when free).
+        contact_nodes: u8,
+        /// Cost of this tick's loop body (encoders in to currents out), in CPU cycles (or
+        /// instructions under QEMU).
+        body_cycles: u32,
+        /// Cost of the whole previous tick (executor, link and plant I/O included), same unit.
+        tick_cycles: u32,
     },
     /// Sent once when a fault is latched.
     Fault {

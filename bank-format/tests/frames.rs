@@ -59,6 +59,11 @@ fn device_messages() -> Vec<DeviceToHost> {
         DeviceToHost::Plant {
             tick: 17,
             currents_a: [0.5, -0.25, 1.0e-6],
+            force_n: [-1.0, 0.0, 4.75],
+            state: State::Fault,
+            contact_nodes: 8,
+            body_cycles: u32::MAX,
+            tick_cycles: 0,
         },
         DeviceToHost::Fault {
             tick: 99,

@@ -343,8 +343,31 @@ fn device_msg() -> impl Strategy<Value = DeviceToHost> {
                 }
             ),
         telemetry,
-        (any::<u32>(), proptest::array::uniform3(f32_finite()))
-            .prop_map(|(tick, currents_a)| DeviceToHost::Plant { tick, currents_a }),
+        (
+            any::<u32>(),
+            proptest::array::uniform3(f32_finite()),
+            proptest::array::uniform3(f32_finite()),
+            prop_oneof![
+                Just(State::Disarmed),
+                Just(State::Armed),
+                Just(State::Fault)
+            ],
+            any::<u8>(),
+            any::<(u32, u32)>()
+        )
+            .prop_map(
+                |(tick, currents_a, force_n, state, contact_nodes, (body_cycles, tick_cycles))| {
+                    DeviceToHost::Plant {
+                        tick,
+                        currents_a,
+                        force_n,
+                        state,
+                        contact_nodes,
+                        body_cycles,
+                        tick_cycles,
+                    }
+                }
+            ),
         (any::<u32>(), fault(), any::<u32>()).prop_map(|(tick, reason, detail)| {
             DeviceToHost::Fault {
                 tick,

@@ -272,8 +272,11 @@ pub fn transpose_mul(j: &[[f32; 3]; 3], v: [f32; 3]) -> [f32; 3] {
     out
 }
 
+/// `(sin t, cos t)` from the `libm` crate: the same bits natively and on the MCU (through
+/// `ComplexField`, a native build gets the platform's `sinf` when another crate enables
+/// `num-traits/std`, and the software-in-the-loop comparison would differ by an ulp).
 fn sin_cos(t: f32) -> (f32, f32) {
-    (ComplexField::sin(t), ComplexField::cos(t))
+    libm::sincosf(t)
 }
 
 fn at(v: [f32; 3], i: usize) -> f32 {

@@ -5,7 +5,11 @@
 //! gimbal forward kinematics ([`device`]) -> contact detection and tracking on the bank's
 //! reachable surface ([`contact`], paper section 5) -> contact solve in compliance form and the
 //! tissue law Q ([`solve`], eqs. 3-8) -> `J^T F` -> motor currents -> limits and the safety
-//! supervisor ([`safety`]). `no_std`, no heap, f32; the QEMU and board images are not written yet.
+//! supervisor ([`safety`]). `no_std`, no heap, f32.
+//!
+//! Around the loop, [`app`] is the device application (link commands, faults, telemetry) and
+//! [`hal`] the trait boundary an image implements for its hardware; the QEMU
+//! software-in-the-loop image lives in `firmware/qemu/`.
 #![no_std]
 // No panic paths in the firmware: every module the tick calls is checked (tests may unwrap).
 #![cfg_attr(
@@ -23,10 +27,12 @@
 /// Tick period of the force loop, in seconds (1 kHz).
 pub const TICK_PERIOD_S: f32 = 1.0e-3;
 
+pub mod app;
 pub mod contact;
 pub mod device;
 #[cfg(any(test, feature = "test-fixtures"))]
 pub mod fixtures;
+pub mod hal;
 pub mod patch;
 pub mod safety;
 pub mod solve;

@@ -12,4 +12,5 @@ pub mod mesh;
 pub mod ordering;
 pub mod reach;
 pub mod scene;
+pub mod sil;
 pub mod vec3;

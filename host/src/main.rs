@@ -29,6 +29,8 @@ enum Command {
     /// Benchmarks that print figures.
     #[command(subcommand)]
     Bench(cmd::bench::Bench),
+    /// Software in the loop: the firmware image under QEMU against a simulated device.
+    Sil(cmd::sil::Args),
 }
 
 fn main() -> ExitCode {
@@ -45,6 +47,7 @@ fn main() -> ExitCode {
         Command::Compliance(args) => cmd::compliance::run(args),
         Command::Bench(bench) => cmd::bench::run(bench),
         Command::Bank(bank) => cmd::bank::run(bank),
+        Command::Sil(args) => cmd::sil::run(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -5,7 +5,9 @@
 #[allow(dead_code, clippy::needless_range_loop)]
 mod common;
 
-use bank_format::{DeviceToHost, FaultReason, HostToDevice, MAX_FRAME, Mode, encode_frame};
+use bank_format::{
+    DeviceToHost, FaultReason, HostToDevice, MAX_FRAME, Mode, State, encode_frame,
+};
 use std::fs;
 
 fn main() -> std::io::Result<()> {
@@ -29,6 +31,11 @@ fn main() -> std::io::Result<()> {
         DeviceToHost::Plant {
             tick: 3,
             currents_a: [0.1, 0.2, 0.3],
+            force_n: [0.0, 0.0, 1.5],
+            state: State::Armed,
+            contact_nodes: 3,
+            body_cycles: 2500,
+            tick_cycles: 9000,
         },
         DeviceToHost::Fault {
             tick: 5,

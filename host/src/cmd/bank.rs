@@ -254,7 +254,7 @@ fn section_table(bank: &Bank) -> Vec<(&'static str, u32, u32, u32)> {
 
 /// Writes `bytes` to `out` atomically: `<out>.tmp` in the same directory, fsync, rename. On any
 /// error the temporary file is removed and `out` is untouched.
-fn write_atomic(out: &Path, bytes: &[u8]) -> Result<()> {
+pub fn write_atomic(out: &Path, bytes: &[u8]) -> Result<()> {
     let mut tmp_name = out
         .file_name()
         .context("output path has no file name")?
@@ -279,6 +279,22 @@ fn write_atomic(out: &Path, bytes: &[u8]) -> Result<()> {
         return Err(e).with_context(|| format!("cannot write {}", out.display()));
     }
     Ok(())
+}
+
+/// The bank of a scene file (what `host bank build` writes), for other subcommands.
+pub fn scene_bank(scene: &Path) -> Result<Vec<u8>> {
+    let prep = Prepared::new(scene)?;
+    let radius = prep.scene.bank.truncation_radius_m;
+    let (bytes, _) = prep.bank(&prep.blocks(radius)?, radius)?;
+    if bytes.len() > BANK_REGION_BYTES {
+        bail!(
+            "{}: the bank would be {} bytes, more than the {BANK_REGION_BYTES} bytes of the \
+             bank region",
+            scene.display(),
+            bytes.len()
+        );
+    }
+    Ok(bytes)
 }
 
 fn build(args: BuildArgs) -> Result<()> {

@@ -19,6 +19,23 @@ pub enum Bench {
     /// The same tool press on one organ meshed at several sizes: point contact against the
     /// finite tool tip (the point contact's force falls under refinement, the tip's converges).
     Refinement(super::refinement::Args),
+    /// Instructions per tick of the firmware image under QEMU (idle and per contact-set size,
+    /// loop body and whole tick) along the press, slide and strike scripts, and the image's
+    /// flash and RAM use against memory.x.
+    Sil(SilArgs),
+}
+
+/// Arguments of `host bench sil`.
+#[derive(clap::Args, Debug)]
+pub struct SilArgs {
+    /// Virtual seconds per script.
+    #[arg(long, default_value_t = 3.0)]
+    seconds: f64,
+    /// Print one JSON object instead of a table.
+    #[arg(long)]
+    json: bool,
+    #[command(flatten)]
+    setup: super::sil::SetupArgs,
 }
 
 /// Arguments of `host bench tick`.
@@ -98,6 +115,7 @@ pub fn run(bench: Bench) -> Result<()> {
         Bench::Compliance(args) => compliance(args),
         Bench::Tick(args) => tick(args),
         Bench::Refinement(args) => super::refinement::run(args),
+        Bench::Sil(args) => sil(args),
     }
 }
 
@@ -361,6 +379,98 @@ fn tick(args: TickArgs) -> Result<()> {
         pct(0.5),
         pct(0.99),
         pct(1.0)
+    );
+    Ok(())
+}
+
+/// memory.x: FLASH (firmware) and RAM regions.
+const FLASH_BYTES: u64 = 256 * 1024;
+const RAM_START: u32 = 0x2000_0000;
+const RAM_BYTES: u32 = 128 * 1024;
+
+fn sil(args: SilArgs) -> Result<()> {
+    use host::sil::cost::{by_contact_nodes, image_size};
+    use host::sil::harness::{self, Session};
+    use host::sil::script::Script;
+    let (setup, bytes) = args.setup.resolve()?;
+    let bank = bank_format::Bank::parse(&bytes)
+        .map_err(|e| anyhow::anyhow!("{}: invalid bank: {e}", setup.bank.display()))?;
+    let mut records = Vec::new();
+    let mut scripts = Vec::new();
+    for script in [Script::Press, Script::Slide, Script::Strike] {
+        let run = harness::run(&setup, &Session::new(&bank, script, args.seconds)?)?;
+        if let Some(why) = &run.stopped {
+            anyhow::bail!("{script:?}: the image stopped early: {why}\n{}", run.stderr);
+        }
+        scripts.push(serde_json::json!({
+            "script": script,
+            "ticks": run.ticks.len(),
+            "overruns": run.overruns(),
+            "faults": run.faults().len(),
+            "wall_s": run.wall_s,
+        }));
+        records.push(run.ticks);
+    }
+    let groups = by_contact_nodes(&records.concat());
+    let size = image_size(&setup.image, RAM_START, RAM_BYTES)?;
+    let worst = groups.values().map(|g| g.body_max).max().unwrap_or(0);
+    let worst_tick = groups.values().map(|g| g.tick_max).max().unwrap_or(0);
+    if args.json {
+        let by: serde_json::Map<String, serde_json::Value> = groups
+            .iter()
+            .map(|(k, g)| (k.to_string(), serde_json::json!(g)))
+            .collect();
+        let out = serde_json::json!({
+            "instructions_per_period": harness::INSTRUCTIONS_PER_TICK,
+            "by_contact_nodes": by,
+            "worst_body_instructions": worst,
+            "worst_tick_instructions": worst_tick,
+            "flash_bytes": size.flash,
+            "flash_region_bytes": FLASH_BYTES,
+            "ram_static_bytes": size.ram,
+            "ram_region_bytes": RAM_BYTES,
+            "runs": scripts,
+        });
+        println!("{out}");
+        return Ok(());
+    }
+    println!(
+        "instructions per armed tick under QEMU (-icount shift=3: {} per 1 ms period), {} s of \
+         press, slide and strike",
+        harness::INSTRUCTIONS_PER_TICK,
+        args.seconds
+    );
+    println!(
+        "{:<16} {:>7} {:>10} {:>9} {:>9} {:>9} {:>10} {:>9}",
+        "contact nodes",
+        "ticks",
+        "body mean",
+        "body p50",
+        "body p99",
+        "body max",
+        "tick mean",
+        "tick max"
+    );
+    for (k, g) in &groups {
+        let name = if *k == 0 {
+            "0 (idle)".to_string()
+        } else {
+            k.to_string()
+        };
+        println!(
+            "{:<16} {:>7} {:>10.0} {:>9} {:>9} {:>9} {:>10.0} {:>9}",
+            name, g.ticks, g.body_mean, g.body_p50, g.body_p99, g.body_max, g.tick_mean, g.tick_max
+        );
+    }
+    println!("worst case       body {worst}, whole tick {worst_tick}");
+    println!(
+        "image            flash {} B of {} B ({:.1}%), static RAM {} B of {} B ({:.1}%)",
+        size.flash,
+        FLASH_BYTES,
+        100.0 * size.flash as f64 / FLASH_BYTES as f64,
+        size.ram,
+        RAM_BYTES,
+        100.0 * size.ram as f64 / f64::from(RAM_BYTES)
     );
     Ok(())
 }

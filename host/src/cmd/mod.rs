@@ -6,3 +6,4 @@ pub mod compliance;
 pub mod demo;
 pub mod fixing;
 pub mod refinement;
+pub mod sil;

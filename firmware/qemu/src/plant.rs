@@ -1,0 +1,120 @@
+//! The plant channel of software in the loop: on a board the encoders and motor drivers are
+//! peripherals; here they are the host's plant simulator, reached through two named pipes that
+//! QEMU's semihosting opens in its working directory: `sil-plant-in` (host -> image,
+//! `HostToDevice::Plant { tick, encoder_counts }`) and `sil-plant-out` (image -> host,
+//! `DeviceToHost::Plant { tick, currents_a, .. }`), both as link frames (postcard + COBS + CRC).
+//!
+//! Semihosting calls stop the virtual CPU, so virtual time (`-icount`) stands still while the
+//! host computes the next encoder counts: the exchange is lockstep and runs are deterministic.
+
+use bank_format::{DeviceToHost, FrameDecoder, FrameError, HostToDevice, MAX_FRAME, encode_frame};
+use core::fmt;
+use firmware::hal::{Actuation, Plant};
+use semihosting::fs::File;
+use semihosting::io::{Read, Write};
+
+/// Pipe the host writes encoder frames to.
+const IN_PATH: &core::ffi::CStr = c"sil-plant-in";
+/// Pipe the host reads current frames from.
+const OUT_PATH: &core::ffi::CStr = c"sil-plant-out";
+
+/// Why the plant exchange failed.
+#[derive(Debug)]
+pub enum PlantError {
+    /// The host closed the channel (end of the run).
+    Closed,
+    /// A semihosting call failed.
+    Io(semihosting::io::Error),
+    /// A frame from the host was dropped.
+    Frame(FrameError),
+    /// The host answered for another tick or with another message (a missed plant frame).
+    Unexpected {
+        /// The tick the image asked for.
+        expected: u32,
+    },
+}
+
+impl fmt::Display for PlantError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            PlantError::Closed => f.write_str("closed by the host"),
+            PlantError::Io(e) => write!(f, "semihosting I/O: {e:?}"),
+            PlantError::Frame(e) => write!(f, "bad frame from the host: {e}"),
+            PlantError::Unexpected { expected } => {
+                write!(f, "expected the encoder frame of tick {expected}")
+            }
+        }
+    }
+}
+
+/// The two pipes and a receive buffer.
+pub struct PlantChannel {
+    rx: File,
+    tx: File,
+    decoder: FrameDecoder<HostToDevice>,
+    buf: [u8; 64],
+    pos: usize,
+    len: usize,
+}
+
+impl PlantChannel {
+    /// Open the pipes: the image's output first (the host opens them in the same order).
+    pub fn open() -> Result<PlantChannel, PlantError> {
+        let tx = File::create(OUT_PATH).map_err(PlantError::Io)?;
+        let rx = File::open(IN_PATH).map_err(PlantError::Io)?;
+        Ok(PlantChannel {
+            rx,
+            tx,
+            decoder: FrameDecoder::new(),
+            buf: [0; 64],
+            pos: 0,
+            len: 0,
+        })
+    }
+
+    /// The next frame from the host (blocking; virtual time stands still meanwhile).
+    fn next_frame(&mut self) -> Result<HostToDevice, PlantError> {
+        loop {
+            while let Some(&b) = self.buf.get(self.pos).filter(|_| self.pos < self.len) {
+                self.pos += 1;
+                if let Some(r) = self.decoder.feed(b) {
+                    return r.map_err(PlantError::Frame);
+                }
+            }
+            let n = self.rx.read(&mut self.buf).map_err(PlantError::Io)?;
+            if n == 0 {
+                return Err(PlantError::Closed);
+            }
+            (self.pos, self.len) = (0, n);
+        }
+    }
+}
+
+impl Plant for PlantChannel {
+    type Error = PlantError;
+
+    fn read_encoders(&mut self, tick: u32) -> Result<[i32; 3], PlantError> {
+        match self.next_frame()? {
+            HostToDevice::Plant {
+                tick: t,
+                encoder_counts,
+            } if t == tick => Ok(encoder_counts),
+            _ => Err(PlantError::Unexpected { expected: tick }),
+        }
+    }
+
+    fn actuate(&mut self, out: &Actuation) -> Result<(), PlantError> {
+        let msg = DeviceToHost::Plant {
+            tick: out.tick,
+            currents_a: out.currents_a,
+            force_n: out.force_n,
+            state: out.state,
+            contact_nodes: out.contact_nodes,
+            body_cycles: out.body_cycles,
+            tick_cycles: out.tick_cycles,
+        };
+        let mut buf = [0u8; MAX_FRAME];
+        let frame = encode_frame(&msg, &mut buf).map_err(PlantError::Frame)?;
+        self.tx.write_all(frame).map_err(PlantError::Io)
+    }
+}

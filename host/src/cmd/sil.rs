@@ -1,0 +1,204 @@
+//! `host sil`: run the firmware image under QEMU against the simulated device for a scripted
+//! hand motion and print a summary (one JSON object with `--json`).
+
+use super::bank::{scene_bank, write_atomic};
+use anyhow::{Context, Result, bail};
+use bank_format::{AlignedBytes, Bank};
+use host::sil::harness::{self, Run, Session, Setup};
+use host::sil::script::Script;
+use std::path::{Path, PathBuf};
+
+/// Arguments of `host sil`.
+#[derive(clap::Args, Debug)]
+pub struct Args {
+    /// The hand's scripted motion.
+    #[arg(long, value_enum, default_value_t = Script::Press)]
+    pub script: Script,
+    /// Virtual seconds to run (1 kHz ticks).
+    #[arg(long, default_value_t = 5.0)]
+    pub seconds: f64,
+    /// Print one JSON object instead of text.
+    #[arg(long)]
+    pub json: bool,
+    /// Also write every tick (counts, joints, currents, force, state, instructions) to this
+    /// file as JSON lines.
+    #[arg(long)]
+    pub trace: Option<PathBuf>,
+    #[command(flatten)]
+    pub setup: SetupArgs,
+}
+
+/// Where the image, the bank and QEMU come from (shared with `host bench sil`).
+#[derive(clap::Args, Debug)]
+pub struct SetupArgs {
+    /// Bank file to load at the bank region; default: built from --scene into
+    /// target/sil/<scene>.bank when missing or older than the scene file.
+    #[arg(long)]
+    pub bank: Option<PathBuf>,
+    /// Scene the default bank is built from.
+    #[arg(long, default_value = "host/scenes/liver.toml")]
+    pub scene: PathBuf,
+    /// Firmware image (ELF); default: build firmware/qemu and use its release image.
+    #[arg(long)]
+    pub image: Option<PathBuf>,
+    /// QEMU binary.
+    #[arg(long, default_value = "qemu-system-arm")]
+    pub qemu: PathBuf,
+}
+
+impl SetupArgs {
+    /// The setup, building the image and the bank as needed, and the bank's bytes.
+    pub fn resolve(&self) -> Result<(Setup, AlignedBytes)> {
+        let image = match &self.image {
+            Some(p) => p.clone(),
+            None => harness::build_image()?,
+        };
+        let bank = match &self.bank {
+            Some(p) => p.clone(),
+            None => cached_bank(&self.scene)?,
+        };
+        let raw =
+            std::fs::read(&bank).with_context(|| format!("cannot read {}", bank.display()))?;
+        Ok((
+            Setup {
+                qemu: self.qemu.clone(),
+                image,
+                bank,
+            },
+            AlignedBytes::new(&raw),
+        ))
+    }
+}
+
+/// `target/sil/<scene stem>.bank`, rebuilt when missing or older than the scene file.
+fn cached_bank(scene: &Path) -> Result<PathBuf> {
+    let stem = scene
+        .file_stem()
+        .with_context(|| format!("{}: not a scene file path", scene.display()))?;
+    let out = harness::repo_root()
+        .join("target/sil")
+        .join(stem)
+        .with_extension("bank");
+    let modified = |p: &Path| std::fs::metadata(p).and_then(|m| m.modified()).ok();
+    let scene_time =
+        modified(scene).with_context(|| format!("cannot read the scene {}", scene.display()))?;
+    if modified(&out).is_none_or(|t| t < scene_time) {
+        let bytes = scene_bank(scene)?;
+        if let Some(dir) = out.parent() {
+            std::fs::create_dir_all(dir)
+                .with_context(|| format!("cannot create {}", dir.display()))?;
+        }
+        write_atomic(&out, &bytes)?;
+    }
+    Ok(out)
+}
+
+/// The JSON summary of a run.
+#[derive(serde::Serialize)]
+pub struct Summary {
+    script: Script,
+    virtual_s: f64,
+    ticks: usize,
+    missed_plant_frames: u32,
+    overruns: u32,
+    /// Whole tick (executor, link and plant I/O included), instructions.
+    max_instructions_per_tick: u32,
+    /// Loop body only, instructions.
+    max_body_instructions: u32,
+    peak_force_n: f32,
+    faults: Vec<FaultJson>,
+    final_state: String,
+    rx_frames: u32,
+    rx_errors: u32,
+    telemetry_messages: usize,
+    wall_s: f64,
+    virtual_over_wall: f64,
+    exit_code: Option<i32>,
+    stopped: Option<String>,
+}
+
+#[derive(serde::Serialize)]
+struct FaultJson {
+    tick: u32,
+    reason: String,
+    detail: u32,
+}
+
+impl Summary {
+    /// Condense `run`.
+    pub fn new(script: Script, run: &Run) -> Summary {
+        let last = run
+            .telemetry()
+            .last()
+            .map(|t| t.counters)
+            .unwrap_or_default();
+        let virtual_s = run.ticks.len() as f64 * 1e-3;
+        Summary {
+            script,
+            virtual_s,
+            ticks: run.ticks.len(),
+            missed_plant_frames: run.missed_plant_frames(),
+            overruns: run.overruns(),
+            max_instructions_per_tick: run
+                .ticks
+                .iter()
+                .map(|t| t.tick_instructions)
+                .max()
+                .unwrap_or(0),
+            max_body_instructions: run
+                .ticks
+                .iter()
+                .map(|t| t.body_instructions)
+                .max()
+                .unwrap_or(0),
+            peak_force_n: run.peak_force_n(),
+            faults: run
+                .faults()
+                .into_iter()
+                .map(|(tick, reason, detail)| FaultJson {
+                    tick,
+                    reason: format!("{reason:?}"),
+                    detail,
+                })
+                .collect(),
+            final_state: run
+                .ticks
+                .last()
+                .map_or_else(|| "none".into(), |t| format!("{:?}", t.state)),
+            rx_frames: last.rx_frames,
+            rx_errors: last.rx_errors,
+            telemetry_messages: run.telemetry().len(),
+            wall_s: run.wall_s,
+            virtual_over_wall: virtual_s / run.wall_s.max(1e-9),
+            exit_code: run.exit_code,
+            stopped: run.stopped.clone(),
+        }
+    }
+}
+
+/// Runs `host sil`.
+pub fn run(args: Args) -> Result<()> {
+    let (setup, bytes) = args.setup.resolve()?;
+    let bank = Bank::parse(&bytes)
+        .map_err(|e| anyhow::anyhow!("{}: invalid bank: {e}", setup.bank.display()))?;
+    let session = Session::new(&bank, args.script, args.seconds)?;
+    let run = harness::run(&setup, &session)?;
+    if let Some(path) = &args.trace {
+        let mut text = String::new();
+        for t in &run.ticks {
+            text.push_str(&serde_json::to_string(t)?);
+            text.push('\n');
+        }
+        write_atomic(path, text.as_bytes())?;
+    }
+    let s = Summary::new(args.script, &run);
+    if args.json {
+        println!("{}", serde_json::to_string(&s)?);
+    } else {
+        println!("{}", serde_json::to_string_pretty(&s)?);
+    }
+    if let Some(why) = &run.stopped {
+        bail!("the image stopped early: {why}\n{}", run.stderr);
+    }
+    Ok(())
+}

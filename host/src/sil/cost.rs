@@ -1,0 +1,175 @@
+//! Where the instructions go under QEMU: per-tick costs of a run grouped by contact-set size,
+//! and the image's flash and RAM use read from its ELF section headers.
+
+use super::harness::TickRecord;
+use anyhow::{Context, Result, bail};
+use bank_format::State;
+use std::collections::BTreeMap;
+use std::path::Path;
+
+/// Instruction counts of one group of ticks.
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]
+pub struct CostStats {
+    /// Ticks in the group.
+    pub ticks: usize,
+    /// Mean loop-body instructions.
+    pub body_mean: f64,
+    /// Median loop-body instructions.
+    pub body_p50: u32,
+    /// 99th percentile of loop-body instructions.
+    pub body_p99: u32,
+    /// Largest loop-body instructions.
+    pub body_max: u32,
+    /// Mean whole-tick instructions (executor, link and plant I/O included).
+    pub tick_mean: f64,
+    /// Largest whole-tick instructions.
+    pub tick_max: u32,
+}
+
+impl CostStats {
+    /// The statistics of `(record, its whole-tick instructions)` pairs.
+    pub fn of<'a>(records: impl Iterator<Item = (&'a TickRecord, u32)>) -> CostStats {
+        let mut s = CostStats::default();
+        let (mut body, mut tick) = (0.0, 0.0);
+        let mut bodies = Vec::new();
+        for (r, whole) in records {
+            bodies.push(r.body_instructions);
+            s.ticks += 1;
+            body += f64::from(r.body_instructions);
+            tick += f64::from(whole);
+            s.body_max = s.body_max.max(r.body_instructions);
+            s.tick_max = s.tick_max.max(whole);
+        }
+        if s.ticks > 0 {
+            s.body_mean = body / s.ticks as f64;
+            s.tick_mean = tick / s.ticks as f64;
+            bodies.sort_unstable();
+            let at = |q: f64| bodies[((bodies.len() - 1) as f64 * q).round() as usize];
+            (s.body_p50, s.body_p99) = (at(0.5), at(0.99));
+        }
+        s
+    }
+}
+
+/// Costs of armed ticks grouped by contact nodes (0 = idle, free motion). A record's
+/// `tick_instructions` belongs to the tick before it, so each tick's whole cost is read from
+/// its successor.
+pub fn by_contact_nodes(records: &[TickRecord]) -> BTreeMap<u8, CostStats> {
+    let mut groups: BTreeMap<u8, Vec<(&TickRecord, u32)>> = BTreeMap::new();
+    for w in records.windows(2) {
+        if w[0].state == State::Armed {
+            groups
+                .entry(w[0].contact_nodes)
+                .or_default()
+                .push((&w[0], w[1].tick_instructions));
+        }
+    }
+    groups
+        .into_iter()
+        .map(|(k, v)| (k, CostStats::of(v.into_iter())))
+        .collect()
+}
+
+/// Bytes of flash (code, read-only data and the initial values of `.data`) and of statically
+/// allocated RAM (`.data`, `.bss`, `.uninit`; the stack takes the rest) of an ELF32 image.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
+pub struct ImageSize {
+    /// Flash bytes.
+    pub flash: u64,
+    /// Static RAM bytes.
+    pub ram: u64,
+}
+
+/// Read [`ImageSize`] from the section headers of the little-endian ELF32 file at `path`;
+/// `ram_start..ram_start + ram_len` is the RAM region (allocated sections there count as RAM).
+pub fn image_size(path: &Path, ram_start: u32, ram_len: u32) -> Result<ImageSize> {
+    let b = std::fs::read(path).with_context(|| format!("cannot read {}", path.display()))?;
+    let u16_at = |o: usize| b.get(o..o + 2).map(|s| u16::from_le_bytes([s[0], s[1]]));
+    let u32_at = |o: usize| {
+        b.get(o..o + 4)
+            .map(|s| u32::from_le_bytes([s[0], s[1], s[2], s[3]]))
+    };
+    if b.get(..6) != Some(&[0x7f, b'E', b'L', b'F', 1, 1][..]) {
+        bail!("{}: not a little-endian ELF32 file", path.display());
+    }
+    let bad = || anyhow::anyhow!("{}: truncated ELF section table", path.display());
+    let shoff = u32_at(0x20).ok_or_else(bad)? as usize;
+    let shentsize = usize::from(u16_at(0x2e).ok_or_else(bad)?);
+    let shnum = usize::from(u16_at(0x30).ok_or_else(bad)?);
+    const SHF_ALLOC: u32 = 2;
+    const SHT_NOBITS: u32 = 8;
+    let mut size = ImageSize { flash: 0, ram: 0 };
+    for i in 0..shnum {
+        let h = shoff + i * shentsize;
+        let (kind, flags) = (
+            u32_at(h + 4).ok_or_else(bad)?,
+            u32_at(h + 8).ok_or_else(bad)?,
+        );
+        let (addr, len) = (
+            u32_at(h + 12).ok_or_else(bad)?,
+            u32_at(h + 20).ok_or_else(bad)?,
+        );
+        if flags & SHF_ALLOC == 0 {
+            continue;
+        }
+        if kind != SHT_NOBITS {
+            size.flash += u64::from(len);
+        }
+        if addr >= ram_start && u64::from(addr) < u64::from(ram_start) + u64::from(ram_len) {
+            size.ram += u64::from(len);
+        }
+    }
+    Ok(size)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn rec(tick: u32, nodes: u8, body: u32, prev_tick: u32, state: State) -> TickRecord {
+        TickRecord {
+            tick,
+            encoder_counts: [0; 3],
+            joints: [0.0; 3],
+            currents_a: [0.0; 3],
+            force_n: [0.0; 3],
+            state,
+            contact_nodes: nodes,
+            body_instructions: body,
+            tick_instructions: prev_tick,
+        }
+    }
+
+    #[test]
+    fn groups_by_contact_nodes_with_the_successors_tick_cost() {
+        let r = [
+            rec(1, 0, 500, 0, State::Disarmed),
+            rec(2, 0, 1000, 9, State::Armed),
+            rec(3, 3, 4000, 3000, State::Armed),
+            rec(4, 3, 6000, 7000, State::Armed),
+            rec(5, 0, 1200, 9000, State::Armed),
+        ];
+        let g = by_contact_nodes(&r);
+        assert_eq!(g.len(), 2);
+        let idle = g[&0];
+        // Tick 1 is disarmed, tick 5 has no successor: only tick 2 counts.
+        assert_eq!((idle.ticks, idle.body_max, idle.tick_max), (1, 1000, 3000));
+        let three = g[&3];
+        assert_eq!(three.ticks, 2);
+        assert_eq!(three.body_mean, 5000.0);
+        assert_eq!(
+            (three.body_p50, three.body_p99, three.body_max),
+            (6000, 6000, 6000)
+        );
+        assert_eq!((three.tick_mean, three.tick_max), (8000.0, 9000));
+    }
+
+    #[test]
+    fn image_size_rejects_a_non_elf_file() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("x");
+        std::fs::write(&p, b"not an elf").unwrap();
+        let e = image_size(&p, 0x2000_0000, 1024).unwrap_err().to_string();
+        assert!(e.contains("not a little-endian ELF32"), "{e}");
+    }
+}

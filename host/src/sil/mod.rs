@@ -1,0 +1,10 @@
+//! Software in the loop: the real firmware image (`firmware/qemu`) under QEMU against a
+//! simulated haptic device. [`plant`] is the gimbal (rigid joints, motors, the user's hand),
+//! [`script`] the hand's scripted motions and [`harness`] starts QEMU, exchanges encoder counts
+//! and currents with the image every tick over a lockstep channel and collects its link
+//! traffic; [`cost`] groups instruction counts per tick and sizes the image.
+
+pub mod cost;
+pub mod harness;
+pub mod plant;
+pub mod script;

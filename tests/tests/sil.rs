@@ -1,0 +1,377 @@
+//! Software in the loop: the firmware image under QEMU against the simulated device
+//! (`host::sil`). Needs `qemu-system-arm`, the `thumbv7em-none-eabihf` target (the image is
+//! built here if stale) and the liver bank at `target/sil/liver.bank` (scripts/test-all.sh
+//! installs and builds all three).
+
+use bank_format::{
+    AlignedBytes, Bank, DeviceCalibration, DeviceToHost, FaultReason, HostToDevice, MAX_FRAME,
+    Mode, State, encode_frame, reseal,
+};
+use firmware::tick::{HapticLoop, LoopInput};
+use host::sil::harness::{self, ARM_TICK, LinkSend, Run, Session, Setup};
+use host::sil::script::Script;
+use std::path::PathBuf;
+use std::sync::{Mutex, OnceLock};
+
+/// The image (built once per test binary) and the liver bank.
+fn setup() -> (Setup, AlignedBytes) {
+    static IMAGE: OnceLock<PathBuf> = OnceLock::new();
+    let image = IMAGE
+        .get_or_init(|| harness::build_image().expect("building the QEMU image"))
+        .clone();
+    let bank = harness::repo_root().join("target/sil/liver.bank");
+    let raw = std::fs::read(&bank).unwrap_or_else(|e| {
+        panic!(
+            "{}: {e}; build it with `cargo run --release -p host -- bank build \
+             host/scenes/liver.toml -o target/sil/liver.bank` (scripts/test-all.sh does)",
+            bank.display()
+        )
+    });
+    let setup = Setup {
+        qemu: "qemu-system-arm".into(),
+        image,
+        bank,
+    };
+    (setup, AlignedBytes::new(&raw))
+}
+
+/// One QEMU at a time: the machine has two cores, and each run is already two busy threads.
+fn qemu(setup: &Setup, session: &Session) -> Run {
+    static ONE_AT_A_TIME: Mutex<()> = Mutex::new(());
+    let _turn = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let run = harness::run(setup, session).expect("QEMU run");
+    assert_eq!(run.exit_code, Some(0), "image stderr:\n{}", run.stderr);
+    run
+}
+
+fn norm(v: [f32; 3]) -> f32 {
+    v.iter().map(|x| x * x).sum::<f32>().sqrt()
+}
+
+/// Replays the encoder counts QEMU was fed through the native portable loop, arming it at the
+/// tick the image armed, and checks currents, forces, state and contact set are bit-identical.
+/// Returns the number of ticks with a nonzero current.
+fn assert_matches_native(bank: &Bank, run: &Run) -> usize {
+    let mut native = HapticLoop::new(bank);
+    let mut driven = 0;
+    for rec in &run.ticks {
+        if rec.state == State::Armed && native.state() != firmware::safety::State::Armed {
+            native.arm().expect("native loop arms");
+        }
+        let out = native.tick(LoopInput {
+            encoder_counts: rec.encoder_counts,
+            overrun: false,
+            ticks_since_host_frame: 0,
+        });
+        let bits = |v: [f32; 3]| v.map(f32::to_bits);
+        assert_eq!(out.tick, rec.tick);
+        assert_eq!(out.state.wire(), rec.state, "tick {}", rec.tick);
+        assert_eq!(
+            bits(out.currents_a),
+            bits(rec.currents_a),
+            "tick {}: {out:?} vs {rec:?}",
+            rec.tick
+        );
+        assert_eq!(
+            bits(out.tool_force_n),
+            bits(rec.force_n),
+            "tick {}: {out:?} vs {rec:?}",
+            rec.tick
+        );
+        assert_eq!(
+            out.contacts.len(),
+            usize::from(rec.contact_nodes),
+            "tick {}",
+            rec.tick
+        );
+        if rec.currents_a != [0.0; 3] {
+            driven += 1;
+        }
+    }
+    driven
+}
+
+#[test]
+fn ten_seconds_of_slide_match_the_native_loop_without_overrun() {
+    let (setup, bytes) = setup();
+    let bank = Bank::parse(&bytes).unwrap();
+    let run = qemu(&setup, &Session::new(&bank, Script::Slide, 10.0).unwrap());
+    assert_eq!(run.stopped, None);
+    assert_eq!(run.ticks.len(), 10_000);
+    assert_eq!(run.missed_plant_frames(), 0);
+    assert_eq!(run.overruns(), 0);
+    assert!(run.faults().is_empty(), "{:?}", run.faults());
+    // Every tick, executor and I/O included, well inside its 125,000-instruction period.
+    let worst = run.ticks.iter().map(|t| t.tick_instructions).max().unwrap();
+    assert!(worst < harness::INSTRUCTIONS_PER_TICK / 2, "{worst}");
+    // Telemetry every 10 ticks, nothing dropped either way on the link.
+    let tel = run.telemetry();
+    assert!(tel.len() >= 995, "{}", tel.len());
+    let last = tel.last().unwrap();
+    assert_eq!(last.counters.rx_errors, 0);
+    assert_eq!(last.counters.overruns, 0);
+    assert_eq!(run.link_stats.errors(), 0);
+    // The image armed on the host's command (the link is asynchronous: within a few ticks).
+    let armed = run
+        .ticks
+        .iter()
+        .position(|t| t.state == State::Armed)
+        .unwrap() as u32
+        + 1;
+    assert!(
+        (ARM_TICK..ARM_TICK + 50).contains(&armed),
+        "armed at {armed}"
+    );
+    assert!(
+        run.ticks[armed as usize..]
+            .iter()
+            .all(|t| t.state == State::Armed)
+    );
+
+    let driven = assert_matches_native(&bank, &run);
+    // The script really pressed and slid: thousands of ticks in contact with force rendered.
+    assert!(driven > 4000, "{driven}");
+    let touching = run.ticks.iter().filter(|t| t.contact_nodes > 0).count();
+    assert!(touching > 4000, "{touching}");
+    assert!(run.peak_force_n() > 0.05 && run.peak_force_n() <= bank.device().max_force_n);
+}
+
+#[test]
+fn press_and_strike_match_the_native_loop() {
+    let (setup, bytes) = setup();
+    let bank = Bank::parse(&bytes).unwrap();
+    for script in [Script::Press, Script::Strike] {
+        let run = qemu(&setup, &Session::new(&bank, script, 2.0).unwrap());
+        assert_eq!(run.stopped, None);
+        assert!(run.faults().is_empty(), "{script:?}: {:?}", run.faults());
+        assert!(assert_matches_native(&bank, &run) > 300, "{script:?}");
+    }
+}
+
+/// The first tick at or after `from` in contact and armed (so a fault has current to cut).
+fn pressing_tick(run: &Run, from: u32) -> u32 {
+    run.ticks
+        .iter()
+        .find(|t| t.tick >= from && t.contact_nodes > 0 && t.currents_a != [0.0; 3])
+        .unwrap_or_else(|| {
+            panic!(
+                "no pressing tick from {from}: faults {:?}, stopped {:?}, last {:?}",
+                run.faults(),
+                run.stopped,
+                run.ticks.last()
+            )
+        })
+        .tick
+}
+
+/// From the fault's tick on, every current is zero and the state is `Fault`.
+fn assert_zero_from(run: &Run, tick: u32) {
+    for t in run.ticks.iter().filter(|t| t.tick >= tick) {
+        assert_eq!(t.currents_a, [0.0; 3], "{t:?}");
+        assert_eq!(t.state, State::Fault, "{t:?}");
+    }
+}
+
+#[test]
+fn silent_host_link_faults_within_ten_ticks() {
+    let (setup, bytes) = setup();
+    let bank = Bank::parse(&bytes).unwrap();
+    let probe = qemu(&setup, &Session::new(&bank, Script::Press, 1.5).unwrap());
+    let quiet_from = pressing_tick(&probe, 1000);
+    let mut session = Session::new(&bank, Script::Press, 1.5).unwrap();
+    session.heartbeat_until = Some(quiet_from);
+    let run = qemu(&setup, &session);
+    let faults = run.faults();
+    assert_eq!(faults.len(), 1, "{faults:?}");
+    let (tick, reason, detail) = faults[0];
+    assert_eq!(reason, FaultReason::LinkSilent);
+    // Faulted on the 11th tick without a frame (timeout 10 ticks), and not before the host
+    // went quiet (its last heartbeat may still have been in flight on the UART).
+    assert_eq!(detail, 11);
+    assert!(
+        tick > quiet_from && tick <= quiet_from + 11 + 10,
+        "{tick} vs {quiet_from}"
+    );
+    assert!(run.ticks[tick as usize - 2].currents_a != [0.0; 3]);
+    assert_zero_from(&run, tick);
+    let last = run.telemetry().last().copied().cloned().unwrap();
+    assert_eq!(last.fault, Some(FaultReason::LinkSilent));
+}
+
+#[test]
+fn corrupt_and_truncated_frames_are_dropped_and_counted() {
+    let (setup, bytes) = setup();
+    let bank = Bank::parse(&bytes).unwrap();
+    let mut buf = [0u8; MAX_FRAME];
+    let frame = encode_frame(&HostToDevice::Disarm, &mut buf)
+        .unwrap()
+        .to_vec();
+    let mut bad_crc = frame.clone();
+    bad_crc[2] ^= 0x40;
+    // A truncated frame: its start, then the delimiter.
+    let truncated = [&frame[..2], &[0u8][..]].concat();
+    // Not valid COBS: a code byte pointing past the delimiter.
+    let bad_cobs = vec![0x09, 0x01, 0x02, 0x00];
+    let mut session = Session::new(&bank, Script::Press, 2.0).unwrap();
+    for (i, raw) in [bad_crc, truncated, bad_cobs].into_iter().enumerate() {
+        // While pressing: a Disarm that got through would cut the current.
+        session
+            .link
+            .push((1100 + 100 * i as u32, LinkSend::Raw(raw)));
+    }
+    let run = qemu(&setup, &session);
+    assert!(run.faults().is_empty(), "{:?}", run.faults());
+    assert_eq!(run.ticks.len(), 2000);
+    assert!(
+        run.ticks[ARM_TICK as usize + 50..]
+            .iter()
+            .all(|t| t.state == State::Armed)
+    );
+    let last = run.telemetry().last().copied().cloned().unwrap();
+    assert_eq!(last.counters.rx_errors, 3);
+    assert!(last.counters.rx_frames >= 300, "{:?}", last.counters);
+    // The loop kept rendering through them.
+    assert!(
+        run.ticks[1100..1400]
+            .iter()
+            .all(|t| t.currents_a != [0.0; 3])
+    );
+}
+
+#[test]
+fn bank_with_one_flipped_byte_refuses_to_arm() {
+    let (mut setup, bytes) = setup();
+    let good = Bank::parse(&bytes).unwrap();
+    let mut flipped = bytes.as_slice().to_vec();
+    let at = flipped.len() / 2;
+    flipped[at] ^= 0x01;
+    let code = Bank::parse(&AlignedBytes::new(&flipped))
+        .unwrap_err()
+        .code();
+    let dir = tempfile::tempdir().unwrap();
+    setup.bank = dir.path().join("flipped.bank");
+    std::fs::write(&setup.bank, &flipped).unwrap();
+    let mut session = Session::new(&good, Script::Press, 0.3).unwrap();
+    session
+        .link
+        .push((150, LinkSend::Command(HostToDevice::Arm)));
+    let run = qemu(&setup, &session);
+    assert!(run.stderr.contains("bank region invalid"), "{}", run.stderr);
+    assert!(
+        run.ticks
+            .iter()
+            .all(|t| t.currents_a == [0.0; 3] && t.state == State::Fault)
+    );
+    let hello = run.link.iter().find_map(|e| match e.msg {
+        DeviceToHost::Hello { bank_crc, .. } => Some(bank_crc),
+        _ => None,
+    });
+    assert_eq!(hello, Some(None), "Hello must report no valid bank");
+    // At boot and on each of the two arm attempts: the reason and the bank error's code.
+    let faults = run.faults();
+    assert_eq!(faults.len(), 3, "{faults:?}");
+    assert!(
+        faults
+            .iter()
+            .all(|f| (f.1, f.2) == (FaultReason::InvalidBank, u32::from(code)))
+    );
+}
+
+#[test]
+fn absurd_encoder_counts_fault_to_zero_current() {
+    let (setup, bytes) = setup();
+    let bank = Bank::parse(&bytes).unwrap();
+    let probe = qemu(&setup, &Session::new(&bank, Script::Press, 1.5).unwrap());
+    let at = pressing_tick(&probe, 1100);
+    let mut session = Session::new(&bank, Script::Press, 1.5).unwrap();
+    session.encoder_override.push((at, [i32::MAX, i32::MIN, 7]));
+    let run = qemu(&setup, &session);
+    assert_eq!(run.faults(), [(at, FaultReason::EncoderJump, 0)]);
+    assert!(run.ticks[at as usize - 2].currents_a != [0.0; 3]);
+    assert_zero_from(&run, at);
+}
+
+/// A copy of `bytes` with the device calibration's current limits replaced (CRC resealed).
+fn with_current_limit(bytes: &AlignedBytes, limit_a: f32) -> Vec<u8> {
+    let bank = Bank::parse(bytes).unwrap();
+    let cal_at = bank.device() as *const DeviceCalibration as usize - bytes.as_ptr() as usize;
+    let field = cal_at + std::mem::offset_of!(DeviceCalibration, current_limit_a);
+    let mut out = bytes.as_slice().to_vec();
+    for j in 0..3 {
+        out[field + 4 * j..field + 4 * j + 4].copy_from_slice(&limit_a.to_le_bytes());
+    }
+    assert!(reseal(&mut out));
+    out
+}
+
+#[test]
+fn current_over_the_limit_faults_or_is_clamped() {
+    let (mut setup, bytes) = setup();
+    let bank = Bank::parse(&bytes).unwrap();
+    let cal = *bank.device();
+
+    // The host commands constant currents over the limit (and a NaN): the device clamps them
+    // to the limit (NaN to 0 A) and never drives more.
+    let mut session = Session::new(&bank, Script::Press, 0.5).unwrap();
+    let asked = [10.0, -10.0, f32::NAN];
+    session.link.push((
+        100,
+        LinkSend::Command(HostToDevice::SetMode(Mode::ConstantCurrent {
+            currents_a: asked,
+        })),
+    ));
+    let run = qemu(&setup, &session);
+    let limit = cal.current_limit_a;
+    assert!(
+        run.ticks
+            .iter()
+            .all(|t| (0..3).all(|j| t.currents_a[j].abs() <= limit[j]))
+    );
+    let last = run.ticks.last().unwrap();
+    assert_eq!(last.currents_a, [limit[0], -limit[1], 0.0]);
+    assert_eq!(last.state, State::Armed);
+
+    // A calibration whose current limit is far below what the rendered force needs: the
+    // request exceeds 1.25 x the limit as soon as the tool presses, which is a fault.
+    let dir = tempfile::tempdir().unwrap();
+    setup.bank = dir.path().join("low-limit.bank");
+    std::fs::write(&setup.bank, with_current_limit(&bytes, 0.005)).unwrap();
+    let run = qemu(&setup, &Session::new(&bank, Script::Press, 1.5).unwrap());
+    let faults = run.faults();
+    assert_eq!(faults.len(), 1, "{faults:?}");
+    let (tick, reason, detail) = faults[0];
+    assert_eq!(
+        (reason, detail),
+        (FaultReason::CurrentLimit, 2),
+        "insertion motor"
+    );
+    let first_contact = run.ticks.iter().find(|t| t.contact_nodes > 0).unwrap().tick;
+    assert!(
+        tick >= first_contact && tick < first_contact + 200,
+        "{tick} {first_contact}"
+    );
+    assert!(norm(run.ticks[tick as usize - 1].force_n) > 0.0);
+    assert_zero_from(&run, tick);
+}
+
+#[test]
+fn overrun_faults_to_zero_current() {
+    let (setup, bytes) = setup();
+    let bank = Bank::parse(&bytes).unwrap();
+    // A virtual CPU 16 times slower (128 ns per instruction, 7,812 per 1 ms period): idle ticks
+    // (about 3,500 instructions) still fit, ticks near or in contact do not.
+    let mut session = Session::new(&bank, Script::Press, 1.5).unwrap();
+    session.icount_shift = 7;
+    let run = qemu(&setup, &session);
+    let faults = run.faults();
+    assert_eq!(faults.len(), 1, "{faults:?}");
+    let (tick, reason, _) = faults[0];
+    assert_eq!(reason, FaultReason::Overrun);
+    // Armed and idle first: the overrun comes with the work near the surface.
+    assert!(tick > ARM_TICK + 100, "{tick}");
+    assert_eq!(run.ticks[tick as usize - 2].state, State::Armed);
+    assert_zero_from(&run, tick);
+    let last = run.telemetry().last().copied().cloned().unwrap();
+    assert!(last.counters.overruns >= 1, "{:?}", last.counters);
+    assert_eq!(last.fault, Some(FaultReason::Overrun));
+}
