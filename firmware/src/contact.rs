@@ -402,10 +402,14 @@ pub struct SurfacePoint {
     pub point: [f32; 3],
 }
 
-/// The rest-surface point closest to `p`, by descent from triangle `start` (nodes
-/// `start_nodes`): move to whichever triangle around the current triangle's vertices has a
-/// closer point, at most [`MAX_SLIDE_STEPS`] times. A local search: it finds the closest point
-/// of the surface patch around `start`, not of a fold elsewhere.
+/// The rest-surface point under `p` (a point near the surface), by a walk from triangle
+/// `start` (nodes `start_nodes`): project `p` onto the current triangle's plane; if the
+/// projection lies inside, that is the point; otherwise cross the edge opposite the most
+/// negative barycentric coordinate into the neighbouring triangle and repeat, at most
+/// [`MAX_SLIDE_STEPS`] times. At a boundary edge of R, or when the walk would step straight back
+/// (over a ridge, where `p` projects outside both triangles), the answer is the closest point of
+/// the current triangle. A local search, about a hundred operations per step: it follows the
+/// surface around `start`, never jumping to a fold elsewhere.
 pub fn closest_surface_point(
     bank: &Bank,
     start: u32,
@@ -413,49 +417,66 @@ pub fn closest_surface_point(
     p: [f32; 3],
 ) -> Option<SurfacePoint> {
     let positions = bank.positions();
-    let triangles = bank.triangles();
-    let [a, b, c] = vertices(positions, start_nodes)?;
     let mut cur = start;
-    let mut cur_nodes = start_nodes;
-    let (mut point, mut bary, mut d2) = closest_on_triangle(p, a, b, c)?;
+    let mut nodes = start_nodes;
+    let mut came_from: Option<u32> = None;
     for _ in 0..MAX_SLIDE_STEPS {
-        // On the surface already (within rounding): nothing can be closer.
-        if d2 <= ON_SURFACE_D2 {
-            break;
+        let [a, b, c] = vertices(positions, nodes)?;
+        let n = cross(sub(b, a), sub(c, a));
+        let nn = dot(n, n);
+        if !(nn > 0.0) {
+            return None;
         }
-        let mut moved = false;
-        for v in cur_nodes {
-            for &ti in bank.node_triangles(usize::from(v)) {
-                if ti == cur {
-                    continue;
-                }
-                let Some(&tri) = triangles.get(ti as usize) else {
-                    continue;
-                };
-                let Some([ta, tb, tc]) = vertices(positions, tri) else {
-                    continue;
-                };
-                let Some((q, k, e2)) = closest_on_triangle(p, ta, tb, tc) else {
-                    continue;
-                };
-                if e2 < d2 {
-                    (point, bary, d2) = (q, k, e2);
-                    cur = ti;
-                    cur_nodes = tri;
-                    moved = true;
-                }
+        let k = plane_bary(a, b, c, n, nn, p);
+        let (i, low) =
+            k.iter().enumerate().fold(
+                (0, f32::INFINITY),
+                |m, (i, &v)| if v < m.1 { (i, v) } else { m },
+            );
+        if low >= -BARY_TOL {
+            let bary = normalise(k)?;
+            return Some(SurfacePoint {
+                triangle: cur,
+                nodes,
+                bary,
+                point: combine(a, b, c, bary),
+            });
+        }
+        // The edge opposite vertex i.
+        let [u, v] = match i {
+            0 => [nodes[1], nodes[2]],
+            1 => [nodes[2], nodes[0]],
+            _ => [nodes[0], nodes[1]],
+        };
+        match neighbour_across(bank, cur, u, v) {
+            Some((t, tri)) if Some(t) != came_from => {
+                came_from = Some(cur);
+                cur = t;
+                nodes = tri;
             }
-        }
-        if !moved {
-            break;
+            _ => break,
         }
     }
+    let [a, b, c] = vertices(positions, nodes)?;
+    let (point, bary, _) = closest_on_triangle(p, a, b, c)?;
     Some(SurfacePoint {
         triangle: cur,
-        nodes: cur_nodes,
+        nodes,
         bary,
         point,
     })
+}
+
+/// The triangle other than `t` with edge `(u, v)`, if R has one.
+fn neighbour_across(bank: &Bank, t: u32, u: u16, v: u16) -> Option<(u32, [u16; 3])> {
+    let triangles = bank.triangles();
+    bank.node_triangles(usize::from(u))
+        .iter()
+        .filter(|&&o| o != t)
+        .find_map(|&o| {
+            let tri = *triangles.get(o as usize)?;
+            tri.contains(&v).then_some((o, tri))
+        })
 }
 
 /// Closest point of triangle `abc` to `p` (Ericson, Real-Time Collision Detection 5.1.5): the
