@@ -251,7 +251,7 @@ fn section_table(bank: &Bank) -> Vec<(&'static str, u32, u32, u32)> {
 
 /// Writes `bytes` to `out` atomically: `<out>.tmp` in the same directory, fsync, rename. On any
 /// error the temporary file is removed and `out` is untouched.
-fn write_atomic(out: &Path, bytes: &[u8]) -> Result<()> {
+pub(crate) fn write_atomic(out: &Path, bytes: &[u8]) -> Result<()> {
     let mut tmp_name = out
         .file_name()
         .context("output path has no file name")?
