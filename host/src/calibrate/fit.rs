@@ -193,7 +193,7 @@ pub fn fit(x: &[f64], y: &[f64], degree: usize) -> Result<ChebFit, FitError> {
     }
     let lo = x.iter().copied().fold(f64::INFINITY, f64::min);
     let hi = x.iter().copied().fold(f64::NEG_INFINITY, f64::max);
-    if !(hi > lo) {
+    if !(hi > lo && (hi - lo).is_finite()) {
         return Err(FitError::Domain { lo, hi });
     }
     let domain = [lo, hi];

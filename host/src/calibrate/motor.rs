@@ -86,7 +86,7 @@ pub fn samples(table: &Table) -> Result<Vec<Sample>, CsvError> {
                         format!("column \"axis\": {name:?} is not pitch, yaw, insertion, 0, 1 or 2"),
                     )
                 })?;
-            if axis != 2 && !(insertion[i] > 0.0) {
+            if axis != 2 && !(insertion[i] > 0.0 && insertion[i].is_finite()) {
                 return Err(table.at(
                     line,
                     format!(

@@ -335,7 +335,7 @@ fn motor_cmd(a: MotorArgs) -> Result<()> {
         if let Some(s) = &scene {
             let g = f64::from(s.device.transmission[f.axis]);
             let k = f.gain / g;
-            if !(k > 0.0) {
+            if !(k > 0.0 && k.is_finite()) {
                 bail!(
                     "{}: axis {}: fitted gain {:.6} has the opposite sign of gear_ratio {g}: \
                      check the load cell's direction or the motor wiring",
