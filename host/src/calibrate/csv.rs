@@ -75,9 +75,21 @@ pub fn read(path: &Path, columns: &[&str]) -> Result<Table, CsvError> {
 
 /// Parses CSV text; `file` names it in errors.
 pub fn parse(file: &str, text: &str, columns: &[&str]) -> Result<Table, CsvError> {
+    // Comment lines are blanked rather than left to the reader, whose line and byte counts
+    // skip them; blank lines are skipped by the reader but counted.
+    let blanked: String = text
+        .split_inclusive('\n')
+        .map(|l| {
+            if l.trim_start().starts_with('#') {
+                if l.ends_with('\n') { "\n" } else { "" }
+            } else {
+                l
+            }
+        })
+        .collect();
+    let text = blanked.as_str();
     let mut reader = ::csv::ReaderBuilder::new()
         .trim(::csv::Trim::All)
-        .comment(Some(b'#'))
         .from_reader(text.as_bytes());
     let at = |line: u64, message: String| CsvError::At {
         file: file.to_string(),
@@ -86,9 +98,9 @@ pub fn parse(file: &str, text: &str, columns: &[&str]) -> Result<Table, CsvError
     };
     let header = reader
         .headers()
-        .map_err(|e| at(error_line(&e), format!("bad header: {e}")))?
+        .map_err(|e| at(error_line(text, &e), format!("bad header: {e}")))?
         .clone();
-    let header_line = reader.position().line().saturating_sub(1).max(1);
+    let header_line = header.position().map_or(1, |p| line_at(text, p.byte()));
     if header.is_empty() || header.iter().all(str::is_empty) {
         return Err(CsvError::File {
             file: file.to_string(),
@@ -112,8 +124,8 @@ pub fn parse(file: &str, text: &str, columns: &[&str]) -> Result<Table, CsvError
     let mut lines = Vec::new();
     let mut cells = Vec::new();
     for record in reader.records() {
-        let record = record.map_err(|e| at(error_line(&e), format!("bad record: {e}")))?;
-        let line = record.position().map_or(0, |p| p.line());
+        let record = record.map_err(|e| at(error_line(text, &e), format!("bad record: {e}")))?;
+        let line = record.position().map_or(0, |p| line_at(text, p.byte()));
         cells.push(
             index
                 .iter()
@@ -130,8 +142,21 @@ pub fn parse(file: &str, text: &str, columns: &[&str]) -> Result<Table, CsvError
     })
 }
 
-fn error_line(e: &::csv::Error) -> u64 {
-    e.position().map_or(1, |p| p.line())
+fn error_line(text: &str, e: &::csv::Error) -> u64 {
+    e.position().map_or(1, |p| line_at(text, p.byte()))
+}
+
+/// 1-based line of the first non-blank byte at or after `offset` in `text` (the reader
+/// reports a record's position before the blank lines it skips).
+fn line_at(text: &str, offset: u64) -> u64 {
+    let bytes = text.as_bytes();
+    let mut end = usize::try_from(offset)
+        .unwrap_or(usize::MAX)
+        .min(bytes.len());
+    while end < bytes.len() && matches!(bytes[end], b'\n' | b'\r') {
+        end += 1;
+    }
+    bytes[..end].iter().filter(|&&b| b == b'\n').count() as u64 + 1
 }
 
 impl Table {
