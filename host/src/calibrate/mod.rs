@@ -7,9 +7,11 @@
 //! the degree choice by cross-validation and the monotonicity check, [`motor`] the per-axis
 //! torque-constant fit, [`scene_edit`] writes results into a scene file without disturbing its
 //! comments, [`specimen`] computes the linear model's prediction for a compression specimen, and
-//! [`plot`] draws data, fit and residuals (PNG and SVG).
+//! [`plot`] draws data, fit and residuals (PNG and SVG); [`cost`] estimates what evaluating a law
+//! costs on the MCU.
 
 pub mod cheb;
+pub mod cost;
 pub mod csv;
 pub mod fit;
 pub mod motor;

@@ -16,6 +16,9 @@ pub enum Bench {
     /// Nanoseconds per tick of the firmware's portable loop run natively on a bank, along a
     /// scripted press-slide-release trajectory.
     Tick(TickArgs),
+    /// Instructions one evaluation of the tissue law costs on the MCU (thumbv7em), per degree,
+    /// estimated from the disassembly of `TissueLaw::eval`.
+    Law(super::bench_law::LawArgs),
 }
 
 /// Arguments of `host bench tick`.
@@ -87,6 +90,7 @@ pub fn run(bench: Bench) -> Result<()> {
     match bench {
         Bench::Compliance(args) => compliance(args),
         Bench::Tick(args) => tick(args),
+        Bench::Law(args) => super::bench_law::run(args),
     }
 }
 
