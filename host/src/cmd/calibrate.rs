@@ -266,7 +266,7 @@ fn print_tissue(
         );
         for r in survey {
             println!(
-                "{:>6} {:>10.4} {:>10.4} {:>10.4} {:>9}{}",
+                "{:>6} {:>10.3e} {:>10.3e} {:>10.3e} {:>9}{}",
                 r.degree,
                 100.0 * r.rms_rel,
                 100.0 * r.max_rel,
