@@ -877,6 +877,43 @@ mod tests {
     }
 
     #[test]
+    fn display_law_is_optional_and_validated() {
+        let (_, t) = shipped();
+        let s = Scene::parse(Path::new("scene.toml"), &t).unwrap();
+        assert!(s.display_law.is_none());
+        assert_eq!(s.friction_offset, [0.0; 3]);
+        let ok = format!(
+            "{t}\n[display_law]\nkind = \"chebyshev\"\ncoeffs = [1e-3, 1e-3]\ndomain_m = [0.0, 0.002]\n"
+        );
+        let p = Scene::parse(Path::new("scene.toml"), &ok)
+            .unwrap()
+            .display_law
+            .unwrap();
+        assert!((p.eval(0.002) - 2e-3).abs() < 1e-9);
+        let lines = t.lines().count();
+        for (table, line, key) in [
+            (
+                "kind = \"linear\"\ncoeffs = [0.0, 1.0]\ndomain_m = [0.0, 1.0]",
+                lines + 3,
+                "display_law.kind",
+            ),
+            (
+                "kind = \"chebyshev\"\ncoeffs = [0.0, -1.0]\ndomain_m = [0.0, 1.0]",
+                lines + 4,
+                "display_law.coeffs",
+            ),
+            (
+                "kind = \"chebyshev\"\ncoeffs = [0.0, 1.0]\ndomain_m = [1.0, 0.0]",
+                lines + 5,
+                "display_law.domain_m",
+            ),
+        ] {
+            let e = err_of(&format!("{t}\n[display_law]\n{table}\n"));
+            assert_eq!((e.line, e.key.as_str()), (Some(line), key), "{e}");
+        }
+    }
+
+    #[test]
     fn syntax_errors_and_missing_keys_have_lines() {
         let e = err_of("mesh = \"x.msh\"\n[material\n");
         assert_eq!(e.line, Some(2), "{e}");
