@@ -22,18 +22,18 @@
 //! every triangle around it; the first hit along the segment wins, ties going to the lowest
 //! triangle index, so it is reported once and deterministically.
 //!
-//! # Tracking and sliding (friction-free)
+//! # Tracking and sliding (a stick cone)
 //!
-//! While touching, the anchor (the rest-surface point where contact began) and its triangle are
-//! kept as long as the tip's projection onto the triangle's rest plane stays inside the triangle:
-//! the surface point sticks to the tip and `displacement = tip - anchor`. When the projection
-//! leaves the triangle, the contact slides without friction: a descent over the triangles around
-//! the current triangle's vertices finds the rest-surface triangle closest to the tip, and the
-//! anchor jumps to the tip's closest point on it (its projection when that lies inside). So the
-//! tangential displacement stays within one triangle and is released at each triangle boundary
-//! (a saw-tooth in the tangential force while sliding); the normal displacement is continuous.
-//! Contact ends when `(tip - anchor) . n > 0` for the contact triangle's outward rest normal `n`
-//! (the contact would pull), checked before and after any slide.
+//! While touching, the anchor (the rest-surface point the tool holds) sticks to the tip and
+//! `displacement = tip - anchor`, as long as the displacement stays inside the stick cone
+//! around the contact triangle's inward normal: tangential part at most [`STICK_SLOPE`] times
+//! the normal part (a Coulomb-like friction cone, on displacements). When the tip leaves the
+//! cone, the contact slides: the anchor moves along the surface just far enough to put the
+//! displacement back on the cone (the target point is found on the rest surface by
+//! [`closest_surface_point`], a descent over the triangles around the current one), so the
+//! tangential force is bounded by the slope and changes continuously, with no saw-tooth at
+//! triangle edges. Contact ends when `(tip - anchor) . n > 0` for the contact triangle's outward
+//! rest normal `n` (the contact would pull), checked before and after any slide.
 
 // `!(x > 0.0)` is deliberate throughout: it also rejects NaN.
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
@@ -52,6 +52,13 @@ pub const MAX_REACH_CELLS: u16 = 3;
 pub const MAX_SAMPLES: u32 = 2048;
 /// Cap on the triangle-to-triangle steps of one slide.
 pub const MAX_SLIDE_STEPS: u32 = 32;
+/// Squared distance (m^2) under which a point counts as on the surface: (0.1 um)^2, far below
+/// any mesh size and above f32 rounding of positions within a metre.
+pub const ON_SURFACE_D2: f32 = 1.0e-14;
+/// The stick cone: while touching, the tangential displacement may reach this many times the
+/// normal displacement before the contact slides (about the friction coefficient of an
+/// instrument on wet tissue).
+pub const STICK_SLOPE: f32 = 0.2;
 
 /// What the contact solve needs this tick.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -221,10 +228,9 @@ pub fn detect(bank: &Bank, params: &SearchParams, p0: [f32; 3], p1: [f32; 3]) ->
     // Clip to the grid box (padded by a hundredth of a cell).
     let pad = 0.01 * h;
     let (mut ta, mut tb) = (0.0f32, 1.0f32);
-    for axis in 0..3 {
-        let lo = origin[axis] - pad;
-        let hi = origin[axis] + f32::from(dims[axis]) * h + pad;
-        let (p, d) = (p0[axis], dir[axis]);
+    for (((&o, &n), &p), &d) in origin.iter().zip(&dims).zip(&p0).zip(&dir) {
+        let lo = o - pad;
+        let hi = o + f32::from(n) * h + pad;
         if d == 0.0 {
             if p < lo || p > hi {
                 return None;
@@ -259,19 +265,19 @@ pub fn detect(bank: &Bank, params: &SearchParams, p0: [f32; 3], p1: [f32; 3]) ->
         if prev_cell == Some(cell) {
             continue;
         }
-        let mut lo = [0i32; 3];
-        let mut hi = [0i32; 3];
-        for axis in 0..3 {
-            lo[axis] = (cell[axis] - reach).max(0);
-            hi[axis] = (cell[axis] + reach).min(i32::from(dims[axis]) - 1);
-        }
-        for cz in lo[2]..=hi[2] {
-            for cy in lo[1]..=hi[1] {
-                for cx in lo[0]..=hi[0] {
+        let [lx, ly, lz] = cell.map(|c| (c - reach).max(0));
+        let [hx, hy, hz] = [0, 1, 2].map(|a| {
+            let (c, n) = (cell.get(a).copied(), dims.get(a).copied());
+            c.zip(n)
+                .map_or(-1, |(c, n)| (c + reach).min(i32::from(n) - 1))
+        });
+        for cz in lz..=hz {
+            for cy in ly..=hy {
+                for cx in lx..=hx {
                     let c = [cx, cy, cz];
                     // Already scanned around the previous sample.
-                    let seen =
-                        prev_cell.is_some_and(|pc| (0..3).all(|a| (c[a] - pc[a]).abs() <= reach));
+                    let seen = prev_cell
+                        .is_some_and(|pc| c.iter().zip(&pc).all(|(a, b)| (a - b).abs() <= reach));
                     if seen {
                         continue;
                     }
@@ -355,19 +361,68 @@ fn track(bank: &Bank, active: Active, tip: [f32; 3]) -> Option<Active> {
     let [a, b, c] = vertices(positions, active.nodes)?;
     let n = cross(sub(b, a), sub(c, a));
     let nn = dot(n, n);
-    if !(nn > 0.0) || dot(sub(tip, active.anchor), n) > 0.0 {
+    let d = sub(tip, active.anchor);
+    if !(nn > 0.0) || dot(d, n) > 0.0 {
         return None;
     }
-    let k = plane_bary(a, b, c, n, nn, tip);
-    if k[0] >= -BARY_TOL && k[1] >= -BARY_TOL && k[2] >= -BARY_TOL {
+    // Normal (inward, >= 0) and tangential parts of the displacement.
+    let depth = -dot(d, n) / sqrt(nn);
+    let dt = add(d, scale(n, depth / sqrt(nn)));
+    let t = sqrt(dot(dt, dt));
+    let allowed = STICK_SLOPE * depth;
+    if !(t > allowed) {
         return Some(active);
     }
-    // Slide: descend to the triangle closest to the tip.
+    // Slide: move the anchor along the tangential displacement onto the cone's edge.
+    let target = add(active.anchor, scale(dt, 1.0 - allowed / t));
+    let near = closest_surface_point(bank, active.triangle, active.nodes, target)?;
+    let [a, b, c] = vertices(positions, near.nodes)?;
+    let n = cross(sub(b, a), sub(c, a));
+    if dot(sub(tip, near.point), n) > 0.0 {
+        return None;
+    }
+    Some(Active {
+        triangle: near.triangle,
+        nodes: near.nodes,
+        bary: near.bary,
+        anchor: near.point,
+    })
+}
+
+/// A point of R's rest surface found by [`closest_surface_point`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SurfacePoint {
+    /// Index into `bank.triangles()`.
+    pub triangle: u32,
+    /// The triangle's nodes.
+    pub nodes: [u16; 3],
+    /// Barycentric coordinates of `point`, each in `[0, 1]`, sum 1.
+    pub bary: [f32; 3],
+    /// The point, m.
+    pub point: [f32; 3],
+}
+
+/// The rest-surface point closest to `p`, by descent from triangle `start` (nodes
+/// `start_nodes`): move to whichever triangle around the current triangle's vertices has a
+/// closer point, at most [`MAX_SLIDE_STEPS`] times. A local search: it finds the closest point
+/// of the surface patch around `start`, not of a fold elsewhere.
+pub fn closest_surface_point(
+    bank: &Bank,
+    start: u32,
+    start_nodes: [u16; 3],
+    p: [f32; 3],
+) -> Option<SurfacePoint> {
+    let positions = bank.positions();
     let triangles = bank.triangles();
-    let mut cur = active.triangle;
-    let mut cur_nodes = active.nodes;
-    let (mut point, mut bary, mut d2) = closest_on_triangle(tip, a, b, c)?;
+    let [a, b, c] = vertices(positions, start_nodes)?;
+    let mut cur = start;
+    let mut cur_nodes = start_nodes;
+    let (mut point, mut bary, mut d2) = closest_on_triangle(p, a, b, c)?;
     for _ in 0..MAX_SLIDE_STEPS {
+        // On the surface already (within rounding): nothing can be closer.
+        if d2 <= ON_SURFACE_D2 {
+            break;
+        }
         let mut moved = false;
         for v in cur_nodes {
             for &ti in bank.node_triangles(usize::from(v)) {
@@ -380,11 +435,11 @@ fn track(bank: &Bank, active: Active, tip: [f32; 3]) -> Option<Active> {
                 let Some([ta, tb, tc]) = vertices(positions, tri) else {
                     continue;
                 };
-                let Some((p, k, e2)) = closest_on_triangle(tip, ta, tb, tc) else {
+                let Some((q, k, e2)) = closest_on_triangle(p, ta, tb, tc) else {
                     continue;
                 };
                 if e2 < d2 {
-                    (point, bary, d2) = (p, k, e2);
+                    (point, bary, d2) = (q, k, e2);
                     cur = ti;
                     cur_nodes = tri;
                     moved = true;
@@ -395,16 +450,11 @@ fn track(bank: &Bank, active: Active, tip: [f32; 3]) -> Option<Active> {
             break;
         }
     }
-    let [a, b, c] = vertices(positions, cur_nodes)?;
-    let n = cross(sub(b, a), sub(c, a));
-    if dot(sub(tip, point), n) > 0.0 {
-        return None;
-    }
-    Some(Active {
+    Some(SurfacePoint {
         triangle: cur,
         nodes: cur_nodes,
         bary,
-        anchor: point,
+        point,
     })
 }
 
@@ -503,7 +553,12 @@ fn normalise(k: [f32; 3]) -> Option<[f32; 3]> {
     } else {
         2
     };
-    let rest: f32 = (0..3).filter(|&i| i != big).map(|i| out[i]).sum();
+    let rest: f32 = out
+        .iter()
+        .enumerate()
+        .filter(|&(i, _)| i != big)
+        .map(|(_, v)| v)
+        .sum();
     if let Some(v) = out.get_mut(big) {
         *v = (1.0 - rest).clamp(0.0, 1.0);
     }
@@ -520,14 +575,14 @@ fn vertices(positions: &[[f32; 3]], tri: [u16; 3]) -> Option<[[f32; 3]; 3]> {
 
 fn signed_cell(p: [f32; 3], origin: [f32; 3], h: f32) -> Option<[i32; 3]> {
     let mut out = [0i32; 3];
-    for axis in 0..3 {
-        let t = (p[axis] - origin[axis]) / h;
+    for ((o, &x), &x0) in out.iter_mut().zip(&p).zip(&origin) {
+        let t = (x - x0) / h;
         if !t.is_finite() {
             return None;
         }
         let t = t.clamp(-1.0e6, 1.0e6);
         let i = t as i32;
-        out[axis] = if (i as f32) > t { i - 1 } else { i };
+        *o = if (i as f32) > t { i - 1 } else { i };
     }
     Some(out)
 }
@@ -545,11 +600,20 @@ fn point_segment_dist2(v: [f32; 3], p0: [f32; 3], dir: [f32; 3]) -> f32 {
 }
 
 fn combine(a: [f32; 3], b: [f32; 3], c: [f32; 3], k: [f32; 3]) -> [f32; 3] {
-    core::array::from_fn(|i| k[0] * a[i] + k[1] * b[i] + k[2] * c[i])
+    let [k0, k1, k2] = k;
+    let mut out = [0.0; 3];
+    for (((o, &x), &y), &z) in out.iter_mut().zip(&a).zip(&b).zip(&c) {
+        *o = k0 * x + k1 * y + k2 * z;
+    }
+    out
 }
 
 fn finite(p: [f32; 3]) -> bool {
     p.iter().all(|v| v.is_finite())
+}
+
+fn sqrt(x: f32) -> f32 {
+    nalgebra::ComplexField::sqrt(x)
 }
 
 fn sub(a: [f32; 3], b: [f32; 3]) -> [f32; 3] {
@@ -865,9 +929,9 @@ mod tests {
             };
             assert_eq!(anchor[2], 0.0);
             assert!((displacement[2] - depth).abs() < 1.0e-7);
-            // Tangential displacement stays within one triangle.
+            // Tangential displacement stays within the stick cone.
             let dt = (displacement[0].powi(2) + displacement[1].powi(2)).sqrt();
-            assert!(dt < 1.5 * SPACING as f32, "{dt}");
+            assert!(dt <= STICK_SLOPE * -depth * 1.001, "{dt}");
             if seen.last() != Some(&triangle) {
                 seen.push(triangle);
             }

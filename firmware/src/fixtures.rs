@@ -2,10 +2,14 @@
 //! device calibrations and a small hand-made bank. Compiled only for tests or with the
 //! `test-fixtures` feature (which needs `bank-format/alloc`); never in a firmware image.
 
+// Test data only, never in an image: the crate's no-panic lints do not apply.
+#![allow(clippy::indexing_slicing, clippy::expect_used)]
+
 extern crate alloc;
 
 use alloc::vec::Vec;
 use bank_format::{AlignedBytes, BankBuilder, DeviceCalibration, TissueLaw};
+use nalgebra::ComplexField;
 
 /// The liver scene's device (`host/scenes/liver.toml`).
 pub fn liver_device() -> DeviceCalibration {
@@ -41,40 +45,64 @@ pub fn patch_device() -> DeviceCalibration {
     }
 }
 
-/// `C_kl = exp(-|x_k - x_l| / 15 mm) M (+ 0.3e-3 I on the diagonal)`: SPD, m/N.
+/// `C_kl = exp(-|x_k - x_l| / 15 mm) M + 0.3e-3 exp(-|x_k - x_l| / 1 mm) I`: SPD (a sum of
+/// exponential kernels times SPD matrices), m/N, and continuous in the positions, so nodes a
+/// few micrometres apart have nearly equal blocks, as an elastic body's would.
 pub fn kernel_block(p: &[[f64; 3]], k: usize, l: usize) -> [[f64; 3]; 3] {
     let m = [
         [1.0e-3, 0.1e-3, 0.0],
         [0.1e-3, 1.2e-3, 0.05e-3],
         [0.0, 0.05e-3, 2.0e-3],
     ];
-    let d = (0..3)
-        .map(|i| (p[k][i] - p[l][i]).powi(2))
-        .sum::<f64>()
-        .sqrt();
-    let kern = (-d / 0.015).exp();
+    // libm through nalgebra: this module is `no_std` too.
+    let d = ComplexField::sqrt(
+        (0..3)
+            .map(|i| (p[k][i] - p[l][i]) * (p[k][i] - p[l][i]))
+            .sum::<f64>(),
+    );
+    let kern = ComplexField::exp(-d / 0.015);
+    let local = 0.3e-3 * ComplexField::exp(-d / 0.001);
     core::array::from_fn(|i| {
-        core::array::from_fn(|j| kern * m[i][j] + if k == l && i == j { 0.3e-3 } else { 0.0 })
+        core::array::from_fn(|j| kern * m[i][j] + if i == j { local } else { 0.0 })
     })
 }
 
 /// A flat 5 x 5-node patch at z = 0 (outward normal +z), 1 cm spacing, every pair coupled with
 /// [`kernel_block`], the [`patch_device`] and a Chebyshev tissue law.
+pub fn flat_patch() -> AlignedBytes {
+    grid_patch(PATCH_SIDE, PATCH_SPACING_M, 0.06)
+}
+
+/// A flat `n_side x n_side`-node grid at z = 0 (outward normal +z) with spacing `h` (m), two
+/// triangles per square (every interior node has six, lumped area `h^2`), the pairs closer than
+/// `truncation_m` coupled with [`kernel_block`], the [`patch_device`] and a Chebyshev law.
+pub fn grid_patch(n_side: usize, h: f64, truncation_m: f64) -> AlignedBytes {
+    let ticks: Vec<f64> = (0..n_side).map(|i| h * i as f64).collect();
+    grid_patch_at(&ticks, &ticks, truncation_m)
+}
+
+/// [`grid_patch`] with node columns at `xs` and rows at `ys` (increasing, m): uneven grids,
+/// e.g. two rows a few micrometres apart (sliver triangles, nearly coincident contact nodes).
 ///
 /// # Panics
 /// Only if the builder rejects it, which would be a bug in this fixture.
-pub fn flat_patch() -> AlignedBytes {
-    let (n_side, h) = (PATCH_SIDE, PATCH_SPACING_M);
+pub fn grid_patch_at(xs: &[f64], ys: &[f64], truncation_m: f64) -> AlignedBytes {
+    let (nx, ny) = (xs.len(), ys.len());
     let mut p = Vec::new();
-    for j in 0..n_side {
-        for i in 0..n_side {
-            p.push([h * i as f64, h * j as f64, 0.0]);
+    for &y in ys {
+        for &x in xs {
+            p.push([x, y, 0.0]);
         }
     }
-    let id = |i: usize, j: usize| (i + n_side * j) as u32;
+    let h = xs
+        .windows(2)
+        .chain(ys.windows(2))
+        .map(|w| w[1] - w[0])
+        .fold(0.0, f64::max);
+    let id = |i: usize, j: usize| (i + nx * j) as u32;
     let mut triangles = Vec::new();
-    for j in 0..n_side - 1 {
-        for i in 0..n_side - 1 {
+    for j in 0..ny - 1 {
+        for i in 0..nx - 1 {
             let (a, b, c, d) = (id(i, j), id(i + 1, j), id(i + 1, j + 1), id(i, j + 1));
             triangles.push([a, b, c]);
             triangles.push([a, c, d]);
@@ -84,7 +112,12 @@ pub fn flat_patch() -> AlignedBytes {
     let mut couplings = Vec::new();
     for k in 0..n {
         for l in k + 1..n {
-            couplings.push((k as u32, l as u32, kernel_block(&p, k, l)));
+            let d2: f64 = (0..3)
+                .map(|i| (p[k][i] - p[l][i]) * (p[k][i] - p[l][i]))
+                .sum();
+            if d2 < truncation_m * truncation_m {
+                couplings.push((k as u32, l as u32, kernel_block(&p, k, l)));
+            }
         }
     }
     let b = BankBuilder {
@@ -94,7 +127,7 @@ pub fn flat_patch() -> AlignedBytes {
         triangles,
         positions_m: p,
         grid_cell_size_m: h,
-        truncation_radius_m: 0.06,
+        truncation_radius_m: truncation_m,
         scene_id: 7,
         law: TissueLaw::chebyshev(&[2.6, 2.5, -0.1], [0.0, 5.0]).expect("valid law"),
         device: patch_device(),

@@ -7,6 +7,18 @@
 //! tissue law Q ([`solve`], eqs. 3-8) -> `J^T F` -> motor currents -> limits and the safety
 //! supervisor ([`safety`]). `no_std`, no heap, f32; the QEMU and board images are not written yet.
 #![no_std]
+// No panic paths in the firmware: every module the tick calls is checked (tests may unwrap).
+#![cfg_attr(
+    not(test),
+    deny(
+        clippy::unwrap_used,
+        clippy::expect_used,
+        clippy::panic,
+        clippy::indexing_slicing,
+        clippy::unreachable,
+        clippy::todo
+    )
+)]
 
 /// Tick period of the force loop, in seconds (1 kHz).
 pub const TICK_PERIOD_S: f32 = 1.0e-3;
@@ -15,6 +27,7 @@ pub mod contact;
 pub mod device;
 #[cfg(any(test, feature = "test-fixtures"))]
 pub mod fixtures;
+pub mod patch;
 pub mod safety;
 pub mod solve;
 pub mod tick;

@@ -1,7 +1,7 @@
 //! The contact solve in compliance form (paper eqs. 2 and 8, compliance form in the design
-//! notes): with displacements `u*_S` imposed on a contact set `S` of at most
-//! [`MAX_CONTACT_NODES`] nodes and every other node force-free, the contact forces are
-//! `f_S = C_SS^-1 u*_S`. Then the quasi non-linear law Q (eqs. 3-6) on the tool force.
+//! notes): with displacements `u*_S` imposed on a contact set `S` and every other node
+//! force-free, the contact forces are `f_S = C_SS^-1 u*_S`. Then the quasi non-linear law Q
+//! (eqs. 3-6) on the tool force.
 //!
 //! Fixed sizes, f32, no heap, no panics: `C_SS` is assembled into a `9 x 9` matrix (the unused
 //! part is a decoupled diagonal block that does not touch the solution), factored by Cholesky.
@@ -17,6 +17,12 @@
 //!   and `f_v = k_v f_tool`. It never needs `C_SS^-1`, so nearly coincident vertices (a nearly
 //!   singular `C_SS`) do not hurt it.
 //!
+//! The energy-minimal form works for any weights `w` (`w_a >= 0`, `sum w_a = 1`) on up to
+//! [`MAX_CONTACT_NODES`] nodes ([`WeightedSolve`], [`solve_weighted`]): the force on the tissue
+//! is distributed as `f_a = w_a f_tool`, and the tool displacement is imposed on the work-
+//! conjugate mean `sum_a w_a u_a`. The finite tool radius ([`crate::patch`]) uses it with the
+//! weights of the pressure under the tool tip.
+//!
 //! Sign convention: forces are those applied *to the tissue* at the contact nodes (as in the
 //! host's `contact_forces`); [`ContactForces::tool_force_n`] is their sum, the force the tool
 //! exerts on the tissue. The force the user feels is its opposite.
@@ -24,16 +30,18 @@
 use bank_format::{Bank, TissueLaw};
 use nalgebra::{Cholesky, ComplexField, Const, SMatrix, SVector};
 
-/// Most nodes in one contact set (one triangle).
-pub const MAX_CONTACT_NODES: usize = 3;
-/// Degrees of freedom of the largest contact set.
-pub const MAX_DOFS: usize = 3 * MAX_CONTACT_NODES;
+/// Most nodes in one contact set (the link's contact list, [`bank_format::MAX_CONTACTS`]).
+pub const MAX_CONTACT_NODES: usize = bank_format::MAX_CONTACTS;
+/// Most nodes with imposed displacements in [`solve_imposed`] (one triangle, the paper's form).
+pub const MAX_IMPOSED_NODES: usize = 3;
+/// Degrees of freedom of the largest [`solve_imposed`] set.
+pub const MAX_DOFS: usize = 3 * MAX_IMPOSED_NODES;
+/// Tolerance on `|sum w_a - 1|` for contact weights (and barycentric coordinates).
+pub const WEIGHT_SUM_TOL: f32 = 1.0e-3;
 /// Smallest Cholesky pivot (`L_ii^2`) accepted, relative to the largest diagonal entry of the
 /// matrix factored. Below it an f32 solve loses more than about two significant digits, so the
 /// solve reports [`SolveError::IllConditioned`] instead of returning forces.
 pub const MIN_PIVOT_REL: f32 = 1.0e-5;
-/// Tolerance on `|k1 + k2 + k3 - 1|` for barycentric coordinates.
-pub const BARYCENTRIC_SUM_TOL: f32 = 1.0e-3;
 
 /// `C_SS` padded to the largest contact set.
 pub type CssMatrix = SMatrix<f32, MAX_DOFS, MAX_DOFS>;
@@ -43,16 +51,18 @@ pub type CssMatrix = SMatrix<f32, MAX_DOFS, MAX_DOFS>;
 pub enum SolveError {
     /// The contact set is empty.
     NoNodes,
-    /// More than [`MAX_CONTACT_NODES`] nodes.
+    /// More nodes than the solve takes ([`MAX_IMPOSED_NODES`] or [`MAX_CONTACT_NODES`]).
     TooManyNodes {
         /// Nodes given.
         count: usize,
+        /// Most the solve takes.
+        max: usize,
     },
-    /// As many imposed displacements as nodes are needed.
+    /// As many imposed displacements (or weights) as nodes are needed.
     LengthMismatch {
         /// Nodes given.
         nodes: usize,
-        /// Displacements given.
+        /// Displacements or weights given.
         imposed: usize,
     },
     /// A node index is not in the bank's region R.
@@ -75,8 +85,9 @@ pub enum SolveError {
     },
     /// A NaN or infinite input, compliance entry or result.
     NonFinite,
-    /// Barycentric coordinates that do not sum to 1 (within [`BARYCENTRIC_SUM_TOL`]).
-    BadBarycentric,
+    /// Barycentric coordinates or contact weights that are negative or do not sum to 1 (within
+    /// [`WEIGHT_SUM_TOL`]).
+    BadWeights,
     /// The matrix to factor is not positive definite at f32 precision.
     NotPositiveDefinite,
     /// The smallest Cholesky pivot relative to the largest diagonal entry is below
@@ -91,13 +102,13 @@ impl core::fmt::Display for SolveError {
     fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
         match self {
             SolveError::NoNodes => f.write_str("empty contact set"),
-            SolveError::TooManyNodes { count } => {
-                write!(f, "{count} contact nodes, at most {MAX_CONTACT_NODES}")
+            SolveError::TooManyNodes { count, max } => {
+                write!(f, "{count} contact nodes, at most {max}")
             }
             SolveError::LengthMismatch { nodes, imposed } => {
                 write!(
                     f,
-                    "{nodes} contact nodes but {imposed} imposed displacements"
+                    "{nodes} contact nodes but {imposed} displacements or weights"
                 )
             }
             SolveError::NodeOutOfRange { node } => write!(f, "node {node} is not in the bank"),
@@ -106,7 +117,9 @@ impl core::fmt::Display for SolveError {
                 write!(f, "the bank does not couple nodes {k} and {l}")
             }
             SolveError::NonFinite => f.write_str("NaN or infinite value"),
-            SolveError::BadBarycentric => f.write_str("barycentric coordinates do not sum to 1"),
+            SolveError::BadWeights => {
+                f.write_str("contact weights are negative or do not sum to 1")
+            }
             SolveError::NotPositiveDefinite => f.write_str("matrix not positive definite"),
             SolveError::IllConditioned { pivot_rel } => {
                 write!(
@@ -217,12 +230,15 @@ impl<const D: usize> Factor<D> {
     }
 }
 
-fn check_nodes(bank: &Bank, nodes: &[u16]) -> Result<(), SolveError> {
+fn check_nodes(bank: &Bank, nodes: &[u16], max: usize) -> Result<(), SolveError> {
     if nodes.is_empty() {
         return Err(SolveError::NoNodes);
     }
-    if nodes.len() > MAX_CONTACT_NODES {
-        return Err(SolveError::TooManyNodes { count: nodes.len() });
+    if nodes.len() > max {
+        return Err(SolveError::TooManyNodes {
+            count: nodes.len(),
+            max,
+        });
     }
     for (a, &k) in nodes.iter().enumerate() {
         if usize::from(k) >= bank.node_count() {
@@ -235,12 +251,12 @@ fn check_nodes(bank: &Bank, nodes: &[u16]) -> Result<(), SolveError> {
     Ok(())
 }
 
-/// Assembles `C_SS` (m/N) for the contact set `nodes`: block `(a, b)` is
+/// Assembles `C_SS` (m/N) for the contact set `nodes` (at most [`MAX_IMPOSED_NODES`]): block `(a, b)` is
 /// `bank.coupling(nodes[a], nodes[b])`. Rows and columns past `3 * nodes.len()` hold the mean
 /// active diagonal on the diagonal and zeros elsewhere, so a factorisation of the padded matrix
 /// solves the active part exactly. A pair the bank does not couple is an error, never zero.
 pub fn assemble_css(bank: &Bank, nodes: &[u16]) -> Result<CssMatrix, SolveError> {
-    check_nodes(bank, nodes)?;
+    check_nodes(bank, nodes, MAX_IMPOSED_NODES)?;
     let mut c = CssMatrix::zeros();
     for (a, &k) in nodes.iter().enumerate() {
         for (b, &l) in nodes.iter().enumerate() {
@@ -334,14 +350,19 @@ pub fn solve_point(bank: &Bank, node: u16, d_m: [f32; 3]) -> Result<ContactForce
 }
 
 fn check_barycentric(k: [f32; 3]) -> Result<(), SolveError> {
-    if !k.iter().all(|v| v.is_finite()) {
+    check_weights(&k)
+}
+
+/// Weights must be finite, non-negative and sum to 1 within [`WEIGHT_SUM_TOL`].
+fn check_weights(w: &[f32]) -> Result<(), SolveError> {
+    if !w.iter().all(|v| v.is_finite()) {
         return Err(SolveError::NonFinite);
     }
-    let s = k[0] + k[1] + k[2];
-    if (s - 1.0).abs() <= BARYCENTRIC_SUM_TOL {
+    let s: f32 = w.iter().sum();
+    if w.iter().all(|&v| v >= 0.0) && (s - 1.0).abs() <= WEIGHT_SUM_TOL {
         Ok(())
     } else {
-        Err(SolveError::BadBarycentric)
+        Err(SolveError::BadWeights)
     }
 }
 
@@ -367,65 +388,131 @@ pub fn solve_triangle_alpha(
     solve_imposed(bank, &triangle, &imposed)
 }
 
-/// `B C_SS B^T = sum_ab k_a k_b C_ab` (3 x 3, m/N).
-fn reduced_compliance(
-    bank: &Bank,
-    triangle: [u16; 3],
-    bary: [f32; 3],
-) -> Result<SMatrix<f32, 3, 3>, SolveError> {
-    check_barycentric(bary)?;
-    let c = assemble_css(bank, &triangle)?;
-    let mut m = SMatrix::<f32, 3, 3>::zeros();
-    for (a, &ka) in bary.iter().enumerate() {
-        for (b, &kb) in bary.iter().enumerate() {
-            let w = ka * kb;
-            for i in 0..3 {
-                for j in 0..3 {
-                    let cij = c.get((3 * a + i, 3 * b + j)).copied().unwrap_or(0.0);
-                    if let Some(e) = m.get_mut((i, j)) {
-                        *e += w * cij;
+/// The energy-minimal contact solve for one weighted contact set, factored once: `M = B C_SS
+/// B^T = sum_ab w_a w_b C_ab` (3 x 3, m/N) and its Cholesky factor. [`WeightedSolve::forces`]
+/// then costs one 3 x 3 solve, so a contact that does not slide reuses it tick after tick.
+#[derive(Clone, Copy, Debug)]
+pub struct WeightedSolve {
+    nodes: [u16; MAX_CONTACT_NODES],
+    weights: [f32; MAX_CONTACT_NODES],
+    len: usize,
+    factor: Factor<3>,
+}
+
+impl WeightedSolve {
+    /// Assembles and factors `M` for `nodes` with `weights` (finite, `>= 0`, sum 1). Every
+    /// pair must be coupled in the bank; an ill-conditioned `M` is an error.
+    pub fn new(bank: &Bank, nodes: &[u16], weights: &[f32]) -> Result<WeightedSolve, SolveError> {
+        check_nodes(bank, nodes, MAX_CONTACT_NODES)?;
+        if weights.len() != nodes.len() {
+            return Err(SolveError::LengthMismatch {
+                nodes: nodes.len(),
+                imposed: weights.len(),
+            });
+        }
+        check_weights(weights)?;
+        let mut m = SMatrix::<f32, 3, 3>::zeros();
+        for (a, (&k, &wa)) in nodes.iter().zip(weights).enumerate() {
+            // Blocks (a, b) and (b, a) are transposes: visit b >= a and add both.
+            for (&l, &wb) in nodes.iter().zip(weights).skip(a) {
+                let c = bank
+                    .coupling(usize::from(k), usize::from(l))
+                    .ok_or(SolveError::MissingCoupling { k, l })?;
+                let w = wa * wb;
+                for (i, row) in c.iter().enumerate() {
+                    for (j, &v) in row.iter().enumerate() {
+                        if !v.is_finite() {
+                            return Err(SolveError::NonFinite);
+                        }
+                        // Symmetric by construction (C_lk = C_kl^T); the diagonal block
+                        // is symmetrised by the same sum.
+                        let scaled = if k == l { 0.5 * w * v } else { w * v };
+                        if let Some(e) = m.get_mut((i, j)) {
+                            *e += scaled;
+                        }
+                        if let Some(e) = m.get_mut((j, i)) {
+                            *e += scaled;
+                        }
                     }
                 }
             }
         }
+        let factor = Factor::new(m, 3)?;
+        factor.check()?;
+        let mut out = WeightedSolve {
+            nodes: [0; MAX_CONTACT_NODES],
+            weights: [0.0; MAX_CONTACT_NODES],
+            len: nodes.len(),
+            factor,
+        };
+        for ((n, w), (&k, &wk)) in out
+            .nodes
+            .iter_mut()
+            .zip(out.weights.iter_mut())
+            .zip(nodes.iter().zip(weights))
+        {
+            *n = k;
+            *w = wk;
+        }
+        Ok(out)
     }
-    // Symmetrise: the bank's C_kl and C_lk^T agree only to its symmetry tolerance.
-    Ok((m + m.transpose()) * 0.5)
+
+    /// The contact nodes.
+    pub fn nodes(&self) -> &[u16] {
+        self.nodes.get(..self.len).unwrap_or(&[])
+    }
+
+    /// Condition estimate ([`Factor::condition`]) of `M`.
+    pub fn condition(&self) -> f32 {
+        self.factor.condition()
+    }
+
+    /// The forces that move the weighted mean `sum_a w_a u_a` by `d_m` (m): `f_tool = M^-1 d`,
+    /// `f_a = w_a f_tool` (N, on the tissue).
+    pub fn forces(&self, d_m: [f32; 3]) -> Result<ContactForces, SolveError> {
+        if !d_m.iter().all(|v| v.is_finite()) {
+            return Err(SolveError::NonFinite);
+        }
+        let f = self.factor.solve(&SVector::<f32, 3>::from(d_m))?;
+        let tool = [f.x, f.y, f.z];
+        let mut out = ContactForces {
+            nodes: self.nodes,
+            len: self.len,
+            forces: [[0.0; 3]; MAX_CONTACT_NODES],
+            tool_force_n: [0.0; 3],
+            condition: self.factor.condition(),
+        };
+        for (fv, &w) in out.forces.iter_mut().zip(&self.weights).take(self.len) {
+            *fv = tool.map(|t| w * t);
+            for (t, v) in out.tool_force_n.iter_mut().zip(fv.iter()) {
+                *t += *v;
+            }
+        }
+        Ok(out)
+    }
+}
+
+/// Weighted contact, energy-minimal form: [`WeightedSolve::new`] then
+/// [`WeightedSolve::forces`].
+pub fn solve_weighted(
+    bank: &Bank,
+    nodes: &[u16],
+    weights: &[f32],
+    d_m: [f32; 3],
+) -> Result<ContactForces, SolveError> {
+    WeightedSolve::new(bank, nodes, weights)?.forces(d_m)
 }
 
 /// Triangle contact, energy-minimal form: the single constraint `B u_S = d_m` on the contact
-/// point, `f_tool = (B C_SS B^T)^-1 d_m`, `f_v = k_v f_tool` (3 x 3 solve).
+/// point, `f_tool = (B C_SS B^T)^-1 d_m`, `f_v = k_v f_tool` (3 x 3 solve): [`solve_weighted`]
+/// with the barycentric coordinates as weights.
 pub fn solve_triangle_barycentric(
     bank: &Bank,
     triangle: [u16; 3],
     bary: [f32; 3],
     d_m: [f32; 3],
 ) -> Result<ContactForces, SolveError> {
-    if !d_m.iter().all(|v| v.is_finite()) {
-        return Err(SolveError::NonFinite);
-    }
-    let m = reduced_compliance(bank, triangle, bary)?;
-    let factor = Factor::new(m, 3)?;
-    factor.check()?;
-    let f = factor.solve(&SVector::<f32, 3>::from(d_m))?;
-    let tool = [f.x, f.y, f.z];
-    let mut out = ContactForces {
-        nodes: triangle,
-        len: 3,
-        forces: [[0.0; 3]; MAX_CONTACT_NODES],
-        tool_force_n: [0.0; 3],
-        condition: factor.condition(),
-    };
-    for (fv, &k) in out.forces.iter_mut().zip(bary.iter()) {
-        *fv = tool.map(|t| k * t);
-    }
-    // Sum of the vertex forces (equals f_tool up to rounding when sum k = 1).
-    for fv in out.forces.iter() {
-        for (t, v) in out.tool_force_n.iter_mut().zip(fv) {
-            *t += *v;
-        }
-    }
-    Ok(out)
+    solve_weighted(bank, &triangle, &bary, d_m)
 }
 
 /// Condition estimate ([`Factor::condition`]) of the paper's form: `C_SS` of the triangle.
@@ -439,8 +526,7 @@ pub fn condition_barycentric(
     triangle: [u16; 3],
     bary: [f32; 3],
 ) -> Result<f32, SolveError> {
-    let m = reduced_compliance(bank, triangle, bary)?;
-    Ok(Factor::new(m, 3)?.condition())
+    Ok(WeightedSolve::new(bank, &triangle, &bary)?.condition())
 }
 
 fn dot(a: [f32; 3], b: [f32; 3]) -> f32 {
@@ -790,7 +876,7 @@ mod tests {
         );
         assert_eq!(
             solve_imposed(&bank, &[0, 1, 2, 3], &[d; 4]).unwrap_err(),
-            SolveError::TooManyNodes { count: 4 }
+            SolveError::TooManyNodes { count: 4, max: 3 }
         );
         assert_eq!(
             solve_imposed(&bank, &[0, 0], &[d, d]).unwrap_err(),
@@ -813,7 +899,7 @@ mod tests {
         );
         assert_eq!(
             solve_triangle_alpha(&bank, [0, 1, 2], [0.5, 0.5, 0.5], d).unwrap_err(),
-            SolveError::BadBarycentric
+            SolveError::BadWeights
         );
         assert_eq!(
             solve_triangle_barycentric(&bank, [0, 1, 2], [f32::NAN, 0.5, 0.5], d).unwrap_err(),

@@ -8,15 +8,17 @@
 //! 2. contact update on the segment `[previous tip, tip]` ([`ContactTracker::update`]; the
 //!    first tick, and the first after zeroing the encoders, use a zero-length segment, so a
 //!    pose jump is never swept for contacts);
-//! 3. when touching: the **energy-minimal barycentric** triangle solve
-//!    ([`solve_triangle_barycentric`]): `f_tool = (B C_SS B^T)^-1 d` with `B = [k1 I, k2 I,
-//!    k3 I]`, `d = tip - anchor`, `f_v = k_v f_tool`. It is chosen over the paper's alpha form
-//!    because it is the better-conditioned one: it factors the 3 x 3 matrix `B C_SS B^T` (a
-//!    barycentric average of the triangle's blocks, about as well conditioned as one `C_kk`)
-//!    and never needs `C_SS^-1`, so a small or skinny triangle (nearly dependent columns of
-//!    `C_SS`, a 9 x 9 factorisation losing digits in f32) does not hurt it; at a vertex both
-//!    forms agree. The node forces `f_S` (on the tissue, linear model) are what telemetry
-//!    reports, so the host's `u = C f_S` displays the surface that follows the tip;
+//! 3. when touching: the weighted patch under the tool tip ([`tool_patch`], radius from the
+//!    bank's device calibration; the contact triangle's barycentric coordinates when the radius
+//!    is zero or smaller than the triangles) and the **energy-minimal** solve on it
+//!    ([`WeightedSolve`]): `f_tool = (B C_SS B^T)^-1 d` with `B = [w_1 I, ..., w_n I]`,
+//!    `d = tip - anchor`, `f_k = w_k f_tool`. It is chosen over the paper's alpha form because
+//!    it is the better-conditioned one: it factors the 3 x 3 matrix `B C_SS B^T` (a weighted
+//!    average of the patch's blocks, about as well conditioned as one `C_kk`) and never needs
+//!    `C_SS^-1`, so close or nearly dependent contact nodes do not hurt it. The patch and the
+//!    factor depend only on the anchor, so they are kept while the contact does not slide and
+//!    a pressing tick costs one 3 x 3 solve. The node forces `f_S` (on the tissue, linear model)
+//!    are what telemetry reports, so the host's `u = C f_S` displays the surface under the tip;
 //! 4. the tissue law Q on the tool force ([`apply_tissue_law`], bank's law), except in
 //!    [`Mode::LinearLaw`]; the force on the tool is the *opposite* of the force on the tissue
 //!    (sign convention of [`crate::device`]); it is capped by [`Device::limit_force`];
@@ -33,21 +35,13 @@
 //! `Transparent` (tracking and telemetry, zero force) and `ConstantCurrent` (the given currents,
 //! clamped to the limits, still under the supervisor).
 
-#![deny(
-    clippy::unwrap_used,
-    clippy::expect_used,
-    clippy::panic,
-    clippy::indexing_slicing,
-    clippy::unreachable,
-    clippy::todo
-)]
-
 use bank_format::{Bank, Contact, Counters, MAX_CONTACTS, Mode, Telemetry, heapless};
 
 use crate::contact::{ContactState, ContactTracker};
 use crate::device::{Device, transpose_mul};
+use crate::patch::tool_patch;
 use crate::safety::{ArmRefused, Fault, SafetyConfig, State, Supervisor, TickInput};
-use crate::solve::{SolveError, apply_tissue_law, solve_triangle_barycentric};
+use crate::solve::{SolveError, WeightedSolve, apply_tissue_law};
 
 /// The contact set and its forces, as sent in telemetry.
 pub type Contacts = heapless::Vec<Contact, MAX_CONTACTS>;
@@ -91,6 +85,8 @@ pub struct LoopOutput {
     pub new_fault: Option<Fault>,
     /// The solve or law error of this tick, if any (it raised `SolveFailed`).
     pub solve_error: Option<SolveError>,
+    /// Where the contact patch in use was built, when touching.
+    pub patch: Option<PatchOrigin>,
 }
 
 /// What the last tick produced, kept for [`HapticLoop::telemetry`].
@@ -115,6 +111,36 @@ pub struct HapticLoop<'b> {
     tick: u32,
     counters: Counters,
     last: Last,
+    held: Option<Held>,
+}
+
+/// A sliding contact keeps its patch (weights and factored solve) until the anchor has moved
+/// this fraction of the tip radius from where the patch was built: the displacement still
+/// follows the anchor every tick, and rebuilding the patch (quadrature points located on the
+/// surface, a new factor) costs far more than a tick should.
+pub const REPATCH_FRACTION: f32 = 0.1;
+
+/// The factored contact solve of the anchor it was built at (reused while the contact presses
+/// in place or slides less than [`REPATCH_FRACTION`] of the tip radius).
+#[derive(Clone, Copy, Debug)]
+struct Held {
+    origin: PatchOrigin,
+    solve: WeightedSolve,
+}
+
+/// Where the current contact patch was built ([`crate::patch::tool_patch`]'s arguments): the
+/// contact triangle and the rest-surface point, which lags the anchor by less than
+/// [`REPATCH_FRACTION`] of the tip radius while the contact slides.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PatchOrigin {
+    /// Index into `bank.triangles()`.
+    pub triangle: u32,
+    /// The triangle's nodes.
+    pub nodes: [u16; 3],
+    /// Barycentric coordinates of `anchor` in the triangle.
+    pub bary: [f32; 3],
+    /// The point, m.
+    pub anchor: [f32; 3],
 }
 
 impl<'b> HapticLoop<'b> {
@@ -142,6 +168,7 @@ impl<'b> HapticLoop<'b> {
                 contacts: Contacts::new(),
                 currents_a: [0.0; 3],
             },
+            held: None,
         }
     }
 
@@ -279,6 +306,7 @@ impl<'b> HapticLoop<'b> {
             fault: self.supervisor.fault(),
             new_fault: out.new_fault,
             solve_error,
+            patch: self.held.map(|h| h.origin),
         }
     }
 
@@ -297,20 +325,45 @@ impl<'b> HapticLoop<'b> {
     }
 
     /// Contact forces on the tissue (linear model) and the force on the tool (N) for the mode.
-    fn contact_force(&self, contact: &ContactState) -> Result<(Contacts, [f32; 3]), SolveError> {
+    fn contact_force(
+        &mut self,
+        contact: &ContactState,
+    ) -> Result<(Contacts, [f32; 3]), SolveError> {
         let ContactState::Touching {
+            triangle,
             nodes,
             bary,
+            anchor,
             displacement,
-            ..
         } = *contact
         else {
+            self.held = None;
             return Ok((Contacts::new(), [0.0; 3]));
         };
-        let forces = solve_triangle_barycentric(self.bank, nodes, bary, displacement)?;
+        let radius = self.bank.device().tip_radius_m;
+        let solve = match self.held {
+            Some(h) if h.origin.triangle == triangle && h.origin.anchor == anchor => h.solve,
+            Some(h) if dist2(h.origin.anchor, anchor) < sq(REPATCH_FRACTION * radius) => h.solve,
+            _ => {
+                self.held = None;
+                let patch = tool_patch(self.bank, triangle, nodes, bary, anchor, radius);
+                let solve = WeightedSolve::new(self.bank, patch.nodes(), patch.weights())?;
+                self.held = Some(Held {
+                    origin: PatchOrigin {
+                        triangle,
+                        nodes,
+                        bary,
+                        anchor,
+                    },
+                    solve,
+                });
+                solve
+            }
+        };
+        let forces = solve.forces(displacement)?;
         let mut contacts = Contacts::new();
         for (&node, &force_n) in forces.nodes().iter().zip(forces.forces()) {
-            // MAX_CONTACTS (8) >= MAX_CONTACT_NODES (3): never full.
+            // MAX_CONTACTS == MAX_CONTACT_NODES: never full.
             if contacts.push(Contact { node, force_n }).is_err() {
                 break;
             }
@@ -324,6 +377,15 @@ impl<'b> HapticLoop<'b> {
         };
         Ok((contacts, on_tissue.map(|f| -f)))
     }
+}
+
+fn dist2(a: [f32; 3], b: [f32; 3]) -> f32 {
+    let d = [a[0] - b[0], a[1] - b[1], a[2] - b[2]];
+    d[0] * d[0] + d[1] * d[1] + d[2] * d[2]
+}
+
+fn sq(x: f32) -> f32 {
+    x * x
 }
 
 /// `a - b` per joint, wrapping (encoder counters wrap).
@@ -404,7 +466,9 @@ mod tests {
                     matches!(out.contact, ContactState::Touching { .. }),
                     "{out:?}"
                 );
-                assert_eq!(out.contacts.len(), 3);
+                // Pressed at a node of the 1 cm grid with a 3 mm tip: the node and its ring of
+                // six carry it.
+                assert_eq!(out.contacts.len(), 7);
                 // The tool is pushed back up, out of the tissue.
                 assert!(out.tool_force_n[2] > 0.0, "{out:?}");
                 // Insertion motor pushes the shaft back: negative effort along +insertion.
@@ -462,7 +526,7 @@ mod tests {
         lp.set_mode(Mode::Transparent);
         let out = lp.tick(input(s));
         assert_eq!(out.currents_a, [0.0; 3]);
-        assert_eq!(out.contacts.len(), 3);
+        assert_eq!(out.contacts.len(), 7);
         lp.set_mode(Mode::ConstantCurrent {
             currents_a: [0.5, -9.0, f32::NAN],
         });
@@ -523,7 +587,7 @@ mod tests {
             assert_eq!(out.currents_a, [0.0; 3]);
         }
         // Pressed 5 mm: a force is computed but not applied.
-        assert!(lp.telemetry().contacts.len() == 3);
+        assert_eq!(lp.telemetry().contacts.len(), 7);
         assert_eq!(lp.telemetry().currents_a, [0.0; 3]);
         // Arm, then disarm: zero again.
         lp.arm().unwrap();

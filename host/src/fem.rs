@@ -4,7 +4,8 @@
 //! Fixed dofs (`u = 0`) are removed; the remaining *free* dofs keep node-major order, so `K_ff`
 //! is assembled directly (upper triangle, CSC) in the layout the Cholesky factorisation wants.
 
-use crate::mesh::{TetMesh, cross, dot, sub};
+use crate::mesh::TetMesh;
+use crate::vec3::{add, cross, dot, norm, scale, sub};
 use faer::sparse::{SparseColMat, SymbolicSparseColMat};
 use rayon::prelude::*;
 
@@ -603,16 +604,4 @@ fn adjacency(node_tets: &Csr, tets: &[[usize; 4]]) -> Csr {
         ptr.push(idx.len());
     }
     Csr { ptr, idx }
-}
-
-fn add(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [a[0] + b[0], a[1] + b[1], a[2] + b[2]]
-}
-
-fn scale(a: [f64; 3], s: f64) -> [f64; 3] {
-    [a[0] * s, a[1] * s, a[2] * s]
-}
-
-fn norm(a: [f64; 3]) -> f64 {
-    dot(a, a).sqrt()
 }

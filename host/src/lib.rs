@@ -7,8 +7,10 @@
 
 pub mod calibrate;
 pub mod compliance;
+pub mod contact;
 pub mod fem;
 pub mod mesh;
 pub mod ordering;
 pub mod reach;
 pub mod scene;
+pub mod vec3;

@@ -23,21 +23,8 @@
 //! other tissue). Nodes on the far side of the organ, seen from the trocar, are therefore kept
 //! when they lie in the sector; the scene's insertion range is what keeps R to the near surface.
 
+use crate::vec3::{cross, dot, sub};
 use bank_format::DeviceCalibration;
-
-fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
-}
-fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-}
-fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [
-        a[1] * b[2] - a[2] * b[1],
-        a[2] * b[0] - a[0] * b[2],
-        a[0] * b[1] - a[1] * b[0],
-    ]
-}
 
 /// The gimbal's workspace in f64, from a device calibration.
 #[derive(Debug, Clone, Copy)]

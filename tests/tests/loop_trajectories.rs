@@ -1,6 +1,7 @@
 //! The whole haptic loop ([`firmware::tick::HapticLoop`]) on a flat 5 x 5-node patch (z = 0,
 //! 1 cm spacing, every pair coupled), driven by encoder counts computed here by inverse
-//! kinematics: a press followed by a 500-tick slide across the patch and a lift. Every tick:
+//! kinematics: a press followed by a 500-tick slide across the patch and a lift, contact nodes
+//! micrometres apart, a press at the edge of the region. Every tick:
 //! no NaN, the force within `max_force_n`, the currents within their limits.
 
 #![allow(clippy::needless_range_loop)]
@@ -66,6 +67,8 @@ fn slide_across_the_patch_while_pressed() {
 
     let mut triangles = std::collections::BTreeSet::new();
     let mut max_f = 0.0f32;
+    let mut prev_ft: Option<f32> = None;
+    let mut max_drop = 0.0f32;
     for (n, &p) in path.iter().enumerate() {
         let out = lp.tick(LoopInput {
             encoder_counts: counts_for_tip(&dev, &cal, p),
@@ -84,17 +87,122 @@ fn slide_across_the_patch_while_pressed() {
                 panic!("contact lost while sliding at tick {n}: {out:?}");
             };
             triangles.insert(triangle);
-            assert_eq!(out.contacts.len(), 3);
+            // The 3 mm tip's patch on the 1 cm grid.
+            assert!(!out.contacts.is_empty(), "{out:?}");
             // Pressed 3 mm: the tool is pushed up, out of the tissue.
             assert!(out.tool_force_n[2] > 0.1, "{out:?}");
             max_f = max_f.max(out.tool_force_n[2]);
+            // The stick cone bounds the tangential force and moves the anchor continuously:
+            // it builds up while sticking, then holds; no saw-tooth (a sudden release) at
+            // triangle edges.
+            let f = out.tool_force_n;
+            let ft = (f[0] * f[0] + f[1] * f[1]).sqrt();
+            assert!(ft < 0.5 * f[2], "{out:?}");
+            if let Some(p) = prev_ft {
+                max_drop = max_drop.max(p - ft);
+            }
+            prev_ft = Some(ft);
         }
     }
     // The slide crossed several triangles; the last ticks are above the surface, force-free.
     assert!(triangles.len() >= 4, "{triangles:?}");
     assert!(max_f > 1.0, "{max_f}");
+    assert!(
+        max_drop < 0.02,
+        "the tangential force fell by {max_drop} N in one tick"
+    );
     let tel = lp.telemetry();
     assert_eq!(tel.tick, path.len() as u32);
     assert!(tel.contacts.is_empty());
     assert_eq!(tel.currents_a, [0.0; 3]);
+}
+
+/// Press and slide across a grid whose middle rows are 3 um apart: sliver triangles, and contact
+/// patches holding pairs of nodes 3 um apart (a nearly singular `C_SS`). The energy-minimal
+/// solve never inverts `C_SS`, so the loop stays armed with finite, bounded forces, and the
+/// force changes smoothly across the sliver row.
+#[test]
+fn contact_nodes_micrometres_apart() {
+    let ticks = [0.0, 0.01, 0.02, 0.03, 0.04];
+    let rows = [0.0, 0.01, 0.02, 0.020_003, 0.03, 0.04];
+    let bytes = firmware::fixtures::grid_patch_at(&ticks, &rows, 0.06);
+    let bank = Bank::parse(bytes.as_slice()).unwrap();
+    let cal = patch_device();
+    let mut lp = HapticLoop::new(&bank);
+    lp.arm().unwrap();
+    let dev = *lp.device();
+    // Down onto the sliver row, then across it in y and back, pressed 2 mm.
+    let above = [0.017, 0.0185, 0.002];
+    let start = [0.017, 0.0185, -0.002];
+    let end = [0.017, 0.0215, -0.002];
+    let mut path: Vec<[f64; 3]> = (0..=40)
+        .map(|t| lerp(above, start, t as f64 / 40.0))
+        .collect();
+    path.extend((1..=300).map(|t| lerp(start, end, t as f64 / 300.0)));
+    let mut close_pairs = 0;
+    let mut prev_fz: Option<f32> = None;
+    let mut max_step = 0.0f32;
+    for (n, p) in path.into_iter().enumerate() {
+        let out = lp.tick(LoopInput {
+            encoder_counts: counts_for_tip(&dev, &cal, p),
+            overrun: false,
+            ticks_since_host_frame: 0,
+        });
+        check(&out, &cal);
+        assert!(out.solve_error.is_none(), "{out:?}");
+        let pos = bank.positions();
+        let nodes: Vec<usize> = out.contacts.iter().map(|c| usize::from(c.node)).collect();
+        if nodes.iter().any(|&a| {
+            nodes.iter().any(|&b| {
+                a != b && (0..3).map(|i| (pos[a][i] - pos[b][i]).powi(2)).sum::<f32>() < 1e-10
+            })
+        }) {
+            close_pairs += 1;
+        }
+        let sliding = n > 40;
+        if matches!(out.contact, ContactState::Touching { .. }) && sliding {
+            if let Some(prev) = prev_fz {
+                max_step = max_step.max((out.tool_force_n[2] - prev).abs());
+            }
+            prev_fz = Some(out.tool_force_n[2]);
+        }
+    }
+    assert!(
+        close_pairs > 50,
+        "only {close_pairs} ticks had both close nodes in contact"
+    );
+    // 10 um per tick across the sliver row: no jump in the normal force (it is ~0.5 N).
+    assert!(max_step < 0.02, "largest normal-force step {max_step} N");
+}
+
+/// A press at the edge of the bank's region, where the rest of the organ is held fixed (the
+/// nodes beyond are not in R): the tip's patch is clipped to R's border, the loop stays armed
+/// with finite forces, and pressing deeper pushes back harder.
+#[test]
+fn contact_next_to_the_fixed_boundary() {
+    let bytes = flat_patch();
+    let bank = Bank::parse(bytes.as_slice()).unwrap();
+    let cal = patch_device();
+    let mut lp = HapticLoop::new(&bank);
+    lp.arm().unwrap();
+    let dev = *lp.device();
+    // 1 mm inside the patch's x = 0 edge, between two edge nodes.
+    let mut last = 0.0f32;
+    let mut touching = 0;
+    for t in 0..=200 {
+        let p = [0.001, 0.015, 0.002 - 4.0e-3 * f64::from(t) / 200.0];
+        let out = lp.tick(LoopInput {
+            encoder_counts: counts_for_tip(&dev, &cal, p),
+            overrun: false,
+            ticks_since_host_frame: 0,
+        });
+        check(&out, &cal);
+        assert!(out.solve_error.is_none(), "{out:?}");
+        if matches!(out.contact, ContactState::Touching { .. }) && p[2] < -1e-4 {
+            touching += 1;
+            assert!(out.tool_force_n[2] > last, "{out:?}");
+            last = out.tool_force_n[2];
+        }
+    }
+    assert!(touching > 80 && last > 0.1, "{touching} {last}");
 }

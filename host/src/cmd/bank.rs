@@ -3,7 +3,10 @@
 use super::compliance::progress_bar;
 use anyhow::{Context, Result, bail};
 use bank_format::{AlignedBytes, Bank, BankBuilder, LawKind, SectionKind};
+use firmware::patch::tool_patch;
+use firmware::solve::WeightedSolve;
 use host::compliance::{Block3, Compliance, contact_forces};
+use host::contact::{ContactSurface, SurfaceHit, patch_force};
 use host::fem::{Elasticity, FixedSet};
 use host::mesh::{Surface, TetMesh};
 use host::reach::{Workspace, reachable};
@@ -328,6 +331,35 @@ fn build(args: BuildArgs) -> Result<()> {
          {} neighbour entries",
         2 * pairs
     );
+    let (mut most, mut dropped) = (0, 0.0f32);
+    for (t, tri) in bank.triangles().iter().enumerate() {
+        let p = bank.positions();
+        let v = tri.map(|k| p[usize::from(k)]);
+        let centroid = std::array::from_fn(|i| (v[0][i] + v[1][i] + v[2][i]) / 3.0);
+        let patch = tool_patch(
+            &bank,
+            t as u32,
+            *tri,
+            [1.0 / 3.0; 3],
+            centroid,
+            bank.device().tip_radius_m,
+        );
+        most = most.max(patch.nodes().len());
+        dropped = dropped.max(patch.dropped);
+    }
+    println!(
+        "tool      tip radius {} m: patches of up to {most} nodes at the triangles' centroids; at \
+         most {:.1}% of a patch's load dropped (nodes the bank does not couple, or beyond {} \
+         nodes){}",
+        prep.scene.tip_radius_m,
+        100.0 * dropped,
+        firmware::solve::MAX_CONTACT_NODES,
+        if dropped > 0.01 {
+            ": raise bank.truncation_radius_m (see `host bank sweep`)"
+        } else {
+            ""
+        }
+    );
     println!("sections  kind                  bytes   count");
     for (name, _, len, count) in section_table(&bank) {
         println!("          {name:<20} {len:>7} {count:>7}");
@@ -587,6 +619,72 @@ impl Stat {
     }
 }
 
+/// The tool patch on a bank against the host's f64 patch on R's surface with untruncated
+/// compliance, at a press site: the firmware's `tool_patch` + `WeightedSolve` (couplings as
+/// truncated in `bank`) and `host::contact` on the same anchor.
+struct PatchCheck<'p> {
+    prep: &'p Prepared,
+    surface: ContactSurface,
+}
+
+/// One tool-patch comparison: relative tool-force error and the weight share the firmware
+/// dropped (uncoupled or beyond the contact-set cap).
+struct PatchError {
+    error: f64,
+    dropped: f64,
+}
+
+impl<'p> PatchCheck<'p> {
+    fn new(prep: &'p Prepared) -> PatchCheck<'p> {
+        let region = Surface {
+            triangles: prep
+                .triangles
+                .iter()
+                .map(|t| t.map(|k| prep.region[k as usize]))
+                .collect(),
+            nodes: prep.region.clone(),
+        };
+        PatchCheck {
+            prep,
+            surface: ContactSurface::new(&prep.mesh, &region),
+        }
+    }
+
+    /// Presses triangle `t` (index into R's triangles) at its centroid by `press` (m).
+    fn press(&self, bank: &Bank, t: usize, press: [f64; 3]) -> Result<PatchError> {
+        let prep = self.prep;
+        let tri = prep.triangles[t];
+        let v = tri.map(|k| prep.positions[k as usize]);
+        let centroid: [f64; 3] = std::array::from_fn(|i| (v[0][i] + v[1][i] + v[2][i]) / 3.0);
+        let hit = SurfaceHit {
+            triangle: t,
+            nodes: tri.map(|k| prep.region[k as usize]),
+            bary: [1.0 / 3.0; 3],
+            point: centroid,
+        };
+        let radius = prep.scene.tip_radius_m;
+        let full = self.surface.tool_patch(&hit, radius, |_| true);
+        let exact = patch_force(&prep.compliance, &full, press)?;
+        let patch = tool_patch(
+            bank,
+            t as u32,
+            tri.map(|k| k as u16),
+            [1.0 / 3.0; 3],
+            centroid.map(|x| x as f32),
+            radius as f32,
+        );
+        let got = WeightedSolve::new(bank, patch.nodes(), patch.weights())
+            .and_then(|s| s.forces(press.map(|x| x as f32)))
+            .map_err(|e| anyhow::anyhow!("firmware solve at triangle {t}: {e}"))?;
+        let norm = |v: [f64; 3]| (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
+        let diff: [f64; 3] = std::array::from_fn(|i| f64::from(got.tool_force_n[i]) - exact[i]);
+        Ok(PatchError {
+            error: norm(diff) / norm(exact),
+            dropped: f64::from(patch.dropped),
+        })
+    }
+}
+
 fn sweep(args: SweepArgs) -> Result<()> {
     let radii = super::fixing::parse_list::<f64>(&args.radii).context("--radii")?;
     if radii.iter().any(|r| !(r.is_finite() && *r >= 0.0)) {
@@ -596,41 +694,25 @@ fn sweep(args: SweepArgs) -> Result<()> {
     let prep = Prepared::new(&args.scene)?;
     let rows = prep.blocks(rmax)?;
     let normals = vertex_normals(&prep.mesh, &prep.surface);
-    let edges = prep.edges();
-    let max_contacts = prep.scene.bank.max_contact_nodes as usize;
 
-    // Contact sets per site: one node; one triangle; the node's 1-ring (node + its surface
-    // neighbours in R, nearest first, at most max_contact_nodes).
+    // Contact sets per site: one node; one triangle; the tool patch at the triangle's
+    // centroid (firmware on the bank, against the host's f64 patch).
     let sites = spread_sites(&prep.positions, args.sites);
-    let mut presses: Vec<([f64; 3], Vec<usize>, Vec<usize>)> = Vec::new();
+    let mut presses: Vec<([f64; 3], Vec<usize>, usize)> = Vec::new();
     for &k in &sites {
         let nrm = normals[prep.region[k]];
         let press = nrm.map(|x| -args.depth * x);
-        let Some(tri) = prep.triangles.iter().find(|t| t.contains(&(k as u32))) else {
+        let Some(t) = prep.triangles.iter().position(|t| t.contains(&(k as u32))) else {
             continue;
         };
-        let tri: Vec<usize> = tri.iter().map(|&v| v as usize).collect();
-        let mut ring: Vec<usize> = edges
-            .iter()
-            .filter_map(|&(a, b)| {
-                if a == k {
-                    Some(b)
-                } else if b == k {
-                    Some(a)
-                } else {
-                    None
-                }
-            })
-            .collect();
-        ring.sort_by(|&a, &b| prep.dist(k, a).total_cmp(&prep.dist(k, b)));
-        ring.truncate(max_contacts.saturating_sub(1));
-        ring.insert(0, k);
-        presses.push((press, tri, ring));
+        let tri: Vec<usize> = prep.triangles[t].iter().map(|&v| v as usize).collect();
+        presses.push((press, tri, t));
     }
+    let check = PatchCheck::new(&prep);
     // Full (untruncated) blocks among every contact node.
     let mut union: Vec<usize> = presses
         .iter()
-        .flat_map(|(_, t, r)| t.iter().chain(r).copied())
+        .flat_map(|(_, t, _)| t.iter().copied())
         .collect();
     union.sort_unstable();
     union.dedup();
@@ -652,30 +734,29 @@ fn sweep(args: SweepArgs) -> Result<()> {
         args.depth * 1e3
     );
     println!(
-        "| radius (mm) | pairs kept | bank bytes | fits 768 KiB | 1 node | triangle, pairs <= r only | 1-ring, bank pairs (<= r + edges) |"
+        "| radius (mm) | pairs kept | bank bytes | fits 768 KiB | 1 node | triangle, pairs <= r only | tool patch r = {:.1} mm, firmware on the bank | patch weight dropped (max) |",
+        prep.scene.tip_radius_m * 1e3
     );
-    println!("| ---: | ---: | ---: | :---: | --- | --- | --- |");
+    println!("| ---: | ---: | ---: | :---: | --- | --- | --- | ---: |");
     for &r in &radii {
         let (bytes, pairs) = prep.bank(&rows, r)?;
-        let (mut one, mut tri, mut ring) = (Stat::default(), Stat::default(), Stat::default());
-        for (press, t, g) in &presses {
+        let aligned = AlignedBytes::new(&bytes);
+        let bank = Bank::parse(&aligned).map_err(|e| anyhow::anyhow!("swept bank: {e}"))?;
+        let (mut one, mut tri, mut patch) = (Stat::default(), Stat::default(), Stat::default());
+        let mut dropped: f64 = 0.0;
+        for (press, t, ti) in &presses {
             one.add(force_error(&sub(&t[..1]), |_, _| false, *press)?);
             tri.add(force_error(
                 &sub(t),
                 |a, b| prep.dist(t[a], t[b]) <= r,
                 *press,
             )?);
-            ring.add(force_error(
-                &sub(g),
-                |a, b| {
-                    let (x, y) = (g[a].min(g[b]), g[a].max(g[b]));
-                    prep.dist(x, y) <= r || edges.contains(&(x, y))
-                },
-                *press,
-            )?);
+            let e = check.press(&bank, *ti, *press)?;
+            patch.add(Some(e.error));
+            dropped = dropped.max(e.dropped);
         }
         println!(
-            "| {:.1} | {pairs} | {} | {} | {} | {} | {} |",
+            "| {:.1} | {pairs} | {} | {} | {} | {} | {} | {:.1}% |",
             r * 1e3,
             bytes.len(),
             if bytes.len() <= BANK_REGION_BYTES {
@@ -685,7 +766,8 @@ fn sweep(args: SweepArgs) -> Result<()> {
             },
             one.show(),
             tri.show(),
-            ring.show()
+            patch.show(),
+            100.0 * dropped
         );
     }
     Ok(())

@@ -16,8 +16,11 @@ pub enum Bench {
     /// Nanoseconds per tick of the firmware's portable loop run natively on a bank, along a
     /// scripted press-slide-release trajectory.
     Tick(TickArgs),
+    /// The same tool press on one organ meshed at several sizes: point contact against the
+    /// finite tool tip (the point contact's force falls under refinement, the tip's converges).
+    Refinement(super::refinement::Args),
     /// Instructions one evaluation of the tissue law costs on the MCU (thumbv7em), per degree,
-    /// estimated from the disassembly of `TissueLaw::eval`.
+    /// counted on the disassembly of `TissueLaw::eval`.
     Law(super::bench_law::LawArgs),
 }
 
@@ -34,6 +37,21 @@ pub struct TickArgs {
     depth: f64,
 }
 
+/// The benchmarks' organ: the shipped livers' material, resting on a bed.
+#[derive(clap::Args, Debug)]
+pub struct OrganArgs {
+    /// Young's modulus in Pa.
+    #[arg(long, default_value_t = 3.0e3)]
+    pub young: f64,
+    /// Poisson's ratio.
+    #[arg(long, default_value_t = 0.45)]
+    pub poisson: f64,
+    /// The organ rests on a bed: nodes less than this height (m) above its lowest point are
+    /// fixed (the peer script's `--fix-box -1,-1,-1,1,1,0.01` for the shipped livers).
+    #[arg(long, default_value_t = 0.01)]
+    pub bed: f64,
+}
+
 /// Arguments of `host bench compliance`.
 #[derive(clap::Args, Debug)]
 pub struct ComplianceArgs {
@@ -41,16 +59,8 @@ pub struct ComplianceArgs {
     /// host/meshes/generated/liver-100k.msh when present.
     #[arg(long)]
     mesh: Vec<PathBuf>,
-    /// Young's modulus in Pa.
-    #[arg(long, default_value_t = 3.0e3)]
-    young: f64,
-    /// Poisson's ratio.
-    #[arg(long, default_value_t = 0.45)]
-    poisson: f64,
-    /// The organ rests on a bed: nodes less than this height (m) above its lowest point are
-    /// fixed (the peer script's `--fix-box -1,-1,-1,1,1,0.01` for the shipped livers).
-    #[arg(long, default_value_t = 0.01)]
-    bed: f64,
+    #[command(flatten)]
+    organ: OrganArgs,
     /// At most this many contact-candidate nodes (the free surface nodes nearest the top
     /// centre, a stand-in for a scene's reachable region).
     #[arg(long, default_value_t = 5000)]
@@ -90,11 +100,13 @@ pub fn run(bench: Bench) -> Result<()> {
     match bench {
         Bench::Compliance(args) => compliance(args),
         Bench::Tick(args) => tick(args),
+        Bench::Refinement(args) => super::refinement::run(args),
         Bench::Law(args) => super::bench_law::run(args),
     }
 }
 
-fn default_meshes() -> Vec<PathBuf> {
+/// The shipped livers, coarse to fine, and the generated 100k one when present.
+pub fn default_meshes() -> Vec<PathBuf> {
     let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("meshes");
     let mut v = vec![dir.join("liver-1k4.msh"), dir.join("liver-10k.msh")];
     let big = dir.join("generated/liver-100k.msh");
@@ -115,7 +127,7 @@ fn compliance(args: ComplianceArgs) -> Result<()> {
     } else {
         args.mesh.clone()
     };
-    let material = Material::new(args.young, args.poisson)?;
+    let material = Material::new(args.organ.young, args.organ.poisson)?;
     if !args.json {
         println!(
             "{:<22} {:>7} {:>8} {:>7} {:>6} {:>8} {:>8} {:>8} {:>9} {:>10} {:>9}",
@@ -166,7 +178,7 @@ fn measure(path: &Path, material: Material, args: &ComplianceArgs) -> Result<Rep
 
     let (lo, hi) = mesh.bounding_box();
     let mut fixed = FixedSet::none(mesh.nodes.len());
-    let top = lo[2] + args.bed;
+    let top = lo[2] + args.organ.bed;
     fixed.fix_box(&mesh, [lo[0], lo[1], lo[2], hi[0], hi[1], top], [true; 3])?;
 
     let centre = [0.5 * (lo[0] + hi[0]), 0.5 * (lo[1] + hi[1]), hi[2]];

@@ -7,3 +7,4 @@ pub mod calibrate;
 pub mod compliance;
 pub mod demo;
 pub mod fixing;
+pub mod refinement;

@@ -222,7 +222,7 @@ pub(crate) fn surface(mesh: &TetMesh) -> Result<Surface, MeshError> {
 mod tests {
     use super::*;
     use crate::mesh::structured::box_mesh;
-    use crate::mesh::{cross, dot, sub};
+    use crate::vec3::{cross, dot, sub};
 
     #[test]
     fn parity() {

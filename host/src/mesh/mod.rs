@@ -15,6 +15,8 @@
 //!
 //! No input makes these functions panic.
 
+use crate::vec3::{cross, dot, sub};
+
 mod boundary;
 pub mod error;
 mod gmsh;
@@ -63,20 +65,4 @@ impl TetMesh {
         }
         (lo, hi)
     }
-}
-
-pub(crate) fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
-}
-
-pub(crate) fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-}
-
-pub(crate) fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [
-        a[1] * b[2] - a[2] * b[1],
-        a[2] * b[0] - a[0] * b[2],
-        a[0] * b[1] - a[1] * b[0],
-    ]
 }

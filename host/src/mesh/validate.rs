@@ -1,8 +1,9 @@
 //! Mesh validation: the checks a mesh must pass before it is used for FEM.
 
+use super::TetMesh;
 use super::boundary::{check_indices, check_size, surface};
 use super::error::{MeshError, nofile};
-use super::{TetMesh, dot, sub};
+use crate::vec3::{dot, sub};
 use rayon::prelude::*;
 use std::collections::HashMap;
 

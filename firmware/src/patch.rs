@@ -1,0 +1,602 @@
+//! The finite tool radius: which nodes a tool tip of radius `r` presses, and with what weights.
+//!
+//! A point force on an elastic solid has unbounded displacement (Boussinesq), so with point
+//! contact (the paper's section 5) a node's compliance grows as the mesh is refined and the
+//! force for a given tool displacement falls: the result depends on the mesh. A real tip has a
+//! radius; spreading the load over the patch under it makes the force converge (design notes,
+//! "a trap worth knowing"; the refinement series is `host bench refinement`).
+//!
+//! The model: the tip presses the surface with the parabolic pressure `p(rho) = 1 - rho^2 / r^2`
+//! around the contact point (the anchor; `rho` the distance from it). The node loads are that
+//! pressure's consistent load `integral p phi_k dA` (P1 shape functions `phi_k`), by quadrature:
+//! [`QUADRATURE`] places 12 points on two rings in the contact triangle's plane (a Gauss rule
+//! in the radius for the weight `rho (1 - rho^2 / r^2)`, six angles per ring), each point is
+//! moved to the closest rest-surface point ([`closest_surface_point`], a local descent from the
+//! contact triangle) and its weight is spread over that triangle's vertices by barycentric
+//! coordinates. When the tip is much smaller than the triangles every point falls in the
+//! contact triangle and the weights are the anchor's barycentric coordinates (the paper's
+//! point contact, exactly the consistent load of a pressure inside one triangle). Twelve points
+//! are twelve point loads, though, which a fine mesh again resolves as singular; so once the
+//! mesh resolves the tip ([`resolution`]: enough nodes under it) the weights blend into the
+//! nodal quadrature `a_k p(rho_k)` (`a_k` the node's lumped area, a third of its triangles'),
+//! which converges under refinement. As the anchor slides, the points, their barycentric
+//! coordinates and the nodal pressures move continuously, and so does the force.
+//!
+//! Normalised to sum 1, these are the weights `w` of the energy-minimal solve
+//! ([`crate::solve::WeightedSolve`]): `f_k = w_k f_tool` and the tool displacement is imposed on
+//! `sum_k w_k u_k`. With `r = 0` the weights are the barycentric coordinates.
+//!
+//! At most [`MAX_CONTACT_NODES`] nodes are kept, the heaviest, and each must be coupled in the
+//! bank to every heavier one kept (true whenever the bank's truncation radius exceeds `2 r` plus
+//! an edge); the weight dropped is reported. The patch depends only on the anchor, so the loop
+//! computes it when the contact starts or slides, not while it presses in place.
+
+use bank_format::Bank;
+use nalgebra::ComplexField;
+
+use crate::contact::closest_surface_point;
+use crate::solve::MAX_CONTACT_NODES;
+
+/// The weighted contact set of one tool press.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Patch {
+    nodes: [u16; MAX_CONTACT_NODES],
+    weights: [f32; MAX_CONTACT_NODES],
+    len: usize,
+    /// Share of the load on nodes that could not be kept (more than [`MAX_CONTACT_NODES`], or
+    /// not coupled in the bank), before renormalising: 0 when nothing was dropped.
+    pub dropped: f32,
+}
+
+impl Patch {
+    /// The contact nodes, heaviest first.
+    pub fn nodes(&self) -> &[u16] {
+        self.nodes.get(..self.len).unwrap_or(&[])
+    }
+
+    /// Their weights (each `> 0`, sum 1).
+    pub fn weights(&self) -> &[f32] {
+        self.weights.get(..self.len).unwrap_or(&[])
+    }
+}
+
+/// The disk quadrature: `(rho / r, weight, angle)` for each point. Radii and weights are the
+/// 2-point Gauss rule for `integral_0^1 f(s) s (1 - s^2) ds` (in `t = s^2`: Gauss-Jacobi with
+/// weight `1 - t`, nodes `0.4 -+ sqrt(0.06)`), normalised to a total of 1 and split over six
+/// angles per ring, the outer ring turned by 30 degrees.
+pub const QUADRATURE: [(f32, f32, f32); 12] = {
+    const S: [f32; 2] = [0.393_765_36, 0.803_087_3];
+    const W: [f32; 2] = [0.636_082_06 / 6.0, 0.363_917_94 / 6.0];
+    const D: f32 = core::f32::consts::PI / 180.0;
+    [
+        (S[0], W[0], 0.0),
+        (S[0], W[0], 60.0 * D),
+        (S[0], W[0], 120.0 * D),
+        (S[0], W[0], 180.0 * D),
+        (S[0], W[0], 240.0 * D),
+        (S[0], W[0], 300.0 * D),
+        (S[1], W[1], 30.0 * D),
+        (S[1], W[1], 90.0 * D),
+        (S[1], W[1], 150.0 * D),
+        (S[1], W[1], 210.0 * D),
+        (S[1], W[1], 270.0 * D),
+        (S[1], W[1], 330.0 * D),
+    ]
+};
+
+/// Cosine and sine of each [`QUADRATURE`] angle.
+const DIRECTIONS: [(f32, f32); 12] = {
+    const H: f32 = 0.866_025_4; // sqrt(3) / 2
+    [
+        (1.0, 0.0),
+        (0.5, H),
+        (-0.5, H),
+        (-1.0, 0.0),
+        (-0.5, -H),
+        (0.5, -H),
+        (H, 0.5),
+        (0.0, 1.0),
+        (-H, 0.5),
+        (-H, -0.5),
+        (0.0, -1.0),
+        (H, -0.5),
+    ]
+};
+
+/// The weighted patch under a tip of radius `radius_m` (m) touching `triangle` (index into
+/// `bank.triangles()`, nodes `nodes`) at the rest-surface point `anchor` with barycentric
+/// coordinates `bary`. A zero, negative or non-finite radius, or a degenerate triangle, gives
+/// the barycentric weights.
+pub fn tool_patch(
+    bank: &Bank,
+    triangle: u32,
+    nodes: [u16; 3],
+    bary: [f32; 3],
+    anchor: [f32; 3],
+    radius_m: f32,
+) -> Patch {
+    let basis = tangent_basis(bank, nodes).filter(|_| radius_m > 0.0 && radius_m.is_finite());
+    let Some((e1, e2)) = basis else {
+        let mut acc = Accumulator::default();
+        acc.add_bary(nodes, bary, 1.0);
+        return acc.finish(bank);
+    };
+    // The nodal pressures first: they say how far the mesh resolves the tip, and the costly
+    // parts (lumped areas, locating the 12 points) are skipped when their share is zero.
+    let (mut nodal, n_eff) = nodal_pressures(bank, nodes, bary, anchor, radius_m);
+    let theta = resolution(n_eff);
+    let mut acc = Accumulator::default();
+    if theta > 0.0 {
+        nodal.weight_by_lumped_area(bank);
+        acc.merge_scaled(&nodal, theta);
+    }
+    if theta < 1.0 {
+        let mut quad = Accumulator::default();
+        for (&(s, w, _), &(c, sn)) in QUADRATURE.iter().zip(&DIRECTIONS) {
+            let (x, y) = (radius_m * s * c, radius_m * s * sn);
+            let q = [
+                anchor[0] + x * e1[0] + y * e2[0],
+                anchor[1] + x * e1[1] + y * e2[1],
+                anchor[2] + x * e1[2] + y * e2[2],
+            ];
+            match closest_surface_point(bank, triangle, nodes, q) {
+                Some(sp) => quad.add_bary(sp.nodes, sp.bary, w),
+                None => quad.add_bary(nodes, bary, w),
+            }
+        }
+        acc.merge_scaled(&quad, 1.0 - theta);
+    }
+    acc.finish(bank)
+}
+
+/// How well the mesh resolves the tip, from `n_eff = sum_k (1 - rho_k^2 / r^2)` over the nodes
+/// within `r` of the anchor (continuous as the anchor moves: nodes enter at zero): the share
+/// `theta` of the nodal quadrature in the weights. 0 up to [`RESOLVED_FROM`] (the 12 points
+/// carry the load), rising linearly to 1 at [`RESOLVED_AT`] (the nodes do).
+pub fn resolution(n_eff: f32) -> f32 {
+    ((n_eff - RESOLVED_FROM) / (RESOLVED_AT - RESOLVED_FROM)).clamp(0.0, 1.0)
+}
+
+/// Below this `n_eff` the disk quadrature alone gives the weights.
+pub const RESOLVED_FROM: f32 = 2.0;
+/// From this `n_eff` the nodal quadrature alone gives the weights.
+pub const RESOLVED_AT: f32 = 6.0;
+
+/// The pressures `1 - rho_k^2 / r^2` at the nodes within `r` of the anchor, among the bank's
+/// neighbours of the contact triangle's vertex nearest to it, and their sum `n_eff` (see
+/// [`resolution`]).
+fn nodal_pressures(
+    bank: &Bank,
+    nodes: [u16; 3],
+    bary: [f32; 3],
+    anchor: [f32; 3],
+    radius_m: f32,
+) -> (Accumulator, f32) {
+    let mut acc = Accumulator::default();
+    let r2 = radius_m * radius_m;
+    let nearest = nodes
+        .iter()
+        .zip(bary)
+        .fold(
+            (nodes[0], -1.0f32),
+            |best, (&k, b)| {
+                if b > best.1 { (k, b) } else { best }
+            },
+        )
+        .0;
+    let (neighbours, _) = bank.neighbours(usize::from(nearest));
+    let mut n_eff = 0.0f32;
+    for &k in core::iter::once(&nearest).chain(neighbours) {
+        let Some(&x) = bank.positions().get(usize::from(k)) else {
+            continue;
+        };
+        let d = sub(x, anchor);
+        let rho2 = d[0] * d[0] + d[1] * d[1] + d[2] * d[2];
+        if rho2 < r2 {
+            let p = 1.0 - rho2 / r2;
+            n_eff += p;
+            acc.add(k, p);
+        }
+    }
+    (acc, n_eff)
+}
+
+/// A third of the area of the bank's triangles around node `k`, m^2.
+fn lumped_area(bank: &Bank, k: u16) -> f32 {
+    let p = bank.positions();
+    let tris = bank.triangles();
+    let mut twice = 0.0f32;
+    for &t in bank.node_triangles(usize::from(k)) {
+        let Some(tri) = tris.get(t as usize) else {
+            continue;
+        };
+        let [a, b, c] = tri.map(|i| p.get(usize::from(i)).copied().unwrap_or([0.0; 3]));
+        let n = cross(sub(b, a), sub(c, a));
+        twice += ComplexField::sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
+    }
+    twice / 6.0
+}
+
+/// Orthonormal `(e1, e2)` spanning the plane of triangle `nodes`, with `e1` the projection of a
+/// fixed axis (x, or y where the plane is nearly normal to x), so that neighbouring triangles
+/// orient the quadrature alike and the weights stay continuous when the anchor changes
+/// triangle.
+fn tangent_basis(bank: &Bank, nodes: [u16; 3]) -> Option<([f32; 3], [f32; 3])> {
+    let p = bank.positions();
+    let [a, b, c] = nodes.map(|i| p.get(usize::from(i)).copied());
+    let (a, b, c) = (a?, b?, c?);
+    let n = unit(cross(sub(b, a), sub(c, a)))?;
+    let axis = if n[0].abs() < 0.9 {
+        [1.0, 0.0, 0.0]
+    } else {
+        [0.0, 1.0, 0.0]
+    };
+    let along = axis[0] * n[0] + axis[1] * n[1] + axis[2] * n[2];
+    let e1 = unit([
+        axis[0] - along * n[0],
+        axis[1] - along * n[1],
+        axis[2] - along * n[2],
+    ])?;
+    Some((e1, cross(n, e1)))
+}
+
+/// Node loads gathered before selection: merges repeated nodes.
+struct Accumulator {
+    nodes: [u16; CANDIDATES],
+    loads: [f32; CANDIDATES],
+    len: usize,
+    overflow: f32,
+}
+
+/// Candidates kept before choosing the heaviest [`MAX_CONTACT_NODES`].
+const CANDIDATES: usize = 64;
+
+impl Default for Accumulator {
+    fn default() -> Accumulator {
+        Accumulator {
+            nodes: [0; CANDIDATES],
+            loads: [0.0; CANDIDATES],
+            len: 0,
+            overflow: 0.0,
+        }
+    }
+}
+
+impl Accumulator {
+    /// Nodal pressures to the nodal quadrature's loads `a_k p_k`.
+    fn weight_by_lumped_area(&mut self, bank: &Bank) {
+        for (&k, q) in self.nodes.iter().zip(self.loads.iter_mut()).take(self.len) {
+            *q *= lumped_area(bank, k);
+        }
+    }
+
+    /// Adds `other`'s loads, normalised to sum `s`.
+    fn merge_scaled(&mut self, other: &Accumulator, s: f32) {
+        let total = other.loads.iter().take(other.len).sum::<f32>() + other.overflow;
+        if !(s > 0.0 && total > 0.0) {
+            return;
+        }
+        for (&k, &q) in other.nodes.iter().zip(&other.loads).take(other.len) {
+            self.add(k, s * q / total);
+        }
+        self.overflow += s * other.overflow / total;
+    }
+
+    /// Adds `w` spread over triangle `nodes` by barycentric coordinates `bary`.
+    fn add_bary(&mut self, nodes: [u16; 3], bary: [f32; 3], w: f32) {
+        for (&k, &b) in nodes.iter().zip(&bary) {
+            if b > 0.0 && b.is_finite() {
+                self.add(k, w * b);
+            }
+        }
+    }
+
+    fn add(&mut self, k: u16, q: f32) {
+        let len = self.len;
+        if let Some(i) = self.nodes.iter().take(len).position(|&n| n == k) {
+            if let Some(l) = self.loads.get_mut(i) {
+                *l += q;
+            }
+        } else if let (Some(n), Some(l)) = (self.nodes.get_mut(len), self.loads.get_mut(len)) {
+            *n = k;
+            *l = q;
+            self.len += 1;
+        } else {
+            self.overflow += q;
+        }
+    }
+
+    /// The heaviest nodes, mutually coupled, normalised.
+    fn finish(mut self, bank: &Bank) -> Patch {
+        let total = self.loads.iter().take(self.len).sum::<f32>() + self.overflow;
+        let mut patch = Patch {
+            nodes: [0; MAX_CONTACT_NODES],
+            weights: [0.0; MAX_CONTACT_NODES],
+            len: 0,
+            dropped: 0.0,
+        };
+        let mut kept = 0.0f32;
+        while patch.len < MAX_CONTACT_NODES {
+            // Heaviest remaining candidate (ties: the first).
+            let Some((i, &q)) = self
+                .loads
+                .iter()
+                .take(self.len)
+                .enumerate()
+                .filter(|&(_, &q)| q > 0.0)
+                .fold(None, |best: Option<(usize, &f32)>, c| match best {
+                    Some(b) if *b.1 >= *c.1 => Some(b),
+                    _ => Some(c),
+                })
+            else {
+                break;
+            };
+            let k = self.nodes.get(i).copied().unwrap_or(0);
+            if let Some(l) = self.loads.get_mut(i) {
+                *l = 0.0;
+            }
+            let coupled = patch
+                .nodes()
+                .iter()
+                .all(|&n| bank.coupling(usize::from(n), usize::from(k)).is_some());
+            if !coupled {
+                continue;
+            }
+            if let (Some(n), Some(w)) = (
+                patch.nodes.get_mut(patch.len),
+                patch.weights.get_mut(patch.len),
+            ) {
+                *n = k;
+                *w = q;
+            }
+            patch.len += 1;
+            kept += q;
+        }
+        if kept > 0.0 && total > 0.0 {
+            for w in patch.weights.iter_mut() {
+                *w /= kept;
+            }
+            patch.dropped = (1.0 - kept / total).max(0.0);
+        }
+        patch
+    }
+}
+
+fn sub(a: [f32; 3], b: [f32; 3]) -> [f32; 3] {
+    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
+}
+
+fn cross(a: [f32; 3], b: [f32; 3]) -> [f32; 3] {
+    [
+        a[1] * b[2] - a[2] * b[1],
+        a[2] * b[0] - a[0] * b[2],
+        a[0] * b[1] - a[1] * b[0],
+    ]
+}
+
+/// `a / |a|`, `None` for a zero or non-finite vector.
+fn unit(a: [f32; 3]) -> Option<[f32; 3]> {
+    let n = ComplexField::sqrt(a[0] * a[0] + a[1] * a[1] + a[2] * a[2]);
+    (n > 0.0 && n.is_finite()).then(|| a.map(|x| x / n))
+}
+
+#[cfg(test)]
+#[allow(clippy::indexing_slicing, clippy::unwrap_used)]
+mod tests {
+    extern crate std;
+    use super::*;
+    use crate::fixtures::grid_patch;
+    use std::vec;
+    use std::vec::Vec;
+
+    /// Node id of grid point (i, j) on an `n`-wide grid.
+    fn id(n: usize, i: usize, j: usize) -> u16 {
+        (i + n * j) as u16
+    }
+
+    /// The grid's triangle containing `(x, y)` (spacing `h`), its index in `grid_patch`'s
+    /// order and the barycentric coordinates: square (i, j) is split into [a, b, c] (u >= v)
+    /// and [a, c, d].
+    fn locate(n: usize, h: f64, x: f64, y: f64) -> (u32, [u16; 3], [f64; 3]) {
+        let (i, j) = ((x / h).floor() as usize, (y / h).floor() as usize);
+        let (i, j) = (i.min(n - 2), j.min(n - 2));
+        let (u, v) = (x / h - i as f64, y / h - j as f64);
+        let square = (2 * (i + (n - 1) * j)) as u32;
+        if u >= v {
+            (
+                square,
+                [id(n, i, j), id(n, i + 1, j), id(n, i + 1, j + 1)],
+                [1.0 - u, u - v, v],
+            )
+        } else {
+            (
+                square + 1,
+                [id(n, i, j), id(n, i + 1, j + 1), id(n, i, j + 1)],
+                [1.0 - v, u, v - u],
+            )
+        }
+    }
+
+    /// The weights on the flat grid, in f64, with the quadrature points located directly and
+    /// the interior nodes' lumped area `h^2`.
+    fn reference(n: usize, h: f64, x: f64, y: f64, r: f64) -> Vec<f64> {
+        let mut quad = vec![0.0; n * n];
+        for &(s, wq, angle) in &QUADRATURE {
+            let (s, wq, angle) = (f64::from(s), f64::from(wq), f64::from(angle));
+            // The fixture's normal is +z, so e1 = x and e2 = y.
+            let (qx, qy) = (x + r * s * angle.cos(), y + r * s * angle.sin());
+            let (_, tri, bary) = locate(n, h, qx, qy);
+            for (k, b) in tri.iter().zip(bary) {
+                quad[usize::from(*k)] += wq * b;
+            }
+        }
+        let mut nodal = vec![0.0; n * n];
+        for j in 0..n {
+            for i in 0..n {
+                let rho2 = (i as f64 * h - x).powi(2) + (j as f64 * h - y).powi(2);
+                if rho2 < r * r {
+                    assert!(i > 0 && j > 0 && i < n - 1 && j < n - 1, "interior only");
+                    nodal[usize::from(id(n, i, j))] = 1.0 - rho2 / (r * r);
+                }
+            }
+        }
+        let n_eff: f64 = nodal.iter().sum();
+        let theta = ((n_eff - 2.0) / 4.0).clamp(0.0, 1.0);
+        quad.iter()
+            .zip(&nodal)
+            .map(|(q, p)| (1.0 - theta) * q + if n_eff > 0.0 { theta * p / n_eff } else { 0.0 })
+            .collect()
+    }
+
+    fn dense(p: &Patch, n: usize) -> Vec<f64> {
+        let mut w = vec![0.0; n * n];
+        for (&k, &wk) in p.nodes().iter().zip(p.weights()) {
+            w[usize::from(k)] = f64::from(wk);
+        }
+        w
+    }
+
+    fn patch_at(bank: &Bank, n: usize, h: f64, x: f64, y: f64, r: f64) -> Patch {
+        let (t, tri, bary) = locate(n, h, x, y);
+        tool_patch(
+            bank,
+            t,
+            tri,
+            bary.map(|b| b as f32),
+            [x as f32, y as f32, 0.0],
+            r as f32,
+        )
+    }
+
+    #[test]
+    fn quadrature_integrates_the_parabolic_pressure() {
+        // Total 1; exact for 1, rho^2 and rho^4 (moments of the pressure-weighted disk).
+        let total: f32 = QUADRATURE.iter().map(|q| q.1).sum();
+        assert!((total - 1.0).abs() < 1e-6);
+        for (m, want) in [(2, 1.0 / 3.0), (4, 1.0 / 6.0)] {
+            let got: f64 = QUADRATURE
+                .iter()
+                .map(|&(s, w, _)| f64::from(w) * f64::from(s).powi(m))
+                .sum();
+            // int_0^1 s^m s (1 - s^2) ds / (1/4)
+            assert!((got - want).abs() < 1e-6, "moment {m}: {got}");
+        }
+        // First moments vanish: the load's centre is the anchor.
+        let (cx, cy) = QUADRATURE
+            .iter()
+            .zip(&DIRECTIONS)
+            .fold((0.0, 0.0), |a, (q, d)| {
+                (a.0 + q.0 * q.1 * d.0, a.1 + q.0 * q.1 * d.1)
+            });
+        assert!(cx.abs() < 1e-7 && cy.abs() < 1e-7);
+    }
+
+    #[test]
+    fn zero_or_small_radius_gives_the_barycentric_weights() {
+        let (n, h) = (5, 0.01);
+        let bytes = grid_patch(n, h, 0.06);
+        let bank = Bank::parse(bytes.as_slice()).unwrap();
+        let (x, y) = (0.0172, 0.0121);
+        let (_, tri, bary) = locate(n, h, x, y);
+        for r in [0.0, 0.0005] {
+            let p = patch_at(&bank, n, h, x, y, r);
+            assert_eq!(p.nodes().len(), 3, "{p:?}");
+            let w = dense(&p, n);
+            for (k, b) in tri.iter().zip(bary) {
+                assert!((w[usize::from(*k)] - b).abs() < 1e-6, "r {r}: {p:?}");
+            }
+            assert_eq!(p.dropped, 0.0);
+        }
+        // A vertex hit with r = 0: one node.
+        let p = tool_patch(&bank, 0, [0, 1, 6], [1.0, 0.0, 0.0], [0.0, 0.0, 0.0], 0.0);
+        assert_eq!(p.nodes(), &[0]);
+        assert_eq!(p.weights(), &[1.0]);
+    }
+
+    /// Against the same quadrature located directly on the flat grid, in f64.
+    #[test]
+    fn weights_match_the_directly_located_quadrature() {
+        let (n, h) = (9, 0.001);
+        let bytes = grid_patch(n, h, 0.008);
+        let bank = Bank::parse(bytes.as_slice()).unwrap();
+        for (x, y, r) in [
+            (0.00405, 0.00395, 0.0009),
+            (0.0043, 0.0037, 0.0015),
+            (0.0041, 0.0046, 0.0008),
+            (0.0045, 0.0042, 0.0004),
+        ] {
+            let p = patch_at(&bank, n, h, x, y, r);
+            let mut want = reference(n, h, x, y, r);
+            // The heaviest MAX_CONTACT_NODES, renormalised (every pair is coupled here).
+            let mut order: Vec<usize> = (0..want.len()).collect();
+            order.sort_by(|&a, &b| want[b].total_cmp(&want[a]));
+            let kept: f64 = order.iter().take(MAX_CONTACT_NODES).map(|&k| want[k]).sum();
+            for &k in order.iter().skip(MAX_CONTACT_NODES) {
+                want[k] = 0.0;
+            }
+            let got = dense(&p, n);
+            for (k, (g, w)) in got.iter().zip(&want).enumerate() {
+                assert!(
+                    (g - w / kept).abs() < 2e-6,
+                    "({x}, {y}, {r}) node {k}: {g} vs {w}"
+                );
+            }
+            assert!((f64::from(p.dropped) - (1.0 - kept)).abs() < 1e-5, "{p:?}");
+        }
+    }
+
+    /// The weights change continuously as the anchor slides across triangles (while no node is
+    /// dropped for want of room: a node swapped out of a full patch is a jump).
+    #[test]
+    fn weights_are_continuous_along_a_slide() {
+        let (n, h) = (9, 0.001);
+        let bytes = grid_patch(n, h, 0.008);
+        let bank = Bank::parse(bytes.as_slice()).unwrap();
+        let steps = 2000;
+        let mut prev: Option<Vec<f64>> = None;
+        let mut max_jump = 0.0f64;
+        let mut full = 0;
+        for s in 0..=steps {
+            // 1.8 mm along a skew line through several triangles.
+            let t = s as f64 / steps as f64;
+            let (x, y) = (0.0031 + 0.0018 * t, 0.0035 + 0.0011 * t);
+            let p = patch_at(&bank, n, h, x, y, 0.0006);
+            assert!((p.weights().iter().sum::<f32>() - 1.0).abs() < 1e-5);
+            let w = dense(&p, n);
+            if let Some(q) = &prev {
+                let jump = w
+                    .iter()
+                    .zip(q)
+                    .map(|(a, b)| (a - b).abs())
+                    .fold(0.0, f64::max);
+                max_jump = max_jump.max(jump);
+            }
+            prev = (p.dropped == 0.0).then_some(w);
+            full += usize::from(p.dropped > 0.0);
+        }
+        // 0.9 um steps on a 1 mm grid: a continuous weight moves by ~1e-3 per step at most.
+        assert!(max_jump < 3e-3, "largest weight jump {max_jump}");
+        assert!(full < steps / 4, "{full} of {steps} patches were full");
+    }
+
+    #[test]
+    fn too_many_or_uncoupled_nodes_are_dropped_and_reported() {
+        // r = 3 mm on a 1 mm grid: far more than 8 nodes loaded, the 8 heaviest kept.
+        let (n, h) = (9, 0.001);
+        let bytes = grid_patch(n, h, 0.007);
+        let bank = Bank::parse(bytes.as_slice()).unwrap();
+        let p = patch_at(&bank, n, h, 0.004, 0.004, 0.003);
+        assert_eq!(p.nodes().len(), MAX_CONTACT_NODES);
+        assert!(p.dropped > 0.2 && p.dropped < 1.0, "{p:?}");
+        // Truncation 1.5 mm: nodes 2 mm apart are not coupled; no kept pair is uncoupled.
+        let bytes = grid_patch(n, h, 0.0015);
+        let bank = Bank::parse(bytes.as_slice()).unwrap();
+        let p = patch_at(&bank, n, h, 0.004, 0.004, 0.0015);
+        for &a in p.nodes() {
+            for &b in p.nodes() {
+                assert!(bank.coupling(usize::from(a), usize::from(b)).is_some());
+            }
+        }
+        assert!(p.dropped > 0.0, "{p:?}");
+    }
+}
