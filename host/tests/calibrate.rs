@@ -541,3 +541,47 @@ fn bad_csvs_name_the_line_and_leave_the_scene_alone() {
         .collect();
     assert!(leftovers.is_empty());
 }
+
+#[test]
+fn cli_displacement_curve_with_specimen_fem_equals_the_linear_columns() {
+    let dir = tempfile::tempdir().unwrap();
+    let brain = manifest(BRAIN);
+    let mesh = manifest("meshes/brain-specimen.msh");
+    let fit_json = |extra: &[&str]| -> serde_json::Value {
+        let mut args = vec!["calibrate", "tissue", "--csv", brain.to_str().unwrap()];
+        args.extend_from_slice(extra);
+        let plot = dir.path().join("p");
+        args.extend_from_slice(&["--degree", "5", "--plot", plot.to_str().unwrap(), "--json"]);
+        let (ok, out, err) = run(&args);
+        assert!(ok, "{err}");
+        serde_json::from_str(&out).unwrap()
+    };
+    for (law, linear, measured) in [
+        ("Q", "linear_force_n", "force_n"),
+        ("P", "linear_radial_m", "radial_m"),
+    ] {
+        let a = fit_json(&["--law", law, "--x", linear, "--y", measured]);
+        let b = fit_json(&[
+            "--law",
+            law,
+            "--x",
+            "displacement_m",
+            "--y",
+            measured,
+            "--specimen",
+            mesh.to_str().unwrap(),
+            "--young",
+            "2526",
+            "--poisson",
+            "0.45",
+        ]);
+        let (ca, cb): (Vec<f64>, Vec<f64>) = (
+            serde_json::from_value(a["coefficients"].clone()).unwrap(),
+            serde_json::from_value(b["coefficients"].clone()).unwrap(),
+        );
+        let scale = ca.iter().fold(0.0f64, |m, c| m.max(c.abs()));
+        for (x, y) in ca.iter().zip(&cb) {
+            assert!((x - y).abs() < 1e-5 * scale, "{law}: {ca:?} vs {cb:?}");
+        }
+    }
+}

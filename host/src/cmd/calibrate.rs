@@ -35,7 +35,8 @@ pub struct TissueArgs {
     /// Bench CSV: a header row, then one row per point; `#` lines are comments.
     #[arg(long)]
     csv: PathBuf,
-    /// Column of the linear model's value (x of the law); must increase from row to row.
+    /// Column of the linear model's value (x of the law), or of the displacement with
+    /// --specimen; must increase from row to row.
     #[arg(long, default_value = "x")]
     x: String,
     /// Column of the measured value (y of the law).
@@ -51,6 +52,18 @@ pub struct TissueArgs {
     /// `auto` is content with this cross-validated RMS error relative to full scale.
     #[arg(long, default_value_t = 0.001)]
     target_rms: f64,
+    /// For a (displacement, measured) bench curve: the specimen's cylinder mesh (axis z, m).
+    /// The --x column is then the platen displacement, and the law's x is the linear FEM's
+    /// prediction for it (`calibrate specimen`): top force for Q, mid-height radial
+    /// displacement for P.
+    #[arg(long, requires_all = ["young", "poisson"])]
+    specimen: Option<PathBuf>,
+    /// Young's modulus of the linear model for --specimen, Pa.
+    #[arg(long, requires = "specimen")]
+    young: Option<f64>,
+    /// Poisson's ratio of the linear model for --specimen.
+    #[arg(long, requires = "specimen")]
+    poisson: Option<f64>,
     /// Scene file to write the law into (comments and layout kept, written atomically).
     #[arg(long)]
     scene: Option<PathBuf>,
@@ -147,8 +160,19 @@ fn tissue(a: TissueArgs) -> Result<()> {
     let table = csv::read(&a.csv, &[&a.x, &a.y])?;
     let need = degree.map_or(fit::AUTO_DEGREES.start() + 2, |d| d + 2);
     table.require_rows(need, "a fit needs more points than coefficients")?;
-    let (x, y) = (table.numbers(0)?, table.numbers(1)?);
+    let (mut x, y) = (table.numbers(0)?, table.numbers(1)?);
     table.require_increasing(0, &x)?;
+    let mut x_name = a.x.clone();
+    if let (Some(mesh), Some(young), Some(poisson)) = (&a.specimen, a.young, a.poisson) {
+        let r = specimen::compress(&host::mesh::load(mesh)?, Material::new(young, poisson)?)
+            .with_context(|| format!("{}: specimen compression", mesh.display()))?;
+        let per_m = match a.law {
+            Law::Q => r.force_per_m,
+            Law::P => r.radial_per_m,
+        };
+        x.iter_mut().for_each(|v| *v *= per_m);
+        x_name = format!("FEM x {}", a.x);
+    }
     let (f, law, survey) = fit::fit_law(&x, &y, degree, a.target_rms)
         .with_context(|| format!("{}: fitting {:?}", a.csv.display(), a.law))?;
     let errors = f.errors(&x, &y);
@@ -178,7 +202,7 @@ fn tissue(a: TissueArgs) -> Result<()> {
             100.0 * errors.rms_rel,
             100.0 * errors.max_rel
         ),
-        x_label: format!("linear model {what} ({}), {unit}", a.x),
+        x_label: format!("linear model {what} ({x_name}), {unit}"),
         y_label: format!("measured {what} ({}), {unit}", a.y),
         data: (
             "bench data".into(),
