@@ -263,22 +263,21 @@ fn tissue(a: TissueArgs) -> Result<()> {
         println!("{}", serde_json::to_string(&report)?);
         return Ok(());
     }
-    print_tissue(&a, name, &f, &x, &y, &residuals, scale, &survey, &plots);
+    print_tissue(&a, name, &f, (&x, &y), &survey, &plots);
     Ok(())
 }
 
-#[allow(clippy::too_many_arguments)]
+/// The degree survey, the residual table and the result, for people.
 fn print_tissue(
     a: &TissueArgs,
     name: &str,
     f: &ChebFit,
-    x: &[f64],
-    y: &[f64],
-    residuals: &[f64],
-    scale: f64,
+    (x, y): (&[f64], &[f64]),
     survey: &[DegreeRow],
     plots: &[PathBuf; 2],
 ) {
+    let residuals: Vec<f64> = x.iter().zip(y).map(|(&xi, &yi)| yi - f.eval(xi)).collect();
+    let scale = y.iter().fold(0.0f64, |m, v| m.max(v.abs()));
     if !survey.is_empty() {
         println!(
             "degree survey (errors relative to full scale {scale:.6}; CV = {}-fold cross-validation):",
@@ -321,7 +320,7 @@ fn print_tissue(
             100.0 * residuals[i] / scale
         );
     }
-    let e = fit::relative_errors(residuals, y);
+    let e = fit::relative_errors(&residuals, y);
     println!();
     println!(
         "{name}: Chebyshev degree {} on [{:.6e}, {:.6e}]: RMS {:.3} %, max {:.3} % of full scale",
