@@ -307,7 +307,7 @@ fn print_tissue(
     println!("residuals of {name} (degree {}):", f.degree);
     println!(
         "{:>5} {:>14} {:>14} {:>14} {:>14} {:>8}",
-        "line", a.x, a.y, "fit", "residual", "% fs"
+        "row", a.x, a.y, "fit", "residual", "% fs"
     );
     for (i, (&xi, &yi)) in x.iter().zip(y).enumerate() {
         println!(
