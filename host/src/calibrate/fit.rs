@@ -191,13 +191,14 @@ pub fn fit(x: &[f64], y: &[f64], degree: usize) -> Result<ChebFit, FitError> {
     if points < degree + 2 {
         return Err(FitError::TooFewPoints { degree, points });
     }
+    let (x, y) = (&x[..points], &y[..points]);
     let lo = x.iter().copied().fold(f64::INFINITY, f64::min);
     let hi = x.iter().copied().fold(f64::NEG_INFINITY, f64::max);
     if !(hi > lo && (hi - lo).is_finite()) {
         return Err(FitError::Domain { lo, hi });
     }
     let domain = [lo, hi];
-    let a = cheb::design(&x[..points], domain, degree);
+    let a = cheb::design(x, domain, degree);
     let b = Mat::from_fn(points, 1, |i, _| y[i]);
     let c = a.qr().solve_lstsq(&b);
     Ok(ChebFit {
@@ -212,7 +213,7 @@ pub fn fit(x: &[f64], y: &[f64], degree: usize) -> Result<ChebFit, FitError> {
 /// is fitted on the other points and predicts its own.
 pub fn cross_validate(x: &[f64], y: &[f64], degree: usize) -> Result<f64, FitError> {
     let n = x.len().min(y.len());
-    let k = FOLDS.min(n);
+    let k = FOLDS.min(n).max(1);
     let mut residuals = Vec::with_capacity(n);
     for fold in 0..k {
         let (mut tx, mut ty, mut vx, mut vy) = (vec![], vec![], vec![], vec![]);
@@ -242,7 +243,7 @@ pub fn survey(
     for degree in degrees {
         let n = x.len().min(y.len());
         // Each training set of the cross-validation must still over-determine the fit.
-        if n - n.div_ceil(FOLDS.min(n)) < degree + 2 {
+        if n - n.div_ceil(FOLDS.min(n).max(1)) < degree + 2 {
             continue;
         }
         let f = fit(x, y, degree)?;
@@ -336,5 +337,8 @@ mod tests {
                 points: 3
             }
         );
+        assert_eq!(survey(&[], &[], AUTO_DEGREES), Ok(vec![]));
+        let e = fit_law(&[], &[], None, 0.0).unwrap_err();
+        assert_eq!(e, FitError::NoMonotoneDegree { lo: 1, hi: 10 });
     }
 }
