@@ -13,6 +13,7 @@ liver-1k4.msh          1,394       liver-like organ (paper's mesh size: 1,394 no
 liver-10k.msh          10,000      same shape, finer (binary)
 cylinder-2k.msh        2,000       compression cylinder r = 0.01, h = 0.02, axis z, z in [0, 0.02]
 cylinder-10k.msh       10,000      same cylinder, finer (binary)
+brain-specimen.msh     2,000       Miller & Chinzei's brain specimen: cylinder r = 0.015, h = 0.013
 beam.msh               1,500       cantilever beam [0, 0.1] x [-0.005, 0.005]^2 (unstructured)
 generated/liver-100k   100,000     liver, only with ``--only liver-100k`` (binary, git-ignored)
 =====================  ==========  =======================================================
@@ -145,6 +146,14 @@ def build_cylinder() -> int:
     return tag
 
 
+def build_brain_specimen() -> int:
+    # Miller & Chinzei (1997): swine brain cylinders ~30 mm across, ~13 mm high (500 mm/min is
+    # their strain rate 0.64 /s on this height). Used by scripts/gen_brain_bench.py.
+    tag = gmsh.model.occ.addCylinder(0.0, 0.0, 0.0, 0.0, 0.0, 0.013, 0.015)
+    gmsh.model.occ.synchronize()
+    return tag
+
+
 def build_beam() -> int:
     tag = gmsh.model.occ.addBox(0.0, -0.005, -0.005, 0.1, 0.01, 0.01)
     gmsh.model.occ.synchronize()
@@ -162,6 +171,7 @@ MESHES = {
     "liver-100k": (build_liver, 0.00147, 1.0, 100000, None, True, False),
     "cylinder-2k": (build_cylinder, 0.0015, 1.0, 2000, None, False, True),
     "cylinder-10k": (build_cylinder, 0.000812, 1.0, 10000, None, True, True),
+    "brain-specimen": (build_brain_specimen, 0.00172, 1.0, 2000, None, False, True),
     "beam": (build_beam, 0.00227, 1.0, 1500, None, False, True),
 }
 

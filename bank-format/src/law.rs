@@ -8,6 +8,11 @@
 use crate::error::BankError;
 use crate::layout::{LAW_CHEBYSHEV, LAW_LINEAR, LawRecord, MAX_LAW_COEFFS, SectionKind};
 
+/// The series loop handles this many coefficients per pass (no remainder: the reversed
+/// coefficient copy is zero-padded to a multiple of it, and zero coefficients leave Clenshaw's
+/// recurrence unchanged).
+const UNROLL: usize = 4;
+
 /// Number of sample intervals used to check monotonicity: the derivative is checked at the
 /// `LAW_SAMPLES + 1` points `x_j = -1 + 2 j / LAW_SAMPLES` of the normalised domain.
 pub const LAW_SAMPLES: u32 = 256;
@@ -32,6 +37,14 @@ pub struct TissueLaw {
     lo: [f32; 2],
     /// Q and dQ/df at f_max.
     hi: [f32; 2],
+    /// `c_K, .., c_1` (highest first), `K` = degree rounded up to a multiple of [`UNROLL`],
+    /// zero beyond the degree.
+    rev: [f32; MAX_LAW_COEFFS],
+    /// `K`.
+    rev_len: usize,
+    /// `(f_min + f_max) / 2` and `2 / (f_max - f_min)`: `x = (f - mid) scale`.
+    mid: f32,
+    scale: f32,
 }
 
 impl TissueLaw {
@@ -110,7 +123,17 @@ impl TissueLaw {
             domain: record.domain_n,
             lo: [0.0; 2],
             hi: [0.0; 2],
+            rev: [0.0; MAX_LAW_COEFFS],
+            rev_len: 0,
+            mid: ((f64::from(a) + f64::from(b)) / 2.0) as f32,
+            scale: (2.0 / (f64::from(b) - f64::from(a))) as f32,
         };
+        let degree = len.saturating_sub(1);
+        law.rev_len = degree.div_ceil(UNROLL) * UNROLL;
+        for (j, slot) in law.rev.iter_mut().take(law.rev_len).enumerate() {
+            // c_{K - j}; past the degree the record holds zeros, past the array too.
+            *slot = record.coeffs.get(law.rev_len - j).copied().unwrap_or(0.0);
+        }
         match kind {
             LawKind::Linear => {
                 if !(record.coeffs[1] > 0.0) {
@@ -130,7 +153,7 @@ impl TissueLaw {
                     }
                 }
                 let ends = |x: f64| -> [f32; 2] {
-                    let q = clenshaw_f32(law.coeffs(), x as f32);
+                    let q = law.series(x as f32);
                     let dq = clenshaw_f64(deriv.get(..dlen).unwrap_or(&[]), x) * scale;
                     [q, dq as f32]
                 };
@@ -183,7 +206,8 @@ impl TissueLaw {
     }
 
     /// Q(f) in N for a linear-model force magnitude `f` in N. Inside the domain: Clenshaw in
-    /// f32; outside: the tangent line at the nearer end. NaN in, NaN out.
+    /// f32 at `x = (f - mid) scale` (for `f` in the domain `|x| <= 1` up to rounding, so no
+    /// clamp is needed); outside: the tangent line at the nearer end. NaN in, NaN out.
     pub fn eval(&self, f: f32) -> f32 {
         let [a, b] = self.domain;
         match self.kind {
@@ -194,8 +218,7 @@ impl TissueLaw {
                 } else if f > b {
                     self.hi[0] + self.hi[1] * (f - b)
                 } else {
-                    let x = ((2.0 * f - (a + b)) / (b - a)).clamp(-1.0, 1.0);
-                    clenshaw_f32(self.coeffs(), x)
+                    self.series((f - self.mid) * self.scale)
                 }
             }
         }
@@ -224,18 +247,25 @@ impl TissueLaw {
     }
 }
 
-/// `sum_k c_k T_k(x)` by Clenshaw's recurrence, f32.
-fn clenshaw_f32(c: &[f32], x: f32) -> f32 {
-    let (mut b1, mut b2) = (0.0f32, 0.0f32);
-    let Some((c0, rest)) = c.split_first() else {
-        return 0.0;
-    };
-    for &ck in rest.iter().rev() {
-        let b0 = ck + 2.0 * x * b1 - b2;
-        b2 = b1;
-        b1 = b0;
+impl TissueLaw {
+    /// `sum_k c_k T_k(x)` by Clenshaw's recurrence in f32, [`UNROLL`] coefficients per pass
+    /// over the zero-padded reversed copy (a loop without remainder handling). Inlined so the
+    /// 1 kHz loop's call of [`TissueLaw::eval`] makes no further call.
+    #[inline(always)]
+    fn series(&self, x: f32) -> f32 {
+        let x2 = x + x;
+        let (mut b1, mut b2) = (0.0f32, 0.0f32);
+        // At most MAX_LAW_COEFFS / UNROLL passes over a fixed-size array: the compiler lays
+        // them out straight, without remainder handling.
+        for quad in self.rev.chunks_exact(UNROLL).take(self.rev_len / UNROLL) {
+            for &ck in quad {
+                let b0 = ck + x2 * b1 - b2;
+                b2 = b1;
+                b1 = b0;
+            }
+        }
+        self.coeffs[0] + x * b1 - b2
     }
-    c0 + x * b1 - b2
 }
 
 /// `sum_k c_k T_k(x)` by Clenshaw's recurrence, f64.
@@ -290,13 +320,42 @@ mod tests {
 
     #[test]
     fn clenshaw_matches_power_form() {
-        let c = [0.5f32, 1.0, 0.25, 0.125];
+        // On the domain [0, 2], x = f - 1.
+        let law = TissueLaw::chebyshev(&[0.5, 1.0, 0.25, 0.125], [0.0, 2.0]).unwrap();
         for i in 0..=20 {
             let x = -1.0 + 0.1 * i as f32;
             let t2 = 2.0 * x * x - 1.0;
             let t3 = 4.0 * x * x * x - 3.0 * x;
             let want = 0.5 + x + 0.25 * t2 + 0.125 * t3;
-            assert!((clenshaw_f32(&c, x) - want).abs() < 1e-6);
+            assert!((law.series(x) - want).abs() < 1e-6);
+            assert!((law.eval(x + 1.0) - want).abs() < 1e-6);
+        }
+    }
+
+    #[test]
+    fn padding_to_the_unroll_does_not_change_the_series() {
+        // Degrees 1 ..= 15 against the plain recurrence in f64.
+        for degree in 1..MAX_LAW_COEFFS {
+            let c: [f32; MAX_LAW_COEFFS] = core::array::from_fn(|k| {
+                if k == 1 {
+                    8.0
+                } else {
+                    0.3 / (1 + k * k) as f32
+                }
+            });
+            let c = &c[..=degree];
+            let law = TissueLaw::chebyshev(c, [1.0, 3.0]).unwrap();
+            let c64: [f64; MAX_LAW_COEFFS] =
+                core::array::from_fn(|k| c.get(k).map_or(0.0, |&v| f64::from(v)));
+            for i in 0..=40 {
+                let x = -1.0 + 0.05 * f64::from(i);
+                let want = clenshaw_f64(&c64[..=degree], x);
+                let got = f64::from(law.series(x as f32));
+                assert!(
+                    (got - want).abs() < 1e-5,
+                    "degree {degree} x {x}: {got} vs {want}"
+                );
+            }
         }
     }
 }

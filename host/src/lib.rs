@@ -5,6 +5,7 @@
 //! as compliance blocks C_nk, and the imposed-displacement solve of eq. 2 / appendix A); [`scene`]
 //! (scene files) and [`reach`] (the region the tool can touch) feed the bank builder.
 
+pub mod calibrate;
 pub mod compliance;
 pub mod contact;
 pub mod fem;

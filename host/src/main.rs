@@ -26,6 +26,9 @@ enum Command {
     /// Firmware banks: build from a scene file, inspect, sweep the truncation radius.
     #[command(subcommand)]
     Bank(cmd::bank::BankCmd),
+    /// Bench calibration: tissue law Q, display law P, motor torque constants.
+    #[command(subcommand)]
+    Calibrate(cmd::calibrate::Calibrate),
     /// Benchmarks that print figures.
     #[command(subcommand)]
     Bench(cmd::bench::Bench),
@@ -46,6 +49,7 @@ fn main() -> ExitCode {
         Command::Demo(args) => cmd::demo::run(args),
         Command::Compliance(args) => cmd::compliance::run(args),
         Command::Bench(bench) => cmd::bench::run(bench),
+        Command::Calibrate(c) => cmd::calibrate::run(c),
         Command::Bank(bank) => cmd::bank::run(bank),
         Command::Sil(args) => cmd::sil::run(args),
     };

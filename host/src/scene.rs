@@ -50,6 +50,8 @@ struct RawScene {
     tool: RawTool,
     device: RawDevice,
     law: RawLaw,
+    #[serde(default)]
+    display_law: Option<RawDisplayLaw>,
     bank: RawBank,
 }
 
@@ -101,6 +103,8 @@ struct RawDevice {
     torque_constant_nm_per_a: Spanned<[f64; 3]>,
     current_limit_a: Spanned<[f64; 3]>,
     max_force_n: Spanned<f64>,
+    #[serde(default)]
+    friction_offset: Option<Spanned<[f64; 3]>>,
 }
 
 #[derive(Debug, Deserialize)]
@@ -115,6 +119,14 @@ struct RawLaw {
     coeffs: Option<Spanned<Vec<f64>>>,
     #[serde(default)]
     domain_n: Option<Spanned<[f64; 2]>>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawDisplayLaw {
+    kind: Spanned<String>,
+    coeffs: Spanned<Vec<f64>>,
+    domain_m: Spanned<[f64; 2]>,
 }
 
 #[derive(Debug, Deserialize)]
@@ -206,6 +218,12 @@ pub struct Scene {
     pub law: TissueLaw,
     /// The law as written.
     pub law_spec: LawSpec,
+    /// Display law P (paper, eq. 4; m -> m), from the optional `[display_law]` table; `None`:
+    /// the display shows the linear displacements.
+    pub display_law: Option<TissueLaw>,
+    /// Friction offsets measured by `host calibrate motor` (pitch, yaw: N m; insertion: N);
+    /// recorded for the operator, default 0.
+    pub friction_offset: [f64; 3],
     /// Bank options.
     pub bank: BankOptions,
     /// Identity of the scene: FNV-1a 64 of the scene file's bytes (the mesh is hashed in when
@@ -598,6 +616,33 @@ impl Scene {
             }
         };
 
+        let display_law = match &raw.display_law {
+            None => None,
+            Some(p) => {
+                if p.kind.get_ref() != "chebyshev" {
+                    return Err(ctx.err(
+                        p.kind.span(),
+                        "display_law.kind",
+                        format!("unknown law {:?} (use \"chebyshev\")", p.kind.get_ref()),
+                    ));
+                }
+                let domain = range(&ctx, &p.domain_m, "display_law.domain_m")?;
+                let coeffs: Vec<f32> = p.coeffs.get_ref().iter().map(|&v| v as f32).collect();
+                Some(
+                    TissueLaw::chebyshev(&coeffs, domain.map(|v| v as f32)).map_err(|e| {
+                        ctx.err(p.coeffs.span(), "display_law.coeffs", e.to_string())
+                    })?,
+                )
+            }
+        };
+        let friction_offset = match &d.friction_offset {
+            Some(f) => {
+                finite(&ctx, f, "device.friction_offset")?;
+                *f.get_ref()
+            }
+            None => [0.0; 3],
+        };
+
         let b = &raw.bank;
         let r = *b.truncation_radius_m.get_ref();
         if !(r.is_finite() && r >= 0.0) {
@@ -676,6 +721,8 @@ impl Scene {
             device,
             law,
             law_spec,
+            display_law,
+            friction_offset,
             bank: BankOptions {
                 truncation_radius_m: r,
                 max_contact_nodes,
@@ -826,6 +873,43 @@ mod tests {
                     .starts_with(&format!("scene.toml:{line}: {name}:")),
                 "{e}"
             );
+        }
+    }
+
+    #[test]
+    fn display_law_is_optional_and_validated() {
+        let (_, t) = shipped();
+        let s = Scene::parse(Path::new("scene.toml"), &t).unwrap();
+        assert!(s.display_law.is_none());
+        assert_eq!(s.friction_offset, [0.0; 3]);
+        let ok = format!(
+            "{t}\n[display_law]\nkind = \"chebyshev\"\ncoeffs = [1e-3, 1e-3]\ndomain_m = [0.0, 0.002]\n"
+        );
+        let p = Scene::parse(Path::new("scene.toml"), &ok)
+            .unwrap()
+            .display_law
+            .unwrap();
+        assert!((p.eval(0.002) - 2e-3).abs() < 1e-9);
+        let lines = t.lines().count();
+        for (table, line, key) in [
+            (
+                "kind = \"linear\"\ncoeffs = [0.0, 1.0]\ndomain_m = [0.0, 1.0]",
+                lines + 3,
+                "display_law.kind",
+            ),
+            (
+                "kind = \"chebyshev\"\ncoeffs = [0.0, -1.0]\ndomain_m = [0.0, 1.0]",
+                lines + 4,
+                "display_law.coeffs",
+            ),
+            (
+                "kind = \"chebyshev\"\ncoeffs = [0.0, 1.0]\ndomain_m = [1.0, 0.0]",
+                lines + 5,
+                "display_law.domain_m",
+            ),
+        ] {
+            let e = err_of(&format!("{t}\n[display_law]\n{table}\n"));
+            assert_eq!((e.line, e.key.as_str()), (Some(line), key), "{e}");
         }
     }
 

@@ -23,6 +23,9 @@ pub enum Bench {
     /// loop body and whole tick) along the press, slide and strike scripts, and the image's
     /// flash and RAM use against memory.x.
     Sil(SilArgs),
+    /// Instructions one evaluation of the tissue law costs on the MCU (thumbv7em), per degree,
+    /// counted on the disassembly of `TissueLaw::eval`.
+    Law(super::bench_law::LawArgs),
 }
 
 /// Arguments of `host bench sil`.
@@ -116,6 +119,7 @@ pub fn run(bench: Bench) -> Result<()> {
         Bench::Tick(args) => tick(args),
         Bench::Refinement(args) => super::refinement::run(args),
         Bench::Sil(args) => sil(args),
+        Bench::Law(args) => super::bench_law::run(args),
     }
 }
 

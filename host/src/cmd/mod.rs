@@ -2,6 +2,8 @@
 
 pub mod bank;
 pub mod bench;
+pub mod bench_law;
+pub mod calibrate;
 pub mod compliance;
 pub mod demo;
 pub mod fixing;

@@ -1,0 +1,466 @@
+//! `host calibrate …`: bench calibration (issue 8). `tissue` fits the tissue law Q or the
+//! display law P to a compression curve, `motor` the torque constants to load-cell
+//! measurements, `specimen` computes the linear FEM prediction for a compression specimen
+//! (the x of Q and P). Results go into a scene file (comments kept, written atomically) and
+//! plots (SVG and PNG).
+
+use super::bank::write_atomic;
+use anyhow::{Context, Result, bail};
+use host::calibrate::fit::{self, ChebFit, DegreeRow};
+use host::calibrate::motor::{self, AXES, AxisFit};
+use host::calibrate::plot::{self, PlotSpec};
+use host::calibrate::scene_edit::{self, Law};
+use host::calibrate::{csv, specimen};
+use host::fem::Material;
+use host::scene::Scene;
+use std::path::{Path, PathBuf};
+
+/// Calibration commands.
+#[derive(clap::Subcommand, Debug)]
+pub enum Calibrate {
+    /// Fit the tissue law Q (linear-model force -> measured force) or the display law P
+    /// (linear radial displacement -> measured radial displacement) to bench data.
+    Tissue(TissueArgs),
+    /// Fit transmission x torque constant and a friction offset per axis to commanded current
+    /// vs load-cell force at known poses.
+    Motor(MotorArgs),
+    /// The linear FEM prediction for a cylindrical compression specimen: force and radial
+    /// displacement per metre of compression, as JSON.
+    Specimen(SpecimenArgs),
+}
+
+/// Arguments of `host calibrate tissue`.
+#[derive(clap::Args, Debug)]
+pub struct TissueArgs {
+    /// Bench CSV: a header row, then one row per point; `#` lines are comments.
+    #[arg(long)]
+    csv: PathBuf,
+    /// Column of the linear model's value (x of the law), or of the displacement with
+    /// --specimen; must increase from row to row.
+    #[arg(long, default_value = "x")]
+    x: String,
+    /// Column of the measured value (y of the law).
+    #[arg(long, default_value = "y")]
+    y: String,
+    /// Polynomial degree (1 to 15), or `auto`: the smallest increasing degree in 1..=10 whose
+    /// 10-fold cross-validated RMS error is within 5 % of the best or under --target-rms.
+    #[arg(long, default_value = "auto")]
+    degree: String,
+    /// Which law: Q (force, scene table [law]) or P (radial displacement, [display_law]).
+    #[arg(long, value_enum, default_value_t = Law::Q, ignore_case = true)]
+    law: Law,
+    /// `auto` is content with this cross-validated RMS error relative to full scale.
+    #[arg(long, default_value_t = 0.001)]
+    target_rms: f64,
+    /// For a (displacement, measured) bench curve: the specimen's cylinder mesh (axis z, m).
+    /// The --x column is then the platen displacement, and the law's x is the linear FEM's
+    /// prediction for it (`calibrate specimen`): top force for Q, mid-height radial
+    /// displacement for P.
+    #[arg(long, requires_all = ["young", "poisson"])]
+    specimen: Option<PathBuf>,
+    /// Young's modulus of the linear model for --specimen, Pa.
+    #[arg(long, requires = "specimen")]
+    young: Option<f64>,
+    /// Poisson's ratio of the linear model for --specimen.
+    #[arg(long, requires = "specimen")]
+    poisson: Option<f64>,
+    /// Scene file to write the law into (comments and layout kept, written atomically).
+    #[arg(long)]
+    scene: Option<PathBuf>,
+    /// Plot path without extension: writes <PLOT>.svg and <PLOT>.png.
+    #[arg(long, default_value = "calibration")]
+    plot: PathBuf,
+    /// Print one JSON object instead of the tables.
+    #[arg(long)]
+    json: bool,
+}
+
+/// Arguments of `host calibrate motor`.
+#[derive(clap::Args, Debug)]
+pub struct MotorArgs {
+    /// Bench CSV with columns axis (pitch|yaw|insertion or 0|1|2), insertion_m (tip distance
+    /// from the fulcrum: the lever of pitch and yaw), current_a, force_n (load cell, N).
+    #[arg(long)]
+    csv: PathBuf,
+    /// Scene file: its gear_ratio turns the fitted gains into torque constants, which are
+    /// written back with the friction offsets (comments kept, written atomically).
+    #[arg(long)]
+    scene: Option<PathBuf>,
+    /// Plot path without extension: writes <PLOT>-<axis>.svg and .png per fitted axis.
+    #[arg(long, default_value = "calibration-motor")]
+    plot: PathBuf,
+    /// Print one JSON object instead of the table.
+    #[arg(long)]
+    json: bool,
+}
+
+/// Arguments of `host calibrate specimen`.
+#[derive(clap::Args, Debug)]
+pub struct SpecimenArgs {
+    /// Cylinder mesh of the specimen, axis along z, in m.
+    #[arg(long)]
+    mesh: PathBuf,
+    /// Young's modulus of the linear model, Pa.
+    #[arg(long)]
+    young: f64,
+    /// Poisson's ratio of the linear model.
+    #[arg(long)]
+    poisson: f64,
+}
+
+/// Runs a calibration command.
+pub fn run(cmd: Calibrate) -> Result<()> {
+    match cmd {
+        Calibrate::Tissue(a) => tissue(a),
+        Calibrate::Motor(a) => motor_cmd(a),
+        Calibrate::Specimen(a) => specimen_cmd(a),
+    }
+}
+
+fn parse_degree(s: &str) -> Result<Option<usize>> {
+    if s.eq_ignore_ascii_case("auto") {
+        return Ok(None);
+    }
+    match s.parse::<usize>() {
+        Ok(d) if (1..=fit::MAX_DEGREE).contains(&d) => Ok(Some(d)),
+        _ => bail!(
+            "--degree {s:?}: use an integer in 1..={} or \"auto\"",
+            fit::MAX_DEGREE
+        ),
+    }
+}
+
+fn write_scene(path: &Path, edit: impl FnOnce(&str) -> Result<String>) -> Result<()> {
+    let text = std::fs::read_to_string(path)
+        .with_context(|| format!("{}: cannot read the scene", path.display()))?;
+    let new = edit(&text)?;
+    write_atomic(path, new.as_bytes()).with_context(|| format!("writing {}", path.display()))
+}
+
+#[derive(serde::Serialize)]
+struct TissueReport<'a> {
+    law: &'static str,
+    degree: usize,
+    basis: &'static str,
+    domain: [f64; 2],
+    coefficients: &'a [f64],
+    rms_rel_error: f64,
+    max_rel_error: f64,
+    points: usize,
+    survey: &'a [DegreeRow],
+    scene: Option<&'a Path>,
+    plot: [PathBuf; 2],
+}
+
+fn tissue(a: TissueArgs) -> Result<()> {
+    let degree = parse_degree(&a.degree)?;
+    if !(a.target_rms.is_finite() && a.target_rms >= 0.0) {
+        bail!("--target-rms must be >= 0, got {}", a.target_rms);
+    }
+    let table = csv::read(&a.csv, &[&a.x, &a.y])?;
+    let need = degree.map_or(fit::AUTO_DEGREES.start() + 2, |d| d + 2);
+    table.require_rows(need, "a fit needs more points than coefficients")?;
+    let (mut x, y) = (table.numbers(0)?, table.numbers(1)?);
+    table.require_increasing(0, &x)?;
+    let mut x_name = a.x.clone();
+    if let (Some(mesh), Some(young), Some(poisson)) = (&a.specimen, a.young, a.poisson) {
+        let r = specimen::compress(&host::mesh::load(mesh)?, Material::new(young, poisson)?)
+            .with_context(|| format!("{}: specimen compression", mesh.display()))?;
+        let per_m = match a.law {
+            Law::Q => r.force_per_m,
+            Law::P => r.radial_per_m,
+        };
+        x.iter_mut().for_each(|v| *v *= per_m);
+        x_name = format!("FEM x {}", a.x);
+    }
+    let (f, law, survey) = fit::fit_law(&x, &y, degree, a.target_rms)
+        .with_context(|| format!("{}: fitting {:?}", a.csv.display(), a.law))?;
+    let errors = f.errors(&x, &y);
+    let name = match a.law {
+        Law::Q => "Q",
+        Law::P => "P",
+    };
+
+    let residuals: Vec<f64> = x.iter().zip(&y).map(|(&xi, &yi)| yi - f.eval(xi)).collect();
+    let scale = y.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+    let [lo, hi] = f.domain;
+    let curve: Vec<(f64, f64)> = (0..=400)
+        .map(|i| lo + (hi - lo) * 1.08 * f64::from(i) / 400.0)
+        .map(|v| (v, f64::from(law.eval(v as f32))))
+        .collect();
+    let (unit, what) = match a.law {
+        Law::Q => ("N", "force"),
+        Law::P => ("m", "radial displacement"),
+    };
+    let spec = PlotSpec {
+        title: format!(
+            "{name}: {} (degree {}, RMS {:.2} %, max {:.2} % of full scale)",
+            a.csv
+                .file_name()
+                .map_or(String::new(), |n| n.to_string_lossy().into_owned()),
+            f.degree,
+            100.0 * errors.rms_rel,
+            100.0 * errors.max_rel
+        ),
+        x_label: format!("linear model {what} ({x_name}), {unit}"),
+        y_label: format!("measured {what} ({}), {unit}", a.y),
+        data: (
+            "bench data".into(),
+            x.iter().copied().zip(y.iter().copied()).collect(),
+        ),
+        curves: vec![
+            (
+                format!(
+                    "{name}: Chebyshev degree {}, f32 Clenshaw as on the MCU (linear past the domain)",
+                    f.degree
+                ),
+                curve,
+            ),
+            (
+                "linear model (y = x)".into(),
+                vec![(lo, lo), (hi * 1.08, hi * 1.08)],
+            ),
+        ],
+        residual_label: "residual, % of full scale".into(),
+        residuals: x
+            .iter()
+            .zip(&residuals)
+            .map(|(&xi, &r)| (xi, 100.0 * r / scale))
+            .collect(),
+    };
+    let plots = plot::write(&a.plot, &spec)?;
+
+    if let Some(scene) = &a.scene {
+        let source = format!(
+            "{}, columns {} -> {}, degree {}, RMS {:.3} % of full scale",
+            a.csv.display(),
+            a.x,
+            a.y,
+            f.degree,
+            100.0 * errors.rms_rel
+        );
+        write_scene(scene, |text| {
+            Ok(scene_edit::set_law(
+                scene, text, a.law, &f.coeffs, f.domain, &source,
+            )?)
+        })?;
+    }
+
+    if a.json {
+        let report = TissueReport {
+            law: name,
+            degree: f.degree,
+            basis: "chebyshev",
+            domain: f.domain,
+            coefficients: &f.coeffs,
+            rms_rel_error: errors.rms_rel,
+            max_rel_error: errors.max_rel,
+            points: x.len(),
+            survey: &survey,
+            scene: a.scene.as_deref(),
+            plot: plots,
+        };
+        println!("{}", serde_json::to_string(&report)?);
+        return Ok(());
+    }
+    print_tissue(&a, name, &f, (&x, &y), &survey, &plots);
+    Ok(())
+}
+
+/// The degree survey, the residual table and the result, for people.
+fn print_tissue(
+    a: &TissueArgs,
+    name: &str,
+    f: &ChebFit,
+    (x, y): (&[f64], &[f64]),
+    survey: &[DegreeRow],
+    plots: &[PathBuf; 2],
+) {
+    let residuals: Vec<f64> = x.iter().zip(y).map(|(&xi, &yi)| yi - f.eval(xi)).collect();
+    let scale = y.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+    if !survey.is_empty() {
+        println!(
+            "degree survey (errors relative to full scale {scale:.6}; CV = {}-fold cross-validation):",
+            fit::FOLDS
+        );
+        println!(
+            "{:>6} {:>10} {:>10} {:>10} {:>9}",
+            "degree", "rms %", "max %", "cv rms %", "monotone"
+        );
+        for r in survey {
+            println!(
+                "{:>6} {:>10.3e} {:>10.3e} {:>10.3e} {:>9}{}",
+                r.degree,
+                100.0 * r.rms_rel,
+                100.0 * r.max_rel,
+                100.0 * r.cv_rms_rel,
+                if r.monotone { "yes" } else { "no" },
+                if r.degree == f.degree {
+                    "  <- chosen"
+                } else {
+                    ""
+                }
+            );
+        }
+        println!();
+    }
+    println!("residuals of {name} (degree {}):", f.degree);
+    println!(
+        "{:>5} {:>14} {:>14} {:>14} {:>14} {:>8}",
+        "row", a.x, a.y, "fit", "residual", "% fs"
+    );
+    for (i, (&xi, &yi)) in x.iter().zip(y).enumerate() {
+        println!(
+            "{:>5} {:>14.6e} {:>14.6e} {:>14.6e} {:>14.3e} {:>8.3}",
+            i + 1,
+            xi,
+            yi,
+            f.eval(xi),
+            residuals[i],
+            100.0 * residuals[i] / scale
+        );
+    }
+    let e = fit::relative_errors(&residuals, y);
+    println!();
+    println!(
+        "{name}: Chebyshev degree {} on [{:.6e}, {:.6e}]: RMS {:.3} %, max {:.3} % of full scale",
+        f.degree,
+        f.domain[0],
+        f.domain[1],
+        100.0 * e.rms_rel,
+        100.0 * e.max_rel
+    );
+    println!("coefficients: {:?}", f.coeffs);
+    if let Some(s) = &a.scene {
+        println!("wrote [{}] of {}", a.law.table(), s.display());
+    }
+    println!("plots: {} {}", plots[0].display(), plots[1].display());
+}
+
+#[derive(serde::Serialize)]
+struct MotorRow<'a> {
+    axis: &'static str,
+    #[serde(flatten)]
+    fit: &'a AxisFit,
+    torque_constant_nm_per_a: Option<f64>,
+}
+
+fn motor_cmd(a: MotorArgs) -> Result<()> {
+    let table = csv::read(&a.csv, &motor::COLUMNS)?;
+    table.require_rows(motor::MIN_POINTS, "three per fitted axis")?;
+    let samples = motor::samples(&table)?;
+    let fits = motor::fit(&samples).with_context(|| a.csv.display().to_string())?;
+    let scene = a.scene.as_deref().map(Scene::load).transpose()?;
+    let mut kt = [None; 3];
+    let mut friction = [None; 3];
+    for f in &fits {
+        friction[f.axis] = Some(f.friction);
+        if let Some(s) = &scene {
+            let g = f64::from(s.device.transmission[f.axis]);
+            let k = f.gain / g;
+            if !(k > 0.0 && k.is_finite()) {
+                bail!(
+                    "{}: axis {}: fitted gain {:.6} has the opposite sign of gear_ratio {g}: \
+                     check the load cell's direction or the motor wiring",
+                    a.csv.display(),
+                    AXES[f.axis],
+                    f.gain
+                );
+            }
+            kt[f.axis] = Some(k);
+        }
+    }
+    let mut plots = Vec::new();
+    for f in &fits {
+        let name = AXES[f.axis];
+        let unit = if f.axis == 2 { "N" } else { "N m" };
+        let pts: Vec<(f64, f64)> = samples
+            .iter()
+            .filter(|s| s.axis == f.axis)
+            .map(|s| (s.current_a, s.effort()))
+            .collect();
+        let (lo, hi) = pts
+            .iter()
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), p| {
+                (l.min(p.0), h.max(p.0))
+            });
+        let line = |i: f64| f.gain * i - f.friction;
+        let mut stem = a.plot.clone().into_os_string();
+        stem.push(format!("-{name}"));
+        let spec = PlotSpec {
+            title: format!(
+                "{name}: k = {:.5} {unit}/A, friction {:.4} {unit}, RMS {:.2} %",
+                f.gain,
+                f.friction,
+                100.0 * f.rms_rel
+            ),
+            x_label: "commanded current, A".into(),
+            y_label: format!("joint effort from the load cell, {unit}"),
+            data: ("bench data".into(), pts),
+            curves: vec![(
+                "fit: k i - friction".into(),
+                vec![(lo, line(lo)), (hi, line(hi))],
+            )],
+            residual_label: format!("residual, {unit}"),
+            residuals: f.residuals.clone(),
+        };
+        plots.extend(plot::write(Path::new(&stem), &spec)?);
+    }
+    if let Some(path) = &a.scene {
+        write_scene(path, |text| {
+            Ok(scene_edit::set_motor(path, text, kt, friction)?)
+        })?;
+    }
+    let rows: Vec<MotorRow> = fits
+        .iter()
+        .map(|f| MotorRow {
+            axis: AXES[f.axis],
+            fit: f,
+            torque_constant_nm_per_a: kt[f.axis],
+        })
+        .collect();
+    if a.json {
+        println!(
+            "{}",
+            serde_json::json!({ "axes": rows, "scene": a.scene, "plots": plots })
+        );
+        return Ok(());
+    }
+    println!(
+        "{:>10} {:>6} {:>14} {:>14} {:>12} {:>12} {:>8}",
+        "axis", "points", "k (/A)", "Kt (N m/A)", "friction", "rms", "rms %"
+    );
+    for r in &rows {
+        println!(
+            "{:>10} {:>6} {:>14.6} {:>14} {:>12.5} {:>12.3e} {:>8.3}",
+            r.axis,
+            r.fit.points,
+            r.fit.gain,
+            r.torque_constant_nm_per_a
+                .map_or("-".into(), |k| format!("{k:.6}")),
+            r.fit.friction,
+            r.fit.rms,
+            100.0 * r.fit.rms_rel
+        );
+    }
+    println!("(pitch, yaw: k in N m/A, friction in N m; insertion: N/A and N)");
+    if let Some(s) = &a.scene {
+        println!(
+            "wrote [device] torque_constant_nm_per_a and friction_offset of {}",
+            s.display()
+        );
+    }
+    for p in &plots {
+        println!("plot: {}", p.display());
+    }
+    Ok(())
+}
+
+fn specimen_cmd(a: SpecimenArgs) -> Result<()> {
+    let mesh = host::mesh::load(&a.mesh)?;
+    let material = Material::new(a.young, a.poisson)?;
+    let r = specimen::compress(&mesh, material)
+        .with_context(|| format!("{}: specimen compression", a.mesh.display()))?;
+    println!("{}", serde_json::to_string(&r)?);
+    Ok(())
+}
