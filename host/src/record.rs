@@ -201,7 +201,7 @@ mod tests {
             .unwrap();
         let f = [0.0f32, 0.0, -0.2];
         let mut forces = vec![0.0; 3 * mesh.nodes.len()];
-        forces[3 * top + 2] = -0.2;
+        forces[3 * top + 2] = f64::from(f[2]);
         let reference = c.displacement(&forces);
 
         let dir = tempfile::tempdir().unwrap();

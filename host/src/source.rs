@@ -47,6 +47,8 @@ pub struct LoopStats {
     pub peak_force_n: f64,
     /// Faults raised so far.
     pub faults: u32,
+    /// Whether the loop thread runs with real-time priority (virtual device only).
+    pub realtime: bool,
 }
 
 /// A telemetry stream.

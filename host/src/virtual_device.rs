@@ -9,7 +9,8 @@
 //! drops samples, the loop never waits for it). Ticks are scheduled on an absolute 1 ms grid;
 //! how late each one starts is the jitter. A PC is not a real-time system: the loop does not
 //! report a late tick as an overrun to the supervisor (that would latch a fault the hardware
-//! would not have), it counts it in [`LoopStats`]. A fault raised anyway (e.g. a solve error)
+//! would not have), it counts it in [`LoopStats`]. The loop thread asks for real-time
+//! scheduling (SCHED_FIFO) and runs without it when refused. A fault raised anyway (e.g. a solve error)
 //! is cleared and the loop re-armed after 0.5 s, so the demo continues.
 
 use crate::source::{LoopStats, Mailbox, Sample, Source, Steering};
@@ -114,12 +115,29 @@ impl Source for VirtualDevice {
     }
 }
 
+/// Asks for the real-time FIFO scheduling class for the calling thread (Linux; needs
+/// CAP_SYS_NICE or an rtprio limit); returns whether it was granted. The thread sleeps between
+/// ticks, so it cannot starve the machine.
+fn request_realtime() -> bool {
+    #[cfg(target_os = "linux")]
+    {
+        let param = libc::sched_param { sched_priority: 20 };
+        // SAFETY: `pthread_self()` is the calling thread and `param` a valid sched_param.
+        unsafe { libc::pthread_setschedparam(libc::pthread_self(), libc::SCHED_FIFO, &param) == 0 }
+    }
+    #[cfg(not(target_os = "linux"))]
+    {
+        false
+    }
+}
+
 /// The loop thread.
 fn run(bytes: &AlignedBytes, shared: &Shared, home: [f64; 3]) {
     let Ok(bank) = Bank::parse(bytes) else {
         return;
     };
     let cal = *bank.device();
+    let realtime = request_realtime();
     let mut haptic = HapticLoop::new(&bank);
     let _ = haptic.arm();
     let mut q = home;
@@ -127,6 +145,7 @@ fn run(bytes: &AlignedBytes, shared: &Shared, home: [f64; 3]) {
     let mut next = start;
     let mut stats = LoopStats {
         max_jitter_us: Some(0.0),
+        realtime,
         ..LoopStats::default()
     };
     let mut ticks: u64 = 0;

@@ -252,7 +252,7 @@ fn report(args: &Args, d: &DisplayStats, l: &LoopStats, recorded: Option<usize>,
         let v = serde_json::json!({
             "tick_rate_hz": l.tick_rate_hz, "max_jitter_us": l.max_jitter_us,
             "display_fps": d.display_fps, "peak_force_n": l.peak_force_n,
-            "faults": l.faults, "frames": d.frames, "mean_frame_ms": d.mean_frame_ms,
+            "faults": l.faults, "realtime": l.realtime, "frames": d.frames, "mean_frame_ms": d.mean_frame_ms,
             "max_frame_ms": d.max_frame_ms, "approximate_frames": d.approximate_frames,
             "mesh_nodes": nodes, "recorded_frames": recorded,
         });
@@ -263,8 +263,11 @@ fn report(args: &Args, d: &DisplayStats, l: &LoopStats, recorded: Option<usize>,
         .max_jitter_us
         .map_or("unknown".to_string(), |j| format!("{j:.0} us"));
     println!(
-        "loop      {:.1} Hz, max jitter {jitter}, {} faults, peak force {:.3} N",
-        l.tick_rate_hz, l.faults, l.peak_force_n
+        "loop      {:.1} Hz, max jitter {jitter}{}, {} faults, peak force {:.3} N",
+        l.tick_rate_hz,
+        if l.realtime { " (SCHED_FIFO)" } else { "" },
+        l.faults,
+        l.peak_force_n
     );
     println!(
         "display   {:.1} frames/s ({} frames of {nodes}-node organ, {:.2} ms mean, {:.2} ms max \

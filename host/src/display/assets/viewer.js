@@ -182,7 +182,7 @@
   const lo = info.bbox_min, hi = info.bbox_max;
   const centre = scale(add(lo, hi), 0.5);
   const radius = 0.5 * len(sub(hi, lo));
-  const cam = { az: -0.9, el: 0.75, dist: 2.6 * radius };
+  const cam = { az: -1.25, el: 0.42, dist: 2.4 * radius };
   let vp = null, eye = null;
   function camera() {
     const w = canvas.clientWidth, h = canvas.clientHeight;
@@ -197,7 +197,10 @@
     return [(x / w * 0.5 + 0.5) * canvas.clientWidth, (0.5 - y / w * 0.5) * canvas.clientHeight];
   }
 
+  camera();
+
   // ---- frames ----
+  let tipPx = null;
   let frame = null, framesReceived = 0, dirty = true;
   const ws = new WebSocket((location.protocol === "https:" ? "wss://" : "ws://") + location.host + "/ws");
   ws.binaryType = "arraybuffer";
@@ -212,6 +215,7 @@
       force: [f(28), f(32), f(36)], tickRate: f(40), fps: f(44), jitter: f(48),
     };
     pos.set(new Float32Array(b, 64, 3 * nv));
+    tipPx = project(frame.tip);
     framesReceived++; dirty = true;
   };
   ws.onclose = () => { hudStats.textContent = "disconnected from the host"; };
@@ -283,7 +287,7 @@
   });
 
   // ---- render ----
-  let rendered = 0, tipPx = null;
+  let rendered = 0;
   function render() {
     requestAnimationFrame(render);
     camera();
@@ -305,13 +309,14 @@
       const F = frame.force, mag = len(F);
       tipPx = project(frame.tip);
       if (showTool) {
-        draw(cylinder, segment(info.fulcrum_m, frame.tip, 0.0025), [0.7, 0.72, 0.76], 0);
+        draw(cylinder, segment(info.fulcrum_m, frame.tip, 0.0015), [0.7, 0.72, 0.76], 0);
         draw(sphere, ball(frame.tip, Math.max(info.tip_radius_m, 0.001)), [0.85, 0.86, 0.9], 0);
         if (mag > 1e-3) {
-          const L = Math.min(0.02 * mag, 0.1), dir = scale(F, 1 / mag);
-          const shaftEnd = add(frame.tip, scale(dir, 0.8 * L)), end = add(frame.tip, scale(dir, L));
-          draw(cylinder, segment(frame.tip, shaftEnd, 0.0012), [0.3, 0.9, 0.35], 0);
-          draw(cone, segment(shaftEnd, end, 0.0035), [0.3, 0.9, 0.35], 0);
+          // 50 mm per newton, at most 0.12 m; thicker than the shaft, which it often runs along.
+          const L = Math.min(0.05 * mag, 0.12), dir = scale(F, 1 / mag);
+          const shaftEnd = add(frame.tip, scale(dir, 0.75 * L)), end = add(frame.tip, scale(dir, L));
+          draw(cylinder, segment(frame.tip, shaftEnd, 0.0024), [0.3, 0.9, 0.35], 0);
+          draw(cone, segment(shaftEnd, end, 0.005), [0.3, 0.9, 0.35], 0);
           const px = project(end);
           label.style.left = (px[0] + 8) + "px"; label.style.top = (px[1] - 10) + "px";
           label.textContent = mag.toFixed(2) + " N";
