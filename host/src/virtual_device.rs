@@ -26,6 +26,10 @@ use std::time::{Duration, Instant};
 const PERIOD: Duration = Duration::from_millis(1);
 /// Largest hand speed per tick: pitch and yaw (rad), insertion (m); 3 rad/s and 0.5 m/s.
 const MAX_STEP: [f64; 3] = [0.003, 0.003, 0.0005];
+/// Lateness histogram: bins of 10 µs up to 50 ms (the last bin holds everything later).
+const JITTER_BIN_US: f64 = 10.0;
+const JITTER_BINS: usize = 5000;
+
 /// Ticks after a fault before the virtual device clears it and re-arms.
 const REARM_AFTER_TICKS: u32 = 500;
 
@@ -149,6 +153,7 @@ fn run(bytes: &AlignedBytes, shared: &Shared, home: [f64; 3]) {
         ..LoopStats::default()
     };
     let mut ticks: u64 = 0;
+    let mut histogram = vec![0u64; JITTER_BINS];
     let mut fault_ticks = 0u32;
     while !shared.stop.load(Ordering::Relaxed) {
         let now = Instant::now();
@@ -163,6 +168,10 @@ fn run(bytes: &AlignedBytes, shared: &Shared, home: [f64; 3]) {
         } else {
             let us = late.as_secs_f64() * 1e6;
             stats.max_jitter_us = stats.max_jitter_us.map(|m| m.max(us));
+            let bin = ((us / JITTER_BIN_US) as usize).min(JITTER_BINS - 1);
+            if let Some(h) = histogram.get_mut(bin) {
+                *h += 1;
+            }
         }
         let target = shared.target.lock().map(|t| *t).unwrap_or(q);
         for i in 0..3 {
@@ -192,6 +201,9 @@ fn run(bytes: &AlignedBytes, shared: &Shared, home: [f64; 3]) {
         if elapsed > 0.0 {
             stats.tick_rate_hz = ticks as f64 / elapsed;
         }
+        if ticks % 256 == 0 {
+            stats.p99_jitter_us = Some(percentile(&histogram, 0.99));
+        }
         let sample = Sample {
             tick: out.tick,
             state: out.state.wire(),
@@ -205,11 +217,36 @@ fn run(bytes: &AlignedBytes, shared: &Shared, home: [f64; 3]) {
     }
 }
 
+/// Upper edge (µs) of the histogram bin holding quantile `q`.
+fn percentile(histogram: &[u64], q: f64) -> f64 {
+    let total: u64 = histogram.iter().sum();
+    let want = (q * total as f64).ceil() as u64;
+    let mut seen = 0;
+    for (i, &n) in histogram.iter().enumerate() {
+        seen += n;
+        if seen >= want {
+            return (i + 1) as f64 * JITTER_BIN_US;
+        }
+    }
+    histogram.len() as f64 * JITTER_BIN_US
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
     use firmware::device::Device;
     use std::path::Path;
+
+    #[test]
+    fn percentile_reads_the_histogram() {
+        let mut h = vec![0u64; 10];
+        h[0] = 98;
+        h[3] = 1;
+        h[7] = 1;
+        assert_eq!(percentile(&h, 0.5), 10.0);
+        assert_eq!(percentile(&h, 0.99), 40.0);
+        assert_eq!(percentile(&h, 1.0), 80.0);
+    }
 
     #[test]
     fn counts_invert_the_firmware_joint_map() {

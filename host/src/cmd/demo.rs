@@ -251,6 +251,7 @@ fn report(args: &Args, d: &DisplayStats, l: &LoopStats, recorded: Option<usize>,
     if args.json {
         let v = serde_json::json!({
             "tick_rate_hz": l.tick_rate_hz, "max_jitter_us": l.max_jitter_us,
+            "p99_jitter_us": l.p99_jitter_us,
             "display_fps": d.display_fps, "peak_force_n": l.peak_force_n,
             "faults": l.faults, "realtime": l.realtime, "frames": d.frames, "mean_frame_ms": d.mean_frame_ms,
             "max_frame_ms": d.max_frame_ms, "approximate_frames": d.approximate_frames,
@@ -259,9 +260,11 @@ fn report(args: &Args, d: &DisplayStats, l: &LoopStats, recorded: Option<usize>,
         println!("{v}");
         return;
     }
-    let jitter = l
-        .max_jitter_us
-        .map_or("unknown".to_string(), |j| format!("{j:.0} us"));
+    let jitter = match (l.max_jitter_us, l.p99_jitter_us) {
+        (Some(m), Some(p)) => format!("{m:.0} us (p99 {p:.0} us)"),
+        (Some(m), None) => format!("{m:.0} us"),
+        _ => "unknown".to_string(),
+    };
     println!(
         "loop      {:.1} Hz, max jitter {jitter}{}, {} faults, peak force {:.3} N",
         l.tick_rate_hz,
