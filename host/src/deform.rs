@@ -75,8 +75,9 @@ pub struct Deformer {
     capacity: usize,
     pending: HashSet<usize>,
     requests: Sender<Vec<usize>>,
-    results: Receiver<Vec<(usize, Arc<[f32]>)>>,
+    results: Receiver<Batch>,
     clock: u64,
+    solves: SolveStats,
     correction: Box<dyn Correction>,
 }
 
@@ -88,6 +89,25 @@ impl std::fmt::Debug for Deformer {
             .field("pending", &self.pending.len())
             .finish()
     }
+}
+
+/// One batch of solved columns and the wall time it took.
+struct Batch {
+    columns: Vec<(usize, Arc<[f32]>)>,
+    seconds: f64,
+}
+
+/// Column solves so far.
+#[derive(Debug, Clone, Copy, Default, PartialEq, serde::Serialize)]
+pub struct SolveStats {
+    /// Batched solves run.
+    pub batches: u64,
+    /// Contact nodes solved (three columns each).
+    pub nodes: u64,
+    /// Wall time of all batches, s.
+    pub seconds: f64,
+    /// Longest batch, s.
+    pub max_seconds: f64,
 }
 
 /// Columns solved per batch at most (one pass over the factor serves them all).
@@ -117,7 +137,10 @@ impl Deformer {
                             Err(_) => break,
                         }
                     }
-                    if tx.send(solve_columns(&compliance, &rows, &batch)).is_err() {
+                    let t = std::time::Instant::now();
+                    let columns = solve_columns(&compliance, &rows, &batch);
+                    let seconds = t.elapsed().as_secs_f64();
+                    if tx.send(Batch { columns, seconds }).is_err() {
                         return;
                     }
                 }
@@ -132,6 +155,7 @@ impl Deformer {
             requests,
             results,
             clock: 0,
+            solves: SolveStats::default(),
             correction: Box::new(Identity),
         }
     }
@@ -144,6 +168,11 @@ impl Deformer {
     /// The display nodes (mesh ids).
     pub fn display_nodes(&self) -> &[usize] {
         &self.display
+    }
+
+    /// Column solves so far.
+    pub fn solve_stats(&self) -> SolveStats {
+        self.solves
     }
 
     /// Number of contact nodes whose columns are cached.
@@ -203,8 +232,12 @@ impl Deformer {
         }
     }
 
-    fn insert(&mut self, batch: Vec<(usize, Arc<[f32]>)>) {
-        for (k, cols) in batch {
+    fn insert(&mut self, batch: Batch) {
+        self.solves.batches += 1;
+        self.solves.nodes += batch.columns.len() as u64;
+        self.solves.seconds += batch.seconds;
+        self.solves.max_seconds = self.solves.max_seconds.max(batch.seconds);
+        for (k, cols) in batch.columns {
             self.pending.remove(&k);
             self.clock += 1;
             self.cache.insert(

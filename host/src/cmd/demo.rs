@@ -255,6 +255,9 @@ fn report(args: &Args, d: &DisplayStats, l: &LoopStats, recorded: Option<usize>,
             "display_fps": d.display_fps, "peak_force_n": l.peak_force_n,
             "faults": l.faults, "realtime": l.realtime, "frames": d.frames, "mean_frame_ms": d.mean_frame_ms,
             "max_frame_ms": d.max_frame_ms, "approximate_frames": d.approximate_frames,
+            "column_batches": d.columns.batches, "column_nodes": d.columns.nodes,
+            "column_batch_mean_ms": mean_batch_ms(d),
+            "column_batch_max_ms": d.columns.max_seconds * 1e3,
             "mesh_nodes": nodes, "recorded_frames": recorded,
         });
         println!("{v}");
@@ -277,8 +280,23 @@ fn report(args: &Args, d: &DisplayStats, l: &LoopStats, recorded: Option<usize>,
          per frame, {} while columns were being solved)",
         d.display_fps, d.frames, d.mean_frame_ms, d.max_frame_ms, d.approximate_frames
     );
+    println!(
+        "columns   {} contact nodes solved in {} batches, {:.1} ms mean, {:.1} ms max per batch",
+        d.columns.nodes,
+        d.columns.batches,
+        mean_batch_ms(d),
+        d.columns.max_seconds * 1e3
+    );
     if let (Some(n), Some(dir)) = (recorded, &args.record) {
         println!("recorded  {n} frames in {}", dir.join("demo.pvd").display());
+    }
+}
+
+fn mean_batch_ms(d: &DisplayStats) -> f64 {
+    if d.columns.batches == 0 {
+        0.0
+    } else {
+        d.columns.seconds * 1e3 / d.columns.batches as f64
     }
 }
 

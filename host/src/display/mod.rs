@@ -12,7 +12,7 @@
 
 pub mod server;
 
-use crate::deform::{Coverage, Deformer};
+use crate::deform::{Coverage, Deformer, SolveStats};
 use crate::source::{LoopStats, Sample, Source};
 use bank_format::State;
 use std::sync::Arc;
@@ -118,6 +118,8 @@ pub struct DisplayStats {
     pub max_frame_ms: f64,
     /// Frames that used a nearby node's columns while a contact node's were being solved.
     pub approximate_frames: u64,
+    /// Compliance column solves (in the deformer's worker thread).
+    pub columns: SolveStats,
 }
 
 /// Receives each frame's sample and displacement (a recorder).
@@ -231,6 +233,7 @@ impl Pipeline<'_> {
             busy += spent;
             stats.max_frame_ms = stats.max_frame_ms.max(spent.as_secs_f64() * 1e3);
         }
+        stats.columns = self.deformer.solve_stats();
         let elapsed = start.elapsed().as_secs_f64();
         if stats.frames > 0 {
             stats.display_fps = stats.frames as f64 / elapsed;
