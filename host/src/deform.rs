@@ -6,13 +6,16 @@
 //! Memory: a dense `C[display, R]` is gigabytes for a 100k-node organ, so columns are produced on
 //! demand from the kept factorisation: one batched solve `K_ff X = E_k` (three unit right-hand
 //! sides per contact node) in a worker thread, restricted to the display rows and cached (least
-//! recently used first out) while nodes stay in or near contact. Until a new node's columns
-//! arrive, its force is carried by the nearest cached node ([`Deformer::displacement`] says so
-//! with [`Coverage::Approximate`]): the display drops accuracy for a few frames, never frames.
+//! recently used first out) while nodes stay in or near contact. The worker serves contact nodes
+//! first ([`Deformer::displacement`]) and the neighbours asked for ahead of need
+//! ([`Deformer::prefetch`]) only when idle, in small batches, so a prefetch never delays a
+//! contact node by more than one small solve. Until a new node's columns arrive, its force is
+//! carried by the nearest cached node ([`Coverage::Approximate`]): the display drops accuracy
+//! for a few frames (on a 100k-node organ, about a second per batch), never frames.
 
 use crate::compliance::Compliance;
 use faer::{Mat, Par};
-use std::collections::{HashMap, HashSet};
+use std::collections::{HashMap, VecDeque};
 use std::sync::Arc;
 use std::sync::mpsc::{Receiver, Sender, channel};
 
@@ -73,8 +76,9 @@ pub struct Deformer {
     positions: Arc<[[f64; 3]]>,
     cache: HashMap<usize, Columns>,
     capacity: usize,
-    pending: HashSet<usize>,
-    requests: Sender<Vec<usize>>,
+    /// Requested and not yet solved, with whether the request was urgent.
+    pending: HashMap<usize, bool>,
+    requests: Sender<Request>,
     results: Receiver<Batch>,
     clock: u64,
     solves: SolveStats,
@@ -94,6 +98,8 @@ impl std::fmt::Debug for Deformer {
 /// One batch of solved columns and the wall time it took.
 struct Batch {
     columns: Vec<(usize, Arc<[f32]>)>,
+    /// Prefetch requests given up.
+    dropped: Vec<usize>,
     seconds: f64,
 }
 
@@ -110,8 +116,64 @@ pub struct SolveStats {
     pub max_seconds: f64,
 }
 
-/// Columns solved per batch at most (one pass over the factor serves them all).
-const MAX_BATCH: usize = 16;
+/// Contact nodes solved per batch at most (a contact set has at most 8 nodes).
+const MAX_URGENT_BATCH: usize = 8;
+/// Prefetched nodes solved per batch at most.
+const MAX_PREFETCH_BATCH: usize = 2;
+/// Prefetch requests kept waiting at most (the oldest are dropped: the tool has moved on).
+const MAX_PREFETCH_QUEUE: usize = 32;
+
+/// A request to the column worker.
+enum Request {
+    /// Needed now (contact nodes).
+    Urgent(Vec<usize>),
+    /// Needed soon perhaps (neighbours of the contact set).
+    Prefetch(Vec<usize>),
+}
+
+/// The worker's queues: urgent first; a node asked for urgently leaves the prefetch queue.
+#[derive(Default)]
+struct Queues {
+    urgent: VecDeque<usize>,
+    prefetch: VecDeque<usize>,
+    dropped: Vec<usize>,
+}
+
+impl Queues {
+    fn push(&mut self, r: Request) {
+        match r {
+            Request::Urgent(nodes) => {
+                self.prefetch.retain(|k| !nodes.contains(k));
+                for k in nodes {
+                    if !self.urgent.contains(&k) {
+                        self.urgent.push_back(k);
+                    }
+                }
+            }
+            Request::Prefetch(nodes) => {
+                self.prefetch.extend(nodes);
+                while self.prefetch.len() > MAX_PREFETCH_QUEUE {
+                    self.dropped.extend(self.prefetch.pop_front());
+                }
+            }
+        }
+    }
+
+    fn is_empty(&self) -> bool {
+        self.urgent.is_empty() && self.prefetch.is_empty() && self.dropped.is_empty()
+    }
+
+    /// The next batch: urgent nodes if any, else a few prefetched ones.
+    fn next_batch(&mut self) -> Vec<usize> {
+        let (queue, max) = if self.urgent.is_empty() {
+            (&mut self.prefetch, MAX_PREFETCH_BATCH)
+        } else {
+            (&mut self.urgent, MAX_URGENT_BATCH)
+        };
+        let n = queue.len().min(max);
+        queue.drain(..n).collect()
+    }
+}
 
 impl Deformer {
     /// A deformer over `display` (mesh node ids) of a mesh with rest `positions`, keeping the
@@ -124,23 +186,34 @@ impl Deformer {
         capacity: usize,
     ) -> Deformer {
         let display: Arc<[usize]> = display.into();
-        let (requests, rx) = channel::<Vec<usize>>();
+        let (requests, rx) = channel::<Request>();
         let (tx, results) = channel();
         let rows = Arc::clone(&display);
         std::thread::Builder::new()
             .name("columns".into())
             .spawn(move || {
-                while let Ok(mut batch) = rx.recv() {
-                    while batch.len() < MAX_BATCH {
-                        match rx.try_recv() {
-                            Ok(more) => batch.extend(more),
-                            Err(_) => break,
+                let mut queues = Queues::default();
+                loop {
+                    if queues.is_empty() {
+                        match rx.recv() {
+                            Ok(r) => queues.push(r),
+                            Err(_) => return,
                         }
                     }
+                    while let Ok(r) = rx.try_recv() {
+                        queues.push(r);
+                    }
+                    let dropped = std::mem::take(&mut queues.dropped);
+                    let batch = queues.next_batch();
                     let t = std::time::Instant::now();
                     let columns = solve_columns(&compliance, &rows, &batch);
                     let seconds = t.elapsed().as_secs_f64();
-                    if tx.send(Batch { columns, seconds }).is_err() {
+                    let out = Batch {
+                        columns,
+                        dropped,
+                        seconds,
+                    };
+                    if tx.send(out).is_err() {
                         return;
                     }
                 }
@@ -150,8 +223,8 @@ impl Deformer {
             display,
             positions: positions.into(),
             cache: HashMap::new(),
-            capacity: capacity.max(MAX_BATCH),
-            pending: HashSet::new(),
+            capacity: capacity.max(2 * MAX_URGENT_BATCH),
+            pending: HashMap::new(),
             requests,
             results,
             clock: 0,
@@ -181,20 +254,36 @@ impl Deformer {
     }
 
     /// Asks for the columns of `nodes` (mesh ids) ahead of need, e.g. the neighbours of the
-    /// contact set while the tool slides.
+    /// contact set while the tool slides; solved only when no contact node waits.
     pub fn prefetch(&mut self, nodes: &[usize]) {
+        self.request(nodes, false);
+    }
+
+    /// Requests the columns of `nodes` not cached yet; an urgent request promotes a pending
+    /// prefetch.
+    fn request(&mut self, nodes: &[usize], urgent: bool) {
         self.drain();
         let missing: Vec<usize> = nodes
             .iter()
             .copied()
-            .filter(|k| *k < self.positions.len())
-            .filter(|k| !self.cache.contains_key(k) && !self.pending.contains(k))
+            .filter(|k| *k < self.positions.len() && !self.cache.contains_key(k))
+            .filter(|k| match self.pending.get(k) {
+                None => true,
+                Some(&was_urgent) => urgent && !was_urgent,
+            })
             .collect();
-        if !missing.is_empty() {
-            self.pending.extend(&missing);
-            // A send error means the worker is gone; the display then stays approximate.
-            let _ = self.requests.send(missing);
+        if missing.is_empty() {
+            return;
         }
+        for &k in &missing {
+            self.pending.insert(k, urgent);
+        }
+        // A send error means the worker is gone; the display then stays approximate.
+        let _ = self.requests.send(if urgent {
+            Request::Urgent(missing)
+        } else {
+            Request::Prefetch(missing)
+        });
     }
 
     /// `u = C[:, S] f_S` on the display nodes, then corrected by `P` along the direction of the
@@ -206,14 +295,14 @@ impl Deformer {
         u: &mut Vec<[f32; 3]>,
     ) -> Coverage {
         let nodes: Vec<usize> = contacts.iter().map(|c| c.0).collect();
-        self.prefetch(&nodes);
+        self.request(&nodes, true);
         self.superpose(contacts, u)
     }
 
     /// [`Deformer::displacement`], waiting until every contact node's columns are cached.
     pub fn displacement_exact(&mut self, contacts: &[(usize, [f32; 3])], u: &mut Vec<[f32; 3]>) {
         let nodes: Vec<usize> = contacts.iter().map(|c| c.0).collect();
-        self.prefetch(&nodes);
+        self.request(&nodes, true);
         while nodes
             .iter()
             .any(|k| *k < self.positions.len() && !self.cache.contains_key(k))
@@ -233,6 +322,12 @@ impl Deformer {
     }
 
     fn insert(&mut self, batch: Batch) {
+        for k in &batch.dropped {
+            self.pending.remove(k);
+        }
+        if batch.columns.is_empty() {
+            return;
+        }
         self.solves.batches += 1;
         self.solves.nodes += batch.columns.len() as u64;
         self.solves.seconds += batch.seconds;
@@ -435,6 +530,21 @@ mod tests {
             d.displacement_exact(&[(k, [0.0, 0.0, -0.1])], &mut u);
         }
         assert_eq!(d.cached(), 16);
+    }
+
+    #[test]
+    fn contact_nodes_jump_the_prefetch_queue() {
+        let mut q = Queues::default();
+        q.push(Request::Prefetch((0..40).collect()));
+        assert_eq!(
+            q.dropped,
+            (0..8).collect::<Vec<_>>(),
+            "only the newest 32 wait"
+        );
+        q.push(Request::Urgent(vec![20, 100]));
+        assert_eq!(q.next_batch(), vec![20, 100]);
+        assert!(!q.prefetch.contains(&20));
+        assert_eq!(q.next_batch(), vec![8, 9]);
     }
 
     #[test]

@@ -335,7 +335,7 @@
   requestAnimationFrame(render);
   setInterval(() => {
     if (ws.readyState === 1) {
-      ws.send(JSON.stringify({ report: { frames: framesReceived, rendered, seq: frame ? frame.seq : null,
+      ws.send(JSON.stringify({ report: { tag: params.get("tag"), frames: framesReceived, rendered, seq: frame ? frame.seq : null,
         contacts: frame ? frame.contacts : 0, tip_px: tipPx, width: canvas.clientWidth, height: canvas.clientHeight } }));
     }
   }, 250);
