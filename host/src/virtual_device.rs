@@ -201,7 +201,8 @@ fn run(bytes: &AlignedBytes, shared: &Shared, home: [f64; 3]) {
         if elapsed > 0.0 {
             stats.tick_rate_hz = ticks as f64 / elapsed;
         }
-        if ticks % 256 == 0 {
+        // Every 256 ticks.
+        if ticks & 0xff == 0 {
             stats.p99_jitter_us = Some(percentile(&histogram, 0.99));
         }
         let sample = Sample {
