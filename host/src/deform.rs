@@ -238,11 +238,6 @@ impl Deformer {
         self.correction = correction;
     }
 
-    /// The display nodes (mesh ids).
-    pub fn display_nodes(&self) -> &[usize] {
-        &self.display
-    }
-
     /// Column solves so far.
     pub fn solve_stats(&self) -> SolveStats {
         self.solves
