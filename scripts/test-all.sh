@@ -23,6 +23,14 @@ if ! command -v qemu-system-arm >/dev/null; then
 fi
 qemu-system-arm --version | head -n 1
 
+step "headless chromium for the viewer test (host/tests/demo.rs)"
+if ! command -v chromium >/dev/null 2>&1; then
+    sudo=""
+    [ "$(id -u)" -eq 0 ] || sudo="sudo"
+    $sudo apt-get update
+    $sudo DEBIAN_FRONTEND=noninteractive apt-get install -y chromium
+fi
+
 step "format and lints"
 cargo fmt --all --check
 cargo clippy --workspace --all-targets --release -- -D warnings

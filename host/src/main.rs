@@ -19,7 +19,8 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Command {
-    /// Run the default liver scene (see `demo --help` for what it does today).
+    /// The default liver scene in the browser: the firmware loop on this PC, the mouse drives
+    /// the tool, the organ deforms and the force is shown live.
     Demo(cmd::demo::Args),
     /// Compliance blocks C(n, k) of a mesh as one JSON object on stdout.
     Compliance(cmd::compliance::Args),

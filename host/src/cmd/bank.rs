@@ -8,11 +8,11 @@ use firmware::solve::WeightedSolve;
 use host::compliance::{Block3, Compliance, contact_forces};
 use host::contact::{ContactSurface, SurfaceHit, patch_force};
 use host::fem::{Elasticity, FixedSet};
+use host::fsio::write_atomic;
 use host::mesh::{Surface, TetMesh};
 use host::reach::{Workspace, reachable};
 use host::scene::Scene;
 use std::collections::{BTreeSet, HashMap};
-use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
@@ -80,15 +80,15 @@ pub fn run(cmd: BankCmd) -> Result<()> {
 }
 
 /// A scene with its mesh, supports, factorised compliance and reachable region.
-struct Prepared {
-    scene: Scene,
-    mesh: TetMesh,
-    mesh_name: String,
-    surface: Surface,
-    compliance: Compliance,
+pub(crate) struct Prepared {
+    pub(crate) scene: Scene,
+    pub(crate) mesh: TetMesh,
+    pub(crate) mesh_name: String,
+    pub(crate) surface: Surface,
+    pub(crate) compliance: Compliance,
     scene_id: u64,
     /// R: mesh node ids, ascending.
-    region: Vec<usize>,
+    pub(crate) region: Vec<usize>,
     /// R's positions.
     positions: Vec<[f64; 3]>,
     /// Boundary triangles with all three vertices in R, as indices into `region`.
@@ -97,7 +97,12 @@ struct Prepared {
 
 impl Prepared {
     fn new(path: &Path) -> Result<Prepared> {
-        let scene = Scene::load(path)?;
+        Prepared::from_scene(Scene::load(path)?)
+    }
+
+    /// Loads the scene's mesh, factorises its compliance and finds its reachable region.
+    pub(crate) fn from_scene(scene: Scene) -> Result<Prepared> {
+        let path = scene.path.clone();
         let (mesh, mesh_name, mesh_hash) = scene.load_mesh()?;
         let surface = host::mesh::boundary(&mesh)?;
         let fixed: FixedSet = scene.fixed_set(&mesh)?;
@@ -252,40 +257,18 @@ fn section_table(bank: &Bank) -> Vec<(&'static str, u32, u32, u32)> {
         .collect()
 }
 
-/// Writes `bytes` to `out` atomically: `<out>.tmp` in the same directory, fsync, rename. On any
-/// error the temporary file is removed and `out` is untouched.
-pub fn write_atomic(out: &Path, bytes: &[u8]) -> Result<()> {
-    let mut tmp_name = out
-        .file_name()
-        .context("output path has no file name")?
-        .to_owned();
-    tmp_name.push(".tmp");
-    let tmp = out.with_file_name(tmp_name);
-    let result = (|| -> std::io::Result<()> {
-        let mut f = std::fs::File::create(&tmp)?;
-        f.write_all(bytes)?;
-        f.sync_all()?;
-        drop(f);
-        std::fs::rename(&tmp, out)?;
-        if let Some(dir) = out.parent().filter(|d| !d.as_os_str().is_empty())
-            && let Ok(d) = std::fs::File::open(dir)
-        {
-            let _ = d.sync_all();
-        }
-        Ok(())
-    })();
-    if let Err(e) = result {
-        let _ = std::fs::remove_file(&tmp);
-        return Err(e).with_context(|| format!("cannot write {}", out.display()));
+impl Prepared {
+    /// The scene's bank at its truncation radius: bytes and the number of coupled pairs.
+    pub(crate) fn build_bank(&self) -> Result<(Vec<u8>, usize)> {
+        let radius = self.scene.bank.truncation_radius_m;
+        let rows = self.blocks(radius)?;
+        self.bank(&rows, radius)
     }
-    Ok(())
 }
 
 /// The bank of a scene file (what `host bank build` writes), for other subcommands.
 pub fn scene_bank(scene: &Path) -> Result<Vec<u8>> {
-    let prep = Prepared::new(scene)?;
-    let radius = prep.scene.bank.truncation_radius_m;
-    let (bytes, _) = prep.bank(&prep.blocks(radius)?, radius)?;
+    let (bytes, _) = Prepared::new(scene)?.build_bank()?;
     if bytes.len() > BANK_REGION_BYTES {
         bail!(
             "{}: the bank would be {} bytes, more than the {BANK_REGION_BYTES} bytes of the \
@@ -301,8 +284,7 @@ fn build(args: BuildArgs) -> Result<()> {
     let t = Instant::now();
     let prep = Prepared::new(&args.scene)?;
     let radius = prep.scene.bank.truncation_radius_m;
-    let rows = prep.blocks(radius)?;
-    let (bytes, pairs) = prep.bank(&rows, radius)?;
+    let (bytes, pairs) = prep.build_bank()?;
     if bytes.len() > args.region_bytes {
         bail!(
             "the bank would be {} bytes, more than the {} bytes of the bank region ({} nodes in \

@@ -4,6 +4,7 @@ use anyhow::{Context, Result};
 use host::compliance::Compliance;
 use host::fem::{DofMap, Elasticity, FixedSet, Material};
 use host::ordering::{Ordering, permutation};
+use host::virtual_device::counts_for;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
@@ -280,15 +281,6 @@ fn peak_rss_mib() -> f64 {
                 .and_then(|l| l.split_whitespace().nth(1)?.parse::<f64>().ok())
         })
         .map_or(0.0, |kib| kib / 1024.0)
-}
-
-/// Encoder counts for joint values `q` (inverse of the firmware's counts -> joints map).
-fn counts_for(cal: &bank_format::DeviceCalibration, q: [f64; 3]) -> [i32; 3] {
-    std::array::from_fn(|i| {
-        let per_unit = f64::from(cal.counts_per_rev[i]) * f64::from(cal.transmission[i])
-            / std::f64::consts::TAU;
-        ((q[i] - f64::from(cal.home_joint[i])) * per_unit).round() as i32
-    })
 }
 
 fn tick(args: TickArgs) -> Result<()> {

@@ -4,7 +4,6 @@
 //! (the x of Q and P). Results go into a scene file (comments kept, written atomically) and
 //! plots (SVG and PNG).
 
-use super::bank::write_atomic;
 use anyhow::{Context, Result, bail};
 use host::calibrate::fit::{self, ChebFit, DegreeRow};
 use host::calibrate::motor::{self, AXES, AxisFit};
@@ -12,6 +11,7 @@ use host::calibrate::plot::{self, PlotSpec};
 use host::calibrate::scene_edit::{self, Law};
 use host::calibrate::{csv, specimen};
 use host::fem::Material;
+use host::fsio::write_atomic;
 use host::scene::Scene;
 use std::path::{Path, PathBuf};
 

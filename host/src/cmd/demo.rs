@@ -1,119 +1,361 @@
-//! `host demo`: the default liver scene.
+//! `host demo`: the default liver scene in the browser, the firmware's loop on the PC.
 //!
-//! The interactive browser demo (mouse-driven tool, live force, deforming organ) is not built
-//! yet; until it is, this command runs the part of the pipeline that exists, the compliance
-//! precompute and the contact-force solve, on the embedded default liver, and says so.
+//! Builds the scene's bank in memory (as `host bank build` does) and keeps the factorised
+//! compliance for the display; starts the source (by default the virtual device: the firmware's
+//! `HapticLoop` at 1 kHz in its own thread); serves the viewer on 127.0.0.1 and prints its
+//! address; then produces display frames (surface displacement `u = C[:, S] f_S`) until
+//! `--seconds` pass or the process is stopped. With `--headless --script ...` it runs a
+//! scripted hand motion without a browser and prints the loop and display figures.
 
-use anyhow::{Context, Result};
-use host::compliance::{Compliance, contact_forces};
-use host::fem::{Elasticity, FixedSet, Material};
-use std::path::PathBuf;
-use std::time::Instant;
+use super::bank::Prepared;
+use anyhow::{Context, Result, bail};
+use bank_format::{AlignedBytes, Bank};
+use host::deform::Deformer;
+use host::display::server::{Server, SteerFn};
+use host::display::{DisplayMesh, DisplayStats, Pipeline};
+use host::reach::Workspace;
+use host::record::Recorder;
+use host::scene::{MeshSource, Scene};
+use host::script::{Script, Scripted, aim_joints, ray_hit};
+use host::source::{LoopStats, SerialSource, Source, SourceSpec};
+use host::virtual_device::VirtualDevice;
+use std::collections::HashMap;
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::{Duration, Instant};
+
+/// The shipped default scene, embedded.
+const LIVER_SCENE: &str = include_str!("../../scenes/liver.toml");
 
 /// Arguments of `host demo`.
 #[derive(clap::Args, Debug)]
 pub struct Args {
-    /// Use this mesh instead of the embedded liver.
+    /// Scene file (default: the embedded host/scenes/liver.toml).
+    #[arg(long)]
+    scene: Option<PathBuf>,
+    /// Use this organ mesh instead of the scene's (.msh, .vtu, .vtk; m), e.g.
+    /// host/meshes/liver-10k.msh.
     #[arg(long)]
     mesh: Option<PathBuf>,
-    /// Young's modulus in Pa (liver parenchyma is a few kPa).
-    #[arg(long, default_value_t = 3.0e3)]
-    young: f64,
-    /// Poisson's ratio.
-    #[arg(long, default_value_t = 0.45)]
-    poisson: f64,
-    /// How far the tool presses into the organ, in metres.
-    #[arg(long, default_value_t = 0.005)]
-    depth: f64,
+    /// Telemetry source: `virtual` (the firmware loop on this PC), `sil` (the QEMU image) or
+    /// `serial:<port>` (a device).
+    #[arg(long, default_value = "virtual")]
+    source: SourceSpec,
+    /// Serial baud rate for `--source serial:<port>`.
+    #[arg(long, default_value_t = 921_600)]
+    baud: u32,
+    /// Port of the viewer on 127.0.0.1 (0: any free port).
+    #[arg(long, default_value_t = 8080)]
+    port: u16,
+    /// Open the page in the default browser (xdg-open).
+    #[arg(long)]
+    open: bool,
+    /// Run without a browser: a scripted hand motion (default `press`), then print figures.
+    #[arg(long)]
+    headless: bool,
+    /// Stop after this many seconds (default: run until stopped; 10 when headless).
+    #[arg(long)]
+    seconds: Option<f64>,
+    /// Scripted hand motion (virtual source only).
+    #[arg(long, value_enum)]
+    script: Option<Script>,
+    /// Print the figures as one JSON object.
+    #[arg(long)]
+    json: bool,
+    /// Display frame rate, Hz.
+    #[arg(long, default_value_t = 60.0)]
+    fps: f64,
+    /// Record the deformation as a ParaView series (demo.pvd + frame_NNNNNN.vtu) in this
+    /// directory.
+    #[arg(long)]
+    record: Option<PathBuf>,
+    /// Contact nodes whose compliance columns are kept in memory.
+    #[arg(long, default_value_t = 256)]
+    cache_nodes: usize,
 }
 
 /// Runs the command.
 pub fn run(args: Args) -> Result<()> {
-    println!(
-        "NOTE: the interactive demo (browser view, mouse-driven tool, live force) is not built \
-         yet.\nThis run shows what exists today: the compliance precompute and the contact-force \
-         solve on the default liver scene.\n"
-    );
-    let t = Instant::now();
-    let (mesh, name) = match &args.mesh {
-        Some(p) => (host::mesh::load(p)?, p.display().to_string()),
-        None => (
-            host::mesh::parse_msh(host::scene::BUILTIN_LIVER).context("embedded default liver")?,
-            "embedded liver-1k4.msh".to_string(),
-        ),
+    if !(args.fps.is_finite() && args.fps > 0.0 && args.fps <= 1000.0) {
+        bail!("--fps must lie in (0, 1000], got {}", args.fps);
+    }
+    if let Some(s) = args.seconds
+        && !(s.is_finite() && s > 0.0)
+    {
+        bail!("--seconds must be a positive number, got {s}");
+    }
+    let mut scene = match &args.scene {
+        Some(p) => Scene::load(p)?,
+        None => Scene::parse(Path::new("host/scenes/liver.toml (embedded)"), LIVER_SCENE)?,
     };
-    let surface = host::mesh::boundary(&mesh)?;
-    let (lo, hi) = mesh.bounding_box();
-    println!(
-        "mesh      {name}: {} nodes, {} tetrahedra, {} surface triangles, {:.3} x {:.3} x {:.3} m",
-        mesh.nodes.len(),
-        mesh.tets.len(),
-        surface.triangles.len(),
-        hi[0] - lo[0],
-        hi[1] - lo[1],
-        hi[2] - lo[2]
-    );
-    let material = Material::new(args.young, args.poisson)?;
-    let mut fixed = FixedSet::none(mesh.nodes.len());
-    let bed = lo[2] + 0.01;
-    let held = fixed.fix_box(&mesh, [lo[0], lo[1], lo[2], hi[0], hi[1], bed], [true; 3])?;
-    println!(
-        "material  E = {} Pa, nu = {}; organ resting on a bed: {held} nodes with z <= {bed:.4} m fixed",
-        args.young, args.poisson
-    );
-    let body = Elasticity::new(&mesh, material)?;
-    let compliance = Compliance::factorize(&body, &fixed)?;
-    let free_surface: Vec<usize> = surface
-        .nodes
-        .iter()
-        .copied()
-        .filter(|&i| (0..3).all(|c| !fixed.is_fixed(i, c)))
-        .collect();
-    let blocks = compliance.blocks(&free_surface, None)?;
-    println!(
-        "compliance {} free surface nodes, all blocks C_nk in {:.3} s (the paper: 8 hours)",
-        free_surface.len(),
+    if let Some(m) = &args.mesh {
+        if !m.is_file() {
+            bail!("--mesh {}: no such file", m.display());
+        }
+        scene.mesh = MeshSource::File(m.clone());
+    }
+    let t = Instant::now();
+    eprintln!("preparing the scene (compliance factorisation, bank) ...");
+    let prep = Prepared::from_scene(scene)?;
+    let (bank_bytes, pairs) = prep.build_bank()?;
+    eprintln!(
+        "scene     {}: {} nodes, {} surface nodes; bank {} reachable nodes, {pairs} coupled \
+         pairs, {:.1} KiB, built in {:.2} s",
+        prep.mesh_name,
+        prep.mesh.nodes.len(),
+        prep.surface.nodes.len(),
+        prep.region.len(),
+        bank_bytes.len() as f64 / 1024.0,
         t.elapsed().as_secs_f64()
     );
-
-    // Press at the top of the organ, straight down: first one node, then a triangle.
-    let centre = [0.5 * (lo[0] + hi[0]), 0.5 * (lo[1] + hi[1])];
-    let top = (0..free_surface.len())
-        .max_by(|&a, &b| {
-            let score = |i: usize| {
-                let p = mesh.nodes[free_surface[i]];
-                p[2] - 0.5 * ((p[0] - centre[0]).powi(2) + (p[1] - centre[1]).powi(2)).sqrt()
-            };
-            score(a).total_cmp(&score(b))
-        })
-        .context("the mesh has no free surface node")?;
-    let press = [0.0, 0.0, -args.depth];
-    let single = contact_forces(&[vec![blocks[top][top]]], &[press])?;
-    println!(
-        "press     node {} by {:.1} mm: force on the tool {:.4} N (point contact)",
-        free_surface[top],
-        args.depth * 1e3,
-        -single.forces[0][2]
-    );
-    if let Some(tri) = surface
-        .triangles
-        .iter()
-        .find(|t| t.contains(&free_surface[top]) && t.iter().all(|v| free_surface.contains(v)))
-    {
-        let idx: Vec<usize> = tri
-            .iter()
-            .map(|v| free_surface.iter().position(|w| w == v).unwrap_or(top))
-            .collect();
-        let c_ss: Vec<Vec<_>> = idx
-            .iter()
-            .map(|&a| idx.iter().map(|&b| blocks[a][b]).collect())
-            .collect();
-        let three = contact_forces(&c_ss, &[press; 3])?;
-        let total: f64 = three.forces.iter().map(|f| -f[2]).sum();
-        println!(
-            "press     triangle {tri:?} by {:.1} mm: force on the tool {total:.4} N (3 contact nodes)",
-            args.depth * 1e3
+    if bank_bytes.len() > super::bank::BANK_REGION_BYTES {
+        eprintln!(
+            "note      this bank is larger than the MCU's 768 KiB bank region: fine for the \
+             virtual device, too big for the board"
         );
     }
+    let aligned = AlignedBytes::new(&bank_bytes);
+    let bank = Bank::parse(&aligned).map_err(|e| anyhow::anyhow!("built bank invalid: {e}"))?;
+    let bank_to_mesh: Vec<usize> = bank.mesh_ids().iter().map(|&k| k as usize).collect();
+    let cal = *bank.device();
+    let workspace = Workspace::from_device(&cal);
+
+    let Prepared {
+        mesh,
+        mesh_name,
+        surface,
+        compliance,
+        ..
+    } = prep;
+    let (display, neighbours) = display_mesh(&mesh.nodes, &surface);
+    let aim = press_point(&mesh.nodes, &surface.triangles)
+        .context("the organ's surface has no point under its top centre")?;
+
+    let mut source: Box<dyn Source> = match &args.source {
+        SourceSpec::Virtual => Box::new(VirtualDevice::start(bank_bytes.clone())?),
+        SourceSpec::Sil => bail!(
+            "--source sil: the QEMU software-in-the-loop source is not available in this build \
+             yet (it comes with the SIL harness); use --source virtual or serial:<port>"
+        ),
+        SourceSpec::Serial(port) => Box::new(SerialSource::open(
+            port,
+            args.baud,
+            *bank.tissue_law(),
+            cal.max_force_n,
+        )?),
+    };
+    let steering = source.steering();
+    let script = match (args.script, args.headless) {
+        (Some(s), _) => Some(s),
+        (None, true) => Some(Script::Press),
+        (None, false) => None,
+    };
+    if script.is_some() && steering.is_none() {
+        bail!("--script needs a source that can be steered (--source virtual)");
+    }
+
+    let (lo, hi) = bounds(&display.rest);
+    let info = serde_json::json!({
+        "mesh": mesh_name, "mesh_nodes": mesh.nodes.len(), "display_nodes": display.rest.len(),
+        "triangles": display.triangles.len(), "fulcrum_m": cal.fulcrum_m,
+        "tip_radius_m": cal.tip_radius_m, "max_force_n": cal.max_force_n,
+        "bbox_min": lo, "bbox_max": hi, "press_point": aim,
+        "source": format!("{:?}", args.source),
+    });
+    let steer_fn: Option<SteerFn> = steering.clone().map(|s| {
+        let f: SteerFn = Arc::new(move |aim: [f64; 3], depth: f64| {
+            s(aim_joints(&workspace, aim, depth));
+        });
+        f
+    });
+    let mesh_bytes = Arc::new(display);
+    let server = Server::start(args.port, mesh_bytes.encode(), info, steer_fn)?;
+    let url = format!("http://{}/", server.addr);
+    println!("viewer    {url}");
+    if args.open {
+        let _ = std::process::Command::new("xdg-open").arg(&url).spawn();
+    }
+
+    let stop = Arc::new(AtomicBool::new(false));
+    let scripter = match (script, &steering) {
+        (Some(s), Some(steer)) => {
+            let scripted = Scripted::new(s, &workspace, &mesh.nodes, &surface.triangles, aim)
+                .context("the scripted path misses the organ")?;
+            let (steer, stop) = (Arc::clone(steer), Arc::clone(&stop));
+            Some(std::thread::spawn(move || {
+                let t0 = Instant::now();
+                while !stop.load(Ordering::Relaxed) {
+                    steer(scripted.joints(t0.elapsed().as_secs_f64()));
+                    std::thread::sleep(Duration::from_millis(5));
+                }
+            }))
+        }
+        _ => None,
+    };
+
+    let seconds = args.seconds.or(args.headless.then_some(10.0));
+    let until = seconds.map(|s| Instant::now() + Duration::from_secs_f64(s));
+    let mesh = Arc::new(mesh);
+    let compliance = Arc::new(compliance);
+    let mut recorder = match &args.record {
+        Some(dir) => Some(Recorder::start(
+            dir,
+            Arc::clone(&mesh),
+            Arc::clone(&compliance),
+        )?),
+        None => None,
+    };
+    let deformer = Deformer::new(
+        Arc::clone(&compliance),
+        &mesh.nodes,
+        surface.nodes.clone(),
+        args.cache_nodes,
+    );
+    let mut pipeline = Pipeline {
+        source: source.as_mut(),
+        deformer,
+        mesh: mesh_bytes,
+        bank_to_mesh,
+        neighbours,
+        hub: server.hub.clone(),
+        fps: args.fps,
+    };
+    let (display_stats, loop_stats) = pipeline.run(
+        &stop,
+        until,
+        recorder
+            .as_mut()
+            .map(|r| r as &mut dyn host::display::FrameSink),
+    )?;
+    stop.store(true, Ordering::Relaxed);
+    if let Some(t) = scripter {
+        let _ = t.join();
+    }
+    let recorded = match recorder {
+        Some(r) => Some(r.finish()?),
+        None => None,
+    };
+    report(
+        &args,
+        &display_stats,
+        &loop_stats,
+        recorded,
+        mesh.nodes.len(),
+    );
     Ok(())
+}
+
+/// Prints the figures of a run.
+fn report(args: &Args, d: &DisplayStats, l: &LoopStats, recorded: Option<usize>, nodes: usize) {
+    if args.json {
+        let v = serde_json::json!({
+            "tick_rate_hz": l.tick_rate_hz, "max_jitter_us": l.max_jitter_us,
+            "p99_jitter_us": l.p99_jitter_us,
+            "display_fps": d.display_fps, "peak_force_n": l.peak_force_n,
+            "faults": l.faults, "realtime": l.realtime, "frames": d.frames, "mean_frame_ms": d.mean_frame_ms,
+            "max_frame_ms": d.max_frame_ms, "approximate_frames": d.approximate_frames,
+            "column_batches": d.columns.batches, "column_nodes": d.columns.nodes,
+            "column_batch_mean_ms": mean_batch_ms(d),
+            "column_batch_max_ms": d.columns.max_seconds * 1e3,
+            "mesh_nodes": nodes, "recorded_frames": recorded,
+        });
+        println!("{v}");
+        return;
+    }
+    let jitter = match (l.max_jitter_us, l.p99_jitter_us) {
+        (Some(m), Some(p)) => format!("{m:.0} us (p99 {p:.0} us)"),
+        (Some(m), None) => format!("{m:.0} us"),
+        _ => "unknown".to_string(),
+    };
+    println!(
+        "loop      {:.1} Hz, max jitter {jitter}{}, {} faults, peak force {:.3} N",
+        l.tick_rate_hz,
+        if l.realtime { " (SCHED_FIFO)" } else { "" },
+        l.faults,
+        l.peak_force_n
+    );
+    println!(
+        "display   {:.1} frames/s ({} frames of {nodes}-node organ, {:.2} ms mean, {:.2} ms max \
+         per frame, {} while columns were being solved)",
+        d.display_fps, d.frames, d.mean_frame_ms, d.max_frame_ms, d.approximate_frames
+    );
+    println!(
+        "columns   {} contact nodes solved in {} batches, {:.1} ms mean, {:.1} ms max per batch",
+        d.columns.nodes,
+        d.columns.batches,
+        mean_batch_ms(d),
+        d.columns.max_seconds * 1e3
+    );
+    if let (Some(n), Some(dir)) = (recorded, &args.record) {
+        println!("recorded  {n} frames in {}", dir.join("demo.pvd").display());
+    }
+}
+
+fn mean_batch_ms(d: &DisplayStats) -> f64 {
+    if d.columns.batches == 0 {
+        0.0
+    } else {
+        d.columns.seconds * 1e3 / d.columns.batches as f64
+    }
+}
+
+/// The display surface (boundary nodes, remapped triangles) and each surface node's
+/// neighbours along the triangles (mesh ids).
+fn display_mesh(
+    nodes: &[[f64; 3]],
+    surface: &host::mesh::Surface,
+) -> (DisplayMesh, HashMap<usize, Vec<usize>>) {
+    let index: HashMap<usize, u32> = surface
+        .nodes
+        .iter()
+        .enumerate()
+        .map(|(i, &k)| (k, i as u32))
+        .collect();
+    let mut neighbours: HashMap<usize, Vec<usize>> = HashMap::new();
+    for t in &surface.triangles {
+        for i in 0..3 {
+            let (a, b) = (t[i], t[(i + 1) % 3]);
+            neighbours.entry(a).or_default().push(b);
+            neighbours.entry(b).or_default().push(a);
+        }
+    }
+    for v in neighbours.values_mut() {
+        v.sort_unstable();
+        v.dedup();
+    }
+    let mesh = DisplayMesh {
+        rest: surface
+            .nodes
+            .iter()
+            .map(|&k| nodes[k].map(|x| x as f32))
+            .collect(),
+        triangles: surface
+            .triangles
+            .iter()
+            .map(|t| t.map(|k| index.get(&k).copied().unwrap_or(0)))
+            .collect(),
+    };
+    (mesh, neighbours)
+}
+
+/// Where the scripts and the page's first view aim: the surface point straight under the
+/// centre of the organ's bounding box, seen from above.
+fn press_point(nodes: &[[f64; 3]], triangles: &[[usize; 3]]) -> Option<[f64; 3]> {
+    let (lo, hi) = bounds(nodes);
+    let from = [0.5 * (lo[0] + hi[0]), 0.5 * (lo[1] + hi[1]), hi[2] + 1.0];
+    let d = ray_hit(nodes, triangles, from, [0.0, 0.0, -1.0])?;
+    Some([from[0], from[1], from[2] - d])
+}
+
+fn bounds<T: Copy + Into<f64>>(p: &[[T; 3]]) -> ([f64; 3], [f64; 3]) {
+    let mut lo = [f64::INFINITY; 3];
+    let mut hi = [f64::NEG_INFINITY; 3];
+    for q in p {
+        for a in 0..3 {
+            lo[a] = lo[a].min(q[a].into());
+            hi[a] = hi[a].max(q[a].into());
+        }
+    }
+    (lo, hi)
 }

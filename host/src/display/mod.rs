@@ -1,0 +1,285 @@
+//! The host display: from telemetry samples to deformed-surface frames for the browser viewer.
+//!
+//! [`Pipeline::run`] takes the newest [`Sample`] of a [`Source`] at a fixed frame rate, maps its
+//! contact set to mesh nodes, computes the surface displacement ([`Deformer`]), and publishes
+//! one binary frame ([`encode_frame`]) to the [`server`], which hands each viewer only the newest
+//! frame (a slow or vanished browser drops frames; the loop thread never waits for anyone).
+//! Optionally every frame is also offered to a recorder (ParaView series, [`crate::record`]).
+//!
+//! Wire format (little-endian), served once at `/mesh.bin`: `u32 nodes, u32 triangles,
+//! f32 rest[3 nodes], u32 tri[3 triangles]`; and per frame over the WebSocket `/ws`:
+//! [`FRAME_HEADER_BYTES`] of header (see [`encode_frame`]) then `f32 positions[3 nodes]`.
+
+pub mod server;
+
+use crate::deform::{Coverage, Deformer, SolveStats};
+use crate::source::{LoopStats, Sample, Source};
+use bank_format::State;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::{Duration, Instant};
+
+/// Magic of a frame, "HFR1".
+pub const FRAME_MAGIC: u32 = u32::from_le_bytes(*b"HFR1");
+/// Bytes of a frame header.
+pub const FRAME_HEADER_BYTES: usize = 64;
+
+/// The displayed surface: rest positions and triangles over the display nodes.
+#[derive(Debug, Clone)]
+pub struct DisplayMesh {
+    /// Rest positions of the display nodes, m.
+    pub rest: Vec<[f32; 3]>,
+    /// Triangles (indices into `rest`), outward.
+    pub triangles: Vec<[u32; 3]>,
+}
+
+impl DisplayMesh {
+    /// The `/mesh.bin` bytes.
+    pub fn encode(&self) -> Vec<u8> {
+        let mut b = Vec::with_capacity(8 + 12 * self.rest.len() + 12 * self.triangles.len());
+        b.extend((self.rest.len() as u32).to_le_bytes());
+        b.extend((self.triangles.len() as u32).to_le_bytes());
+        self.rest
+            .iter()
+            .flatten()
+            .for_each(|x| b.extend(x.to_le_bytes()));
+        self.triangles
+            .iter()
+            .flatten()
+            .for_each(|x| b.extend(x.to_le_bytes()));
+        b
+    }
+}
+
+/// What a frame says besides the positions.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FrameInfo {
+    /// Frame number.
+    pub seq: u32,
+    /// Device tick of the sample.
+    pub tick: u32,
+    /// Safety state.
+    pub state: State,
+    /// Number of contact nodes.
+    pub contacts: u8,
+    /// Whether every contact node's own columns were used.
+    pub exact: bool,
+    /// Tool tip, m.
+    pub tip_m: [f32; 3],
+    /// Force rendered on the tool, N.
+    pub tool_force_n: [f32; 3],
+    /// Loop tick rate, Hz.
+    pub tick_rate_hz: f32,
+    /// Frames produced per second, Hz.
+    pub display_fps: f32,
+    /// Largest tick jitter so far, µs (negative when unknown).
+    pub max_jitter_us: f32,
+}
+
+/// One frame: header `u32 magic, u32 seq, u32 tick, u8 state (0 disarmed, 1 armed, 2 fault),
+/// u8 contacts, u8 exact, u8 0, f32 tip[3], f32 tool_force[3], f32 tick_rate_hz,
+/// f32 display_fps, f32 max_jitter_us, u32 nodes`, zero padding to [`FRAME_HEADER_BYTES`], then
+/// `f32 positions[3 nodes]`.
+pub fn encode_frame(info: &FrameInfo, positions: &[[f32; 3]], out: &mut Vec<u8>) {
+    out.clear();
+    out.extend(FRAME_MAGIC.to_le_bytes());
+    out.extend(info.seq.to_le_bytes());
+    out.extend(info.tick.to_le_bytes());
+    let state = match info.state {
+        State::Disarmed => 0u8,
+        State::Armed => 1,
+        State::Fault => 2,
+    };
+    out.extend([state, info.contacts, u8::from(info.exact), 0]);
+    for x in info.tip_m.iter().chain(&info.tool_force_n) {
+        out.extend(x.to_le_bytes());
+    }
+    for x in [info.tick_rate_hz, info.display_fps, info.max_jitter_us] {
+        out.extend(x.to_le_bytes());
+    }
+    out.extend((positions.len() as u32).to_le_bytes());
+    out.resize(FRAME_HEADER_BYTES, 0);
+    positions
+        .iter()
+        .flatten()
+        .for_each(|x| out.extend(x.to_le_bytes()));
+}
+
+/// Display figures of a run.
+#[derive(Debug, Clone, Copy, Default, PartialEq, serde::Serialize)]
+pub struct DisplayStats {
+    /// Frames produced.
+    pub frames: u64,
+    /// Frames per second of wall time.
+    pub display_fps: f64,
+    /// Mean time to produce one frame (deformation and encoding), ms.
+    pub mean_frame_ms: f64,
+    /// Largest time to produce one frame, ms.
+    pub max_frame_ms: f64,
+    /// Frames that used a nearby node's columns while a contact node's were being solved.
+    pub approximate_frames: u64,
+    /// Compliance column solves (in the deformer's worker thread).
+    pub columns: SolveStats,
+}
+
+/// Receives each frame's sample and displacement (a recorder).
+pub trait FrameSink {
+    /// Called once per frame; must not block for long.
+    fn frame(&mut self, info: &FrameInfo, contacts: &[(usize, [f32; 3])], u: &[[f32; 3]]);
+}
+
+/// The frame loop (see the module notes).
+pub struct Pipeline<'a> {
+    /// The telemetry source.
+    pub source: &'a mut dyn Source,
+    /// Surface displacement.
+    pub deformer: Deformer,
+    /// The displayed surface.
+    pub mesh: Arc<DisplayMesh>,
+    /// Mesh node id of each bank node (the bank's `mesh_ids`).
+    pub bank_to_mesh: Vec<usize>,
+    /// Surface neighbours of each mesh node (for prefetching columns); empty lists allowed.
+    pub neighbours: std::collections::HashMap<usize, Vec<usize>>,
+    /// Where frames go.
+    pub hub: server::Hub,
+    /// Target frame rate, Hz.
+    pub fps: f64,
+}
+
+impl Pipeline<'_> {
+    /// Produces frames until `stop` is set or `until` passes; `sink` sees every frame.
+    pub fn run(
+        &mut self,
+        stop: &AtomicBool,
+        until: Option<Instant>,
+        mut sink: Option<&mut dyn FrameSink>,
+    ) -> anyhow::Result<(DisplayStats, LoopStats)> {
+        let period = Duration::from_secs_f64(1.0 / self.fps.max(1.0));
+        let start = Instant::now();
+        let mut next = start;
+        let mut stats = DisplayStats::default();
+        let mut busy = Duration::ZERO;
+        let mut current: Option<Sample> = None;
+        let (mut u, mut positions, mut bytes) = (Vec::new(), Vec::new(), Vec::new());
+        let mut contacts: Vec<(usize, [f32; 3])> = Vec::new();
+        loop {
+            if stop.load(Ordering::Relaxed) || until.is_some_and(|t| Instant::now() >= t) {
+                break;
+            }
+            let now = Instant::now();
+            if now < next {
+                std::thread::sleep(next - now);
+            }
+            next += period;
+            if Instant::now() > next + 10 * period {
+                next = Instant::now();
+            }
+            let began = Instant::now();
+            if let Some(s) = self.source.latest(Duration::ZERO)? {
+                current = Some(s);
+            }
+            let Some(sample) = &current else {
+                continue;
+            };
+            contacts.clear();
+            contacts.extend(
+                sample.contacts.iter().filter_map(|c| {
+                    Some((*self.bank_to_mesh.get(usize::from(c.node))?, c.force_n))
+                }),
+            );
+            let coverage = self.deformer.displacement(&contacts, &mut u);
+            if coverage == Coverage::Approximate {
+                stats.approximate_frames += 1;
+            } else {
+                let ring: Vec<usize> = contacts
+                    .iter()
+                    .flat_map(|c| self.neighbours.get(&c.0).into_iter().flatten().copied())
+                    .collect();
+                self.deformer.prefetch(&ring);
+            }
+            positions.clear();
+            positions.extend(
+                self.mesh
+                    .rest
+                    .iter()
+                    .zip(&u)
+                    .map(|(r, d)| [r[0] + d[0], r[1] + d[1], r[2] + d[2]]),
+            );
+            let loop_stats = self.source.stats();
+            let elapsed = began.duration_since(start).as_secs_f64();
+            let info = FrameInfo {
+                seq: stats.frames as u32,
+                tick: sample.tick,
+                state: sample.state,
+                contacts: contacts.len().min(255) as u8,
+                exact: coverage == Coverage::Exact,
+                tip_m: sample.tip_m,
+                tool_force_n: sample.tool_force_n,
+                tick_rate_hz: loop_stats.tick_rate_hz as f32,
+                display_fps: if elapsed > 0.0 {
+                    (stats.frames as f64 / elapsed) as f32
+                } else {
+                    0.0
+                },
+                max_jitter_us: loop_stats.max_jitter_us.map_or(-1.0, |j| j as f32),
+            };
+            encode_frame(&info, &positions, &mut bytes);
+            self.hub.publish(bytes.clone(), &info);
+            if let Some(s) = sink.as_deref_mut() {
+                s.frame(&info, &contacts, &u);
+            }
+            stats.frames += 1;
+            let spent = began.elapsed();
+            busy += spent;
+            stats.max_frame_ms = stats.max_frame_ms.max(spent.as_secs_f64() * 1e3);
+        }
+        stats.columns = self.deformer.solve_stats();
+        let elapsed = start.elapsed().as_secs_f64();
+        if stats.frames > 0 {
+            stats.display_fps = stats.frames as f64 / elapsed;
+            stats.mean_frame_ms = busy.as_secs_f64() * 1e3 / stats.frames as f64;
+        }
+        Ok((stats, self.source.stats()))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn frame_layout_is_as_documented() {
+        let info = FrameInfo {
+            seq: 7,
+            tick: 1234,
+            state: State::Armed,
+            contacts: 3,
+            exact: true,
+            tip_m: [0.1, 0.2, 0.3],
+            tool_force_n: [0.0, 0.0, 1.5],
+            tick_rate_hz: 1000.0,
+            display_fps: 60.0,
+            max_jitter_us: 80.0,
+        };
+        let mut b = Vec::new();
+        encode_frame(&info, &[[1.0, 2.0, 3.0], [4.0, 5.0, 6.0]], &mut b);
+        assert_eq!(b.len(), FRAME_HEADER_BYTES + 24);
+        let f = |o: usize| f32::from_le_bytes(b[o..o + 4].try_into().unwrap());
+        let w = |o: usize| u32::from_le_bytes(b[o..o + 4].try_into().unwrap());
+        assert_eq!(&b[0..4], b"HFR1");
+        assert_eq!((w(4), w(8)), (7, 1234));
+        assert_eq!(&b[12..16], &[1, 3, 1, 0]);
+        assert_eq!([f(16), f(20), f(24)], [0.1, 0.2, 0.3]);
+        assert_eq!([f(28), f(32), f(36)], [0.0, 0.0, 1.5]);
+        assert_eq!([f(40), f(44), f(48)], [1000.0, 60.0, 80.0]);
+        assert_eq!(w(52), 2);
+        assert_eq!(f(FRAME_HEADER_BYTES + 20), 6.0);
+        let mesh = DisplayMesh {
+            rest: vec![[1.0, 2.0, 3.0]],
+            triangles: vec![[0, 0, 0]],
+        };
+        let m = mesh.encode();
+        assert_eq!(m.len(), 8 + 12 + 12);
+        assert_eq!(&m[0..8], &[1, 0, 0, 0, 1, 0, 0, 0]);
+    }
+}

@@ -1,0 +1,242 @@
+//! `--record <dir>`: the deformation sequence as a ParaView series, `<dir>/demo.pvd` listing
+//! `<dir>/frame_NNNNNN.vtu` files (every file written atomically: temp file, fsync, rename).
+//!
+//! Each `.vtu` is the whole tetrahedral organ, not only the displayed surface: its points are the
+//! deformed positions `x + u` with `u = K_ff^-1 f` for the frame's contact forces (one
+//! sequential solve with the kept factorisation, the volume counterpart of the display's
+//! `C[:, S] f_S`), point data `displacement` (m) and `force` (N, non-zero on the contact nodes).
+//! The recorder runs in its own thread and takes at most [`RECORD_FPS`] frames per second; when
+//! it is busy, frames are skipped, never waited for.
+
+use crate::compliance::Compliance;
+use crate::display::{FrameInfo, FrameSink};
+use crate::fsio::write_atomic;
+use crate::mesh::TetMesh;
+use anyhow::{Context, Result};
+use faer::{Mat, Par};
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::sync::mpsc::{Receiver, SyncSender, TrySendError, sync_channel};
+use std::thread::JoinHandle;
+use std::time::{Duration, Instant};
+
+/// Largest recording rate, frames per second.
+pub const RECORD_FPS: f64 = 20.0;
+
+struct Job {
+    time_s: f64,
+    contacts: Vec<(usize, [f32; 3])>,
+}
+
+/// The recorder: a [`FrameSink`] feeding a writer thread.
+pub struct Recorder {
+    jobs: Option<SyncSender<Job>>,
+    thread: Option<JoinHandle<Result<usize>>>,
+    started: Instant,
+    last: Option<Instant>,
+}
+
+impl Recorder {
+    /// Creates `dir` if needed and starts the writer thread.
+    pub fn start(dir: &Path, mesh: Arc<TetMesh>, compliance: Arc<Compliance>) -> Result<Recorder> {
+        std::fs::create_dir_all(dir)
+            .with_context(|| format!("cannot create the recording directory {}", dir.display()))?;
+        let (tx, rx) = sync_channel(1);
+        let dir = dir.to_path_buf();
+        let thread = std::thread::Builder::new()
+            .name("recorder".into())
+            .spawn(move || write_all(&dir, &mesh, &compliance, &rx))?;
+        Ok(Recorder {
+            jobs: Some(tx),
+            thread: Some(thread),
+            started: Instant::now(),
+            last: None,
+        })
+    }
+
+    /// Stops after the frame in progress; returns how many frames were written.
+    pub fn finish(mut self) -> Result<usize> {
+        self.jobs.take();
+        match self.thread.take().map(|t| t.join()) {
+            Some(Ok(r)) => r,
+            Some(Err(_)) => anyhow::bail!("the recorder thread panicked"),
+            None => Ok(0),
+        }
+    }
+}
+
+impl FrameSink for Recorder {
+    fn frame(&mut self, _info: &FrameInfo, contacts: &[(usize, [f32; 3])], _u: &[[f32; 3]]) {
+        let now = Instant::now();
+        if self
+            .last
+            .is_some_and(|l| now - l < Duration::from_secs_f64(1.0 / RECORD_FPS))
+        {
+            return;
+        }
+        let Some(jobs) = &self.jobs else { return };
+        let job = Job {
+            time_s: (now - self.started).as_secs_f64(),
+            contacts: contacts.to_vec(),
+        };
+        match jobs.try_send(job) {
+            Ok(()) => self.last = Some(now),
+            Err(TrySendError::Full(_)) | Err(TrySendError::Disconnected(_)) => {}
+        }
+    }
+}
+
+fn write_all(
+    dir: &Path,
+    mesh: &TetMesh,
+    compliance: &Compliance,
+    jobs: &Receiver<Job>,
+) -> Result<usize> {
+    let mut entries: Vec<(f64, PathBuf)> = Vec::new();
+    while let Ok(job) = jobs.recv() {
+        let name = PathBuf::from(format!("frame_{:06}.vtu", entries.len()));
+        let mut forces = vec![0.0; 3 * mesh.nodes.len()];
+        for &(k, f) in &job.contacts {
+            if k < mesh.nodes.len() {
+                (0..3).for_each(|i| forces[3 * k + i] += f64::from(f[i]));
+            }
+        }
+        let u = solve_sequential(compliance, &forces);
+        write_atomic(&dir.join(&name), vtu(mesh, &u, &forces).as_bytes())?;
+        entries.push((job.time_s, name));
+        write_atomic(&dir.join("demo.pvd"), pvd(&entries).as_bytes())?;
+    }
+    Ok(entries.len())
+}
+
+/// `u = K_ff^-1 f` (node-major, zeros at fixed dofs) on one thread.
+fn solve_sequential(c: &Compliance, forces: &[f64]) -> Vec<f64> {
+    let dofs = c.dofs();
+    let mut rhs = Mat::<f64>::zeros(dofs.free_count(), 1);
+    for node in 0..dofs.nodes() {
+        for comp in 0..3 {
+            if let Some(d) = dofs.free_dof(node, comp) {
+                rhs[(d, 0)] = forces[3 * node + comp];
+            }
+        }
+    }
+    if dofs.free_count() > 0 {
+        c.solve_in_place(rhs.as_mut(), Par::Seq);
+    }
+    let free: Vec<f64> = (0..dofs.free_count()).map(|i| rhs[(i, 0)]).collect();
+    dofs.expand(&free)
+}
+
+/// One `.vtu` (ASCII): deformed points, tetrahedra, displacement and force point data.
+fn vtu(mesh: &TetMesh, u: &[f64], forces: &[f64]) -> String {
+    let (n, t) = (mesh.nodes.len(), mesh.tets.len());
+    let mut s = String::with_capacity(120 * n + 40 * t);
+    s.push_str("<?xml version=\"1.0\"?>\n<VTKFile type=\"UnstructuredGrid\" version=\"1.0\" byte_order=\"LittleEndian\">\n<UnstructuredGrid>\n");
+    let _ = writeln!(s, "<Piece NumberOfPoints=\"{n}\" NumberOfCells=\"{t}\">");
+    s.push_str("<PointData Vectors=\"displacement\">\n");
+    for (name, data) in [("displacement", u), ("force", forces)] {
+        let _ = writeln!(
+            s,
+            "<DataArray type=\"Float64\" Name=\"{name}\" NumberOfComponents=\"3\" format=\"ascii\">"
+        );
+        for v in data.chunks_exact(3) {
+            let _ = writeln!(s, "{:e} {:e} {:e}", v[0], v[1], v[2]);
+        }
+        s.push_str("</DataArray>\n");
+    }
+    s.push_str("</PointData>\n<Points>\n<DataArray type=\"Float64\" NumberOfComponents=\"3\" format=\"ascii\">\n");
+    for (p, d) in mesh.nodes.iter().zip(u.chunks_exact(3)) {
+        let _ = writeln!(s, "{:e} {:e} {:e}", p[0] + d[0], p[1] + d[1], p[2] + d[2]);
+    }
+    s.push_str("</DataArray>\n</Points>\n<Cells>\n<DataArray type=\"Int64\" Name=\"connectivity\" format=\"ascii\">\n");
+    for c in &mesh.tets {
+        let _ = writeln!(s, "{} {} {} {}", c[0], c[1], c[2], c[3]);
+    }
+    s.push_str("</DataArray>\n<DataArray type=\"Int64\" Name=\"offsets\" format=\"ascii\">\n");
+    for i in 1..=t {
+        let _ = writeln!(s, "{}", 4 * i);
+    }
+    s.push_str("</DataArray>\n<DataArray type=\"UInt8\" Name=\"types\" format=\"ascii\">\n");
+    for _ in 0..t {
+        s.push_str("10\n");
+    }
+    s.push_str("</DataArray>\n</Cells>\n</Piece>\n</UnstructuredGrid>\n</VTKFile>\n");
+    s
+}
+
+/// The `.pvd` collection: one `DataSet` per frame with its time in seconds.
+fn pvd(entries: &[(f64, PathBuf)]) -> String {
+    let mut s = String::from(
+        "<?xml version=\"1.0\"?>\n<VTKFile type=\"Collection\" version=\"0.1\">\n<Collection>\n",
+    );
+    for (t, f) in entries {
+        let _ = writeln!(
+            s,
+            "<DataSet timestep=\"{t:.6}\" group=\"\" part=\"0\" file=\"{}\"/>",
+            f.display()
+        );
+    }
+    s.push_str("</Collection>\n</VTKFile>\n");
+    s
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::fem::{Elasticity, FixedSet, Material};
+    use crate::mesh::structured::box_mesh;
+
+    #[test]
+    fn recorded_frames_read_back_deformed_with_every_point() {
+        let mesh = box_mesh([0.04, 0.02, 0.02], [4, 2, 2]);
+        let mut fixed = FixedSet::none(mesh.nodes.len());
+        fixed
+            .fix_box(&mesh, [-1.0, -1.0, -1.0, 1.0, 1.0, 1e-6], [true; 3])
+            .unwrap();
+        let body = Elasticity::new(&mesh, Material::new(3.0e3, 0.45).unwrap()).unwrap();
+        let c = Arc::new(Compliance::factorize(&body, &fixed).unwrap());
+        let top = (0..mesh.nodes.len())
+            .find(|&i| mesh.nodes[i][2] > 0.0199)
+            .unwrap();
+        let f = [0.0f32, 0.0, -0.2];
+        let mut forces = vec![0.0; 3 * mesh.nodes.len()];
+        forces[3 * top + 2] = f64::from(f[2]);
+        let reference = c.displacement(&forces);
+
+        let dir = tempfile::tempdir().unwrap();
+        let mesh = Arc::new(mesh);
+        let mut rec = Recorder::start(dir.path(), Arc::clone(&mesh), Arc::clone(&c)).unwrap();
+        let info = FrameInfo {
+            seq: 0,
+            tick: 1,
+            state: bank_format::State::Armed,
+            contacts: 1,
+            exact: true,
+            tip_m: [0.0; 3],
+            tool_force_n: [0.0, 0.0, 0.2],
+            tick_rate_hz: 1000.0,
+            display_fps: 60.0,
+            max_jitter_us: 0.0,
+        };
+        rec.frame(&info, &[(top, f)], &[]);
+        assert_eq!(rec.finish().unwrap(), 1);
+
+        let back = crate::mesh::read(&dir.path().join("frame_000000.vtu")).unwrap();
+        assert_eq!(back.nodes.len(), mesh.nodes.len());
+        assert_eq!(back.tets, mesh.tets);
+        for (i, (p, q)) in back.nodes.iter().zip(&mesh.nodes).enumerate() {
+            for a in 0..3 {
+                let want = q[a] + reference[3 * i + a];
+                assert!((p[a] - want).abs() < 1e-12, "node {i}: {p:?} vs {want}");
+            }
+        }
+        assert!(
+            reference[3 * top + 2] < -1e-4,
+            "the press moves the node down"
+        );
+        let pvd = std::fs::read_to_string(dir.path().join("demo.pvd")).unwrap();
+        assert!(pvd.contains("file=\"frame_000000.vtu\""));
+        assert!(!dir.path().join("demo.pvd.tmp").exists());
+    }
+}

@@ -1,0 +1,243 @@
+//! Aiming the tool at the organ, and the demo's scripted hand motions (`press`, `slide`,
+//! `strike`), as joint targets `[pitch, yaw, insertion]` for [`crate::source::Steering`].
+//!
+//! Depth is measured along the shaft from the organ's rest surface: `insertion = |aim -
+//! fulcrum| + depth`, with `(pitch, yaw)` pointing the shaft at the aimed surface point
+//! ([`Workspace::angles`]); positive depth presses in, negative hovers above.
+
+use crate::reach::Workspace;
+
+/// Joint target that points the shaft at `aim` (m) and pushes `depth` (m) beyond it.
+pub fn aim_joints(ws: &Workspace, aim: [f64; 3], depth: f64) -> [f64; 3] {
+    let v: [f64; 3] = std::array::from_fn(|i| aim[i] - ws.fulcrum[i]);
+    let (pitch, yaw) = ws.angles(v);
+    let dist = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
+    [pitch, yaw, dist + depth]
+}
+
+/// Distance along the unit ray `origin + t dir` to the nearest triangle it crosses (t > 0);
+/// Möller-Trumbore per triangle.
+pub fn ray_hit(
+    positions: &[[f64; 3]],
+    triangles: &[[usize; 3]],
+    origin: [f64; 3],
+    dir: [f64; 3],
+) -> Option<f64> {
+    let sub = |a: [f64; 3], b: [f64; 3]| [a[0] - b[0], a[1] - b[1], a[2] - b[2]];
+    let dot = |a: [f64; 3], b: [f64; 3]| a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+    let cross = |a: [f64; 3], b: [f64; 3]| {
+        [
+            a[1] * b[2] - a[2] * b[1],
+            a[2] * b[0] - a[0] * b[2],
+            a[0] * b[1] - a[1] * b[0],
+        ]
+    };
+    let mut best: Option<f64> = None;
+    for t in triangles {
+        let [a, b, c] = t.map(|i| positions[i]);
+        let (e1, e2) = (sub(b, a), sub(c, a));
+        let p = cross(dir, e2);
+        let det = dot(e1, p);
+        if det.abs() < 1e-18 {
+            continue;
+        }
+        let s = sub(origin, a);
+        let u = dot(s, p) / det;
+        let q = cross(s, e1);
+        let v = dot(dir, q) / det;
+        let dist = dot(e2, q) / det;
+        if (0.0..=1.0).contains(&u) && v >= 0.0 && u + v <= 1.0 && dist > 0.0 {
+            best = Some(best.map_or(dist, |d| d.min(dist)));
+        }
+    }
+    best
+}
+
+/// A scripted hand motion, repeated for as long as the demo runs.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum Script {
+    /// Every 3 s: hover 5 mm above the aim point, press 8 mm in over 1 s, hold, release.
+    Press,
+    /// Every 4 s: press 6 mm in, slide +-0.08 rad in yaw (about +-9 mm on the organ) and back,
+    /// release.
+    Slide,
+    /// Every 1.5 s: from 20 mm above, strike 8 mm in at the hand's top speed, hold 0.25 s,
+    /// withdraw.
+    Strike,
+}
+
+/// Samples of the rest surface's distance from the fulcrum along the shaft across the slide's
+/// yaw sweep.
+const SWEEP_SAMPLES: usize = 65;
+/// Yaw amplitude of `slide`, rad.
+const SLIDE_YAW: f64 = 0.08;
+
+/// A script bound to a scene: the aim direction and the surface distances along the sweep.
+#[derive(Debug, Clone)]
+pub struct Scripted {
+    script: Script,
+    pitch: f64,
+    yaw: f64,
+    /// Surface distance for yaw `yaw + SLIDE_YAW * (2 i / (n - 1) - 1)`.
+    sweep: Vec<f64>,
+}
+
+impl Scripted {
+    /// Binds `script` to the surface (rest `positions`, outward `triangles`) aimed at `aim`.
+    /// Returns `None` when the shaft pointed at `aim` misses the surface.
+    pub fn new(
+        script: Script,
+        ws: &Workspace,
+        positions: &[[f64; 3]],
+        triangles: &[[usize; 3]],
+        aim: [f64; 3],
+    ) -> Option<Scripted> {
+        let [pitch, yaw, _] = aim_joints(ws, aim, 0.0);
+        let sweep = (0..SWEEP_SAMPLES)
+            .map(|i| {
+                let y = yaw + SLIDE_YAW * (2.0 * i as f64 / (SWEEP_SAMPLES - 1) as f64 - 1.0);
+                let tip = ws.tip(pitch, y, 1.0);
+                let dir = std::array::from_fn(|k| tip[k] - ws.fulcrum[k]);
+                ray_hit(positions, triangles, ws.fulcrum, dir)
+            })
+            .collect::<Option<Vec<f64>>>()?;
+        Some(Scripted {
+            script,
+            pitch,
+            yaw,
+            sweep,
+        })
+    }
+
+    /// Surface distance at yaw offset `s * SLIDE_YAW`, `s` in [-1, 1] (linear interpolation).
+    fn surface(&self, s: f64) -> f64 {
+        let x = (s.clamp(-1.0, 1.0) + 1.0) * 0.5 * (SWEEP_SAMPLES - 1) as f64;
+        let i = (x.floor() as usize).min(SWEEP_SAMPLES - 2);
+        let w = x - i as f64;
+        self.sweep[i] * (1.0 - w) + self.sweep[i + 1] * w
+    }
+
+    /// Joint target at time `t` (s) since the start.
+    pub fn joints(&self, t: f64) -> [f64; 3] {
+        let ramp = |t: f64, t0: f64, t1: f64, a: f64, b: f64| {
+            a + (b - a) * ((t - t0) / (t1 - t0)).clamp(0.0, 1.0)
+        };
+        let (yaw_offset, depth) = match self.script {
+            Script::Press => {
+                let t = t % 3.0;
+                let d = if t < 1.6 {
+                    ramp(t, 0.5, 1.5, -0.005, 0.008)
+                } else {
+                    ramp(t, 2.2, 2.8, 0.008, -0.005)
+                };
+                (0.0, d)
+            }
+            Script::Slide => {
+                let t = t % 4.0;
+                let d = if t < 2.0 {
+                    ramp(t, 0.4, 1.0, -0.005, 0.006)
+                } else {
+                    ramp(t, 3.0, 3.5, 0.006, -0.005)
+                };
+                let s = if (1.0..3.0).contains(&t) {
+                    (std::f64::consts::PI * (t - 1.0)).sin()
+                } else {
+                    0.0
+                };
+                (s, d)
+            }
+            Script::Strike => {
+                let t = t % 1.5;
+                let d = if t < 0.6 {
+                    ramp(t, 0.5, 0.556, -0.020, 0.008)
+                } else {
+                    ramp(t, 0.806, 1.0, 0.008, -0.020)
+                };
+                (0.0, d)
+            }
+        };
+        [
+            self.pitch,
+            self.yaw + SLIDE_YAW * yaw_offset,
+            self.surface(yaw_offset) + depth,
+        ]
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The flat-box workspace of `reach`'s tests: trocar 0.1 m above z = 0, shaft down.
+    fn down() -> Workspace {
+        Workspace {
+            fulcrum: [0.0, 0.0, 0.1],
+            shaft: [0.0, 0.0, -1.0],
+            pitch_axis: [1.0, 0.0, 0.0],
+            yaw_axis: [0.0, 1.0, 0.0],
+            pitch: [-0.4, 0.4],
+            yaw: [-0.4, 0.4],
+            insertion: [0.02, 0.2],
+        }
+    }
+
+    /// Two triangles covering [-0.1, 0.1]^2 at z = 0, normal up.
+    fn plane() -> (Vec<[f64; 3]>, Vec<[usize; 3]>) {
+        let p = vec![
+            [-0.1, -0.1, 0.0],
+            [0.1, -0.1, 0.0],
+            [0.1, 0.1, 0.0],
+            [-0.1, 0.1, 0.0],
+        ];
+        (p, vec![[0, 1, 2], [0, 2, 3]])
+    }
+
+    #[test]
+    fn aiming_reaches_the_aim_point_plus_depth_along_the_shaft() {
+        let ws = down();
+        let aim = [0.02, -0.03, 0.0];
+        let q = aim_joints(&ws, aim, 0.004);
+        let tip = ws.tip(q[0], q[1], q[2]);
+        let v: [f64; 3] = std::array::from_fn(|i| aim[i] - ws.fulcrum[i]);
+        let n = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
+        for i in 0..3 {
+            let want = aim[i] + 0.004 * v[i] / n;
+            assert!((tip[i] - want).abs() < 1e-12, "{tip:?}");
+        }
+    }
+
+    #[test]
+    fn ray_hits_the_plane_at_the_hand_computed_distance() {
+        let (p, t) = plane();
+        // From (0, 0, 0.1) towards (0.03, 0.04, 0): distance sqrt(0.03^2 + 0.04^2 + 0.1^2).
+        let d = [0.03, 0.04, -0.1];
+        let n = (0.03f64 * 0.03 + 0.04 * 0.04 + 0.01).sqrt();
+        let hit = ray_hit(&p, &t, [0.0, 0.0, 0.1], d.map(|x| x / n)).unwrap();
+        assert!((hit - n).abs() < 1e-12);
+        assert_eq!(ray_hit(&p, &t, [0.0, 0.0, 0.1], [0.0, 0.0, 1.0]), None);
+    }
+
+    #[test]
+    fn scripts_press_to_their_depth_below_the_rest_surface() {
+        let (p, t) = plane();
+        let ws = down();
+        let s = Scripted::new(Script::Press, &ws, &p, &t, [0.0, 0.0, 0.0]).unwrap();
+        // Held at 8 mm from 1.5 s to 2.2 s, straight down: tip at z = -0.008.
+        let q = s.joints(1.8);
+        assert!((ws.tip(q[0], q[1], q[2])[2] + 0.008).abs() < 1e-12);
+        assert!(
+            (s.joints(0.2)[2] - 0.095).abs() < 1e-12,
+            "hovering 5 mm above"
+        );
+        // Slide: mid-sweep (t = 1.5 s) at +SLIDE_YAW, 6 mm below the plane along the shaft.
+        let s = Scripted::new(Script::Slide, &ws, &p, &t, [0.0, 0.0, 0.0]).unwrap();
+        let q = s.joints(1.5);
+        assert!((q[1] - SLIDE_YAW).abs() < 1e-12);
+        let tip = ws.tip(q[0], q[1], q[2]);
+        assert!((tip[2] + 0.006 * SLIDE_YAW.cos()).abs() < 1e-6, "{tip:?}");
+        // Strike: 8 mm in shortly after 0.556 s.
+        let s = Scripted::new(Script::Strike, &ws, &p, &t, [0.0, 0.0, 0.0]).unwrap();
+        assert!((s.joints(0.7)[2] - 0.108).abs() < 1e-12);
+        assert!((s.joints(0.1)[2] - 0.08).abs() < 1e-12);
+    }
+}

@@ -1,0 +1,443 @@
+//! Where the display's telemetry comes from: the [`Source`] trait and the serial-link source.
+//!
+//! A source yields [`Sample`]s (tip, contact set S with the forces `f_S` on the tissue, the
+//! force rendered on the tool, safety state) at whatever rate it has them; the display takes the
+//! newest one per frame. Sources: the virtual device ([`crate::virtual_device`], the firmware's
+//! loop on the PC), a device on a serial port ([`SerialSource`], bank-format link frames), and
+//! later the QEMU image through the plant simulator (`--source sil`, not in this build).
+
+use anyhow::{Context, Result, anyhow};
+use bank_format::{
+    DeviceToHost, FaultReason, FrameDecoder, HostToDevice, MAX_FRAME, State, TissueLaw,
+    encode_frame,
+};
+use firmware::solve::apply_tissue_law;
+use firmware::tick::Contacts;
+use std::io::{ErrorKind, Read};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, Condvar, Mutex};
+use std::thread::JoinHandle;
+use std::time::{Duration, Instant};
+
+/// One telemetry sample, in the bank's frame (m, N).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Sample {
+    /// Device tick number.
+    pub tick: u32,
+    /// Safety state.
+    pub state: State,
+    /// Latched fault, if any.
+    pub fault: Option<FaultReason>,
+    /// Tool tip, m.
+    pub tip_m: [f32; 3],
+    /// Contact set S (bank node indices) and the forces on the tissue `f_S`, N.
+    pub contacts: Contacts,
+    /// Force rendered on the tool, N.
+    pub tool_force_n: [f32; 3],
+}
+
+/// Loop timing as measured by the source, when it can measure it.
+#[derive(Debug, Clone, Copy, Default, PartialEq, serde::Serialize)]
+pub struct LoopStats {
+    /// Ticks per second of wall time since the start.
+    pub tick_rate_hz: f64,
+    /// Largest lateness of a tick start behind its schedule, µs (`None` when unknown).
+    pub max_jitter_us: Option<f64>,
+    /// 99th percentile of that lateness, µs (10 µs resolution; `None` when unknown).
+    pub p99_jitter_us: Option<f64>,
+    /// Largest tool force seen on any tick (not only the sampled ones), N.
+    pub peak_force_n: f64,
+    /// Faults raised so far.
+    pub faults: u32,
+    /// Whether the loop thread runs with real-time priority (virtual device only).
+    pub realtime: bool,
+}
+
+/// A telemetry stream.
+pub trait Source: Send {
+    /// The newest sample, waiting at most `timeout` for one newer than the last returned;
+    /// `Ok(None)` when nothing new arrived. An error means the source is gone.
+    fn latest(&mut self, timeout: Duration) -> Result<Option<Sample>>;
+
+    /// Loop timing so far.
+    fn stats(&self) -> LoopStats;
+
+    /// A handle that points the tool at joint values `[pitch (rad), yaw (rad), insertion (m)]`
+    /// (for the mouse or a script); `None` when a real hand holds the device.
+    fn steering(&self) -> Option<Steering> {
+        None
+    }
+}
+
+/// Points the tool at joint values `[pitch, yaw, insertion]` (rad, rad, m).
+pub type Steering = Arc<dyn Fn([f64; 3]) + Send + Sync>;
+
+#[derive(Default)]
+struct Published {
+    sample: Option<Sample>,
+    stats: LoopStats,
+}
+
+/// The newest sample and stats of a source thread, for readers that must never hold it up.
+#[derive(Default)]
+pub struct Mailbox {
+    published: Mutex<Published>,
+    fresh: Condvar,
+}
+
+impl Mailbox {
+    /// Replaces the newest sample and the stats.
+    pub fn publish(&self, sample: Sample, stats: LoopStats) {
+        if let Ok(mut p) = self.published.lock() {
+            p.sample = Some(sample);
+            p.stats = stats;
+        }
+        self.fresh.notify_all();
+    }
+
+    /// Replaces the stats only.
+    pub fn publish_stats(&self, stats: LoopStats) {
+        if let Ok(mut p) = self.published.lock() {
+            p.stats = stats;
+        }
+    }
+
+    /// The newest sample if its tick differs from `last`, waiting at most `timeout`.
+    pub fn newer(&self, last: Option<u32>, timeout: Duration) -> Result<Option<Sample>> {
+        let poisoned = || anyhow!("the source thread panicked");
+        let guard = self.published.lock().map_err(|_| poisoned())?;
+        let (guard, _) = self
+            .fresh
+            .wait_timeout_while(guard, timeout, |p| {
+                p.sample.as_ref().map(|s| s.tick) == last
+            })
+            .map_err(|_| poisoned())?;
+        Ok(guard.sample.clone().filter(|s| Some(s.tick) != last))
+    }
+
+    /// The stats.
+    pub fn stats(&self) -> LoopStats {
+        self.published.lock().map(|p| p.stats).unwrap_or_default()
+    }
+}
+
+/// `--source` values.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum SourceSpec {
+    /// The firmware loop on the PC.
+    Virtual,
+    /// The QEMU firmware image through the plant simulator.
+    Sil,
+    /// A device on a serial port.
+    Serial(String),
+}
+
+impl std::str::FromStr for SourceSpec {
+    type Err = String;
+    fn from_str(s: &str) -> Result<SourceSpec, String> {
+        match s {
+            "virtual" => Ok(SourceSpec::Virtual),
+            "sil" => Ok(SourceSpec::Sil),
+            _ => match s.strip_prefix("serial:") {
+                Some(port) if !port.is_empty() => Ok(SourceSpec::Serial(port.to_string())),
+                _ => Err(format!(
+                    "unknown source {s:?}: expected virtual, sil or serial:<port>"
+                )),
+            },
+        }
+    }
+}
+
+/// The force on the tool a serial device renders, rebuilt from its telemetry (which carries
+/// `f_S`, not the tool force): `-Q(sum f_S)`, the law applied along the linear force's own
+/// direction, capped at `max_force_n`. Exact for the linear law; for a non-linear law the
+/// firmware applies Q along the tip displacement, which the link does not carry, so this is
+/// then an approximation.
+pub fn tool_force_from_contacts(
+    law: &TissueLaw,
+    contacts: &Contacts,
+    max_force_n: f32,
+) -> [f32; 3] {
+    let mut f = [0.0f32; 3];
+    for c in contacts {
+        (0..3).for_each(|i| f[i] += c.force_n[i]);
+    }
+    let q = apply_tissue_law(law, f, f).unwrap_or([0.0; 3]);
+    let n = (q[0] * q[0] + q[1] * q[1] + q[2] * q[2]).sqrt();
+    let scale = if n > max_force_n {
+        max_force_n / n
+    } else {
+        1.0
+    };
+    q.map(|x| -x * scale)
+}
+
+/// A device on a serial port: a reader thread decodes `DeviceToHost::Telemetry` frames and
+/// sends a heartbeat every 2 ms (the firmware's link-silence watchdog expects one within 10
+/// ticks).
+pub struct SerialSource {
+    mailbox: Arc<Mailbox>,
+    stop: Arc<AtomicBool>,
+    thread: Option<JoinHandle<()>>,
+    last_tick: Option<u32>,
+}
+
+impl SerialSource {
+    /// Opens `port` at `baud` and greets the device; `law` and `max_force_n` come from the
+    /// bank the device runs (the same scene).
+    pub fn open(port: &str, baud: u32, law: TissueLaw, max_force_n: f32) -> Result<SerialSource> {
+        let mut handle = serialport::new(port, baud)
+            .timeout(Duration::from_millis(2))
+            .open()
+            .with_context(|| format!("cannot open serial port {port}"))?;
+        send(&mut *handle, &HostToDevice::Hello)
+            .with_context(|| format!("{port}: cannot send Hello"))?;
+        let mailbox = Arc::new(Mailbox::default());
+        let stop = Arc::new(AtomicBool::new(false));
+        let link = Link {
+            port: handle,
+            decoder: FrameDecoder::new(),
+            law,
+            max_force_n,
+            first_tick: None,
+            stats: LoopStats::default(),
+        };
+        let (m, st) = (Arc::clone(&mailbox), Arc::clone(&stop));
+        let thread = std::thread::Builder::new()
+            .name("serial-link".into())
+            .spawn(move || link.run(&m, &st))?;
+        Ok(SerialSource {
+            mailbox,
+            stop,
+            thread: Some(thread),
+            last_tick: None,
+        })
+    }
+}
+
+impl Drop for SerialSource {
+    fn drop(&mut self) {
+        self.stop.store(true, Ordering::Relaxed);
+        if let Some(t) = self.thread.take() {
+            let _ = t.join();
+        }
+    }
+}
+
+impl Source for SerialSource {
+    fn latest(&mut self, timeout: Duration) -> Result<Option<Sample>> {
+        let s = self.mailbox.newer(self.last_tick, timeout)?;
+        if let Some(s) = &s {
+            self.last_tick = Some(s.tick);
+        }
+        Ok(s)
+    }
+
+    fn stats(&self) -> LoopStats {
+        self.mailbox.stats()
+    }
+}
+
+fn send(port: &mut dyn serialport::SerialPort, msg: &HostToDevice) -> Result<()> {
+    let mut buf = [0u8; MAX_FRAME];
+    let frame = encode_frame(msg, &mut buf).map_err(|e| anyhow!("encoding {msg:?}: {e:?}"))?;
+    port.write_all(frame)?;
+    Ok(())
+}
+
+/// The serial reader thread's state.
+struct Link {
+    port: Box<dyn serialport::SerialPort>,
+    decoder: FrameDecoder<DeviceToHost>,
+    law: TissueLaw,
+    max_force_n: f32,
+    first_tick: Option<(u32, Instant)>,
+    stats: LoopStats,
+}
+
+impl Link {
+    fn run(mut self, mailbox: &Mailbox, stop: &AtomicBool) {
+        let mut buf = [0u8; 512];
+        let mut last_heartbeat = Instant::now();
+        while !stop.load(Ordering::Relaxed) {
+            if last_heartbeat.elapsed() >= Duration::from_millis(2) {
+                if send(&mut *self.port, &HostToDevice::Heartbeat).is_err() {
+                    return;
+                }
+                last_heartbeat = Instant::now();
+            }
+            match self.port.read(&mut buf) {
+                Ok(0) => return,
+                Ok(n) => {
+                    let msgs: Vec<DeviceToHost> = self
+                        .decoder
+                        .feed_slice(buf.get(..n).unwrap_or(&[]))
+                        .filter_map(|r| r.ok())
+                        .collect();
+                    msgs.into_iter().for_each(|m| self.absorb(m, mailbox));
+                }
+                Err(e) if e.kind() == ErrorKind::TimedOut => {}
+                Err(_) => return,
+            }
+        }
+    }
+
+    fn absorb(&mut self, msg: DeviceToHost, mailbox: &Mailbox) {
+        match msg {
+            DeviceToHost::Telemetry(t) => {
+                let now = Instant::now();
+                let (t0, i0) = *self.first_tick.get_or_insert((t.tick, now));
+                if now > i0 {
+                    self.stats.tick_rate_hz =
+                        f64::from(t.tick.wrapping_sub(t0)) / (now - i0).as_secs_f64();
+                }
+                let tool_force_n =
+                    tool_force_from_contacts(&self.law, &t.contacts, self.max_force_n);
+                let f = tool_force_n.iter().map(|x| x * x).sum::<f32>().sqrt();
+                self.stats.peak_force_n = self.stats.peak_force_n.max(f64::from(f));
+                let sample = Sample {
+                    tick: t.tick,
+                    state: t.state,
+                    fault: t.fault,
+                    tip_m: t.tip_m,
+                    contacts: t.contacts,
+                    tool_force_n,
+                };
+                mailbox.publish(sample, self.stats);
+            }
+            DeviceToHost::Fault { .. } => {
+                self.stats.faults += 1;
+                mailbox.publish_stats(self.stats);
+            }
+            DeviceToHost::Hello { .. } | DeviceToHost::Plant { .. } => {}
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use bank_format::Contact;
+
+    #[test]
+    fn source_names_parse() {
+        assert_eq!("virtual".parse(), Ok(SourceSpec::Virtual));
+        assert_eq!("sil".parse(), Ok(SourceSpec::Sil));
+        assert_eq!(
+            "serial:/dev/ttyACM0".parse(),
+            Ok(SourceSpec::Serial("/dev/ttyACM0".into()))
+        );
+        assert!("serial:".parse::<SourceSpec>().is_err());
+        assert!("qemu".parse::<SourceSpec>().unwrap_err().contains("qemu"));
+    }
+
+    #[test]
+    fn tool_force_is_minus_the_law_of_the_total_contact_force() {
+        let mut c = Contacts::new();
+        c.push(Contact {
+            node: 1,
+            force_n: [0.0, 0.0, -0.4],
+        })
+        .unwrap();
+        c.push(Contact {
+            node: 2,
+            force_n: [0.1, 0.0, -0.2],
+        })
+        .unwrap();
+        // Linear law with gain 2: Q(|f|) = 2 |f| along f.
+        let law = TissueLaw::linear(0.0, 2.0, [0.0, 5.0]).unwrap();
+        let f = tool_force_from_contacts(&law, &c, 5.0);
+        let want = [-0.2f32, 0.0, 1.2];
+        for i in 0..3 {
+            assert!((f[i] - want[i]).abs() < 1e-6, "{f:?}");
+        }
+        // Capped at the device's largest force.
+        let capped = tool_force_from_contacts(&law, &c, 0.5);
+        let n = capped.iter().map(|x| x * x).sum::<f32>().sqrt();
+        assert!((n - 0.5).abs() < 1e-6);
+    }
+
+    /// A pseudo-terminal pair: the master end plays the device.
+    #[cfg(target_os = "linux")]
+    fn pty() -> (std::fs::File, String, std::fs::File) {
+        use std::os::fd::FromRawFd;
+        let (mut m, mut s) = (0, 0);
+        // SAFETY: openpty writes two new descriptors into `m` and `s`; null name/termios/winsize
+        // are allowed.
+        let rc = unsafe {
+            libc::openpty(
+                &mut m,
+                &mut s,
+                std::ptr::null_mut(),
+                std::ptr::null(),
+                std::ptr::null(),
+            )
+        };
+        assert_eq!(rc, 0, "openpty failed");
+        // SAFETY: `s` is a valid descriptor; ttyname returns a NUL-terminated static buffer.
+        let name = unsafe { std::ffi::CStr::from_ptr(libc::ttyname(s)) }
+            .to_string_lossy()
+            .into_owned();
+        // SAFETY: both descriptors are fresh and owned by the returned files only.
+        unsafe {
+            (
+                std::fs::File::from_raw_fd(m),
+                name,
+                std::fs::File::from_raw_fd(s),
+            )
+        }
+    }
+
+    #[cfg(target_os = "linux")]
+    #[test]
+    fn serial_source_decodes_telemetry_and_sends_heartbeats() {
+        use std::io::Write as _;
+        let (mut device, name, _slave) = pty();
+        let law = TissueLaw::linear(0.0, 1.0, [0.0, 5.0]).unwrap();
+        let mut src = SerialSource::open(&name, 115_200, law, 5.0).unwrap();
+        assert!(src.steering().is_none());
+        let mut contacts = Contacts::new();
+        contacts
+            .push(Contact {
+                node: 4,
+                force_n: [0.0, 0.1, -0.3],
+            })
+            .unwrap();
+        let t = bank_format::Telemetry {
+            tick: 500,
+            state: State::Armed,
+            mode: bank_format::Mode::Render,
+            fault: None,
+            tip_m: [0.01, 0.02, 0.05],
+            contacts: contacts.clone(),
+            currents_a: [0.1, 0.0, -0.2],
+            counters: bank_format::Counters::default(),
+        };
+        let mut buf = [0u8; MAX_FRAME];
+        let frame = encode_frame(&DeviceToHost::Telemetry(t), &mut buf).unwrap();
+        // Line noise first: the decoder resynchronises on the frame delimiter.
+        device.write_all(&[0x13, 0x37, 0x00]).unwrap();
+        device.write_all(frame).unwrap();
+        let s = src
+            .latest(Duration::from_secs(5))
+            .unwrap()
+            .expect("a sample");
+        assert_eq!(
+            (s.tick, s.state, s.tip_m),
+            (500, State::Armed, [0.01, 0.02, 0.05])
+        );
+        assert_eq!(s.contacts, contacts);
+        assert_eq!(s.tool_force_n, [0.0, -0.1, 0.3]);
+        // The host greeted the device and keeps the link alive.
+        let mut rx: FrameDecoder<HostToDevice> = FrameDecoder::new();
+        let mut got = Vec::new();
+        let end = Instant::now() + Duration::from_secs(5);
+        let mut bytes = [0u8; 256];
+        while !(got.contains(&HostToDevice::Hello) && got.contains(&HostToDevice::Heartbeat)) {
+            assert!(Instant::now() < end, "got {got:?}");
+            let n = device.read(&mut bytes).unwrap();
+            got.extend(rx.feed_slice(&bytes[..n]).filter_map(|r| r.ok()));
+        }
+        assert_eq!(got[0], HostToDevice::Hello);
+    }
+}
