@@ -20,6 +20,11 @@ pub const TELEMETRY_EVERY_TICKS: u32 = 10;
 /// At most this many link bytes are read at each of the two link polls of a tick, so a flood
 /// cannot stretch a tick.
 pub const MAX_RX_BYTES_PER_POLL: usize = 64;
+/// A link that delivers bytes but no valid frame for this many ticks more than the supervisor's
+/// link timeout counts as silent too (a host sending only garbage is as good as none). Bytes
+/// alone keep the link alive for that long because a slow UART (QEMU's carries about two bytes
+/// a tick) needs several ticks for one frame.
+pub const GARBLED_LINK_GRACE_TICKS: u32 = 90;
 /// Outgoing bytes buffered per tick (a message that does not fit is dropped).
 const TX_CAPACITY: usize = 3 * MAX_FRAME;
 
@@ -41,6 +46,7 @@ pub struct App<'b> {
     core: Core<'b>,
     rx: FrameDecoder<HostToDevice>,
     ticks_since_host_frame: u32,
+    ticks_since_host_byte: u32,
     last_tick_cycles: u32,
     tx: heapless::Vec<u8, TX_CAPACITY>,
 }
@@ -62,6 +68,7 @@ impl<'b> App<'b> {
             core,
             rx: FrameDecoder::new(),
             ticks_since_host_frame: 0,
+            ticks_since_host_byte: 0,
             last_tick_cycles: 0,
             tx: heapless::Vec::new(),
         };
@@ -101,7 +108,7 @@ impl<'b> App<'b> {
         let input = LoopInput {
             encoder_counts: counts,
             overrun,
-            ticks_since_host_frame: self.ticks_since_host_frame,
+            ticks_since_host_frame: self.link_silence(),
         };
         let (out, new_fault) = match &mut self.core {
             Core::Loop(lp) => {
@@ -149,6 +156,7 @@ impl<'b> App<'b> {
             ..out
         };
         self.ticks_since_host_frame = self.ticks_since_host_frame.saturating_add(1);
+        self.ticks_since_host_byte = self.ticks_since_host_byte.saturating_add(1);
         plant.actuate(&out)?;
         // Again after the plant exchange: a UART holding one byte at a time (QEMU's) may have
         // received another meanwhile; what arrives now applies from the next tick.
@@ -230,8 +238,18 @@ impl<'b> App<'b> {
         }
     }
 
+    /// How long the host has been silent, in ticks, for the supervisor's link timeout: since
+    /// the last byte, or since the last valid frame less [`GARBLED_LINK_GRACE_TICKS`].
+    fn link_silence(&self) -> u32 {
+        self.ticks_since_host_byte.max(
+            self.ticks_since_host_frame
+                .saturating_sub(GARBLED_LINK_GRACE_TICKS),
+        )
+    }
+
     /// Feed one link byte; apply the command it completes, count it or the dropped frame.
     fn receive(&mut self, byte: u8) {
+        self.ticks_since_host_byte = 0;
         match self.rx.feed(byte) {
             None => {}
             Some(Err(_)) => {
@@ -478,6 +496,72 @@ mod tests {
         // A plant error stops the tick and is returned.
         plant.fail_at = Some(31);
         assert_eq!(app.tick(&mut plant, &mut link, &clock, false), Err(31));
+    }
+
+    /// A slow link (one byte a tick, so a frame takes several ticks) is not silent; a link
+    /// that delivers only garbage is, once the garbled-link grace has run out.
+    #[test]
+    fn slow_link_stays_alive_and_garbage_alone_is_silence() {
+        let bytes = flat_patch();
+        let bank = Bank::parse(bytes.as_slice()).unwrap();
+        let mut app = App::new(Ok(&bank));
+        let (mut plant, mut link, clock) = rig();
+        link.send(&HostToDevice::Arm);
+        app.tick(&mut plant, &mut link, &clock, false).unwrap();
+        // Heartbeats trickled one byte per tick: never 10 ticks without a byte.
+        let mut buf = [0u8; MAX_FRAME];
+        let beat = encode_frame(&HostToDevice::Heartbeat, &mut buf)
+            .unwrap()
+            .to_vec();
+        let mut slow = SlowLink::default();
+        for _ in 0..200 {
+            if slow.queue.is_empty() {
+                slow.queue.extend_from_slice(&beat);
+            }
+            app.tick(&mut plant, &mut slow, &clock, false).unwrap();
+        }
+        assert!(plant.out.iter().all(|a| a.state == WireState::Armed));
+        assert!(app.telemetry().counters.rx_frames > 20);
+        // Now one garbage byte a tick (after what is left of a heartbeat): alive for the
+        // grace, then silent.
+        let mut states = Vec::new();
+        for _ in 0..200u32 {
+            slow.queue.push(0x55);
+            app.tick(&mut plant, &mut slow, &clock, false).unwrap();
+            states.push(plant.out.last().unwrap().state);
+        }
+        let limit = (GARBLED_LINK_GRACE_TICKS + firmware_link_timeout()) as usize;
+        assert!(states[..limit - 1].iter().all(|&s| s == WireState::Armed));
+        // The partial heartbeat may complete up to a frame's length into the garbage.
+        assert!(
+            states[limit + beat.len()..]
+                .iter()
+                .all(|&s| s == WireState::Fault)
+        );
+        assert_eq!(app.telemetry().fault, Some(FaultReason::LinkSilent));
+    }
+
+    fn firmware_link_timeout() -> u32 {
+        crate::safety::DEFAULT_LINK_TIMEOUT_TICKS
+    }
+
+    /// Delivers one queued byte per call of a tick (two reads per tick: the second finds none).
+    #[derive(Default)]
+    struct SlowLink {
+        queue: Vec<u8>,
+        read_this_tick: bool,
+    }
+
+    impl LinkPort for SlowLink {
+        fn read_byte(&mut self) -> Option<u8> {
+            if self.read_this_tick || self.queue.is_empty() {
+                self.read_this_tick = false;
+                return None;
+            }
+            self.read_this_tick = true;
+            Some(self.queue.remove(0))
+        }
+        fn write(&mut self, _: &[u8]) {}
     }
 
     #[test]
