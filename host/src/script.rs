@@ -53,8 +53,10 @@ pub fn ray_hit(
     best
 }
 
-/// A scripted hand motion, repeated for as long as the demo runs.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+/// A scripted hand motion, repeated for as long as the demo runs (the demo's steering, below;
+/// the SIL plant's hand in `sil::script`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
 pub enum Script {
     /// Every 3 s: hover 5 mm above the aim point, press 8 mm in over 1 s, hold, release.
     Press,

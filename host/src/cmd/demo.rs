@@ -17,7 +17,7 @@ use host::reach::Workspace;
 use host::record::Recorder;
 use host::scene::{MeshSource, Scene};
 use host::script::{Script, Scripted, aim_joints, ray_hit};
-use host::source::{LoopStats, SerialSource, Source, SourceSpec};
+use host::source::{LoopStats, SerialSource, SilSource, Source, SourceSpec};
 use host::virtual_device::VirtualDevice;
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
@@ -57,7 +57,7 @@ pub struct Args {
     /// Stop after this many seconds (default: run until stopped; 10 when headless).
     #[arg(long)]
     seconds: Option<f64>,
-    /// Scripted hand motion (virtual source only).
+    /// Scripted hand motion (virtual source: the mouse's stand-in; sil: the plant's hand).
     #[arg(long, value_enum)]
     script: Option<Script>,
     /// Print the figures as one JSON object.
@@ -132,12 +132,31 @@ pub fn run(args: Args) -> Result<()> {
     let aim = press_point(&mesh.nodes, &surface.triangles)
         .context("the organ's surface has no point under its top centre")?;
 
+    let mut sil_bank: Option<tempfile::NamedTempFile> = None;
     let mut source: Box<dyn Source> = match &args.source {
         SourceSpec::Virtual => Box::new(VirtualDevice::start(bank_bytes.clone())?),
-        SourceSpec::Sil => bail!(
-            "--source sil: the QEMU software-in-the-loop source is not available in this build \
-             yet (it comes with the SIL harness); use --source virtual or serial:<port>"
-        ),
+        SourceSpec::Sil => {
+            // The bank built above, loaded into QEMU's flash as the board's would be; the
+            // image's hand follows the script (default press) for --seconds (default 60 s).
+            let file = sil_bank.insert(tempfile::NamedTempFile::new()?);
+            std::io::Write::write_all(file, &bank_bytes)?;
+            let setup = host::sil::harness::Setup {
+                qemu: PathBuf::from("qemu-system-arm"),
+                image: host::sil::harness::build_image()?,
+                bank: file.path().to_path_buf(),
+            };
+            let seconds = args
+                .seconds
+                .unwrap_or(if args.headless { 10.0 } else { 60.0 });
+            let script = args.script.unwrap_or(Script::Press);
+            let session = host::sil::harness::Session::new(&bank, script, seconds + 1.0)?;
+            Box::new(SilSource::start(
+                setup,
+                session,
+                *bank.tissue_law(),
+                cal.max_force_n,
+            )?)
+        }
         SourceSpec::Serial(port) => Box::new(SerialSource::open(
             port,
             args.baud,
@@ -151,8 +170,8 @@ pub fn run(args: Args) -> Result<()> {
         (None, true) => Some(Script::Press),
         (None, false) => None,
     };
-    if script.is_some() && steering.is_none() {
-        bail!("--script needs a source that can be steered (--source virtual)");
+    if args.script.is_some() && steering.is_none() && args.source != SourceSpec::Sil {
+        bail!("--script needs a source that can be steered (--source virtual) or sil");
     }
 
     let (lo, hi) = bounds(&display.rest);

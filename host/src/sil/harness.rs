@@ -85,6 +85,21 @@ pub struct Session {
     /// 125 MIPS core) is what the image's instruction counter assumes; a larger shift slows the
     /// virtual CPU 2^(shift - 3) times, to provoke overruns.
     pub icount_shift: u8,
+    /// Hold each tick until its time in wall time (1 ms per tick from the start), for a live
+    /// display; otherwise the run goes as fast as QEMU does.
+    pub real_time: bool,
+    /// Called with every message the image sends on the link, as it arrives.
+    pub observer: Option<LinkObserver>,
+}
+
+/// A callback for the image's link messages ([`Session::observer`]).
+#[derive(Clone)]
+pub struct LinkObserver(pub Arc<dyn Fn(&DeviceToHost) + Send + Sync>);
+
+impl std::fmt::Debug for LinkObserver {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("LinkObserver")
+    }
 }
 
 impl Session {
@@ -107,6 +122,8 @@ impl Session {
             heartbeat_until: None,
             encoder_override: Vec::new(),
             icount_shift: 3,
+            real_time: false,
+            observer: None,
         })
     }
 }
@@ -375,7 +392,11 @@ fn exchange(
     set_blocking(&to_image)?;
 
     let done = Arc::new(AtomicU32::new(0));
-    let reader = spawn_link_reader(link.try_clone()?, Arc::clone(&done));
+    let reader = spawn_link_reader(
+        link.try_clone()?,
+        Arc::clone(&done),
+        session.observer.clone(),
+    );
     let mut link_tx = link;
 
     // Watchdog: a run far slower than expected (a hung image) is killed, which closes the
@@ -407,7 +428,14 @@ fn exchange(
     let mut hand_prev = session.trajectory.at(0.0);
     // Link bytes written but perhaps not yet read by the image (two reads per tick at most).
     let mut in_flight: u32 = 0;
+    let started = Instant::now();
     for tick in 1..=session.ticks {
+        if session.real_time {
+            let due = started + Duration::from_millis(u64::from(tick));
+            if let Some(wait) = due.checked_duration_since(Instant::now()) {
+                std::thread::sleep(wait);
+            }
+        }
         for (_, send) in session.link.iter().filter(|(t, _)| *t == tick) {
             in_flight += send_link(&mut link_tx, send)? as u32;
         }
@@ -502,6 +530,7 @@ fn exchange(
 fn spawn_link_reader(
     mut sock: TcpStream,
     done: Arc<AtomicU32>,
+    observer: Option<LinkObserver>,
 ) -> std::thread::JoinHandle<(Vec<LinkEvent>, FrameStats)> {
     std::thread::spawn(move || {
         let events = Mutex::new(Vec::new());
@@ -512,6 +541,9 @@ fn spawn_link_reader(
                 break;
             }
             for r in decoder.feed_slice(&buf[..n]) {
+                if let (Ok(msg), Some(o)) = (&r, &observer) {
+                    (o.0)(msg);
+                }
                 if let Ok(msg) = r
                     && let Ok(mut ev) = events.lock()
                 {

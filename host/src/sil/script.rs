@@ -14,17 +14,9 @@ use anyhow::{Result, bail};
 use bank_format::Bank;
 use firmware::device::{Device, Joints};
 
-/// A scripted hand motion.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum, serde::Serialize)]
-#[serde(rename_all = "lowercase")]
-pub enum Script {
-    /// Press straight down and release.
-    Press,
-    /// Press, then slide sideways along the surface.
-    Slide,
-    /// A fast strike onto the surface.
-    Strike,
-}
+/// The scripted hand motions (the demo's names; the plant's hand follows its own version of
+/// each, below).
+pub use crate::script::Script;
 
 /// Time before the first cycle: rest, then the approach to above the surface, s.
 const APPROACH_END_S: f64 = 0.5;
