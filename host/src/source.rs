@@ -103,17 +103,23 @@ impl Mailbox {
         }
     }
 
-    /// The newest sample if its tick differs from `last`, waiting at most `timeout`.
-    pub fn newer(&self, last: Option<u32>, timeout: Duration) -> Result<Option<Sample>> {
+    /// The newest sample if its tick differs from `*last`, waiting at most `timeout`; `*last`
+    /// becomes that sample's tick.
+    pub fn newer(&self, last: &mut Option<u32>, timeout: Duration) -> Result<Option<Sample>> {
         let poisoned = || anyhow!("the source thread panicked");
         let guard = self.published.lock().map_err(|_| poisoned())?;
+        let seen = *last;
         let (guard, _) = self
             .fresh
             .wait_timeout_while(guard, timeout, |p| {
-                p.sample.as_ref().map(|s| s.tick) == last
+                p.sample.as_ref().map(|s| s.tick) == seen
             })
             .map_err(|_| poisoned())?;
-        Ok(guard.sample.clone().filter(|s| Some(s.tick) != last))
+        let s = guard.sample.clone().filter(|s| Some(s.tick) != seen);
+        if let Some(s) = &s {
+            *last = Some(s.tick);
+        }
+        Ok(s)
     }
 
     /// The stats.
@@ -224,11 +230,7 @@ impl Drop for SerialSource {
 
 impl Source for SerialSource {
     fn latest(&mut self, timeout: Duration) -> Result<Option<Sample>> {
-        let s = self.mailbox.newer(self.last_tick, timeout)?;
-        if let Some(s) = &s {
-            self.last_tick = Some(s.tick);
-        }
-        Ok(s)
+        self.mailbox.newer(&mut self.last_tick, timeout)
     }
 
     fn stats(&self) -> LoopStats {
@@ -384,11 +386,7 @@ impl Source for SilSource {
             t.join().map_err(|_| anyhow!("the SIL thread panicked"))??;
             return Err(anyhow!("the SIL run is over"));
         }
-        let s = self.mailbox.newer(self.last_tick, timeout)?;
-        if let Some(s) = &s {
-            self.last_tick = Some(s.tick);
-        }
-        Ok(s)
+        self.mailbox.newer(&mut self.last_tick, timeout)
     }
 
     fn stats(&self) -> LoopStats {

@@ -97,11 +97,7 @@ impl Drop for VirtualDevice {
 
 impl Source for VirtualDevice {
     fn latest(&mut self, timeout: Duration) -> Result<Option<Sample>> {
-        let s = self.shared.mailbox.newer(self.last_tick, timeout)?;
-        if let Some(s) = &s {
-            self.last_tick = Some(s.tick);
-        }
-        Ok(s)
+        self.shared.mailbox.newer(&mut self.last_tick, timeout)
     }
 
     fn stats(&self) -> LoopStats {

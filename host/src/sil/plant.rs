@@ -123,21 +123,7 @@ mod tests {
     use super::*;
 
     fn cal() -> DeviceCalibration {
-        DeviceCalibration {
-            fulcrum_m: [0.0, 0.0, 0.16],
-            shaft_axis: [0.0, 0.0, -1.0],
-            pitch_axis: [1.0, 0.0, 0.0],
-            yaw_axis: [0.0, 1.0, 0.0],
-            joint_min: [-0.35, -0.35, 0.03],
-            joint_max: [0.35, 0.35, 0.14],
-            home_joint: [0.0, 0.0, 0.03],
-            counts_per_rev: [4096; 3],
-            transmission: [12.0, 12.0, 400.0],
-            torque_constant_nm_per_a: [0.025; 3],
-            current_limit_a: [2.0; 3],
-            max_force_n: 5.0,
-            tip_radius_m: 0.003,
-        }
+        firmware::fixtures::liver_device()
     }
 
     #[test]
