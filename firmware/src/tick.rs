@@ -16,8 +16,11 @@
 //!    it is the better-conditioned one: it factors the 3 x 3 matrix `B C_SS B^T` (a weighted
 //!    average of the patch's blocks, about as well conditioned as one `C_kk`) and never needs
 //!    `C_SS^-1`, so close or nearly dependent contact nodes do not hurt it. The patch and the
-//!    factor depend only on the anchor, so they are kept while the contact does not slide and
-//!    a pressing tick costs one 3 x 3 solve. The node forces `f_S` (on the tissue, linear model)
+//!    factor depend only on the anchor, so they are kept while the contact presses in place
+//!    (one 3 x 3 solve a tick) and rebuilt when it has slid [`REPATCH_FRACTION`] of the tip
+//!    radius; the first tick of a contact, which also ran the detection, solves on the contact
+//!    triangle alone and the tip's patch follows a tick later (the displacement, hence the
+//!    force, is still tiny then). The node forces `f_S` (on the tissue, linear model)
 //!    are what telemetry reports, so the host's `u = C f_S` displays the surface under the tip;
 //! 4. the tissue law Q on the tool force ([`apply_tissue_law`], bank's law), except in
 //!    [`Mode::LinearLaw`]; the force on the tool is the *opposite* of the force on the tissue
@@ -141,6 +144,9 @@ pub struct PatchOrigin {
     pub bary: [f32; 3],
     /// The point, m.
     pub anchor: [f32; 3],
+    /// The tip radius the patch was built for, m: the bank's, or 0 on the first tick of a
+    /// contact (the contact triangle alone; see [`HapticLoop::tick`]).
+    pub radius_m: f32,
 }
 
 impl<'b> HapticLoop<'b> {
@@ -340,11 +346,22 @@ impl<'b> HapticLoop<'b> {
             self.held = None;
             return Ok((Contacts::new(), [0.0; 3]));
         };
-        let radius = self.bank.device().tip_radius_m;
+        let tip_radius = self.bank.device().tip_radius_m;
         let solve = match self.held {
-            Some(h) if h.origin.triangle == triangle && h.origin.anchor == anchor => h.solve,
-            Some(h) if dist2(h.origin.anchor, anchor) < sq(REPATCH_FRACTION * radius) => h.solve,
-            _ => {
+            // Pressing in place, or slid less than REPATCH_FRACTION of the tip radius.
+            Some(h)
+                if h.origin.radius_m == tip_radius
+                    && (h.origin.anchor == anchor
+                        || dist2(h.origin.anchor, anchor) < sq(REPATCH_FRACTION * tip_radius)) =>
+            {
+                h.solve
+            }
+            held => {
+                // The first tick of a contact also ran the detection: it solves on the
+                // contact triangle alone (the tip's displacement is still tiny, so is the
+                // force), and the next tick builds the tip's patch. This keeps the two costly
+                // steps in different ticks.
+                let radius = if held.is_some() { tip_radius } else { 0.0 };
                 self.held = None;
                 let patch = tool_patch(self.bank, triangle, nodes, bary, anchor, radius);
                 let solve = WeightedSolve::new(self.bank, patch.nodes(), patch.weights())?;
@@ -354,6 +371,7 @@ impl<'b> HapticLoop<'b> {
                         nodes,
                         bary,
                         anchor,
+                        radius_m: radius,
                     },
                     solve,
                 });

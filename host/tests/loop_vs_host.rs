@@ -176,7 +176,7 @@ fn full_tick_forces_match_the_host_f64_reference_on_the_liver_bank() {
             point: origin.anchor.map(f64::from),
         };
         let free = |k: usize| (0..3).all(|c| !fixed.is_fixed(k, c));
-        let patch = surface.tool_patch(&hit, f64::from(cal.tip_radius_m), free);
+        let patch = surface.tool_patch(&hit, f64::from(origin.radius_m), free);
         let got: Vec<(usize, [f32; 3])> = out
             .contacts
             .iter()
