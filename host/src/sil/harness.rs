@@ -426,8 +426,6 @@ fn exchange(
     let mut rx = Vec::new();
     let mut stopped = None;
     let mut hand_prev = session.trajectory.at(0.0);
-    // Link bytes written but perhaps not yet read by the image (two reads per tick at most).
-    let mut in_flight: u32 = 0;
     let started = Instant::now();
     for tick in 1..=session.ticks {
         if session.real_time {
@@ -437,18 +435,13 @@ fn exchange(
             }
         }
         for (_, send) in session.link.iter().filter(|(t, _)| *t == tick) {
-            in_flight += send_link(&mut link_tx, send)? as u32;
+            send_link(&mut link_tx, send)?;
         }
         let beat = session.heartbeat_every > 0
             && tick.is_multiple_of(session.heartbeat_every)
             && session.heartbeat_until.is_none_or(|u| tick < u);
         if beat {
-            in_flight +=
-                send_link(&mut link_tx, &LinkSend::Command(HostToDevice::Heartbeat))? as u32;
-        }
-        if in_flight > 0 {
-            std::thread::sleep(LINK_BYTE_GRACE);
-            in_flight = in_flight.saturating_sub(2);
+            send_link(&mut link_tx, &LinkSend::Command(HostToDevice::Heartbeat))?;
         }
         let counts = session
             .encoder_override
@@ -558,23 +551,15 @@ fn spawn_link_reader(
     })
 }
 
-/// Sends one link message; returns its length in bytes.
-fn send_link(sock: &mut TcpStream, send: &LinkSend) -> Result<usize> {
+/// Sends one link message.
+fn send_link(sock: &mut TcpStream, send: &LinkSend) -> Result<()> {
     let mut buf = [0u8; MAX_FRAME];
     let bytes: &[u8] = match send {
         LinkSend::Command(c) => encode_frame(c, &mut buf)?,
         LinkSend::Raw(r) => r,
     };
-    sock.write_all(bytes).context("link socket write failed")?;
-    Ok(bytes.len())
+    sock.write_all(bytes).context("link socket write failed")
 }
-
-/// Wall time given to QEMU's I/O thread, before each plant exchange while link bytes are in
-/// flight, to move the next byte into the USART's one-byte receive register. The image reads
-/// that register twice per tick; QEMU refills it only from its main loop, in wall time, so on
-/// a busy machine bytes could otherwise arrive ticks late and a heartbeat gap look like a
-/// silent host.
-const LINK_BYTE_GRACE: Duration = Duration::from_micros(100);
 
 /// The next frame from the image's plant output (`None` at end of file).
 fn read_frame(
