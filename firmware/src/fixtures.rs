@@ -30,6 +30,26 @@ pub fn liver_device() -> DeviceCalibration {
     }
 }
 
+/// A bench gimbal for hand-made test banks: shaft down from `fulcrum_m` (m), pitch and yaw
+/// +-0.8 rad, insertion 2-20 cm (home 5 cm), a 2 mm tool tip.
+pub fn bench_device(fulcrum_m: [f32; 3]) -> DeviceCalibration {
+    DeviceCalibration {
+        fulcrum_m,
+        shaft_axis: [0.0, 0.0, -1.0],
+        pitch_axis: [1.0, 0.0, 0.0],
+        yaw_axis: [0.0, 1.0, 0.0],
+        joint_min: [-0.8, -0.8, 0.02],
+        joint_max: [0.8, 0.8, 0.2],
+        home_joint: [0.0, 0.0, 0.05],
+        counts_per_rev: [4096, 4096, 2048],
+        transmission: [10.0, -10.0, 100.0],
+        torque_constant_nm_per_a: [0.03, 0.03, 0.025],
+        current_limit_a: [2.0, 2.0, 1.5],
+        max_force_n: 5.0,
+        tip_radius_m: 0.002,
+    }
+}
+
 /// Spacing of [`flat_patch`], m.
 pub const PATCH_SPACING_M: f64 = 0.01;
 /// Nodes per side of [`flat_patch`].

@@ -581,27 +581,9 @@ pub fn tool_force_with_law(
 mod tests {
     extern crate std;
     use super::*;
-    use bank_format::{AlignedBytes, BankBuilder, DeviceCalibration, TissueLaw};
+    use bank_format::{AlignedBytes, BankBuilder, TissueLaw};
     use std::vec;
     use std::vec::Vec;
-
-    fn device() -> DeviceCalibration {
-        DeviceCalibration {
-            fulcrum_m: [0.005, 0.005, 0.1],
-            shaft_axis: [0.0, 0.0, -1.0],
-            pitch_axis: [1.0, 0.0, 0.0],
-            yaw_axis: [0.0, 1.0, 0.0],
-            joint_min: [-0.8, -0.8, 0.02],
-            joint_max: [0.8, 0.8, 0.2],
-            home_joint: [0.0, 0.0, 0.05],
-            counts_per_rev: [4096, 4096, 2048],
-            transmission: [10.0, -10.0, 100.0],
-            torque_constant_nm_per_a: [0.03, 0.03, 0.025],
-            current_limit_a: [2.0, 2.0, 1.5],
-            max_force_n: 5.0,
-            tip_radius_m: 0.002,
-        }
-    }
 
     /// `C_kl = exp(-|x_k - x_l| / L) M` (an SPD kernel times an SPD 3x3), m/N.
     fn block(p: &[[f64; 3]], k: usize, l: usize) -> [[f64; 3]; 3] {
@@ -634,7 +616,7 @@ mod tests {
             truncation_radius_m: radius,
             scene_id: 1,
             law: TissueLaw::chebyshev(&[2.6, 2.5, 0.1], [0.0, 5.0]).unwrap(),
-            device: device(),
+            device: crate::fixtures::bench_device([0.005, 0.005, 0.1]),
         };
         AlignedBytes::new(&b.build().unwrap())
     }

@@ -7,7 +7,7 @@
 
 #![allow(clippy::needless_range_loop)]
 
-use bank_format::{AlignedBytes, Bank, BankBuilder, DeviceCalibration, TissueLaw};
+use bank_format::{AlignedBytes, Bank, BankBuilder, TissueLaw};
 use firmware::solve::{
     alpha_weights, condition_alpha, condition_barycentric, solve_point, solve_triangle_alpha,
     solve_triangle_barycentric,
@@ -65,21 +65,7 @@ fn bank_bytes() -> AlignedBytes {
         truncation_radius_m: 0.03,
         scene_id: 7,
         law: TissueLaw::chebyshev(&[2.6, 2.5, 0.1], [0.0, 5.0]).unwrap(),
-        device: DeviceCalibration {
-            fulcrum_m: [0.008, 0.004, 0.1],
-            shaft_axis: [0.0, 0.0, -1.0],
-            pitch_axis: [1.0, 0.0, 0.0],
-            yaw_axis: [0.0, 1.0, 0.0],
-            joint_min: [-0.8, -0.8, 0.02],
-            joint_max: [0.8, 0.8, 0.2],
-            home_joint: [0.0, 0.0, 0.05],
-            counts_per_rev: [4096, 4096, 2048],
-            transmission: [10.0, -10.0, 100.0],
-            torque_constant_nm_per_a: [0.03, 0.03, 0.025],
-            current_limit_a: [2.0, 2.0, 1.5],
-            max_force_n: 5.0,
-            tip_radius_m: 0.002,
-        },
+        device: firmware::fixtures::bench_device([0.008, 0.004, 0.1]),
     };
     AlignedBytes::new(&b.build().expect("valid analytic bank"))
 }
