@@ -34,6 +34,7 @@ fi
 step "format and lints"
 cargo fmt --all --check
 cargo clippy --workspace --all-targets --release -- -D warnings
+RUSTDOCFLAGS="-D warnings" cargo doc --workspace --no-deps --quiet
 # The QEMU image is its own workspace (it only builds for the MCU).
 (cd firmware/qemu && cargo fmt --check && cargo clippy --release -- -D warnings)
 

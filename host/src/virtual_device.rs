@@ -1,7 +1,7 @@
 //! The virtual device: the firmware's portable loop ([`firmware::tick::HapticLoop`]) on a bank,
 //! ticking at 1 kHz in its own thread on the PC, with a virtual hand on the encoders.
 //!
-//! The hand follows a joint target (set by the mouse or a script through [`Source::steer`]) at a
+//! The hand follows a joint target (set by the mouse or a script through [`Source::steering`]) at a
 //! bounded speed, well under the supervisor's joint-speed limits, and its joint values become
 //! encoder counts through the bank's calibration ([`counts_for`], the inverse of
 //! [`firmware::device::Device::joints`]), so the tip goes through the same device model as on the

@@ -7,7 +7,7 @@
 //!
 //! One sparse Cholesky factorisation of `K_ff` (nested-dissection ordering, supernodal) replaces
 //! the paper's `3m` conjugate-gradient solves; a sparse forward substitution restricted to the
-//! contact candidates then gives all their blocks at once ([`gram`]).
+//! contact candidates then gives all their blocks at once (module `gram`).
 
 mod gram;
 
@@ -209,7 +209,7 @@ impl Compliance {
     }
 
     /// The blocks `C(nodes[a], nodes[b])` for every pair, `result[a][b]`, row-major in m/N,
-    /// by a sparse forward substitution and a Gram product (see [`gram`]). A requested node's
+    /// by a sparse forward substitution and a Gram product (module `gram`). A requested node's
     /// fixed components give zero rows and columns. The progress bar, if any, counts
     /// supernodes.
     pub fn blocks(
