@@ -38,6 +38,7 @@
 // `!(x > 0.0)` is deliberate throughout: it also rejects NaN.
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 
+use crate::vec3::{add, cross, dot, scale, sqrt, sub};
 use bank_format::Bank;
 
 /// Grazing threshold: a segment whose direction makes `|cos| <= PARALLEL_TOL` with a triangle's
@@ -52,9 +53,6 @@ pub const MAX_REACH_CELLS: u16 = 3;
 pub const MAX_SAMPLES: u32 = 2048;
 /// Cap on the triangle-to-triangle steps of one slide.
 pub const MAX_SLIDE_STEPS: u32 = 32;
-/// Squared distance (m^2) under which a point counts as on the surface: (0.1 um)^2, far below
-/// any mesh size and above f32 rounding of positions within a metre.
-pub const ON_SURFACE_D2: f32 = 1.0e-14;
 /// The stick cone: while touching, the tangential displacement may reach this many times the
 /// normal displacement before the contact slides (about the friction coefficient of an
 /// instrument on wet tissue).
@@ -150,15 +148,8 @@ const SAMPLE_STEP_CELLS: f32 = 0.25;
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ContactTracker {
     params: SearchParams,
-    active: Option<Active>,
-}
-
-#[derive(Clone, Copy, Debug, PartialEq)]
-struct Active {
-    triangle: u32,
-    nodes: [u16; 3],
-    bary: [f32; 3],
-    anchor: [f32; 3],
+    /// The anchor: the rest-surface point the tool holds.
+    active: Option<SurfacePoint>,
 }
 
 impl ContactTracker {
@@ -195,11 +186,11 @@ impl ContactTracker {
         if let Some(active) = self.active {
             self.active = track(bank, active, tip);
         } else if let Some(hit) = detect(bank, &self.params, prev_tip, tip) {
-            self.active = Some(Active {
+            self.active = Some(SurfacePoint {
                 triangle: hit.triangle,
                 nodes: hit.nodes,
                 bary: hit.bary,
-                anchor: hit.point,
+                point: hit.point,
             });
         }
         match self.active {
@@ -207,8 +198,8 @@ impl ContactTracker {
                 triangle: a.triangle,
                 nodes: a.nodes,
                 bary: a.bary,
-                anchor: a.anchor,
-                displacement: sub(tip, a.anchor),
+                anchor: a.point,
+                displacement: sub(tip, a.point),
             },
             None => ContactState::Free,
         }
@@ -356,37 +347,33 @@ fn intersect(
 }
 
 /// Next tracking state, `None` when the contact is released.
-fn track(bank: &Bank, active: Active, tip: [f32; 3]) -> Option<Active> {
+fn track(bank: &Bank, active: SurfacePoint, tip: [f32; 3]) -> Option<SurfacePoint> {
     let positions = bank.positions();
     let [a, b, c] = vertices(positions, active.nodes)?;
     let n = cross(sub(b, a), sub(c, a));
     let nn = dot(n, n);
-    let d = sub(tip, active.anchor);
+    let d = sub(tip, active.point);
     if !(nn > 0.0) || dot(d, n) > 0.0 {
         return None;
     }
     // Normal (inward, >= 0) and tangential parts of the displacement.
-    let depth = -dot(d, n) / sqrt(nn);
-    let dt = add(d, scale(n, depth / sqrt(nn)));
+    let len = sqrt(nn);
+    let depth = -dot(d, n) / len;
+    let dt = add(d, scale(n, depth / len));
     let t = sqrt(dot(dt, dt));
     let allowed = STICK_SLOPE * depth;
     if !(t > allowed) {
         return Some(active);
     }
     // Slide: move the anchor along the tangential displacement onto the cone's edge.
-    let target = add(active.anchor, scale(dt, 1.0 - allowed / t));
+    let target = add(active.point, scale(dt, 1.0 - allowed / t));
     let near = closest_surface_point(bank, active.triangle, active.nodes, target)?;
     let [a, b, c] = vertices(positions, near.nodes)?;
     let n = cross(sub(b, a), sub(c, a));
     if dot(sub(tip, near.point), n) > 0.0 {
         return None;
     }
-    Some(Active {
-        triangle: near.triangle,
-        nodes: near.nodes,
-        bary: near.bary,
-        anchor: near.point,
-    })
+    Some(near)
 }
 
 /// A point of R's rest surface found by [`closest_surface_point`].
@@ -631,34 +618,6 @@ fn combine(a: [f32; 3], b: [f32; 3], c: [f32; 3], k: [f32; 3]) -> [f32; 3] {
 
 fn finite(p: [f32; 3]) -> bool {
     p.iter().all(|v| v.is_finite())
-}
-
-fn sqrt(x: f32) -> f32 {
-    nalgebra::ComplexField::sqrt(x)
-}
-
-fn sub(a: [f32; 3], b: [f32; 3]) -> [f32; 3] {
-    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
-}
-
-fn add(a: [f32; 3], b: [f32; 3]) -> [f32; 3] {
-    [a[0] + b[0], a[1] + b[1], a[2] + b[2]]
-}
-
-fn scale(a: [f32; 3], s: f32) -> [f32; 3] {
-    [a[0] * s, a[1] * s, a[2] * s]
-}
-
-fn dot(a: [f32; 3], b: [f32; 3]) -> f32 {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-}
-
-fn cross(a: [f32; 3], b: [f32; 3]) -> [f32; 3] {
-    [
-        a[1] * b[2] - a[2] * b[1],
-        a[2] * b[0] - a[0] * b[2],
-        a[0] * b[1] - a[1] * b[0],
-    ]
 }
 
 #[cfg(test)]

@@ -26,6 +26,8 @@ use bank_format::DeviceCalibration;
 use core::f32::consts::PI;
 use nalgebra::ComplexField;
 
+use crate::vec3::{cross, dot};
+
 /// Joint index of pitch (rad).
 pub const PITCH: usize = 0;
 /// Joint index of yaw (rad).
@@ -281,18 +283,6 @@ fn sin_cos(t: f32) -> (f32, f32) {
 
 fn at(v: [f32; 3], i: usize) -> f32 {
     v.get(i).copied().unwrap_or(0.0)
-}
-
-fn dot(a: [f32; 3], b: [f32; 3]) -> f32 {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-}
-
-fn cross(a: [f32; 3], b: [f32; 3]) -> [f32; 3] {
-    [
-        a[1] * b[2] - a[2] * b[1],
-        a[2] * b[0] - a[0] * b[2],
-        a[0] * b[1] - a[1] * b[0],
-    ]
 }
 
 /// Rodrigues: `v cos t + (a x v) sin t + a (a.v)(1 - cos t)`, given `sin t`, `cos t`.

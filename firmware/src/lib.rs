@@ -37,3 +37,4 @@ pub mod patch;
 pub mod safety;
 pub mod solve;
 pub mod tick;
+mod vec3;

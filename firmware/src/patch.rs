@@ -32,10 +32,10 @@
 //! computes it when the contact starts or slides, not while it presses in place.
 
 use bank_format::Bank;
-use nalgebra::ComplexField;
 
 use crate::contact::closest_surface_point;
 use crate::solve::MAX_CONTACT_NODES;
+use crate::vec3::{add, cross, dist2, dot, scale, sqrt, sub, unit};
 
 /// The weighted contact set of one tool press.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -134,11 +134,7 @@ pub fn tool_patch(
         let mut quad = Accumulator::default();
         for (&(s, w, _), &(c, sn)) in QUADRATURE.iter().zip(&DIRECTIONS) {
             let (x, y) = (radius_m * s * c, radius_m * s * sn);
-            let q = [
-                anchor[0] + x * e1[0] + y * e2[0],
-                anchor[1] + x * e1[1] + y * e2[1],
-                anchor[2] + x * e1[2] + y * e2[2],
-            ];
+            let q = add(add(anchor, scale(e1, x)), scale(e2, y));
             match closest_surface_point(bank, triangle, nodes, q) {
                 Some(sp) => quad.add_bary(sp.nodes, sp.bary, w),
                 None => quad.add_bary(nodes, bary, w),
@@ -190,8 +186,7 @@ fn nodal_pressures(
         let Some(&x) = bank.positions().get(usize::from(k)) else {
             continue;
         };
-        let d = sub(x, anchor);
-        let rho2 = d[0] * d[0] + d[1] * d[1] + d[2] * d[2];
+        let rho2 = dist2(x, anchor);
         if rho2 < r2 {
             let p = 1.0 - rho2 / r2;
             n_eff += p;
@@ -212,7 +207,7 @@ fn lumped_area(bank: &Bank, k: u16) -> f32 {
         };
         let [a, b, c] = tri.map(|i| p.get(usize::from(i)).copied().unwrap_or([0.0; 3]));
         let n = cross(sub(b, a), sub(c, a));
-        twice += ComplexField::sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
+        twice += sqrt(dot(n, n));
     }
     twice / 6.0
 }
@@ -231,12 +226,7 @@ fn tangent_basis(bank: &Bank, nodes: [u16; 3]) -> Option<([f32; 3], [f32; 3])> {
     } else {
         [0.0, 1.0, 0.0]
     };
-    let along = axis[0] * n[0] + axis[1] * n[1] + axis[2] * n[2];
-    let e1 = unit([
-        axis[0] - along * n[0],
-        axis[1] - along * n[1],
-        axis[2] - along * n[2],
-    ])?;
+    let e1 = unit(sub(axis, scale(n, dot(axis, n))))?;
     Some((e1, cross(n, e1)))
 }
 
@@ -360,24 +350,6 @@ impl Accumulator {
         }
         patch
     }
-}
-
-fn sub(a: [f32; 3], b: [f32; 3]) -> [f32; 3] {
-    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
-}
-
-fn cross(a: [f32; 3], b: [f32; 3]) -> [f32; 3] {
-    [
-        a[1] * b[2] - a[2] * b[1],
-        a[2] * b[0] - a[0] * b[2],
-        a[0] * b[1] - a[1] * b[0],
-    ]
-}
-
-/// `a / |a|`, `None` for a zero or non-finite vector.
-fn unit(a: [f32; 3]) -> Option<[f32; 3]> {
-    let n = ComplexField::sqrt(a[0] * a[0] + a[1] * a[1] + a[2] * a[2]);
-    (n > 0.0 && n.is_finite()).then(|| a.map(|x| x / n))
 }
 
 #[cfg(test)]

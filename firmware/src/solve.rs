@@ -27,6 +27,7 @@
 //! host's `contact_forces`); [`ContactForces::tool_force_n`] is their sum, the force the tool
 //! exerts on the tissue. The force the user feels is its opposite.
 
+use crate::vec3::dot;
 use bank_format::{Bank, TissueLaw};
 use nalgebra::{Cholesky, ComplexField, Const, SMatrix, SVector};
 
@@ -349,10 +350,6 @@ pub fn solve_point(bank: &Bank, node: u16, d_m: [f32; 3]) -> Result<ContactForce
     solve_imposed(bank, &[node], &[d_m])
 }
 
-fn check_barycentric(k: [f32; 3]) -> Result<(), SolveError> {
-    check_weights(&k)
-}
-
 /// Weights must be finite, non-negative and sum to 1 within [`WEIGHT_SUM_TOL`].
 fn check_weights(w: &[f32]) -> Result<(), SolveError> {
     if !w.iter().all(|v| v.is_finite()) {
@@ -382,7 +379,7 @@ pub fn solve_triangle_alpha(
     bary: [f32; 3],
     d_m: [f32; 3],
 ) -> Result<ContactForces, SolveError> {
-    check_barycentric(bary)?;
+    check_weights(&bary)?;
     let alpha = alpha_weights(bary);
     let imposed = alpha.map(|a| d_m.map(|x| a * x));
     solve_imposed(bank, &triangle, &imposed)
@@ -527,10 +524,6 @@ pub fn condition_barycentric(
     bary: [f32; 3],
 ) -> Result<f32, SolveError> {
     Ok(WeightedSolve::new(bank, &triangle, &bary)?.condition())
-}
-
-fn dot(a: [f32; 3], b: [f32; 3]) -> f32 {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
 }
 
 /// The quasi non-linear law (paper eqs. 5-6) on a force `f` (N) produced by imposing the

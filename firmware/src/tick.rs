@@ -45,6 +45,7 @@ use crate::device::{Device, transpose_mul};
 use crate::patch::tool_patch;
 use crate::safety::{ArmRefused, Fault, SafetyConfig, State, Supervisor, TickInput};
 use crate::solve::{SolveError, WeightedSolve, apply_tissue_law};
+use crate::vec3::dist2;
 
 /// The contact set and its forces, as sent in telemetry.
 pub type Contacts = heapless::Vec<Contact, MAX_CONTACTS>;
@@ -347,12 +348,13 @@ impl<'b> HapticLoop<'b> {
             return Ok((Contacts::new(), [0.0; 3]));
         };
         let tip_radius = self.bank.device().tip_radius_m;
+        let repatch = REPATCH_FRACTION * tip_radius;
         let solve = match self.held {
             // Pressing in place, or slid less than REPATCH_FRACTION of the tip radius.
             Some(h)
                 if h.origin.radius_m == tip_radius
                     && (h.origin.anchor == anchor
-                        || dist2(h.origin.anchor, anchor) < sq(REPATCH_FRACTION * tip_radius)) =>
+                        || dist2(h.origin.anchor, anchor) < repatch * repatch) =>
             {
                 h.solve
             }
@@ -395,15 +397,6 @@ impl<'b> HapticLoop<'b> {
         };
         Ok((contacts, on_tissue.map(|f| -f)))
     }
-}
-
-fn dist2(a: [f32; 3], b: [f32; 3]) -> f32 {
-    let d = [a[0] - b[0], a[1] - b[1], a[2] - b[2]];
-    d[0] * d[0] + d[1] * d[1] + d[2] * d[2]
-}
-
-fn sq(x: f32) -> f32 {
-    x * x
 }
 
 /// `a - b` per joint, wrapping (encoder counters wrap).
