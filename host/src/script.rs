@@ -6,51 +6,53 @@
 //! ([`Workspace::angles`]); positive depth presses in, negative hovers above.
 
 use crate::reach::Workspace;
+use crate::vec3::{cross, dot, norm, sub};
 
 /// Joint target that points the shaft at `aim` (m) and pushes `depth` (m) beyond it.
 pub fn aim_joints(ws: &Workspace, aim: [f64; 3], depth: f64) -> [f64; 3] {
-    let v: [f64; 3] = std::array::from_fn(|i| aim[i] - ws.fulcrum[i]);
+    let v = sub(aim, ws.fulcrum);
     let (pitch, yaw) = ws.angles(v);
-    let dist = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
-    [pitch, yaw, dist + depth]
+    [pitch, yaw, norm(v) + depth]
 }
 
 /// Distance along the unit ray `origin + t dir` to the nearest triangle it crosses (t > 0);
-/// Möller-Trumbore per triangle.
+/// [`ray_triangle`] per triangle.
 pub fn ray_hit(
     positions: &[[f64; 3]],
     triangles: &[[usize; 3]],
     origin: [f64; 3],
     dir: [f64; 3],
 ) -> Option<f64> {
-    let sub = |a: [f64; 3], b: [f64; 3]| [a[0] - b[0], a[1] - b[1], a[2] - b[2]];
-    let dot = |a: [f64; 3], b: [f64; 3]| a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
-    let cross = |a: [f64; 3], b: [f64; 3]| {
-        [
-            a[1] * b[2] - a[2] * b[1],
-            a[2] * b[0] - a[0] * b[2],
-            a[0] * b[1] - a[1] * b[0],
-        ]
-    };
-    let mut best: Option<f64> = None;
-    for t in triangles {
-        let [a, b, c] = t.map(|i| positions[i]);
-        let (e1, e2) = (sub(b, a), sub(c, a));
-        let p = cross(dir, e2);
-        let det = dot(e1, p);
-        if det.abs() < 1e-18 {
-            continue;
-        }
-        let s = sub(origin, a);
-        let u = dot(s, p) / det;
-        let q = cross(s, e1);
-        let v = dot(dir, q) / det;
-        let dist = dot(e2, q) / det;
-        if (0.0..=1.0).contains(&u) && v >= 0.0 && u + v <= 1.0 && dist > 0.0 {
-            best = Some(best.map_or(dist, |d| d.min(dist)));
-        }
+    triangles
+        .iter()
+        .filter_map(|t| {
+            let [a, b, c] = t.map(|i| positions[i]);
+            ray_triangle(origin, dir, a, b, c)
+        })
+        .reduce(f64::min)
+}
+
+/// Distance along `dir` (unit) from `o` to triangle `abc`, if the ray hits it in front
+/// (Möller-Trumbore).
+pub fn ray_triangle(
+    o: [f64; 3],
+    dir: [f64; 3],
+    a: [f64; 3],
+    b: [f64; 3],
+    c: [f64; 3],
+) -> Option<f64> {
+    let (e1, e2) = (sub(b, a), sub(c, a));
+    let p = cross(dir, e2);
+    let det = dot(e1, p);
+    if det.abs() < 1e-18 {
+        return None;
     }
-    best
+    let tv = sub(o, a);
+    let u = dot(tv, p) / det;
+    let q = cross(tv, e1);
+    let v = dot(dir, q) / det;
+    let t = dot(e2, q) / det;
+    (u >= 0.0 && v >= 0.0 && u + v <= 1.0 && t > 0.0).then_some(t)
 }
 
 /// A scripted hand motion, repeated for as long as the demo runs (the demo's steering, below;
@@ -169,6 +171,30 @@ impl Scripted {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn ray_hits_a_triangle_at_the_right_distance() {
+        let t = ray_triangle(
+            [0.2, 0.2, 1.0],
+            [0.0, 0.0, -1.0],
+            [0.0, 0.0, 0.25],
+            [1.0, 0.0, 0.25],
+            [0.0, 1.0, 0.25],
+        );
+        assert_eq!(t, Some(0.75));
+        // Outside the triangle, and behind the origin.
+        let miss = |o| {
+            ray_triangle(
+                o,
+                [0.0, 0.0, -1.0],
+                [0.0; 3],
+                [1.0, 0.0, 0.0],
+                [0.0, 1.0, 0.0],
+            )
+        };
+        assert_eq!(miss([0.8, 0.8, 1.0]), None);
+        assert_eq!(miss([0.2, 0.2, -1.0]), None);
+    }
 
     /// The flat-box workspace of `reach`'s tests: trocar 0.1 m above z = 0, shaft down.
     fn down() -> Workspace {

@@ -14,6 +14,8 @@ use anyhow::{Result, bail};
 use bank_format::Bank;
 use firmware::device::{Device, Joints};
 
+use crate::script::ray_triangle;
+
 /// The scripted hand motions (the demo's names; the plant's hand follows its own version of
 /// each, below).
 pub use crate::script::Script;
@@ -165,65 +167,9 @@ pub fn surface_insertion(bank: &Bank, angles: [f64; 2]) -> Result<f64> {
     })
 }
 
-fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
-}
-
-fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [
-        a[1] * b[2] - a[2] * b[1],
-        a[2] * b[0] - a[0] * b[2],
-        a[0] * b[1] - a[1] * b[0],
-    ]
-}
-
-fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-}
-
-/// Distance along `dir` (unit) from `o` to triangle `abc`, if the ray hits it in front.
-fn ray_triangle(o: [f64; 3], dir: [f64; 3], a: [f64; 3], b: [f64; 3], c: [f64; 3]) -> Option<f64> {
-    let (e1, e2) = (sub(b, a), sub(c, a));
-    let p = cross(dir, e2);
-    let det = dot(e1, p);
-    if det.abs() < 1e-18 {
-        return None;
-    }
-    let tv = sub(o, a);
-    let u = dot(tv, p) / det;
-    let q = cross(tv, e1);
-    let v = dot(dir, q) / det;
-    let t = dot(e2, q) / det;
-    (u >= 0.0 && v >= 0.0 && u + v <= 1.0 && t > 0.0).then_some(t)
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn ray_hits_a_triangle_at_the_right_distance() {
-        let t = ray_triangle(
-            [0.2, 0.2, 1.0],
-            [0.0, 0.0, -1.0],
-            [0.0, 0.0, 0.25],
-            [1.0, 0.0, 0.25],
-            [0.0, 1.0, 0.25],
-        );
-        assert_eq!(t, Some(0.75));
-        // Outside the triangle, and behind the origin.
-        let miss = |o| {
-            ray_triangle(
-                o,
-                [0.0, 0.0, -1.0],
-                [0.0; 3],
-                [1.0, 0.0, 0.0],
-                [0.0, 1.0, 0.0],
-            )
-        };
-        assert_eq!(miss([0.8, 0.8, 1.0]), None);
-        assert_eq!(miss([0.2, 0.2, -1.0]), None);
-    }
 
     #[test]
     fn blend_is_smooth_and_holds_the_ends() {
