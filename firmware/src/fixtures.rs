@@ -154,3 +154,45 @@ pub fn grid_patch_at(xs: &[f64], ys: &[f64], truncation_m: f64) -> AlignedBytes 
     };
     AlignedBytes::new(&b.build().expect("valid fixture bank"))
 }
+
+/// Gaussian elimination with partial pivoting in f64: the independent reference the f32 solves
+/// are checked against.
+///
+/// # Panics
+/// On an empty or singular system, which would be a bug in the calling test.
+#[allow(clippy::needless_range_loop)]
+pub fn gauss(mut a: Vec<Vec<f64>>, mut b: Vec<f64>) -> Vec<f64> {
+    let n = b.len();
+    for c in 0..n {
+        let p = (c..n)
+            .max_by(|&i, &j| a[i][c].abs().total_cmp(&a[j][c].abs()))
+            .expect("a non-empty column");
+        a.swap(c, p);
+        b.swap(c, p);
+        for r in c + 1..n {
+            let f = a[r][c] / a[c][c];
+            for k in c..n {
+                a[r][k] -= f * a[c][k];
+            }
+            b[r] -= f * b[c];
+        }
+    }
+    let mut x = alloc::vec![0.0; n];
+    for r in (0..n).rev() {
+        let s: f64 = (r + 1..n).map(|k| a[r][k] * x[k]).sum();
+        x[r] = (b[r] - s) / a[r][r];
+    }
+    x
+}
+
+/// `|got - want| / |want|` over all components (f32 results against an f64 reference).
+pub fn rel_err(got: &[[f32; 3]], want: &[f64]) -> f64 {
+    let num: f64 = got
+        .iter()
+        .flatten()
+        .zip(want)
+        .map(|(&a, b)| (f64::from(a) - b) * (f64::from(a) - b))
+        .sum();
+    let den: f64 = want.iter().map(|b| b * b).sum();
+    ComplexField::sqrt(num / den)
+}

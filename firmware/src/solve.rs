@@ -574,6 +574,7 @@ pub fn tool_force_with_law(
 mod tests {
     extern crate std;
     use super::*;
+    use crate::fixtures::{gauss, rel_err};
     use bank_format::{AlignedBytes, BankBuilder, TissueLaw};
     use std::vec;
     use std::vec::Vec;
@@ -634,38 +635,6 @@ mod tests {
             }
         }
         c
-    }
-
-    /// Gaussian elimination with partial pivoting, f64.
-    fn gauss(mut a: Vec<Vec<f64>>, mut b: Vec<f64>) -> Vec<f64> {
-        let n = b.len();
-        for c in 0..n {
-            let p = (c..n)
-                .max_by(|&i, &j| a[i][c].abs().total_cmp(&a[j][c].abs()))
-                .unwrap();
-            a.swap(c, p);
-            b.swap(c, p);
-            for r in c + 1..n {
-                let f = a[r][c] / a[c][c];
-                for k in c..n {
-                    a[r][k] -= f * a[c][k];
-                }
-                b[r] -= f * b[c];
-            }
-        }
-        let mut x = vec![0.0; n];
-        for r in (0..n).rev() {
-            let s: f64 = (r + 1..n).map(|k| a[r][k] * x[k]).sum();
-            x[r] = (b[r] - s) / a[r][r];
-        }
-        x
-    }
-
-    fn rel_err(got: &[[f32; 3]], want: &[f64]) -> f64 {
-        let g: Vec<f64> = got.iter().flatten().map(|&v| f64::from(v)).collect();
-        let num: f64 = g.iter().zip(want).map(|(a, b)| (a - b).powi(2)).sum();
-        let den: f64 = want.iter().map(|b| b * b).sum();
-        (num / den).sqrt()
     }
 
     #[test]

@@ -8,6 +8,7 @@
 #![allow(clippy::needless_range_loop)]
 
 use bank_format::{AlignedBytes, Bank, BankBuilder, TissueLaw};
+use firmware::fixtures::{gauss, rel_err};
 use firmware::solve::{
     alpha_weights, condition_alpha, condition_barycentric, solve_point, solve_triangle_alpha,
     solve_triangle_barycentric,
@@ -87,38 +88,6 @@ fn css(nodes: &[usize]) -> Vec<Vec<f64>> {
         }
     }
     c
-}
-
-/// Gaussian elimination with partial pivoting, f64.
-fn gauss(mut a: Vec<Vec<f64>>, mut b: Vec<f64>) -> Vec<f64> {
-    let n = b.len();
-    for c in 0..n {
-        let p = (c..n)
-            .max_by(|&i, &j| a[i][c].abs().total_cmp(&a[j][c].abs()))
-            .unwrap();
-        a.swap(c, p);
-        b.swap(c, p);
-        for r in c + 1..n {
-            let f = a[r][c] / a[c][c];
-            for k in c..n {
-                a[r][k] -= f * a[c][k];
-            }
-            b[r] -= f * b[c];
-        }
-    }
-    let mut x = vec![0.0; n];
-    for r in (0..n).rev() {
-        let s: f64 = (r + 1..n).map(|k| a[r][k] * x[k]).sum();
-        x[r] = (b[r] - s) / a[r][r];
-    }
-    x
-}
-
-fn rel_err(got: &[[f32; 3]], want: &[f64]) -> f64 {
-    let g: Vec<f64> = got.iter().flatten().map(|&v| f64::from(v)).collect();
-    let num: f64 = g.iter().zip(want).map(|(a, b)| (a - b).powi(2)).sum();
-    let den: f64 = want.iter().map(|b| b * b).sum();
-    (num / den).sqrt()
 }
 
 const D: [f32; 3] = [0.0008, -0.0005, -0.005];
