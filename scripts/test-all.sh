@@ -6,6 +6,36 @@ cd "$(dirname "$0")/.."
 
 step() { printf '\n== %s\n' "$*"; }
 
+# apt-get install as root, or through sudo; says what to do when neither is possible.
+apt_install() {
+    local as=()
+    if [ "$(id -u)" -ne 0 ]; then
+        if ! command -v sudo >/dev/null; then
+            echo "error: need root or sudo to apt-get install $*; install them by hand" >&2
+            exit 1
+        fi
+        as=(sudo)
+    fi
+    # apt-get update once per run; the package lists of a fresh machine are usually empty.
+    if [ -z "${apt_updated:-}" ]; then
+        "${as[@]}" apt-get update
+        apt_updated=1
+    fi
+    "${as[@]}" env DEBIAN_FRONTEND=noninteractive apt-get install -y --no-install-recommends "$@"
+}
+
+# Installs Debian package $2 when command $1 is missing.
+need() {
+    if ! command -v "$1" >/dev/null; then
+        step "installing $2 (for $1)"
+        apt_install "$2"
+    fi
+    command -v "$1" >/dev/null || {
+        echo "error: $1 still missing after installing $2" >&2
+        exit 1
+    }
+}
+
 step "toolchain: thumbv7em-none-eabihf target, rustfmt, clippy"
 if ! rustup target list --installed | grep -qx thumbv7em-none-eabihf; then
     rustup target add thumbv7em-none-eabihf
@@ -14,22 +44,14 @@ for c in rustfmt clippy; do
     rustup component list --installed | grep -q "^$c" || rustup component add "$c"
 done
 
-step "qemu-system-arm (software-in-the-loop tests)"
-if ! command -v qemu-system-arm >/dev/null; then
-    sudo=""
-    [ "$(id -u)" -eq 0 ] || sudo="sudo"
-    $sudo apt-get update
-    $sudo DEBIAN_FRONTEND=noninteractive apt-get install -y qemu-system-arm
-fi
+step "Debian tools: qemu-system-arm (software in the loop), chromium (viewer test), shellcheck"
+need qemu-system-arm qemu-system-arm
+need chromium chromium
+need shellcheck shellcheck
 qemu-system-arm --version | head -n 1
 
-step "headless chromium for the viewer test (host/tests/demo.rs)"
-if ! command -v chromium >/dev/null 2>&1; then
-    sudo=""
-    [ "$(id -u)" -eq 0 ] || sudo="sudo"
-    $sudo apt-get update
-    $sudo DEBIAN_FRONTEND=noninteractive apt-get install -y chromium
-fi
+step "shell scripts"
+shellcheck scripts/*.sh .ci/run
 
 step "format and lints"
 cargo fmt --all --check
