@@ -6,7 +6,7 @@ Regenerate (from the repository root):
     pip install gmsh==4.15.2 meshio==5.3.5
     python3 scripts/gen_test_meshes.py
 
-Writes into host/tests/data/:
+Writes into host/fem/tests/data/:
 
   cube_v2.msh, cube_v41.msh, cube_v41_bin.msh   the same 5 cm cube mesh (Gmsh, ~45 nodes,
                                                 ~100 tetrahedra) as MSH 2.2 ASCII, 4.1 ASCII,
@@ -25,7 +25,7 @@ Writes into host/tests/data/:
   noncontiguous_tags_v2.msh                     MSH 2.2 ASCII, node tags scrambled and sparse,
                                                 nodes listed out of tag order (valid)
 
-and into host/tests/data/bad/ one tiny file per problem the reader or validator must report
+and into host/fem/tests/data/bad/ one tiny file per problem the reader or validator must report
 (hand-written MSH 2.2 ASCII or legacy VTK ASCII; see BAD below). All files in both folders hold
 the same node order, so the valid ones must read to identical meshes.
 
@@ -42,7 +42,7 @@ import meshio
 import numpy as np
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-DATA = os.path.join(ROOT, "host", "tests", "data")
+DATA = os.path.join(ROOT, "host", "fem", "tests", "data")
 BAD = os.path.join(DATA, "bad")
 
 L = 0.05  # cube edge, metres

@@ -62,6 +62,13 @@ mod reader;
 #[cfg(feature = "alloc")]
 mod writer;
 
+/// The STM32F405 flash map: where the firmware image and the bank live. Generated at build time
+/// from the workspace's `memory.x`, the one place the map is written (the firmware links
+/// against the same file).
+pub mod region {
+    include!(concat!(env!("OUT_DIR"), "/region.rs"));
+}
+
 pub use error::{BankError, DeviceField};
 pub use frame::{
     Contact, Counters, DeviceToHost, FRAME_CRC_LEN, FaultReason, FeedIter, FrameDecoder,

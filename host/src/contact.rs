@@ -8,9 +8,9 @@
 //! point contact's force for a given press falls as the mesh is refined, while the finite tip's
 //! converges.
 
-use crate::compliance::{Block3, Compliance, ComplianceError};
-use crate::mesh::{Surface, TetMesh};
-use crate::vec3::{add, cross, dist2, dot, norm, scale, sub};
+use fem::compliance::{Block3, Compliance, ComplianceError};
+use fem::mesh::{Surface, TetMesh};
+use fem::vec3::{add, cross, dist2, dot, norm, scale, sub};
 
 /// A mesh's boundary surface with what contact needs: positions, triangles, lumped areas.
 #[derive(Debug, Clone)]
@@ -249,7 +249,7 @@ pub fn weighted_tool_force(
             }
         }
     }
-    let solved = crate::compliance::contact_forces(&[vec![m]], &[d])?;
+    let solved = fem::compliance::contact_forces(&[vec![m]], &[d])?;
     Ok(solved.forces[0])
 }
 

@@ -13,8 +13,8 @@
 //! carried by the nearest cached node ([`Coverage::Approximate`]): the display drops accuracy
 //! for a few frames (on a 100k-node organ, about a second per batch), never frames.
 
-use crate::compliance::Compliance;
 use faer::{Mat, Par};
+use fem::compliance::Compliance;
 use std::collections::{HashMap, VecDeque};
 use std::sync::Arc;
 use std::sync::mpsc::{Receiver, Sender, channel};
@@ -436,11 +436,11 @@ fn solve_columns(c: &Compliance, display: &[usize], nodes: &[usize]) -> Vec<(usi
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::fem::{Elasticity, FixedSet, Material};
-    use crate::mesh::structured::box_mesh;
+    use fem::elasticity::{Elasticity, FixedSet, Material};
+    use fem::mesh::structured::box_mesh;
 
     /// A 40 x 20 x 20 mm block resting on its bottom face, its boundary as display nodes.
-    fn block() -> (crate::mesh::TetMesh, Arc<Compliance>, Vec<usize>) {
+    fn block() -> (fem::mesh::TetMesh, Arc<Compliance>, Vec<usize>) {
         let mesh = box_mesh([0.04, 0.02, 0.02], [6, 3, 3]);
         let mut fixed = FixedSet::none(mesh.nodes.len());
         fixed
@@ -448,11 +448,11 @@ mod tests {
             .unwrap();
         let body = Elasticity::new(&mesh, Material::new(3.0e3, 0.45).unwrap()).unwrap();
         let c = Arc::new(Compliance::factorize(&body, &fixed).unwrap());
-        let surface = crate::mesh::boundary(&mesh).unwrap();
+        let surface = fem::mesh::boundary(&mesh).unwrap();
         (mesh, c, surface.nodes)
     }
 
-    fn top_nodes(mesh: &crate::mesh::TetMesh) -> Vec<usize> {
+    fn top_nodes(mesh: &fem::mesh::TetMesh) -> Vec<usize> {
         (0..mesh.nodes.len())
             .filter(|&i| (mesh.nodes[i][2] - 0.02).abs() < 1e-9)
             .collect()

@@ -8,20 +8,18 @@
 //! (surface displacement from the contact forces), [`display`] (frames and the browser viewer),
 //! [`record`] (ParaView series) and [`script`] (aiming and scripted hand motions).
 
+pub mod bank;
 pub mod calibrate;
-pub mod compliance;
 pub mod contact;
 pub mod deform;
 pub mod display;
-pub mod fem;
 pub mod fsio;
-pub mod mesh;
-pub mod ordering;
+pub mod kinematics;
+pub mod progress;
 pub mod reach;
 pub mod record;
 pub mod scene;
 pub mod script;
 pub mod sil;
 pub mod source;
-pub mod vec3;
 pub mod virtual_device;

@@ -23,67 +23,10 @@
 //! other tissue). Nodes on the far side of the organ, seen from the trocar, are therefore kept
 //! when they lie in the sector; the scene's insertion range is what keeps R to the near surface.
 
-use crate::vec3::{cross, dot, sub};
-use bank_format::DeviceCalibration;
-
-/// The gimbal's workspace in f64, from a device calibration.
-#[derive(Debug, Clone, Copy)]
-pub struct Workspace {
-    /// Fulcrum, m.
-    pub fulcrum: [f64; 3],
-    /// Shaft direction at rest (unit).
-    pub shaft: [f64; 3],
-    /// Pitch axis at rest (unit).
-    pub pitch_axis: [f64; 3],
-    /// Yaw axis (unit, ground-fixed).
-    pub yaw_axis: [f64; 3],
-    /// Pitch range, rad.
-    pub pitch: [f64; 2],
-    /// Yaw range, rad.
-    pub yaw: [f64; 2],
-    /// Insertion range, m.
-    pub insertion: [f64; 2],
-}
+use crate::kinematics::Workspace;
+use fem::vec3::{dot, sub};
 
 impl Workspace {
-    /// From the bank's calibration record.
-    pub fn from_device(d: &DeviceCalibration) -> Workspace {
-        let f = |a: [f32; 3]| a.map(f64::from);
-        Workspace {
-            fulcrum: f(d.fulcrum_m),
-            shaft: f(d.shaft_axis),
-            pitch_axis: f(d.pitch_axis),
-            yaw_axis: f(d.yaw_axis),
-            pitch: [d.joint_min[0].into(), d.joint_max[0].into()],
-            yaw: [d.joint_min[1].into(), d.joint_max[1].into()],
-            insertion: [d.joint_min[2].into(), d.joint_max[2].into()],
-        }
-    }
-
-    /// Forward kinematics: the tip for joint values (pitch, yaw, insertion).
-    pub fn tip(&self, pitch: f64, yaw: f64, insertion: f64) -> [f64; 3] {
-        let d = rotate(
-            self.yaw_axis,
-            yaw,
-            rotate(self.pitch_axis, pitch, self.shaft),
-        );
-        std::array::from_fn(|i| self.fulcrum[i] + insertion * d[i])
-    }
-
-    /// Inverse kinematics of a direction: `(pitch, yaw)` with `|pitch| <= pi/2` that point the
-    /// shaft along `v` (any length > 0).
-    pub fn angles(&self, v: [f64; 3]) -> (f64, f64) {
-        // Rot(p, t) s = cos t s + sin t (p x s); its component along the yaw axis is what
-        // yaw preserves.
-        let w = cross(self.pitch_axis, self.shaft);
-        let sign = dot(w, self.yaw_axis).signum();
-        let n = dot(v, v).sqrt();
-        let pitch = (sign * dot(v, self.yaw_axis) / n).clamp(-1.0, 1.0).asin();
-        // In the plane orthogonal to the yaw axis, Rot(y, phi) s = cos phi s + sin phi (y x s).
-        let yaw = dot(v, cross(self.yaw_axis, self.shaft)).atan2(dot(v, self.shaft));
-        (pitch, yaw)
-    }
-
     /// Whether point `x` lies within (approximately, see the module notes) `margin` of the
     /// tip's workspace.
     pub fn reaches(&self, x: [f64; 3], margin: f64) -> bool {
@@ -101,14 +44,6 @@ impl Workspace {
         let dy = outside(yaw, self.yaw) * pitch.cos();
         (dp * dp + dy * dy).sqrt() <= (margin / rho).min(1.0).asin()
     }
-}
-
-/// Rodrigues' rotation of `v` by `angle` about the unit axis `a` (right-handed).
-pub fn rotate(a: [f64; 3], angle: f64, v: [f64; 3]) -> [f64; 3] {
-    let (s, c) = angle.sin_cos();
-    let axv = cross(a, v);
-    let adv = dot(a, v);
-    std::array::from_fn(|i| v[i] * c + axv[i] * s + a[i] * adv * (1.0 - c))
 }
 
 /// The reachable region: the `candidates` (surface nodes) within `tip_radius + margin` of the
@@ -146,19 +81,6 @@ mod tests {
             pitch: [-a, a],
             yaw: [-a, a],
             insertion: [0.05, 0.2],
-        }
-    }
-
-    #[test]
-    fn inverse_kinematics_inverts_forward() {
-        let w = down();
-        for (p, y) in [(0.0, 0.0), (0.3, -0.2), (-0.4, 0.4), (0.1, 0.45)] {
-            let t = w.tip(p, y, 0.12);
-            let (p2, y2) = w.angles(sub(t, w.fulcrum));
-            assert!(
-                (p - p2).abs() < 1e-12 && (y - y2).abs() < 1e-12,
-                "{p} {y}: {p2} {y2}"
-            );
         }
     }
 

@@ -8,12 +8,12 @@
 //! The recorder runs in its own thread and takes at most [`RECORD_FPS`] frames per second; when
 //! it is busy, frames are skipped, never waited for.
 
-use crate::compliance::Compliance;
 use crate::display::{FrameInfo, FrameSink};
 use crate::fsio::write_atomic;
-use crate::mesh::TetMesh;
 use anyhow::{Context, Result};
 use faer::{Mat, Par};
+use fem::compliance::Compliance;
+use fem::mesh::TetMesh;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
@@ -184,8 +184,8 @@ fn pvd(entries: &[(f64, PathBuf)]) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::fem::{Elasticity, FixedSet, Material};
-    use crate::mesh::structured::box_mesh;
+    use fem::elasticity::{Elasticity, FixedSet, Material};
+    use fem::mesh::structured::box_mesh;
 
     #[test]
     fn recorded_frames_read_back_deformed_with_every_point() {
@@ -222,7 +222,7 @@ mod tests {
         rec.frame(&info, &[(top, f)], &[]);
         assert_eq!(rec.finish().unwrap(), 1);
 
-        let back = crate::mesh::read(&dir.path().join("frame_000000.vtu")).unwrap();
+        let back = fem::mesh::read(&dir.path().join("frame_000000.vtu")).unwrap();
         assert_eq!(back.nodes.len(), mesh.nodes.len());
         assert_eq!(back.tets, mesh.tets);
         for (i, (p, q)) in back.nodes.iter().zip(&mesh.nodes).enumerate() {

@@ -13,9 +13,9 @@
 //!   2 = insertion, and `tip = fulcrum + insertion * Rot(yaw_axis, yaw) Rot(pitch_axis, pitch)
 //!   shaft_axis`.
 
-use crate::fem::{FixedSet, Material};
-use crate::mesh::TetMesh;
 use bank_format::{DeviceCalibration, TissueLaw};
+use fem::elasticity::{FixedSet, Material};
+use fem::mesh::TetMesh;
 use serde::Deserialize;
 use std::ops::Range;
 use std::path::{Path, PathBuf};
@@ -738,7 +738,7 @@ impl Scene {
         use anyhow::Context;
         match &self.mesh {
             MeshSource::BuiltinLiver => Ok((
-                crate::mesh::parse_msh(BUILTIN_LIVER).context("embedded liver-1k4")?,
+                fem::mesh::parse_msh(BUILTIN_LIVER).context("embedded liver-1k4")?,
                 "embedded liver-1k4.msh".into(),
                 fnv1a(FNV_OFFSET, BUILTIN_LIVER),
             )),
@@ -746,7 +746,7 @@ impl Scene {
                 let bytes = std::fs::read(p)
                     .with_context(|| format!("{}: mesh {}", self.path.display(), p.display()))?;
                 Ok((
-                    crate::mesh::load(p)?,
+                    fem::mesh::load(p)?,
                     p.display().to_string(),
                     fnv1a(FNV_OFFSET, &bytes),
                 ))

@@ -3,16 +3,15 @@
 //!
 //! Depth is measured along the shaft from the organ's rest surface: `insertion = |aim -
 //! fulcrum| + depth`, with `(pitch, yaw)` pointing the shaft at the aimed surface point
-//! ([`Workspace::angles`]); positive depth presses in, negative hovers above.
+//! ([`Workspace::joints_for_tip`]); positive depth presses in, negative hovers above.
 
-use crate::reach::Workspace;
-use crate::vec3::{cross, dot, norm, sub};
+use crate::kinematics::Workspace;
+use fem::vec3::{cross, dot, sub};
 
 /// Joint target that points the shaft at `aim` (m) and pushes `depth` (m) beyond it.
 pub fn aim_joints(ws: &Workspace, aim: [f64; 3], depth: f64) -> [f64; 3] {
-    let v = sub(aim, ws.fulcrum);
-    let (pitch, yaw) = ws.angles(v);
-    [pitch, yaw, norm(v) + depth]
+    let [pitch, yaw, reach] = ws.joints_for_tip(aim);
+    [pitch, yaw, reach + depth]
 }
 
 /// Distance along the unit ray `origin + t dir` to the nearest triangle it crosses (t > 0);

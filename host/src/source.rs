@@ -4,8 +4,8 @@
 //! force rendered on the tool, safety state) at whatever rate it has them; the display takes the
 //! newest one per frame. Sources: the virtual device ([`crate::virtual_device`], the firmware's
 //! loop on the PC), a device on a serial port ([`SerialSource`], bank-format link frames), and
-//! the QEMU image through the plant simulator ([`SilSource`], its telemetry over the emulated
-//! USART: the same frames a board sends).
+//! the QEMU image through the plant simulator ([`crate::sil::source::SilSource`], its telemetry
+//! over the emulated USART: the same frames a board sends).
 
 use anyhow::{Context, Result, anyhow};
 use bank_format::{
@@ -253,7 +253,7 @@ struct Link {
 }
 
 /// Turns a device's link messages into samples and stats (serial and SIL sources).
-struct Absorber {
+pub(crate) struct Absorber {
     law: TissueLaw,
     max_force_n: f32,
     first_tick: Option<(u32, Instant)>,
@@ -290,7 +290,7 @@ impl Link {
 }
 
 impl Absorber {
-    fn new(law: TissueLaw, max_force_n: f32) -> Absorber {
+    pub(crate) fn new(law: TissueLaw, max_force_n: f32) -> Absorber {
         Absorber {
             law,
             max_force_n,
@@ -299,7 +299,7 @@ impl Absorber {
         }
     }
 
-    fn absorb(&mut self, msg: DeviceToHost, mailbox: &Mailbox) {
+    pub(crate) fn absorb(&mut self, msg: DeviceToHost, mailbox: &Mailbox) {
         match msg {
             DeviceToHost::Telemetry(t) => {
                 let now = Instant::now();
@@ -328,69 +328,6 @@ impl Absorber {
             }
             DeviceToHost::Hello { .. } | DeviceToHost::Plant { .. } => {}
         }
-    }
-}
-
-/// The QEMU image through the plant simulator (`host::sil`): a scripted hand, the image's
-/// telemetry over its emulated USART. Runs in real time (1 ms of wall time per tick) so the
-/// display follows it; `latest` reports an error once the run is over.
-pub struct SilSource {
-    mailbox: Arc<Mailbox>,
-    thread: Option<JoinHandle<Result<()>>>,
-    last_tick: Option<u32>,
-}
-
-impl SilSource {
-    /// Starts `session` (made real-time and observed here) on `setup`; `law` and
-    /// `max_force_n` come from the bank QEMU loads.
-    pub fn start(
-        setup: crate::sil::harness::Setup,
-        mut session: crate::sil::harness::Session,
-        law: TissueLaw,
-        max_force_n: f32,
-    ) -> Result<SilSource> {
-        let mailbox = Arc::new(Mailbox::default());
-        let absorber = Mutex::new(Absorber::new(law, max_force_n));
-        let m = Arc::clone(&mailbox);
-        session.real_time = true;
-        session.observer = Some(crate::sil::harness::LinkObserver(Arc::new(
-            move |msg: &DeviceToHost| {
-                if let Ok(mut a) = absorber.lock() {
-                    a.absorb(msg.clone(), &m);
-                }
-            },
-        )));
-        let thread =
-            std::thread::Builder::new()
-                .name("sil".into())
-                .spawn(move || -> Result<()> {
-                    let run = crate::sil::harness::run(&setup, &session)?;
-                    match run.stopped {
-                        Some(why) => Err(anyhow!("the SIL run stopped: {why}")),
-                        None => Ok(()),
-                    }
-                })?;
-        Ok(SilSource {
-            mailbox,
-            thread: Some(thread),
-            last_tick: None,
-        })
-    }
-}
-
-impl Source for SilSource {
-    fn latest(&mut self, timeout: Duration) -> Result<Option<Sample>> {
-        if self.thread.as_ref().is_some_and(|t| t.is_finished())
-            && let Some(t) = self.thread.take()
-        {
-            t.join().map_err(|_| anyhow!("the SIL thread panicked"))??;
-            return Err(anyhow!("the SIL run is over"));
-        }
-        self.mailbox.newer(&mut self.last_tick, timeout)
-    }
-
-    fn stats(&self) -> LoopStats {
-        self.mailbox.stats()
     }
 }
 

@@ -3,7 +3,7 @@
 //!
 //! The hand follows a joint target (set by the mouse or a script through [`Source::steering`]) at a
 //! bounded speed, well under the supervisor's joint-speed limits, and its joint values become
-//! encoder counts through the bank's calibration ([`counts_for`], the inverse of
+//! encoder counts through the bank's calibration ([`crate::kinematics::counts_for`], the inverse of
 //! [`firmware::device::Device::joints`]), so the tip goes through the same device model as on the
 //! hardware. Every tick publishes a [`Sample`]; readers take the newest one (a slow display
 //! drops samples, the loop never waits for it). Ticks are scheduled on an absolute 1 ms grid;
@@ -13,6 +13,7 @@
 //! scheduling (SCHED_FIFO) and runs without it when refused. A fault raised anyway (e.g. a solve error)
 //! is cleared and the loop re-armed after 0.5 s, so the demo continues.
 
+use crate::kinematics::{clamp_joints, counts_for};
 use crate::source::{LoopStats, Mailbox, Sample, Source, Steering};
 use anyhow::{Result, anyhow};
 use bank_format::{AlignedBytes, Bank, DeviceCalibration};
@@ -32,20 +33,6 @@ const JITTER_BINS: usize = 5000;
 
 /// Ticks after a fault before the virtual device clears it and re-arms.
 const REARM_AFTER_TICKS: u32 = 500;
-
-/// Encoder counts for joint values `q` (inverse of the firmware's counts -> joints map).
-pub fn counts_for(cal: &DeviceCalibration, q: [f64; 3]) -> [i32; 3] {
-    std::array::from_fn(|i| {
-        let per_unit = f64::from(cal.counts_per_rev[i]) * f64::from(cal.transmission[i])
-            / std::f64::consts::TAU;
-        ((q[i] - f64::from(cal.home_joint[i])) * per_unit).round() as i32
-    })
-}
-
-/// `q` clamped into the calibration's joint ranges.
-pub fn clamp_joints(cal: &DeviceCalibration, q: [f64; 3]) -> [f64; 3] {
-    std::array::from_fn(|i| q[i].clamp(cal.joint_min[i].into(), cal.joint_max[i].into()))
-}
 
 struct Shared {
     target: Mutex<[f64; 3]>,
@@ -231,8 +218,6 @@ fn percentile(histogram: &[u64], q: f64) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use firmware::device::Device;
-    use std::path::Path;
 
     #[test]
     fn percentile_reads_the_histogram() {
@@ -243,22 +228,5 @@ mod tests {
         assert_eq!(percentile(&h, 0.5), 10.0);
         assert_eq!(percentile(&h, 0.99), 40.0);
         assert_eq!(percentile(&h, 1.0), 80.0);
-    }
-
-    #[test]
-    fn counts_invert_the_firmware_joint_map() {
-        let scene = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/liver.toml");
-        let cal = crate::scene::Scene::load(&scene).unwrap().device;
-        let dev = Device::new(&cal);
-        for q in [[0.0, 0.0, 0.03], [0.2, -0.3, 0.1], [-0.34, 0.34, 0.139]] {
-            let back = dev.joints(counts_for(&cal, q)).to_array();
-            for i in 0..3 {
-                let step = f64::from(dev.joint_per_count()[i].abs());
-                assert!(
-                    (f64::from(back[i]) - q[i]).abs() <= 0.5 * step + 1e-6,
-                    "{q:?} {back:?}"
-                );
-            }
-        }
     }
 }

@@ -5,11 +5,11 @@
 
 use faer::Mat;
 use faer::linalg::solvers::Solve;
+use fem::elasticity::Material;
 use host::calibrate::fit::{self, FitError};
 use host::calibrate::motor::{self, Sample};
 use host::calibrate::scene_edit::{self, Law};
 use host::calibrate::{cheb, csv, specimen};
-use host::fem::Material;
 use host::scene::Scene;
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -262,7 +262,7 @@ fn shipped_brain_data_meets_the_goal_and_matches_the_host_fem() {
     let col = |i| table.numbers(i).unwrap();
     let (d, force, radial, lf, lr) = (col(0), col(1), col(2), col(3), col(4));
     // The linear columns are the host FEM's prediction on the specimen mesh.
-    let mesh = host::mesh::load(&manifest("meshes/brain-specimen.msh")).unwrap();
+    let mesh = fem::mesh::load(&manifest("meshes/brain-specimen.msh")).unwrap();
     let r = specimen::compress(&mesh, Material::new(3.0 * 842.0, 0.45).unwrap()).unwrap();
     for i in 1..d.len() {
         assert!(
@@ -290,7 +290,7 @@ fn shipped_brain_data_meets_the_goal_and_matches_the_host_fem() {
 fn specimen_fem_matches_the_papers_formulas() {
     // Paper, section 3-4: f^L = s E x / h, d_r^L = nu r x / h. The FEM's top face is the
     // inscribed polygon of the circle, slightly smaller than pi r^2.
-    let mesh = host::mesh::load(&manifest("meshes/brain-specimen.msh")).unwrap();
+    let mesh = fem::mesh::load(&manifest("meshes/brain-specimen.msh")).unwrap();
     let (e, nu) = (2526.0, 0.45);
     let r = specimen::compress(&mesh, Material::new(e, nu).unwrap()).unwrap();
     let s = std::f64::consts::PI * r.radius_m * r.radius_m;

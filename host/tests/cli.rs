@@ -43,14 +43,15 @@ fn compliance_prints_one_json_object_matching_the_library() {
     assert_eq!(blocks.len(), 3);
     let get = |a: usize, b: usize, i: usize| blocks[a][b][i].as_f64().unwrap();
     // Same numbers as the library, and C_kn = C_nk^T.
-    let m = host::mesh::load(&mesh).unwrap();
+    let m = fem::mesh::load(&mesh).unwrap();
     let body =
-        host::fem::Elasticity::new(&m, host::fem::Material::new(3000.0, 0.45).unwrap()).unwrap();
-    let mut fixed = host::fem::FixedSet::none(m.nodes.len());
+        fem::elasticity::Elasticity::new(&m, fem::elasticity::Material::new(3000.0, 0.45).unwrap())
+            .unwrap();
+    let mut fixed = fem::elasticity::FixedSet::none(m.nodes.len());
     fixed
         .fix_box(&m, [-1.0, -1.0, -1.0, 1.0, 1.0, 0.01], [true; 3])
         .unwrap();
-    let c = host::compliance::Compliance::factorize(&body, &fixed).unwrap();
+    let c = fem::compliance::Compliance::factorize(&body, &fixed).unwrap();
     let lib = c.blocks(&[700, 701, 1000], None).unwrap();
     for a in 0..3 {
         for b in 0..3 {
@@ -70,7 +71,7 @@ fn compliance_prints_one_json_object_matching_the_library() {
 #[test]
 fn fix_nodes_file_is_equivalent_to_the_box() {
     let mesh = liver();
-    let m = host::mesh::load(&mesh).unwrap();
+    let m = fem::mesh::load(&mesh).unwrap();
     let dir = std::env::temp_dir().join(format!("host-cli-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let list = dir.join("bed.txt");
@@ -208,4 +209,35 @@ fn bad_input_is_reported_on_stderr_with_a_nonzero_exit() {
         ],
         "Poisson",
     );
+}
+
+/// A malformed MSH 4.1 file on which the `mshio` parser panics (it subtracts 1 from a node
+/// count of zero): the user sees one clean error, no panic message.
+#[test]
+fn malformed_msh41_prints_only_the_error() {
+    let dir = tempfile::tempdir().unwrap();
+    let bad = dir.path().join("bad.msh");
+    std::fs::write(
+        &bad,
+        "$MeshFormat\n4.1 0 8\n$EndMeshFormat\n$Nodes\n1 0 1 1\n$EndNodes\n",
+    )
+    .unwrap();
+    let out = host(&[
+        "compliance",
+        "--mesh",
+        bad.to_str().unwrap(),
+        "--young",
+        "3000",
+        "--poisson",
+        "0.45",
+        "--fix-box",
+        BED,
+        "--nodes",
+        "0",
+    ]);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success());
+    assert!(stderr.contains("bad.msh"), "{stderr}");
+    assert!(!stderr.contains("panicked"), "{stderr}");
+    assert_eq!(stderr.trim().lines().count(), 1, "{stderr}");
 }

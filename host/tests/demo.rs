@@ -123,9 +123,9 @@ fn recorded_sequence_reads_back_with_every_node() {
         .filter_map(|l| l.split("file=\"").nth(1)?.split('"').next())
         .collect();
     assert!(files.len() >= 5, "{pvd}");
-    let rest = host::mesh::parse_msh(host::scene::BUILTIN_LIVER).unwrap();
+    let rest = fem::mesh::parse_msh(host::scene::BUILTIN_LIVER).unwrap();
     for f in [files[0], files[files.len() - 1]] {
-        let m = host::mesh::read(&rec.join(f)).unwrap();
+        let m = fem::mesh::read(&rec.join(f)).unwrap();
         assert_eq!(m.nodes.len(), rest.nodes.len(), "{f}");
         assert_eq!(m.tets.len(), rest.tets.len(), "{f}");
     }

@@ -3,9 +3,9 @@
 //! paper's alpha-weighted triangle contacts.
 
 use bank_format::{AlignedBytes, Bank};
-use host::compliance::{Compliance, contact_forces};
-use host::fem::{Elasticity, FixedSet};
-use host::mesh::TetMesh;
+use fem::compliance::{Compliance, contact_forces};
+use fem::elasticity::{Elasticity, FixedSet};
+use fem::mesh::TetMesh;
 use host::scene::Scene;
 use std::path::Path;
 use std::process::Command;
@@ -119,7 +119,7 @@ fn full_tick_forces_match_the_host_f64_reference_on_the_liver_bank() {
     let (mesh, fixed, compliance) = (&liver.mesh, &liver.fixed, &liver.compliance);
     let ids: Vec<usize> = bank.mesh_ids().iter().map(|&i| i as usize).collect();
     // The bank's surface (R's triangles) in mesh ids: the patch lives on it.
-    let region = host::mesh::Surface {
+    let region = fem::mesh::Surface {
         triangles: bank
             .triangles()
             .iter()

@@ -4,17 +4,17 @@
 //! is refined (about in proportion to the mesh size); the tip's pressure patch converges. The
 //! liver series is `host bench refinement`.
 
-use host::compliance::Compliance;
+use fem::compliance::Compliance;
+use fem::elasticity::{Elasticity, FixedSet, Material};
+use fem::mesh::structured::box_mesh;
 use host::contact::{ContactSurface, patch_force};
-use host::fem::{Elasticity, FixedSet, Material};
-use host::mesh::structured::box_mesh;
 
 /// Force (N) on the tool pressing 1 mm into the top centre of a 40 x 40 x 20 mm box held at
 /// its base, for point contact and a 5 mm tip: `(point, tip)`.
 fn press(cells: usize) -> (f64, f64) {
     let (l, h) = (0.04, 0.02);
     let mesh = box_mesh([l, l, h], [cells, cells, cells / 2]);
-    let surface = host::mesh::boundary(&mesh).unwrap();
+    let surface = fem::mesh::boundary(&mesh).unwrap();
     let mut fixed = FixedSet::none(mesh.nodes.len());
     fixed
         .fix_box(&mesh, [-1.0, -1.0, -1.0, 1.0, 1.0, 1e-9], [true; 3])

@@ -8,23 +8,14 @@
 
 use bank_format::{Bank, DeviceCalibration};
 use firmware::contact::ContactState;
-use firmware::device::Device;
 use firmware::fixtures::{flat_patch, patch_device};
 use firmware::safety::State;
 use firmware::tick::{HapticLoop, LoopInput, LoopOutput};
+use host::kinematics::{Workspace, counts_for};
 
-/// Inverse kinematics of this gimbal (`d = (-cos p sin y, sin p, -cos p cos y)`): the encoder
-/// counts that put the tip at `tip`.
-fn counts_for_tip(dev: &Device, cal: &DeviceCalibration, tip: [f64; 3]) -> [i32; 3] {
-    let r: [f64; 3] = std::array::from_fn(|i| tip[i] - f64::from(cal.fulcrum_m[i]));
-    let len = r.iter().map(|x| x * x).sum::<f64>().sqrt();
-    let pitch = (r[1] / len).asin();
-    let yaw = (-r[0]).atan2(-r[2]);
-    let q = [pitch, yaw, len];
-    let k = dev.joint_per_count();
-    std::array::from_fn(|j| {
-        ((q[j] - f64::from(cal.home_joint[j])) / f64::from(k[j])).round() as i32
-    })
+/// The encoder counts that put the tip at `tip` (the host's inverse kinematics).
+fn counts_for_tip(cal: &DeviceCalibration, tip: [f64; 3]) -> [i32; 3] {
+    counts_for(cal, Workspace::from_device(cal).joints_for_tip(tip))
 }
 
 fn lerp(a: [f64; 3], b: [f64; 3], t: f64) -> [f64; 3] {
@@ -52,7 +43,6 @@ fn slide_across_the_patch_while_pressed() {
     let cal = patch_device();
     let mut lp = HapticLoop::new(&bank);
     lp.arm().unwrap();
-    let dev = *lp.device();
 
     let above = [0.008, 0.012, 0.002];
     let start = [0.008, 0.012, -0.003];
@@ -71,7 +61,7 @@ fn slide_across_the_patch_while_pressed() {
     let mut max_drop = 0.0f32;
     for (n, &p) in path.iter().enumerate() {
         let out = lp.tick(LoopInput {
-            encoder_counts: counts_for_tip(&dev, &cal, p),
+            encoder_counts: counts_for_tip(&cal, p),
             overrun: false,
             ticks_since_host_frame: 0,
         });
@@ -130,7 +120,6 @@ fn contact_nodes_micrometres_apart() {
     let cal = patch_device();
     let mut lp = HapticLoop::new(&bank);
     lp.arm().unwrap();
-    let dev = *lp.device();
     // Down onto the sliver row, then across it in y and back, pressed 2 mm.
     let above = [0.017, 0.0185, 0.002];
     let start = [0.017, 0.0185, -0.002];
@@ -144,7 +133,7 @@ fn contact_nodes_micrometres_apart() {
     let mut max_step = 0.0f32;
     for (n, p) in path.into_iter().enumerate() {
         let out = lp.tick(LoopInput {
-            encoder_counts: counts_for_tip(&dev, &cal, p),
+            encoder_counts: counts_for_tip(&cal, p),
             overrun: false,
             ticks_since_host_frame: 0,
         });
@@ -185,14 +174,13 @@ fn contact_next_to_the_fixed_boundary() {
     let cal = patch_device();
     let mut lp = HapticLoop::new(&bank);
     lp.arm().unwrap();
-    let dev = *lp.device();
     // 1 mm inside the patch's x = 0 edge, between two edge nodes.
     let mut last = 0.0f32;
     let mut touching = 0;
     for t in 0..=200 {
         let p = [0.001, 0.015, 0.002 - 4.0e-3 * f64::from(t) / 200.0];
         let out = lp.tick(LoopInput {
-            encoder_counts: counts_for_tip(&dev, &cal, p),
+            encoder_counts: counts_for_tip(&cal, p),
             overrun: false,
             ticks_since_host_frame: 0,
         });

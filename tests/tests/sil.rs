@@ -1,7 +1,7 @@
 //! Software in the loop: the firmware image under QEMU against the simulated device
 //! (`host::sil`). Needs `qemu-system-arm`, the `thumbv7em-none-eabihf` target (the image is
-//! built here if stale) and the liver bank at `target/sil/liver.bank` (scripts/test-all.sh
-//! installs and builds all three).
+//! built here if stale); scripts/test-all.sh installs both. The liver bank is built here too,
+//! by the library's bank stage (`host::bank`), exactly as `host bank build` builds it.
 
 use bank_format::{
     AlignedBytes, Bank, DeviceCalibration, DeviceToHost, FaultReason, HostToDevice, MAX_FRAME,
@@ -13,26 +13,28 @@ use host::sil::script::Script;
 use std::path::PathBuf;
 use std::sync::{Mutex, OnceLock};
 
-/// The image (built once per test binary) and the liver bank.
+/// The image and the shipped liver scene's bank (each built once per test binary; the bank is
+/// written where QEMU's loader reads it).
 fn setup() -> (Setup, AlignedBytes) {
     static IMAGE: OnceLock<PathBuf> = OnceLock::new();
+    static BANK: OnceLock<(PathBuf, Vec<u8>)> = OnceLock::new();
     let image = IMAGE
         .get_or_init(|| harness::build_image().expect("building the QEMU image"))
         .clone();
-    let bank = harness::repo_root().join("target/sil/liver.bank");
-    let raw = std::fs::read(&bank).unwrap_or_else(|e| {
-        panic!(
-            "{}: {e}; build it with `cargo run --release -p host -- bank build \
-             host/scenes/liver.toml -o target/sil/liver.bank` (scripts/test-all.sh does)",
-            bank.display()
-        )
+    let (bank, raw) = BANK.get_or_init(|| {
+        let scene = harness::repo_root().join("host/scenes/liver.toml");
+        let bytes = host::bank::scene_bank(&scene).expect("the liver scene's bank");
+        let path = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("sil-liver.bank");
+        host::fsio::write_atomic(&path, &bytes).expect("writing the bank for QEMU");
+        (path, bytes)
     });
+    let bank = bank.clone();
     let setup = Setup {
         qemu: "qemu-system-arm".into(),
         image,
         bank,
     };
-    (setup, AlignedBytes::new(&raw))
+    (setup, AlignedBytes::new(raw))
 }
 
 /// One QEMU at a time: the machine has two cores, and each run is already two busy threads.

@@ -9,10 +9,10 @@
 //! constraining the deformation). The response is linear, so one solve gives the force and the
 //! radial displacement per metre of compression.
 
-use crate::compliance::solve_prescribed;
-use crate::fem::{Elasticity, FixedSet, Material};
-use crate::mesh::TetMesh;
 use anyhow::{Result, bail};
+use fem::compliance::solve_prescribed;
+use fem::elasticity::{Elasticity, FixedSet, Material};
+use fem::mesh::TetMesh;
 
 /// The specimen's linear response per metre of axial compression.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]

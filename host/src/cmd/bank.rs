@@ -1,23 +1,19 @@
 //! `host bank build | inspect | sweep`: firmware banks from scene files.
 
-use super::compliance::progress_bar;
 use anyhow::{Context, Result, bail};
-use bank_format::{AlignedBytes, Bank, BankBuilder, LawKind, SectionKind};
+use bank_format::region::BANK_LEN;
+use bank_format::{AlignedBytes, Bank, LawKind, SectionKind};
+use fem::compliance::{Block3, contact_forces};
+use fem::mesh::{Surface, TetMesh};
 use firmware::patch::tool_patch;
 use firmware::solve::WeightedSolve;
-use host::compliance::{Block3, Compliance, contact_forces};
+use host::bank::{BuiltBank, Prepared};
 use host::contact::{ContactSurface, SurfaceHit, patch_force};
-use host::fem::{Elasticity, FixedSet};
 use host::fsio::write_atomic;
-use host::mesh::{Surface, TetMesh};
-use host::reach::{Workspace, reachable};
-use host::scene::Scene;
-use std::collections::{BTreeSet, HashMap};
-use std::path::{Path, PathBuf};
+use host::progress::Bar;
+use std::collections::HashMap;
+use std::path::PathBuf;
 use std::time::Instant;
-
-/// The bank region of the STM32F405 flash (`memory.x`: BANK, 768 KiB).
-pub const BANK_REGION_BYTES: usize = 768 * 1024;
 
 /// Bank subcommands.
 #[derive(clap::Subcommand, Debug)]
@@ -40,7 +36,7 @@ pub struct BuildArgs {
     #[arg(short, long)]
     out: PathBuf,
     /// Refuse banks larger than this many bytes (default: the 768 KiB bank region of memory.x).
-    #[arg(long, default_value_t = BANK_REGION_BYTES)]
+    #[arg(long, default_value_t = BANK_LEN)]
     region_bytes: usize,
 }
 
@@ -79,169 +75,6 @@ pub fn run(cmd: BankCmd) -> Result<()> {
     }
 }
 
-/// A scene with its mesh, supports, factorised compliance and reachable region.
-pub(crate) struct Prepared {
-    pub(crate) scene: Scene,
-    pub(crate) mesh: TetMesh,
-    pub(crate) mesh_name: String,
-    pub(crate) surface: Surface,
-    pub(crate) compliance: Compliance,
-    scene_id: u64,
-    /// R: mesh node ids, ascending.
-    pub(crate) region: Vec<usize>,
-    /// R's positions.
-    positions: Vec<[f64; 3]>,
-    /// Boundary triangles with all three vertices in R, as indices into `region`.
-    triangles: Vec<[u32; 3]>,
-}
-
-impl Prepared {
-    fn new(path: &Path) -> Result<Prepared> {
-        Prepared::from_scene(Scene::load(path)?)
-    }
-
-    /// Loads the scene's mesh, factorises its compliance and finds its reachable region.
-    pub(crate) fn from_scene(scene: Scene) -> Result<Prepared> {
-        let path = scene.path.clone();
-        let (mesh, mesh_name, mesh_hash) = scene.load_mesh()?;
-        let surface = host::mesh::boundary(&mesh)?;
-        let fixed: FixedSet = scene.fixed_set(&mesh)?;
-        let workspace = Workspace::from_device(&scene.device);
-        let region = reachable(
-            &workspace,
-            &mesh.nodes,
-            &surface.nodes,
-            |k| (0..3).any(|c| fixed.is_fixed(k, c)),
-            scene.tip_radius_m,
-            scene.bank.reach_margin_m,
-        );
-        if region.is_empty() {
-            bail!(
-                "{}: the tool reaches no free surface node (check device.fulcrum_m, the ranges \
-                 and bank.reach_margin_m)",
-                path.display()
-            );
-        }
-        if region.len() > bank_format::MAX_NODES {
-            bail!(
-                "{}: the reachable region has {} nodes; a bank holds at most {} (u16 indices): \
-                 narrow the device's ranges",
-                path.display(),
-                region.len(),
-                bank_format::MAX_NODES
-            );
-        }
-        let local: HashMap<usize, u32> = region
-            .iter()
-            .enumerate()
-            .map(|(i, &k)| (k, i as u32))
-            .collect();
-        let triangles = surface
-            .triangles
-            .iter()
-            .filter_map(|t| Some([*local.get(&t[0])?, *local.get(&t[1])?, *local.get(&t[2])?]))
-            .collect();
-        let positions = region.iter().map(|&k| mesh.nodes[k]).collect();
-        let body = Elasticity::new(&mesh, scene.material)?;
-        let compliance = Compliance::factorize(&body, &fixed)?;
-        let scene_id = scene.scene_id(mesh_hash);
-        Ok(Prepared {
-            scene,
-            mesh,
-            mesh_name,
-            surface,
-            compliance,
-            scene_id,
-            region,
-            positions,
-            triangles,
-        })
-    }
-
-    fn edges(&self) -> BTreeSet<(usize, usize)> {
-        let mut e = BTreeSet::new();
-        for t in &self.triangles {
-            for i in 0..3 {
-                let (a, b) = (t[i] as usize, t[(i + 1) % 3] as usize);
-                e.insert((a.min(b), a.max(b)));
-            }
-        }
-        e
-    }
-
-    fn dist(&self, a: usize, b: usize) -> f64 {
-        let (p, q) = (self.positions[a], self.positions[b]);
-        (0..3).map(|i| (p[i] - q[i]).powi(2)).sum::<f64>().sqrt()
-    }
-
-    fn mean_edge(&self) -> f64 {
-        let e = self.edges();
-        if e.is_empty() {
-            return 0.0;
-        }
-        e.iter().map(|&(a, b)| self.dist(a, b)).sum::<f64>() / e.len() as f64
-    }
-
-    /// Blocks of R within `radius`, and at least along every triangle edge.
-    fn blocks(&self, radius: f64) -> Result<Vec<Vec<(usize, Block3)>>> {
-        let longest = self
-            .edges()
-            .iter()
-            .map(|&(a, b)| self.dist(a, b))
-            .fold(0.0, f64::max);
-        let progress = progress_bar(0, "supernodes");
-        let rows = self.compliance.blocks_within(
-            &self.region,
-            &self.positions,
-            radius.max(longest),
-            Some(&progress),
-        )?;
-        progress.finish_and_clear();
-        Ok(rows)
-    }
-
-    /// The bank for truncation radius `radius` from `rows` (computed for at least that
-    /// radius); returns the bytes and the number of coupled pairs.
-    fn bank(&self, rows: &[Vec<(usize, Block3)>], radius: f64) -> Result<(Vec<u8>, usize)> {
-        let edges = self.edges();
-        let mut c_kk = Vec::with_capacity(rows.len());
-        let mut couplings = Vec::new();
-        for (a, row) in rows.iter().enumerate() {
-            let mut diag = None;
-            for &(b, block) in row {
-                if b == a {
-                    diag = Some(block);
-                } else if b > a && (self.dist(a, b) <= radius || edges.contains(&(a, b))) {
-                    couplings.push((a as u32, b as u32, block));
-                }
-            }
-            c_kk.push(diag.context("internal: a node's own block is missing")?);
-        }
-        let grid = self
-            .scene
-            .bank
-            .grid_cell_m
-            .unwrap_or_else(|| radius.max(2.0 * self.mean_edge()).max(1e-3));
-        let pairs = couplings.len();
-        let builder = BankBuilder {
-            positions_m: self.positions.clone(),
-            mesh_ids: self.region.iter().map(|&k| k as u32).collect(),
-            triangles: self.triangles.clone(),
-            c_kk,
-            couplings,
-            grid_cell_size_m: grid,
-            truncation_radius_m: radius,
-            scene_id: self.scene_id,
-            law: self.scene.law,
-            device: self.scene.device,
-        };
-        let bytes = builder
-            .build()
-            .map_err(|e| anyhow::anyhow!("the bank writer refused the scene's data: {e}"))?;
-        Ok((bytes, pairs))
-    }
-}
-
 /// `(kind name, offset, len, count)` of each entry of the bank's section table.
 fn section_table(bank: &Bank) -> Vec<(&'static str, u32, u32, u32)> {
     bank.sections()
@@ -257,34 +90,13 @@ fn section_table(bank: &Bank) -> Vec<(&'static str, u32, u32, u32)> {
         .collect()
 }
 
-impl Prepared {
-    /// The scene's bank at its truncation radius: bytes and the number of coupled pairs.
-    pub(crate) fn build_bank(&self) -> Result<(Vec<u8>, usize)> {
-        let radius = self.scene.bank.truncation_radius_m;
-        let rows = self.blocks(radius)?;
-        self.bank(&rows, radius)
-    }
-}
-
-/// The bank of a scene file (what `host bank build` writes), for other subcommands.
-pub fn scene_bank(scene: &Path) -> Result<Vec<u8>> {
-    let (bytes, _) = Prepared::new(scene)?.build_bank()?;
-    if bytes.len() > BANK_REGION_BYTES {
-        bail!(
-            "{}: the bank would be {} bytes, more than the {BANK_REGION_BYTES} bytes of the \
-             bank region",
-            scene.display(),
-            bytes.len()
-        );
-    }
-    Ok(bytes)
-}
-
 fn build(args: BuildArgs) -> Result<()> {
     let t = Instant::now();
-    let prep = Prepared::new(&args.scene)?;
+    let prep = Prepared::load(&args.scene)?;
     let radius = prep.scene.bank.truncation_radius_m;
-    let (bytes, pairs) = prep.build_bank()?;
+    let progress = Bar::new("supernodes");
+    let BuiltBank { bytes, pairs } = prep.build_bank(Some(&progress))?;
+    progress.finish();
     if bytes.len() > args.region_bytes {
         bail!(
             "the bank would be {} bytes, more than the {} bytes of the bank region ({} nodes in \
@@ -362,7 +174,7 @@ fn build(args: BuildArgs) -> Result<()> {
     for (name, _, len, count) in section_table(&bank) {
         println!("          {name:<20} {len:>7} {count:>7}");
     }
-    let region = BANK_REGION_BYTES;
+    let region = BANK_LEN;
     println!(
         "total     {} bytes = {:.1} KiB of the {} KiB bank region ({:.1}%), crc32 {:08x}, \
          scene id {:016x}",
@@ -689,8 +501,10 @@ fn sweep(args: SweepArgs) -> Result<()> {
         bail!("--radii: every radius must be a number >= 0");
     }
     let rmax = radii.iter().copied().fold(0.0, f64::max);
-    let prep = Prepared::new(&args.scene)?;
-    let rows = prep.blocks(rmax)?;
+    let prep = Prepared::load(&args.scene)?;
+    let progress = Bar::new("supernodes");
+    let rows = prep.blocks(rmax, Some(&progress))?;
+    progress.finish();
     let normals = vertex_normals(&prep.mesh, &prep.surface);
 
     // Contact sets per site: one node; one triangle; the tool patch at the triangle's
@@ -737,7 +551,7 @@ fn sweep(args: SweepArgs) -> Result<()> {
     );
     println!("| ---: | ---: | ---: | :---: | --- | --- | --- | ---: |");
     for &r in &radii {
-        let (bytes, pairs) = prep.bank(&rows, r)?;
+        let BuiltBank { bytes, pairs } = prep.bank(&rows, r)?;
         let aligned = AlignedBytes::new(&bytes);
         let bank = Bank::parse(&aligned).map_err(|e| anyhow::anyhow!("swept bank: {e}"))?;
         let (mut one, mut tri, mut patch) = (Stat::default(), Stat::default(), Stat::default());
@@ -757,11 +571,7 @@ fn sweep(args: SweepArgs) -> Result<()> {
             "| {:.1} | {pairs} | {} | {} | {} | {} | {} | {:.1}% |",
             r * 1e3,
             bytes.len(),
-            if bytes.len() <= BANK_REGION_BYTES {
-                "yes"
-            } else {
-                "no"
-            },
+            if bytes.len() <= BANK_LEN { "yes" } else { "no" },
             one.show(),
             tri.show(),
             patch.show(),

@@ -1,10 +1,11 @@
 //! `host bench …`: benchmarks that print figures (never asserted by tests).
 
+use super::organ::{OrganArgs, default_meshes};
 use anyhow::{Context, Result};
-use host::compliance::Compliance;
-use host::fem::{DofMap, Elasticity, FixedSet, Material};
-use host::ordering::{Ordering, permutation};
-use host::virtual_device::counts_for;
+use fem::compliance::Compliance;
+use fem::elasticity::{DofMap, Elasticity, FixedSet, Material};
+use fem::ordering::{Ordering, permutation};
+use host::kinematics::counts_for;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
@@ -55,21 +56,6 @@ pub struct TickArgs {
     depth: f64,
 }
 
-/// The benchmarks' organ: the shipped livers' material, resting on a bed.
-#[derive(clap::Args, Debug)]
-pub struct OrganArgs {
-    /// Young's modulus in Pa.
-    #[arg(long, default_value_t = 3.0e3)]
-    pub young: f64,
-    /// Poisson's ratio.
-    #[arg(long, default_value_t = 0.45)]
-    pub poisson: f64,
-    /// The organ rests on a bed: nodes less than this height (m) above its lowest point are
-    /// fixed (the peer script's `--fix-box -1,-1,-1,1,1,0.01` for the shipped livers).
-    #[arg(long, default_value_t = 0.01)]
-    pub bed: f64,
-}
-
 /// Arguments of `host bench compliance`.
 #[derive(clap::Args, Debug)]
 pub struct ComplianceArgs {
@@ -87,8 +73,8 @@ pub struct ComplianceArgs {
     /// truncated couplings do; default: every pair (memory grows with the square).
     #[arg(long)]
     radius: Option<f64>,
-    /// Fill-reducing ordering.
-    #[arg(long, value_enum, default_value_t = Ordering::default())]
+    /// Fill-reducing ordering: amd or nested-dissection.
+    #[arg(long, default_value_t = Ordering::default())]
     ordering: Ordering,
     /// Print one JSON object per mesh instead of a table.
     #[arg(long)]
@@ -122,22 +108,6 @@ pub fn run(bench: Bench) -> Result<()> {
         Bench::Sil(args) => sil(args),
         Bench::Law(args) => super::bench_law::run(args),
     }
-}
-
-/// The shipped livers, coarse to fine, and the generated 100k one when present.
-pub fn default_meshes() -> Vec<PathBuf> {
-    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("meshes");
-    let mut v = vec![dir.join("liver-1k4.msh"), dir.join("liver-10k.msh")];
-    let big = dir.join("generated/liver-100k.msh");
-    if big.exists() {
-        v.push(big);
-    } else {
-        eprintln!(
-            "note: {} not found; generate it with `python3 scripts/gen_meshes.py --only liver-100k`",
-            big.display()
-        );
-    }
-    v
 }
 
 fn compliance(args: ComplianceArgs) -> Result<()> {
@@ -191,8 +161,8 @@ fn compliance(args: ComplianceArgs) -> Result<()> {
 
 fn measure(path: &Path, material: Material, args: &ComplianceArgs) -> Result<Report> {
     let t = Instant::now();
-    let mesh = host::mesh::load(path)?;
-    let surface = host::mesh::boundary(&mesh)?;
+    let mesh = fem::mesh::load(path)?;
+    let surface = fem::mesh::boundary(&mesh)?;
     let load_s = t.elapsed().as_secs_f64();
 
     let (lo, hi) = mesh.bounding_box();
@@ -230,7 +200,7 @@ fn measure(path: &Path, material: Material, args: &ComplianceArgs) -> Result<Rep
     let factor_s = t.elapsed().as_secs_f64();
     let factor_peak_rss_mib = peak_rss_mib();
 
-    let bar = super::compliance::progress_bar(candidates.len() as u64, "columns");
+    let bar = host::progress::Bar::new("supernodes");
     let t = Instant::now();
     let pairs = match args.radius {
         None => c.blocks(&candidates, Some(&bar))?.len().pow(2),
@@ -243,7 +213,7 @@ fn measure(path: &Path, material: Material, args: &ComplianceArgs) -> Result<Rep
         }
     };
     let columns_s = t.elapsed().as_secs_f64();
-    bar.finish_and_clear();
+    bar.finish();
     let stats = c.stats();
     Ok(Report {
         mesh: path.file_name().map_or_else(

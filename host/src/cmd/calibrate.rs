@@ -5,12 +5,12 @@
 //! plots (SVG and PNG).
 
 use anyhow::{Context, Result, bail};
+use fem::elasticity::Material;
 use host::calibrate::fit::{self, ChebFit, DegreeRow};
 use host::calibrate::motor::{self, AXES, AxisFit};
 use host::calibrate::plot::{self, PlotSpec};
 use host::calibrate::scene_edit::{self, Law};
 use host::calibrate::{csv, specimen};
-use host::fem::Material;
 use host::fsio::write_atomic;
 use host::scene::Scene;
 use std::path::{Path, PathBuf};
@@ -164,7 +164,7 @@ fn tissue(a: TissueArgs) -> Result<()> {
     table.require_increasing(0, &x)?;
     let mut x_name = a.x.clone();
     if let (Some(mesh), Some(young), Some(poisson)) = (&a.specimen, a.young, a.poisson) {
-        let r = specimen::compress(&host::mesh::load(mesh)?, Material::new(young, poisson)?)
+        let r = specimen::compress(&fem::mesh::load(mesh)?, Material::new(young, poisson)?)
             .with_context(|| format!("{}: specimen compression", mesh.display()))?;
         let per_m = match a.law {
             Law::Q => r.force_per_m,
@@ -457,7 +457,7 @@ fn motor_cmd(a: MotorArgs) -> Result<()> {
 }
 
 fn specimen_cmd(a: SpecimenArgs) -> Result<()> {
-    let mesh = host::mesh::load(&a.mesh)?;
+    let mesh = fem::mesh::load(&a.mesh)?;
     let material = Material::new(a.young, a.poisson)?;
     let r = specimen::compress(&mesh, material)
         .with_context(|| format!("{}: specimen compression", a.mesh.display()))?;

@@ -2,9 +2,9 @@
 
 use super::fixing::{FixArgs, parse_list};
 use anyhow::{Context, Result};
-use host::compliance::Compliance;
-use host::fem::{Elasticity, Material};
-use indicatif::{ProgressBar, ProgressStyle};
+use fem::compliance::Compliance;
+use fem::elasticity::{Elasticity, Material};
+use host::progress::Bar;
 use std::io::Write;
 use std::path::PathBuf;
 
@@ -35,15 +35,15 @@ pub struct Args {
 
 /// Runs the command.
 pub fn run(args: Args) -> Result<()> {
-    let mesh = host::mesh::load(&args.mesh)?;
+    let mesh = fem::mesh::load(&args.mesh)?;
     let nodes = parse_list::<usize>(&args.nodes).context("--nodes")?;
     let material = Material::new(args.young, args.poisson)?;
     let fixed = args.fix.build(&mesh)?;
     let body = Elasticity::new(&mesh, material)?;
     let compliance = Compliance::factorize(&body, &fixed)?;
-    let progress = progress_bar(nodes.len() as u64, "columns");
+    let progress = Bar::new("supernodes");
     let blocks = compliance.blocks(&nodes, Some(&progress))?;
-    progress.finish_and_clear();
+    progress.finish();
     let flat: Vec<Vec<[f64; 9]>> = blocks
         .iter()
         .map(|row| {
@@ -60,15 +60,4 @@ pub fn run(args: Args) -> Result<()> {
     writeln!(out)?;
     out.flush()?;
     Ok(())
-}
-
-/// A progress bar on stderr (hidden when stderr is not a terminal).
-pub fn progress_bar(len: u64, what: &str) -> ProgressBar {
-    let bar = ProgressBar::new(len);
-    if let Ok(style) = ProgressStyle::with_template(&format!(
-        "{{elapsed_precise}} [{{bar:40}}] {{pos}}/{{len}} {what} ({{eta}} left)"
-    )) {
-        bar.set_style(style);
-    }
-    bar
 }

@@ -7,17 +7,18 @@
 //! `--seconds` pass or the process is stopped. With `--headless --script ...` it runs a
 //! scripted hand motion without a browser and prints the loop and display figures.
 
-use super::bank::Prepared;
 use anyhow::{Context, Result, bail};
 use bank_format::{AlignedBytes, Bank};
+use host::bank::{BuiltBank, Prepared};
 use host::deform::Deformer;
 use host::display::server::{Server, SteerFn};
 use host::display::{DisplayMesh, DisplayStats, Pipeline};
-use host::reach::Workspace;
+use host::kinematics::Workspace;
 use host::record::Recorder;
 use host::scene::{MeshSource, Scene};
 use host::script::{Script, Scripted, aim_joints, ray_hit};
-use host::source::{LoopStats, SerialSource, SilSource, Source, SourceSpec};
+use host::sil::source::SilSource;
+use host::source::{LoopStats, SerialSource, Source, SourceSpec};
 use host::virtual_device::VirtualDevice;
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
@@ -98,7 +99,10 @@ pub fn run(args: Args) -> Result<()> {
     let t = Instant::now();
     eprintln!("preparing the scene (compliance factorisation, bank) ...");
     let prep = Prepared::from_scene(scene)?;
-    let (bank_bytes, pairs) = prep.build_bank()?;
+    let BuiltBank {
+        bytes: bank_bytes,
+        pairs,
+    } = prep.build_bank(None)?;
     eprintln!(
         "scene     {}: {} nodes, {} surface nodes; bank {} reachable nodes, {pairs} coupled \
          pairs, {:.1} KiB, built in {:.2} s",
@@ -109,7 +113,7 @@ pub fn run(args: Args) -> Result<()> {
         bank_bytes.len() as f64 / 1024.0,
         t.elapsed().as_secs_f64()
     );
-    if bank_bytes.len() > super::bank::BANK_REGION_BYTES {
+    if bank_bytes.len() > bank_format::region::BANK_LEN {
         eprintln!(
             "note      this bank is larger than the MCU's 768 KiB bank region: fine for the \
              virtual device, too big for the board"
@@ -323,7 +327,7 @@ fn mean_batch_ms(d: &DisplayStats) -> f64 {
 /// neighbours along the triangles (mesh ids).
 fn display_mesh(
     nodes: &[[f64; 3]],
-    surface: &host::mesh::Surface,
+    surface: &fem::mesh::Surface,
 ) -> (DisplayMesh, HashMap<usize, Vec<usize>>) {
     let index: HashMap<usize, u32> = surface
         .nodes

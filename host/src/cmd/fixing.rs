@@ -1,8 +1,8 @@
 //! Command-line description of fixed sets: `--fix-box` (repeatable) and `--fix-nodes`.
 
 use anyhow::{Context, Result, bail};
-use host::fem::FixedSet;
-use host::mesh::TetMesh;
+use fem::elasticity::FixedSet;
+use fem::mesh::TetMesh;
 use std::path::{Path, PathBuf};
 
 /// Fixed-set options shared by commands.

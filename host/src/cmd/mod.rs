@@ -7,5 +7,6 @@ pub mod calibrate;
 pub mod compliance;
 pub mod demo;
 pub mod fixing;
+pub mod organ;
 pub mod refinement;
 pub mod sil;

@@ -4,9 +4,9 @@
 //! tip's pressure patch should converge. Prints a table (or JSON), asserts nothing.
 
 use anyhow::{Context, Result};
-use host::compliance::Compliance;
+use fem::compliance::Compliance;
+use fem::elasticity::{Elasticity, FixedSet, Material};
 use host::contact::{ContactSurface, patch_force};
-use host::fem::{Elasticity, FixedSet, Material};
 use std::path::PathBuf;
 use std::time::Instant;
 
@@ -18,7 +18,7 @@ pub struct Args {
     #[arg(long)]
     mesh: Vec<PathBuf>,
     #[command(flatten)]
-    organ: super::bench::OrganArgs,
+    organ: super::organ::OrganArgs,
     /// Where the tool enters: a point above the organ, m (the shipped scene's trocar).
     #[arg(long, value_delimiter = ',', default_value = "0,0,0.16")]
     from: Vec<f64>,
@@ -48,7 +48,7 @@ struct Row {
 /// Runs the benchmark.
 pub fn run(args: Args) -> Result<()> {
     let meshes = if args.mesh.is_empty() {
-        super::bench::default_meshes()
+        super::organ::default_meshes()
     } else {
         args.mesh.clone()
     };
@@ -79,8 +79,8 @@ pub fn run(args: Args) -> Result<()> {
     }
     for path in &meshes {
         let t = Instant::now();
-        let mesh = host::mesh::load(path)?;
-        let surface = host::mesh::boundary(&mesh)?;
+        let mesh = fem::mesh::load(path)?;
+        let surface = fem::mesh::boundary(&mesh)?;
         let (lo, hi) = mesh.bounding_box();
         let mut fixed = FixedSet::none(mesh.nodes.len());
         fixed.fix_box(

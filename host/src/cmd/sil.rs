@@ -1,9 +1,9 @@
 //! `host sil`: run the firmware image under QEMU against the simulated device for a scripted
 //! hand motion and print a summary (one JSON object with `--json`).
 
-use super::bank::scene_bank;
 use anyhow::{Context, Result, bail};
 use bank_format::{AlignedBytes, Bank};
+use host::bank::scene_bank;
 use host::fsio::write_atomic;
 use host::sil::harness::{self, Run, Session, Setup};
 use host::sil::script::Script;

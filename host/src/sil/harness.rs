@@ -1,7 +1,8 @@
 //! Runs the software-in-the-loop image under QEMU against the plant simulator.
 //!
 //! QEMU (`-M netduinoplus2`, an STM32F405) loads the firmware image as it would be flashed and
-//! the bank file at the bank region's address (`-device loader,file=..,addr=0x08040000`).
+//! the bank file at the bank region's address (`-device loader,file=..,addr=..`, the address
+//! [`bank_format::region::BANK_ORIGIN`] from `memory.x`).
 //! Three channels connect it to this harness:
 //!
 //! - **plant** (lockstep): two named pipes in a temporary working directory, opened by the
@@ -21,6 +22,7 @@
 use super::plant::{Gimbal, PlantParams, TICK_S};
 use super::script::{Script, Trajectory};
 use anyhow::{Context, Result, bail};
+use bank_format::region::BANK_ORIGIN;
 use bank_format::{
     Bank, DeviceCalibration, DeviceToHost, FaultReason, FrameDecoder, FrameStats, HostToDevice,
     MAX_FRAME, State, Telemetry, encode_frame,
@@ -35,8 +37,6 @@ use std::sync::atomic::{AtomicBool, AtomicU32, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
-/// Flash address of the bank region (`memory.x`: BANK).
-pub const BANK_ADDR: u32 = 0x0804_0000;
 /// Instructions per 1 ms tick under `-icount shift=3` (8 ns each; see [`Session::icount_shift`]).
 pub const INSTRUCTIONS_PER_TICK: u32 = 125_000;
 /// Tick at which the default session arms the device.
@@ -305,7 +305,7 @@ pub fn run(setup: &Setup, session: &Session) -> Result<Run> {
         .arg(format!("tcp:127.0.0.1:{port}"))
         .arg("-device")
         .arg(format!(
-            "loader,file={},addr={BANK_ADDR:#x}",
+            "loader,file={},addr={BANK_ORIGIN:#x}",
             std::path::absolute(&setup.bank)?.display()
         ))
         .arg("-kernel")

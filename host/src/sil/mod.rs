@@ -2,9 +2,11 @@
 //! simulated haptic device. [`plant`] is the gimbal (rigid joints, motors, the user's hand),
 //! [`script`] the hand's scripted motions and [`harness`] starts QEMU, exchanges encoder counts
 //! and currents with the image every tick over a lockstep channel and collects its link
-//! traffic; [`cost`] groups instruction counts per tick and sizes the image.
+//! traffic; [`cost`] groups instruction counts per tick and sizes the image; [`source`] shows a
+//! run in the display.
 
 pub mod cost;
 pub mod harness;
 pub mod plant;
 pub mod script;
+pub mod source;

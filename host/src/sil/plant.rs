@@ -11,6 +11,7 @@
 //! `i = tau / (g Kt)` (see `firmware::device`). Integrated with semi-implicit Euler in
 //! [`SUBSTEPS`] steps per 1 ms tick (f64).
 
+use crate::kinematics::counts_for;
 use bank_format::DeviceCalibration;
 
 /// Integration steps per tick.
@@ -48,11 +49,10 @@ impl Default for PlantParams {
 #[derive(Clone, Debug)]
 pub struct Gimbal {
     params: PlantParams,
+    /// The encoders' calibration (counts per joint unit, home pose).
+    cal: DeviceCalibration,
     /// Joint effort per ampere, `g Kt`.
     effort_per_amp: [f64; 3],
-    /// Joint units per encoder count.
-    per_count: [f64; 3],
-    home: [f64; 3],
     q: [f64; 3],
     qd: [f64; 3],
 }
@@ -66,11 +66,7 @@ impl Gimbal {
             effort_per_amp: std::array::from_fn(|j| {
                 f64::from(cal.transmission[j]) * f64::from(cal.torque_constant_nm_per_a[j])
             }),
-            per_count: std::array::from_fn(|j| {
-                2.0 * std::f64::consts::PI
-                    / (f64::from(cal.counts_per_rev[j]) * f64::from(cal.transmission[j]))
-            }),
-            home,
+            cal: *cal,
             q: home,
             qd: [0.0; 3],
         }
@@ -86,9 +82,9 @@ impl Gimbal {
         self.qd
     }
 
-    /// What the encoders read: `round((q - home) / per_count)` (saturating).
+    /// What the encoders read ([`counts_for`] the joint values).
     pub fn encoder_counts(&self) -> [i32; 3] {
-        std::array::from_fn(|j| ((self.q[j] - self.home[j]) / self.per_count[j]).round() as i32)
+        counts_for(&self.cal, self.q)
     }
 
     /// Advance one tick with the motor currents `currents_a` held and the hand moving linearly

@@ -2,15 +2,15 @@
 //! `C = K_ff^-1` computed one by one with full solves (`Compliance::displacement` of unit
 //! forces), for both orderings, partly fixed nodes and bad requests.
 
-use host::compliance::{Block3, Compliance, ComplianceError};
-use host::fem::{Elasticity, FemError, FixedSet, Material};
-use host::mesh::TetMesh;
-use host::mesh::structured::box_mesh;
-use host::ordering::Ordering;
+use fem::compliance::{Block3, Compliance, ComplianceError};
+use fem::elasticity::{Elasticity, FemError, FixedSet, Material};
+use fem::mesh::TetMesh;
+use fem::mesh::structured::box_mesh;
+use fem::ordering::Ordering;
 use std::path::Path;
 
 fn liver() -> TetMesh {
-    host::mesh::load(&Path::new(env!("CARGO_MANIFEST_DIR")).join("meshes/liver-1k4.msh")).unwrap()
+    fem::mesh::load(&Path::new(env!("CARGO_MANIFEST_DIR")).join("../meshes/liver-1k4.msh")).unwrap()
 }
 
 fn bedded(mesh: &TetMesh) -> (Elasticity, FixedSet) {
@@ -60,7 +60,7 @@ fn assert_agree(got: &[Vec<Block3>], want: &[Vec<Block3>], what: &str) {
 }
 
 fn free_surface(mesh: &TetMesh, fixed: &FixedSet) -> Vec<usize> {
-    host::mesh::boundary(mesh)
+    fem::mesh::boundary(mesh)
         .unwrap()
         .nodes
         .into_iter()
@@ -100,7 +100,7 @@ fn partly_fixed_nodes_get_zero_rows_and_columns() {
             [true, false, false],
         )
         .unwrap();
-    let surface = host::mesh::boundary(&mesh).unwrap().nodes;
+    let surface = fem::mesh::boundary(&mesh).unwrap().nodes;
     let partial = surface
         .iter()
         .copied()

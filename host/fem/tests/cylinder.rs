@@ -2,17 +2,17 @@
 //! cylinder's side facets are slightly tilted, so the uniaxial field is not traction-free and
 //! F / (E A_mesh strain) differs from 1; it must converge to 1 under refinement.
 
-use host::compliance::solve_prescribed;
-use host::fem::{Elasticity, FixedSet, Material};
+use fem::compliance::solve_prescribed;
+use fem::elasticity::{Elasticity, FixedSet, Material};
 use std::path::Path;
 
 /// `F / (E A strain)` for the shipped cylinder `name`, with `A` the meshed top-face area.
 fn force_ratio(name: &str) -> (usize, f64) {
     let path = Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("meshes")
+        .join("../meshes")
         .join(name);
-    let mesh = host::mesh::load(&path).unwrap();
-    let surface = host::mesh::boundary(&mesh).unwrap();
+    let mesh = fem::mesh::load(&path).unwrap();
+    let surface = fem::mesh::boundary(&mesh).unwrap();
     let (lo, hi) = mesh.bounding_box();
     let height = hi[2] - lo[2];
     let tol = 1e-9 * height;

@@ -5,10 +5,12 @@ use super::TetMesh;
 use super::error::{MeshError, nofile};
 use super::text::{Cursor, parse_num, show, tokens, trim};
 use std::borrow::Cow;
+use std::cell::Cell;
 use std::collections::HashMap;
 use std::collections::hash_map::Entry;
 use std::io::{self, Write};
 use std::panic::{AssertUnwindSafe, catch_unwind};
+use std::sync::Once;
 
 /// Gmsh element type number of the 4-node tetrahedron.
 const GMSH_TET4: i64 = 4;
@@ -345,10 +347,10 @@ fn read_msh41(bytes: &[u8], header: &Header) -> Result<TetMesh, MeshError> {
         });
     }
     // `mshio` has a few `unwrap`s and unchecked subtractions on malformed input; a panic there
-    // must not take the caller down.
-    let parsed = catch_unwind(AssertUnwindSafe(|| {
+    // must not take the caller down, nor print a panic message before the clean error.
+    let parsed = catch_quietly(|| {
         mshio::parse_msh_bytes(bytes).map_err(|e| convert_mshio_error(&e, bytes, binary))
-    }));
+    });
     let msh = match parsed {
         Ok(r) => r?,
         Err(_) => {
@@ -359,6 +361,30 @@ fn read_msh41(bytes: &[u8], header: &Header) -> Result<TetMesh, MeshError> {
         }
     };
     msh41_to_mesh(&msh)
+}
+
+thread_local! {
+    /// Set while this thread runs [`catch_quietly`]'s closure.
+    static QUIET: Cell<bool> = const { Cell::new(false) };
+}
+
+/// `catch_unwind(f)` without the panic message: the first call wraps the process's panic hook
+/// (whatever it is then) in one that stays silent on a thread inside `catch_quietly` and
+/// delegates everywhere else, so panics of other threads and later ones print as before.
+fn catch_quietly<R>(f: impl FnOnce() -> R) -> std::thread::Result<R> {
+    static WRAP_HOOK: Once = Once::new();
+    WRAP_HOOK.call_once(|| {
+        let previous = std::panic::take_hook();
+        std::panic::set_hook(Box::new(move |info| {
+            if !QUIET.with(Cell::get) {
+                previous(info);
+            }
+        }));
+    });
+    let was = QUIET.with(|q| q.replace(true));
+    let result = catch_unwind(AssertUnwindSafe(f));
+    QUIET.with(|q| q.set(was));
+    result
 }
 
 fn convert_mshio_error(e: &mshio::MshParserError<&[u8]>, bytes: &[u8], binary: bool) -> MeshError {

@@ -1,10 +1,10 @@
 //! P1 elasticity against analytic references: element energy, patch tests, uniaxial
 //! compression of a box, a cantilever against Timoshenko beam theory.
 
-use host::compliance::solve_prescribed;
-use host::fem::{Elasticity, FixedSet, Material};
-use host::mesh::TetMesh;
-use host::mesh::structured::box_mesh;
+use fem::compliance::solve_prescribed;
+use fem::elasticity::{Elasticity, FixedSet, Material};
+use fem::mesh::TetMesh;
+use fem::mesh::structured::box_mesh;
 
 /// A linear field `u(x) = A x + b`.
 fn linear_field(mesh: &TetMesh, a: [[f64; 3]; 3], b: [f64; 3]) -> Vec<f64> {
@@ -80,7 +80,7 @@ fn assembled_matrix_matches_element_by_element_product() {
     let mesh = distorted_box([0.04, 0.03, 0.02], [4, 3, 3], 0.2);
     let body = Elasticity::new(&mesh, Material::new(3.0e3, 0.45).unwrap()).unwrap();
     let fixed = FixedSet::none(mesh.nodes.len());
-    let dofs = host::fem::DofMap::new(&fixed);
+    let dofs = fem::elasticity::DofMap::new(&fixed);
     let k = body.stiffness(&dofs);
     let u = linear_field(&mesh, A, [0.0; 3]);
     let ku_elem = body.apply(&u);
@@ -247,7 +247,7 @@ fn cantilever_ratio(cells: [usize; 3]) -> (usize, f64) {
     fixed
         .fix_box(&mesh, [-1.0, -1.0, -1.0, 1e-9, 1.0, 1.0], [true; 3])
         .unwrap();
-    let compliance = host::compliance::Compliance::factorize(&body, &fixed).unwrap();
+    let compliance = fem::compliance::Compliance::factorize(&body, &fixed).unwrap();
     // Consistent nodal loads of a uniform shear traction on the tip face (structured grid:
     // bilinear weights).
     let p = -1.0e-3;

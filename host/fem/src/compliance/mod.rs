@@ -11,8 +11,9 @@
 
 mod gram;
 
-use crate::fem::{DofMap, Elasticity, FemError, FixedSet};
+use crate::elasticity::{DofMap, Elasticity, FemError, FixedSet};
 use crate::ordering::{DofPermutation, Ordering, permutation};
+use crate::progress::Progress;
 use faer::dyn_stack::{MemBuffer, MemStack};
 use faer::linalg::solvers::Solve;
 use faer::perm::PermRef;
@@ -23,7 +24,6 @@ use faer::sparse::linalg::cholesky::{
 };
 use faer::sparse::{SparseColMat, Triplet};
 use faer::{Conj, Mat, Par, Side};
-use indicatif::ProgressBar;
 
 /// A 3x3 block, row-major, in m/N for compliance and N/m for stiffness.
 pub type Block3 = [[f64; 3]; 3];
@@ -54,7 +54,7 @@ pub enum ComplianceError {
 }
 
 /// Size and cost figures of a factorisation, for reports and benchmarks.
-#[derive(Debug, Clone, Copy, serde::Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct FactorStats {
     /// Order of `K_ff`.
     pub free_dofs: usize,
@@ -210,12 +210,12 @@ impl Compliance {
 
     /// The blocks `C(nodes[a], nodes[b])` for every pair, `result[a][b]`, row-major in m/N,
     /// by a sparse forward substitution and a Gram product (module `gram`). A requested node's
-    /// fixed components give zero rows and columns. The progress bar, if any, counts
+    /// fixed components give zero rows and columns. The progress, if any, counts
     /// supernodes.
     pub fn blocks(
         &self,
         nodes: &[usize],
-        progress: Option<&ProgressBar>,
+        progress: Option<&dyn Progress>,
     ) -> Result<Vec<Vec<Block3>>, ComplianceError> {
         self.check_request(nodes)?;
         let m = nodes.len();
@@ -246,7 +246,7 @@ impl Compliance {
         nodes: &[usize],
         positions: &[[f64; 3]],
         radius: f64,
-        progress: Option<&ProgressBar>,
+        progress: Option<&dyn Progress>,
     ) -> Result<Vec<Vec<(usize, Block3)>>, ComplianceError> {
         self.check_request(nodes)?;
         if positions.len() != nodes.len() || radius.is_nan() || radius < 0.0 {

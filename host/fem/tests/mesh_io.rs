@@ -1,10 +1,9 @@
-//! Integration tests of `host::mesh`: reading every supported format, validation errors, robustness
-//! against malformed input, and the boundary surface. Test data: `host/tests/data/`, made by
+//! Integration tests of `fem::mesh`: reading every supported format, validation errors, robustness
+//! against malformed input, and the boundary surface. Test data: `host/fem/tests/data/`, made by
 //! `scripts/gen_test_meshes.py`.
 
-use host::mesh::{self, Format, MeshError, TetMesh};
+use fem::mesh::{self, Format, MeshError, TetMesh};
 use std::path::{Path, PathBuf};
-use std::time::Instant;
 
 fn data(name: &str) -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR"))
@@ -486,39 +485,33 @@ fn writer_round_trips() {
     }
 }
 
-/// The shipped meshes of `host/meshes/` (if any) are valid.
+/// Every mesh shipped in `host/meshes/` is valid and has a boundary.
 #[test]
 fn shipped_meshes_are_valid() {
-    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("meshes");
-    let Ok(entries) = std::fs::read_dir(&dir) else {
-        return;
-    };
-    for entry in entries.flatten() {
-        let path = entry.path();
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../meshes");
+    let entries = std::fs::read_dir(&dir).unwrap_or_else(|e| panic!("{}: {e}", dir.display()));
+    let mut checked = 0;
+    for entry in entries {
+        let path = entry.unwrap().path();
         if Format::from_path(&path).is_err() {
             continue;
         }
         let m = mesh::load(&path).unwrap_or_else(|e| panic!("{e}"));
         let s = mesh::boundary(&m).unwrap();
         assert!(!s.triangles.is_empty(), "{}", path.display());
+        checked += 1;
     }
+    // liver-1k4, liver-10k, cylinder-2k, cylinder-10k, beam, brain-specimen.
+    assert!(checked >= 6, "only {checked} meshes in {}", dir.display());
 }
 
-/// Validation and boundary of a ~100k-node, ~600k-tet mesh stay fast.
+/// Validation and boundary of a ~100k-node, ~600k-tet mesh (their speed is measured by
+/// `host bench compliance` as its load time; this checks the result at that size).
 #[test]
-fn large_mesh_is_fast() {
+fn large_mesh_validates_and_has_its_boundary() {
     let m = mesh::structured::box_mesh([0.1, 0.1, 0.1], [46, 46, 46]);
     assert!(m.nodes.len() > 100_000 && m.tets.len() > 580_000);
-    let t = Instant::now();
     mesh::validate(&m).unwrap();
     let s = mesh::boundary(&m).unwrap();
-    let dt = t.elapsed();
-    println!(
-        "validate + boundary of {} nodes, {} tets: {dt:?} ({} boundary triangles)",
-        m.nodes.len(),
-        m.tets.len(),
-        s.triangles.len()
-    );
     assert_eq!(s.triangles.len(), 6 * 46 * 46 * 2);
-    assert!(dt.as_secs_f64() < 10.0, "{dt:?}");
 }

@@ -2,12 +2,12 @@
 //! forces of the compliance form (`f_S = C_SS^-1 u*_S`) against the paper's eq. 2 (Lagrange
 //! multipliers, sparse LU) and against Dirichlet conditions (reactions, element by element).
 
-use host::compliance::{
+use fem::compliance::{
     Block3, Compliance, contact_forces, dirichlet_forces, lagrange_forces, superpose,
 };
-use host::fem::{Elasticity, FemError, FixedSet, Material};
-use host::mesh::TetMesh;
-use host::mesh::structured::box_mesh;
+use fem::elasticity::{Elasticity, FemError, FixedSet, Material};
+use fem::mesh::TetMesh;
+use fem::mesh::structured::box_mesh;
 
 const SIZE: [f64; 3] = [0.06, 0.04, 0.03];
 
@@ -147,7 +147,7 @@ fn fixed_sets_leaving_rigid_motions_are_refused() {
     let mesh = box_mesh(SIZE, [3, 3, 3]);
     let body = Elasticity::new(&mesh, Material::new(3.0e3, 0.45).unwrap()).unwrap();
     let refuse = |fixed: &FixedSet, what: &str| match Compliance::factorize(&body, fixed) {
-        Err(host::compliance::ComplianceError::Fem(FemError::RigidMotion(msg))) => {
+        Err(fem::compliance::ComplianceError::Fem(FemError::RigidMotion(msg))) => {
             assert!(
                 msg.contains(what),
                 "message {msg:?} should mention {what:?}"

@@ -25,7 +25,8 @@
 //! full column solves and three times slower than this method, with twice the memory.
 
 use super::{Block3, ComplianceError};
-use crate::fem::DofMap;
+use crate::elasticity::DofMap;
+use crate::progress::Progress;
 use faer::linalg::matmul::matmul;
 use faer::linalg::matmul::triangular::{self, BlockStructure};
 use faer::linalg::triangular_solve::solve_lower_triangular_in_place;
@@ -33,7 +34,6 @@ use faer::reborrow::{Reborrow, ReborrowMut};
 use faer::sparse::linalg::cholesky::supernodal::SupernodalLltRef;
 use faer::sparse::linalg::cholesky::{SymbolicCholesky, SymbolicCholeskyRaw};
 use faer::{Accum, ColMut, Mat, MatMut, MatRef, Par};
-use indicatif::ProgressBar;
 use rayon::prelude::*;
 
 /// Columns per panel of the Gram products (bounds the temporary to `active x PANEL` values).
@@ -185,7 +185,7 @@ pub(super) fn gram_blocks(
     values: &[f64],
     layout: &Layout,
     out: &mut impl GramOut,
-    progress: Option<&ProgressBar>,
+    progress: Option<&dyn Progress>,
 ) -> Result<(), ComplianceError> {
     let internal = |what: &str| ComplianceError::Factorisation(format!("internal error: {what}"));
     let SymbolicCholeskyRaw::Supernodal(sym) = symbolic.raw() else {
@@ -237,11 +237,11 @@ pub(super) fn gram_blocks(
     let mut col_pos = vec![0usize; n_r];
     let mut row_pos = vec![usize::MAX; nf];
     if let Some(bar) = progress {
-        bar.set_length(ns as u64);
+        bar.start(ns as u64);
     }
     for s in 0..ns {
         if let Some(bar) = progress {
-            bar.inc(1);
+            bar.advance(1);
         }
         let kids = std::mem::take(&mut pending[s]);
         let own_cols = &own[own_ptr[s]..own_ptr[s + 1]];

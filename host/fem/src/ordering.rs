@@ -5,16 +5,47 @@
 //! large organs tractable: its fill grows like `n^(4/3)` on 3D meshes, against far more for
 //! minimum degree.
 
-use crate::fem::{DofMap, Elasticity};
+use crate::elasticity::{DofMap, Elasticity};
 
 /// Which fill-reducing ordering to use.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, clap::ValueEnum, serde::Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum Ordering {
     /// Approximate minimum degree (faer's AMD) on the dof graph.
     Amd,
     /// Nested dissection (METIS `NodeND`) on the node graph.
     #[default]
     NestedDissection,
+}
+
+impl Ordering {
+    /// Every ordering, in the order [`Ordering::name`] lists them.
+    pub const ALL: [Ordering; 2] = [Ordering::Amd, Ordering::NestedDissection];
+
+    /// The ordering's name: `amd` or `nested-dissection`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Ordering::Amd => "amd",
+            Ordering::NestedDissection => "nested-dissection",
+        }
+    }
+}
+
+impl std::fmt::Display for Ordering {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+impl std::str::FromStr for Ordering {
+    type Err = String;
+
+    /// Parses a name of [`Ordering::name`].
+    fn from_str(s: &str) -> Result<Ordering, String> {
+        Ordering::ALL
+            .into_iter()
+            .find(|o| o.name() == s)
+            .ok_or_else(|| format!("unknown ordering {s:?} (expected amd or nested-dissection)"))
+    }
 }
 
 /// A dof permutation: `forward[k]` is the free dof eliminated `k`-th; `inverse` its inverse.

@@ -1,0 +1,225 @@
+//! The bank stage of the pipeline: scene -> mesh and supports -> reachable region R ->
+//! factorised compliance -> bank bytes (the design notes' "model only what a scene needs").
+//!
+//! [`Prepared`] holds a scene with everything the later stages need (the compliance stays
+//! factorised, so the display can produce any column on demand); [`Prepared::build_bank`]
+//! writes the scene's bank. `host bank`, `host demo`, `host sil` and the tests all go through
+//! here.
+
+use crate::kinematics::Workspace;
+use crate::reach::reachable;
+use crate::scene::Scene;
+use anyhow::{Context, Result, bail};
+use bank_format::BankBuilder;
+use bank_format::region::BANK_LEN;
+use fem::compliance::{Block3, Compliance};
+use fem::elasticity::{Elasticity, FixedSet};
+use fem::mesh::{Surface, TetMesh};
+use fem::progress::Progress;
+use std::collections::{BTreeSet, HashMap};
+use std::path::Path;
+
+/// Rows of compliance blocks over R: `rows[a]` lists `(b, C(R[a], R[b]))` sorted by `b`.
+pub type BlockRows = Vec<Vec<(usize, Block3)>>;
+
+/// A bank's bytes and how many coupled pairs `C_kl` it keeps.
+pub struct BuiltBank {
+    /// The bank, as `host bank build` writes it.
+    pub bytes: Vec<u8>,
+    /// Coupled pairs `k < l` stored.
+    pub pairs: usize,
+}
+
+/// A scene with its mesh, supports, factorised compliance and reachable region.
+pub struct Prepared {
+    /// The scene as read.
+    pub scene: Scene,
+    /// Its organ mesh, validated.
+    pub mesh: TetMesh,
+    /// The mesh's name for messages (file name, or the embedded mesh's name).
+    pub mesh_name: String,
+    /// The mesh's boundary.
+    pub surface: Surface,
+    /// `K_ff` factorised with the scene's supports.
+    pub compliance: Compliance,
+    /// The scene's identity written into the bank (scene file and mesh contents).
+    pub scene_id: u64,
+    /// R: mesh node ids, ascending.
+    pub region: Vec<usize>,
+    /// R's positions.
+    pub positions: Vec<[f64; 3]>,
+    /// Boundary triangles with all three vertices in R, as indices into `region`.
+    pub triangles: Vec<[u32; 3]>,
+}
+
+impl Prepared {
+    /// [`Prepared::from_scene`] on the scene file at `path`.
+    pub fn load(path: &Path) -> Result<Prepared> {
+        Prepared::from_scene(Scene::load(path)?)
+    }
+
+    /// Loads the scene's mesh, factorises its compliance and finds its reachable region.
+    pub fn from_scene(scene: Scene) -> Result<Prepared> {
+        let path = scene.path.clone();
+        let (mesh, mesh_name, mesh_hash) = scene.load_mesh()?;
+        let surface = fem::mesh::boundary(&mesh)?;
+        let fixed: FixedSet = scene.fixed_set(&mesh)?;
+        let workspace = Workspace::from_device(&scene.device);
+        let region = reachable(
+            &workspace,
+            &mesh.nodes,
+            &surface.nodes,
+            |k| (0..3).any(|c| fixed.is_fixed(k, c)),
+            scene.tip_radius_m,
+            scene.bank.reach_margin_m,
+        );
+        if region.is_empty() {
+            bail!(
+                "{}: the tool reaches no free surface node (check device.fulcrum_m, the ranges \
+                 and bank.reach_margin_m)",
+                path.display()
+            );
+        }
+        if region.len() > bank_format::MAX_NODES {
+            bail!(
+                "{}: the reachable region has {} nodes; a bank holds at most {} (u16 indices): \
+                 narrow the device's ranges",
+                path.display(),
+                region.len(),
+                bank_format::MAX_NODES
+            );
+        }
+        let local: HashMap<usize, u32> = region
+            .iter()
+            .enumerate()
+            .map(|(i, &k)| (k, i as u32))
+            .collect();
+        let triangles = surface
+            .triangles
+            .iter()
+            .filter_map(|t| Some([*local.get(&t[0])?, *local.get(&t[1])?, *local.get(&t[2])?]))
+            .collect();
+        let positions = region.iter().map(|&k| mesh.nodes[k]).collect();
+        let body = Elasticity::new(&mesh, scene.material)?;
+        let compliance = Compliance::factorize(&body, &fixed)?;
+        let scene_id = scene.scene_id(mesh_hash);
+        Ok(Prepared {
+            scene,
+            mesh,
+            mesh_name,
+            surface,
+            compliance,
+            scene_id,
+            region,
+            positions,
+            triangles,
+        })
+    }
+
+    /// R's triangle edges `(a, b)`, `a < b`, as indices into [`Prepared::region`].
+    pub fn edges(&self) -> BTreeSet<(usize, usize)> {
+        let mut e = BTreeSet::new();
+        for t in &self.triangles {
+            for i in 0..3 {
+                let (a, b) = (t[i] as usize, t[(i + 1) % 3] as usize);
+                e.insert((a.min(b), a.max(b)));
+            }
+        }
+        e
+    }
+
+    /// Distance between R's nodes `a` and `b` at rest, m.
+    pub fn dist(&self, a: usize, b: usize) -> f64 {
+        let (p, q) = (self.positions[a], self.positions[b]);
+        (0..3).map(|i| (p[i] - q[i]).powi(2)).sum::<f64>().sqrt()
+    }
+
+    /// Mean length of R's triangle edges, m (0 without triangles).
+    pub fn mean_edge(&self) -> f64 {
+        let e = self.edges();
+        if e.is_empty() {
+            return 0.0;
+        }
+        e.iter().map(|&(a, b)| self.dist(a, b)).sum::<f64>() / e.len() as f64
+    }
+
+    /// Blocks of R within `radius`, and at least along every triangle edge; the progress, if
+    /// any, counts supernodes.
+    pub fn blocks(&self, radius: f64, progress: Option<&dyn Progress>) -> Result<BlockRows> {
+        let longest = self
+            .edges()
+            .iter()
+            .map(|&(a, b)| self.dist(a, b))
+            .fold(0.0, f64::max);
+        Ok(self.compliance.blocks_within(
+            &self.region,
+            &self.positions,
+            radius.max(longest),
+            progress,
+        )?)
+    }
+
+    /// The bank for truncation radius `radius` from `rows` (computed for at least that
+    /// radius by [`Prepared::blocks`]).
+    pub fn bank(&self, rows: &[Vec<(usize, Block3)>], radius: f64) -> Result<BuiltBank> {
+        let edges = self.edges();
+        let mut c_kk = Vec::with_capacity(rows.len());
+        let mut couplings = Vec::new();
+        for (a, row) in rows.iter().enumerate() {
+            let mut diag = None;
+            for &(b, block) in row {
+                if b == a {
+                    diag = Some(block);
+                } else if b > a && (self.dist(a, b) <= radius || edges.contains(&(a, b))) {
+                    couplings.push((a as u32, b as u32, block));
+                }
+            }
+            c_kk.push(diag.context("internal: a node's own block is missing")?);
+        }
+        let grid = self
+            .scene
+            .bank
+            .grid_cell_m
+            .unwrap_or_else(|| radius.max(2.0 * self.mean_edge()).max(1e-3));
+        let pairs = couplings.len();
+        let builder = BankBuilder {
+            positions_m: self.positions.clone(),
+            mesh_ids: self.region.iter().map(|&k| k as u32).collect(),
+            triangles: self.triangles.clone(),
+            c_kk,
+            couplings,
+            grid_cell_size_m: grid,
+            truncation_radius_m: radius,
+            scene_id: self.scene_id,
+            law: self.scene.law,
+            device: self.scene.device,
+        };
+        let bytes = builder
+            .build()
+            .map_err(|e| anyhow::anyhow!("the bank writer refused the scene's data: {e}"))?;
+        Ok(BuiltBank { bytes, pairs })
+    }
+}
+
+impl Prepared {
+    /// The scene's bank at its truncation radius (`bank.truncation_radius_m`).
+    pub fn build_bank(&self, progress: Option<&dyn Progress>) -> Result<BuiltBank> {
+        let radius = self.scene.bank.truncation_radius_m;
+        let rows = self.blocks(radius, progress)?;
+        self.bank(&rows, radius)
+    }
+}
+
+/// The bank of the scene file at `scene` (what `host bank build` writes), refused when it does
+/// not fit the device's bank region ([`BANK_LEN`]).
+pub fn scene_bank(scene: &Path) -> Result<Vec<u8>> {
+    let bytes = Prepared::load(scene)?.build_bank(None)?.bytes;
+    if bytes.len() > BANK_LEN {
+        bail!(
+            "{}: the bank would be {} bytes, more than the {BANK_LEN} bytes of the bank region",
+            scene.display(),
+            bytes.len()
+        );
+    }
+    Ok(bytes)
+}
