@@ -192,7 +192,7 @@ impl<'a> Bank<'a> {
         }
         let table_end = HEADER_LEN + SECTION_ENTRY_LEN * section_count;
         let total = header.total_len as usize;
-        if total % SECTION_ALIGN != 0 || total < table_end {
+        if !total.is_multiple_of(SECTION_ALIGN) || total < table_end {
             return Err(BankError::BadTotalLength {
                 total_len: header.total_len,
             });
@@ -795,7 +795,7 @@ fn check_table(table: &[SectionEntry], table_end: usize, total: usize) -> Result
             return Err(BankError::ReservedSectionKind { entry: i as u32 });
         }
         let start = e.offset as usize;
-        if start % SECTION_ALIGN != 0 {
+        if !start.is_multiple_of(SECTION_ALIGN) {
             return Err(BankError::SectionMisaligned { section });
         }
         let end = start

@@ -108,7 +108,7 @@ impl<'b> App<'b> {
         let input = LoopInput {
             encoder_counts: counts,
             overrun,
-            ticks_since_host_frame: self.link_silence(),
+            link_silence_ticks: self.link_silence(),
         };
         let (out, new_fault) = match &mut self.core {
             Core::Loop(lp) => {

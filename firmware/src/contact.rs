@@ -30,7 +30,7 @@
 //! the normal part (a Coulomb-like friction cone, on displacements). When the tip leaves the
 //! cone, the contact slides: the anchor moves along the surface just far enough to put the
 //! displacement back on the cone (the target point is found on the rest surface by
-//! [`closest_surface_point`], a descent over the triangles around the current one), so the
+//! [`closest_surface_point`], a walk across edges from the current triangle), so the
 //! tangential force is bounded by the slope and changes continuously, with no saw-tooth at
 //! triangle edges. Contact ends when `(tip - anchor) . n > 0` for the contact triangle's outward
 //! rest normal `n` (the contact would pull), checked before and after any slide.
@@ -164,11 +164,6 @@ impl ContactTracker {
     /// The search parameters in use.
     pub fn params(&self) -> SearchParams {
         self.params
-    }
-
-    /// Whether a contact is held.
-    pub fn is_touching(&self) -> bool {
-        self.active.is_some()
     }
 
     /// Drop any contact (e.g. after a fault or a bank change).

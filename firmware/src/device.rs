@@ -131,23 +131,6 @@ impl Device {
         Joints::from_array(q)
     }
 
-    /// The first joint outside `[joint_min - margin, joint_max + margin]` (or not finite), if any.
-    pub fn out_of_range(&self, q: &Joints, margin: [f32; 3]) -> Option<usize> {
-        let q = q.to_array();
-        (0..3).find(|&j| {
-            let (Some(&v), Some(&lo), Some(&hi), Some(&m)) = (
-                q.get(j),
-                self.cal.joint_min.get(j),
-                self.cal.joint_max.get(j),
-                margin.get(j),
-            ) else {
-                return true;
-            };
-            // Written so that NaN counts as out of range.
-            !(v >= lo - m && v <= hi + m)
-        })
-    }
-
     /// Unit shaft direction `d = Rot(yaw_axis, yaw) Rot(pitch_axis, pitch) shaft_axis`.
     pub fn direction(&self, q: &Joints) -> [f32; 3] {
         let (sp, cp) = sin_cos(q.pitch);
@@ -396,36 +379,6 @@ mod tests {
         let q = dev.joints([2000, 0, -500]);
         assert!((q.pitch - (0.1 - 2.0 * PI / 8.0)).abs() < 1e-6);
         assert!((q.insertion - (0.05 + 2.0 * PI / 250.0)).abs() < 1e-6);
-    }
-
-    #[test]
-    fn range_check() {
-        let dev = Device::new(&liver_device());
-        let m = [0.0; 3];
-        assert_eq!(
-            dev.out_of_range(&Joints::from_array([0.0, 0.0, 0.05]), m),
-            None
-        );
-        assert_eq!(
-            dev.out_of_range(&Joints::from_array([0.4, 0.0, 0.05]), m),
-            Some(0)
-        );
-        assert_eq!(
-            dev.out_of_range(&Joints::from_array([0.4, 0.0, 0.05]), [0.1, 0.0, 0.0]),
-            None
-        );
-        assert_eq!(
-            dev.out_of_range(&Joints::from_array([0.0, -0.4, 0.05]), m),
-            Some(1)
-        );
-        assert_eq!(
-            dev.out_of_range(&Joints::from_array([0.0, 0.0, 0.01]), m),
-            Some(2)
-        );
-        assert_eq!(
-            dev.out_of_range(&Joints::from_array([0.0, 0.0, f32::NAN]), m),
-            Some(2)
-        );
     }
 
     fn poses() -> [[f32; 3]; 6] {

@@ -24,8 +24,12 @@
     )
 )]
 
-/// Tick period of the force loop, in seconds (1 kHz).
-pub const TICK_PERIOD_S: f32 = 1.0e-3;
+/// Rate of the force loop, Hz: the one place it is written (the images' tickers, the host's
+/// virtual device and SIL plant derive from it).
+pub const TICK_HZ: u32 = 1_000;
+
+/// Tick period of the force loop, in seconds.
+pub const TICK_PERIOD_S: f32 = 1.0 / TICK_HZ as f32;
 
 pub mod app;
 pub mod contact;

@@ -11,7 +11,7 @@
 //! pressure's consistent load `integral p phi_k dA` (P1 shape functions `phi_k`), by quadrature:
 //! [`QUADRATURE`] places 12 points on two rings in the contact triangle's plane (a Gauss rule
 //! in the radius for the weight `rho (1 - rho^2 / r^2)`, six angles per ring), each point is
-//! moved to the closest rest-surface point ([`closest_surface_point`], a local descent from the
+//! moved to the closest rest-surface point ([`closest_surface_point`], a walk across edges from the
 //! contact triangle) and its weight is spread over that triangle's vertices by barycentric
 //! coordinates. When the tip is much smaller than the triangles every point falls in the
 //! contact triangle and the weights are the anchor's barycentric coordinates (the paper's

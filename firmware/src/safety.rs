@@ -151,8 +151,9 @@ pub struct TickInput {
     pub requested_a: [f32; 3],
     /// Whether the previous tick overran its period.
     pub overrun: bool,
-    /// Ticks since the last valid frame from the host.
-    pub ticks_since_host_frame: u32,
+    /// How long the host link has been silent, in ticks (the application's measure: since the
+    /// last byte, or since the last valid frame less a grace for a garbled link).
+    pub link_silence_ticks: u32,
     /// Whether the contact solve failed this tick.
     pub solve_failed: bool,
 }
@@ -167,7 +168,7 @@ impl TickInput {
             force_n: [0.0; 3],
             requested_a: [0.0; 3],
             overrun: false,
-            ticks_since_host_frame: 0,
+            link_silence_ticks: 0,
             solve_failed: false,
         }
     }
@@ -318,8 +319,8 @@ impl Supervisor {
         if armed && input.overrun {
             return fault(FaultReason::Overrun, 0);
         }
-        if armed && input.ticks_since_host_frame > self.config.link_timeout_ticks {
-            return fault(FaultReason::LinkSilent, input.ticks_since_host_frame);
+        if armed && input.link_silence_ticks > self.config.link_timeout_ticks {
+            return fault(FaultReason::LinkSilent, input.link_silence_ticks);
         }
         if let Some(prev) = self.last_counts {
             let jump = (0..3u32)
@@ -476,7 +477,7 @@ mod tests {
             ),
             (
                 TickInput {
-                    ticks_since_host_frame: 11,
+                    link_silence_ticks: 11,
                     ..ok_tick()
                 },
                 FaultReason::LinkSilent,
@@ -602,7 +603,7 @@ mod tests {
         // Drive-only conditions while disarmed: no fault.
         let out = s.tick(&TickInput {
             overrun: true,
-            ticks_since_host_frame: 1000,
+            link_silence_ticks: 1000,
             joints: [3.0, 0.0, 0.0],
             requested_a: [50.0, 0.0, 0.0],
             ..ok_tick()
@@ -681,12 +682,12 @@ mod tests {
     fn link_timeout_boundary() {
         let mut s = armed();
         let out = s.tick(&TickInput {
-            ticks_since_host_frame: 10,
+            link_silence_ticks: 10,
             ..ok_tick()
         });
         assert_eq!(out.state, State::Armed);
         let out = s.tick(&TickInput {
-            ticks_since_host_frame: 11,
+            link_silence_ticks: 11,
             ..ok_tick()
         });
         assert_eq!(out.state, State::Fault(FaultReason::LinkSilent));

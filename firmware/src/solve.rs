@@ -560,15 +560,6 @@ pub fn apply_tissue_law(law: &TissueLaw, f: [f32; 3], d: [f32; 3]) -> Result<[f3
     }
 }
 
-/// [`apply_tissue_law`] with the bank's law on a solve's tool force.
-pub fn tool_force_with_law(
-    bank: &Bank,
-    forces: &ContactForces,
-    d: [f32; 3],
-) -> Result<[f32; 3], SolveError> {
-    apply_tissue_law(bank.tissue_law(), forces.tool_force_n, d)
-}
-
 #[cfg(test)]
 #[allow(clippy::needless_range_loop)]
 mod tests {

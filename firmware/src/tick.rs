@@ -57,8 +57,9 @@ pub struct LoopInput {
     pub encoder_counts: [i32; 3],
     /// Whether the previous tick overran its period.
     pub overrun: bool,
-    /// Ticks since the last valid frame from the host.
-    pub ticks_since_host_frame: u32,
+    /// How long the host link has been silent, in ticks (the application's measure: since the
+    /// last byte, or since the last valid frame less a grace for a garbled link).
+    pub link_silence_ticks: u32,
 }
 
 /// The result of one tick.
@@ -292,7 +293,7 @@ impl<'b> HapticLoop<'b> {
             force_n: force_on_tool,
             requested_a,
             overrun: input.overrun,
-            ticks_since_host_frame: input.ticks_since_host_frame,
+            link_silence_ticks: input.link_silence_ticks,
             solve_failed: solve_error.is_some(),
         });
 
@@ -434,7 +435,7 @@ mod tests {
         LoopInput {
             encoder_counts: counts,
             overrun: false,
-            ticks_since_host_frame: 0,
+            link_silence_ticks: 0,
         }
     }
 
@@ -591,7 +592,7 @@ mod tests {
                 encoder_counts: counts_for_insertion(&dev, 0.095 + 0.05e-3 * t as f32),
                 overrun: false,
                 // No host at all: not a fault while disarmed.
-                ticks_since_host_frame: t,
+                link_silence_ticks: t,
             });
             check(&out, &cal);
             assert_eq!(out.state, State::Disarmed);
@@ -626,7 +627,7 @@ mod tests {
             let out = lp.tick(LoopInput {
                 encoder_counts: s,
                 overrun: false,
-                ticks_since_host_frame: silent,
+                link_silence_ticks: silent,
             });
             assert_eq!(out.state, State::Armed);
             assert!(out.currents_a[2] < 0.0);
@@ -634,7 +635,7 @@ mod tests {
         let out = lp.tick(LoopInput {
             encoder_counts: s,
             overrun: false,
-            ticks_since_host_frame: 11,
+            link_silence_ticks: 11,
         });
         assert_eq!(out.state, State::Fault(FaultReason::LinkSilent));
         assert_eq!(out.new_fault.unwrap().reason, FaultReason::LinkSilent);
@@ -678,7 +679,7 @@ mod tests {
         let out = lp.tick(LoopInput {
             encoder_counts: s,
             overrun: true,
-            ticks_since_host_frame: 0,
+            link_silence_ticks: 0,
         });
         assert_eq!(out.state, State::Fault(FaultReason::Overrun));
         assert_eq!(out.currents_a, [0.0; 3]);

@@ -391,10 +391,13 @@ mod tests {
             )
         };
         assert_eq!(rc, 0, "openpty failed");
-        // SAFETY: `s` is a valid descriptor; ttyname returns a NUL-terminated static buffer.
-        let name = unsafe { std::ffi::CStr::from_ptr(libc::ttyname(s)) }
-            .to_string_lossy()
-            .into_owned();
+        // SAFETY: `s` is a valid descriptor; ttyname returns NULL or a NUL-terminated static
+        // buffer, read at once.
+        let name = unsafe {
+            let p = libc::ttyname(s);
+            assert!(!p.is_null(), "ttyname of the pseudo-terminal failed");
+            std::ffi::CStr::from_ptr(p).to_string_lossy().into_owned()
+        };
         // SAFETY: both descriptors are fresh and owned by the returned files only.
         unsafe {
             (

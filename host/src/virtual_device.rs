@@ -23,8 +23,8 @@ use std::sync::{Arc, Mutex};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
-/// Tick period.
-const PERIOD: Duration = Duration::from_millis(1);
+/// Tick period ([`firmware::TICK_HZ`]).
+const PERIOD: Duration = Duration::from_micros(1_000_000 / firmware::TICK_HZ as u64);
 /// Largest hand speed per tick: pitch and yaw (rad), insertion (m); 3 rad/s and 0.5 m/s.
 const MAX_STEP: [f64; 3] = [0.003, 0.003, 0.0005];
 /// Lateness histogram: bins of 10 µs up to 50 ms (the last bin holds everything later).
@@ -163,7 +163,7 @@ fn run(bytes: &AlignedBytes, shared: &Shared, home: [f64; 3]) {
         let out = haptic.tick(LoopInput {
             encoder_counts: counts_for(&cal, q),
             overrun: false,
-            ticks_since_host_frame: 0,
+            link_silence_ticks: 0,
         });
         ticks += 1;
         if out.new_fault.is_some() {

@@ -152,7 +152,7 @@ fn full_tick_forces_match_the_host_f64_reference_on_the_liver_bank() {
         let out = lp.tick(LoopInput {
             encoder_counts: counts,
             overrun: false,
-            ticks_since_host_frame: 0,
+            link_silence_ticks: 0,
         });
         assert!(out.solve_error.is_none(), "{out:?}");
         let ContactState::Touching { displacement, .. } = out.contact else {

@@ -63,7 +63,7 @@ fn slide_across_the_patch_while_pressed() {
         let out = lp.tick(LoopInput {
             encoder_counts: counts_for_tip(&cal, p),
             overrun: false,
-            ticks_since_host_frame: 0,
+            link_silence_ticks: 0,
         });
         check(&out, &cal);
         for i in 0..3 {
@@ -135,7 +135,7 @@ fn contact_nodes_micrometres_apart() {
         let out = lp.tick(LoopInput {
             encoder_counts: counts_for_tip(&cal, p),
             overrun: false,
-            ticks_since_host_frame: 0,
+            link_silence_ticks: 0,
         });
         check(&out, &cal);
         assert!(out.solve_error.is_none(), "{out:?}");
@@ -182,7 +182,7 @@ fn contact_next_to_the_fixed_boundary() {
         let out = lp.tick(LoopInput {
             encoder_counts: counts_for_tip(&cal, p),
             overrun: false,
-            ticks_since_host_frame: 0,
+            link_silence_ticks: 0,
         });
         check(&out, &cal);
         assert!(out.solve_error.is_none(), "{out:?}");

@@ -63,7 +63,7 @@ fn assert_matches_native(bank: &Bank, run: &Run) -> usize {
         let out = native.tick(LoopInput {
             encoder_counts: rec.encoder_counts,
             overrun: false,
-            ticks_since_host_frame: 0,
+            link_silence_ticks: 0,
         });
         let bits = |v: [f32; 3]| v.map(f32::to_bits);
         assert_eq!(out.tick, rec.tick);

@@ -60,7 +60,7 @@ fn pender(_context: *mut ()) {
 #[embassy_executor::task]
 async fn haptic(mut app: App<'static>, mut plant: PlantChannel, mut link: Usart1) {
     let counter = InstructionCounter;
-    let mut ticker = Ticker::every(Duration::from_millis(1));
+    let mut ticker = Ticker::every(Duration::from_hz(firmware::TICK_HZ as u64));
     let mut overrun = false;
     loop {
         ticker.next().await;

@@ -1,4 +1,5 @@
-//! `host bench …`: benchmarks that print figures (never asserted by tests).
+//! `host bench …`: benchmarks that measure and print figures (speed is measured here, never
+//! asserted by tests; tests check behaviour).
 
 use super::organ::{OrganArgs, default_meshes};
 use anyhow::{Context, Result};
@@ -265,7 +266,7 @@ fn tick(args: TickArgs) -> Result<()> {
     let input = |q: [f64; 3]| LoopInput {
         encoder_counts: counts_for(&cal, q),
         overrun: false,
-        ticks_since_host_frame: 0,
+        link_silence_ticks: 0,
     };
     // Find first contact straight along the shaft at the home pose (disarmed probe).
     let step = 5e-5;

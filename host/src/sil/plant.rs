@@ -16,8 +16,8 @@ use bank_format::DeviceCalibration;
 
 /// Integration steps per tick.
 pub const SUBSTEPS: usize = 10;
-/// The tick, s.
-pub const TICK_S: f64 = 1.0e-3;
+/// The tick, s ([`firmware::TICK_HZ`]).
+pub const TICK_S: f64 = 1.0 / firmware::TICK_HZ as f64;
 
 /// Mechanical constants of the simulated device and hand.
 #[derive(Clone, Copy, Debug, PartialEq)]
