@@ -1,12 +1,14 @@
-//! Host side of the haptic soft-tissue simulator (Cotin, Delingette & Ayache, IEEE TVCG 1999).
+//! Host side of the haptic soft-tissue simulator (Cotin, Delingette & Ayache, IEEE TVCG 1999),
+//! around the FEM engine (crate [`fem`]: mesh I/O, P1 elasticity, orderings, compliance).
 //!
-//! Pipeline, in module order: [`mesh`] (read and validate a tetrahedral organ), [`fem`] (P1 linear
-//! elasticity, the paper's section 3), [`compliance`] (the "elementary deformations" of section 6
-//! as compliance blocks C_nk, and the imposed-displacement solve of eq. 2 / appendix A); [`scene`]
-//! (scene files) and [`reach`] (the region the tool can touch) feed the bank builder. The
-//! display side: [`source`] (telemetry from the [`virtual_device`] or a real one), [`deform`]
-//! (surface displacement from the contact forces), [`display`] (frames and the browser viewer),
-//! [`record`] (ParaView series) and [`script`] (aiming and scripted hand motions).
+//! Pipeline, in module order: [`scene`] (scene files), [`kinematics`] (the gimbal on the host)
+//! and [`reach`] (the region the tool can touch) feed [`bank`], the bank stage (scene ->
+//! reachable region -> compliance -> bank bytes); [`contact`] is the tool patch in f64, the
+//! reference for the firmware's. The display side: [`source`] (telemetry from the
+//! [`virtual_device`] or a real one), [`deform`] (surface displacement from the contact
+//! forces), [`display`] (frames and the browser viewer), [`record`] (ParaView series) and
+//! [`script`] (aiming and scripted hand motions). [`sil`] runs the firmware image under QEMU,
+//! [`calibrate`] fits the tissue laws and the motor constants.
 
 pub mod bank;
 pub mod calibrate;
