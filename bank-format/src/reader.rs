@@ -161,262 +161,368 @@ fn all_finite(values: &[f32]) -> bool {
     values.iter().all(|v| v.is_finite())
 }
 
-impl<'a> Bank<'a> {
-    /// Validate `bytes` and borrow it as a bank. `bytes` must start on a 4-byte boundary and
-    /// hold at least the header's `total_len` bytes; anything after that is ignored (a flash
-    /// region may be larger than the bank). See `SPEC.md` for every rule and its order.
-    pub fn parse(bytes: &'a [u8]) -> Result<Bank<'a>, BankError> {
-        let header = read_header(bytes)?;
-        if bytes.as_ptr().align_offset(BANK_ALIGN) != 0 {
-            return Err(BankError::Misaligned);
-        }
-        if header.magic != MAGIC {
-            return Err(BankError::BadMagic);
-        }
-        if header.version_major != VERSION_MAJOR {
-            return Err(BankError::UnsupportedVersion {
-                major: header.version_major,
-                minor: header.version_minor,
-            });
-        }
-        if usize::from(header.header_len) != HEADER_LEN {
-            return Err(BankError::BadHeaderLength {
-                header_len: header.header_len,
-            });
-        }
-        let section_count = usize::from(header.section_count);
-        if section_count > MAX_SECTIONS {
-            return Err(BankError::TooManySections {
-                count: header.section_count,
-            });
-        }
-        let table_end = HEADER_LEN + SECTION_ENTRY_LEN * section_count;
-        let total = header.total_len as usize;
-        if !total.is_multiple_of(SECTION_ALIGN) || total < table_end {
-            return Err(BankError::BadTotalLength {
-                total_len: header.total_len,
-            });
-        }
-        let bank = bytes.get(..total).ok_or(BankError::TooShort {
-            needed: total,
-            got: bytes.len(),
-        })?;
-        let computed = bank_crc(bank);
-        if computed != header.crc32 {
-            return Err(BankError::CrcMismatch {
-                stored: header.crc32,
-                computed,
-            });
-        }
-        if header.flags != 0 || header.reserved != 0 {
-            return Err(BankError::ReservedNotZero {
-                section: SectionKind::Header,
-            });
-        }
-        let table: &[SectionEntry] = cast(
-            bank.get(HEADER_LEN..table_end).unwrap_or(&[]),
-            SectionKind::Header,
-        )?;
-        check_table(table, table_end, total)?;
-        let sections = Sections { bank, table };
+/// End of the section table: the header plus `section_count` entries.
+fn table_end(header: &BankHeader) -> usize {
+    HEADER_LEN + SECTION_ENTRY_LEN * usize::from(header.section_count)
+}
 
-        // Meta.
-        let meta: &BankMeta = sections.single(SectionKind::Meta)?;
-        if meta.reserved != 0 {
-            return Err(BankError::ReservedNotZero {
-                section: SectionKind::Meta,
+/// `SPEC.md` "Validation" rule 1, the header: at least 32 bytes, 4-byte aligned start, magic,
+/// major version, header_len, section_count, total_len, and the input holding total_len bytes.
+/// Returns the header and the bank's bytes (exactly `total_len` of them).
+fn check_header(bytes: &[u8]) -> Result<(&BankHeader, &[u8]), BankError> {
+    let header = read_header(bytes)?;
+    if bytes.as_ptr().align_offset(BANK_ALIGN) != 0 {
+        return Err(BankError::Misaligned);
+    }
+    if header.magic != MAGIC {
+        return Err(BankError::BadMagic);
+    }
+    if header.version_major != VERSION_MAJOR {
+        return Err(BankError::UnsupportedVersion {
+            major: header.version_major,
+            minor: header.version_minor,
+        });
+    }
+    if usize::from(header.header_len) != HEADER_LEN {
+        return Err(BankError::BadHeaderLength {
+            header_len: header.header_len,
+        });
+    }
+    if usize::from(header.section_count) > MAX_SECTIONS {
+        return Err(BankError::TooManySections {
+            count: header.section_count,
+        });
+    }
+    let total = header.total_len as usize;
+    if !total.is_multiple_of(SECTION_ALIGN) || total < table_end(header) {
+        return Err(BankError::BadTotalLength {
+            total_len: header.total_len,
+        });
+    }
+    let bank = bytes.get(..total).ok_or(BankError::TooShort {
+        needed: total,
+        got: bytes.len(),
+    })?;
+    Ok((header, bank))
+}
+
+/// `SPEC.md` "Validation" rule 2: the stored CRC matches the bank's (see "CRC").
+fn check_crc(header: &BankHeader, bank: &[u8]) -> Result<(), BankError> {
+    let computed = bank_crc(bank);
+    if computed != header.crc32 {
+        return Err(BankError::CrcMismatch {
+            stored: header.crc32,
+            computed,
+        });
+    }
+    Ok(())
+}
+
+/// `SPEC.md` "Validation" rule 3: the header's flags and reserved word are zero.
+fn check_header_reserved(header: &BankHeader) -> Result<(), BankError> {
+    if header.flags != 0 || header.reserved != 0 {
+        return Err(BankError::ReservedNotZero {
+            section: SectionKind::Header,
+        });
+    }
+    Ok(())
+}
+
+/// `SPEC.md` "Validation" rule 4: the section table, entry by entry, then every required kind
+/// present ([`check_table`]). `bank` is the whole bank, `total_len` bytes.
+fn read_table<'a>(header: &BankHeader, bank: &'a [u8]) -> Result<&'a [SectionEntry], BankError> {
+    let end = table_end(header);
+    let table: &[SectionEntry] = cast(
+        bank.get(HEADER_LEN..end).unwrap_or(&[]),
+        SectionKind::Header,
+    )?;
+    check_table(table, end, bank.len())?;
+    Ok(table)
+}
+
+/// `SPEC.md` "Validation" rule 5, meta: one element, reserved zero, truncation radius finite
+/// and >= 0.
+fn parse_meta<'a>(sections: &Sections<'a>) -> Result<&'a BankMeta, BankError> {
+    let meta: &BankMeta = sections.single(SectionKind::Meta)?;
+    if meta.reserved != 0 {
+        return Err(BankError::ReservedNotZero {
+            section: SectionKind::Meta,
+        });
+    }
+    if !meta.truncation_radius_m.is_finite() {
+        return Err(BankError::NonFinite {
+            section: SectionKind::Meta,
+            entry: 0,
+        });
+    }
+    if !(meta.truncation_radius_m >= 0.0) {
+        return Err(BankError::BadTruncationRadius);
+    }
+    Ok(meta)
+}
+
+/// `SPEC.md` "Validation" rule 6, tissue law: one element, then [`TissueLaw::from_record`]'s
+/// rules (kind, coefficient count, finite, unused coefficients zero, domain, monotone).
+fn parse_law(sections: &Sections<'_>) -> Result<TissueLaw, BankError> {
+    TissueLaw::from_record(sections.single(SectionKind::TissueLaw)?)
+}
+
+/// `SPEC.md` "Validation" rule 7, device: one element, all finite, then the device table's
+/// rules in table order ([`check_device`]).
+fn parse_device<'a>(sections: &Sections<'a>) -> Result<&'a DeviceCalibration, BankError> {
+    let device: &DeviceCalibration = sections.single(SectionKind::Device)?;
+    check_device(device)?;
+    Ok(device)
+}
+
+/// `SPEC.md` "Validation" rule 8, positions: 1 <= n <= 65535 nodes, all finite.
+fn parse_positions<'a>(sections: &Sections<'a>) -> Result<&'a [[f32; 3]], BankError> {
+    let positions: &[[f32; 3]] = sections.slice(SectionKind::Positions)?;
+    let n = positions.len();
+    if n == 0 || n > MAX_NODES {
+        return Err(BankError::NodeCount { count: n as u32 });
+    }
+    if let Some(k) = positions.iter().position(|p| !all_finite(p)) {
+        return Err(BankError::NonFinite {
+            section: SectionKind::Positions,
+            entry: k as u32,
+        });
+    }
+    Ok(positions)
+}
+
+/// `SPEC.md` "Validation" rule 8, mesh ids: one per node.
+fn parse_mesh_ids<'a>(sections: &Sections<'a>, n: usize) -> Result<&'a [u32], BankError> {
+    let mesh_ids: &[u32] = sections.slice(SectionKind::MeshIds)?;
+    expect_count(mesh_ids.len(), n, SectionKind::MeshIds)?;
+    Ok(mesh_ids)
+}
+
+/// `SPEC.md` "Validation" rule 9, triangles: vertices < n and three distinct.
+fn parse_triangles<'a>(sections: &Sections<'a>, n: usize) -> Result<&'a [[u16; 3]], BankError> {
+    let triangles: &[[u16; 3]] = sections.slice(SectionKind::Triangles)?;
+    for (t, tri) in triangles.iter().enumerate() {
+        if tri.iter().any(|&v| usize::from(v) >= n) {
+            return Err(BankError::IndexOutOfRange {
+                section: SectionKind::Triangles,
+                entry: t as u32,
             });
         }
-        if !meta.truncation_radius_m.is_finite() {
+        if tri[0] == tri[1] || tri[1] == tri[2] || tri[0] == tri[2] {
+            return Err(BankError::DegenerateTriangle { triangle: t as u32 });
+        }
+    }
+    Ok(triangles)
+}
+
+/// `SPEC.md` "Validation" rule 9, node-triangle adjacency: n + 1 starts and 3 t items, CSR
+/// starts, items < t, each node's list strictly ascending and naming only triangles that
+/// contain the node. Returns `(starts, items)`.
+fn parse_node_triangles<'a>(
+    sections: &Sections<'a>,
+    triangles: &[[u16; 3]],
+    n: usize,
+) -> Result<(&'a [u32], &'a [u32]), BankError> {
+    let starts: &[u32] = sections.slice(SectionKind::NodeTriStarts)?;
+    let items: &[u32] = sections.slice(SectionKind::NodeTriItems)?;
+    expect_count(starts.len(), n + 1, SectionKind::NodeTriStarts)?;
+    expect_count(
+        items.len(),
+        triangles.len().saturating_mul(3),
+        SectionKind::NodeTriItems,
+    )?;
+    check_starts(starts, items.len(), SectionKind::NodeTriStarts)?;
+    for k in 0..n {
+        let found = csr_row(starts, k).and_then(|r| items.get(r.clone()).map(|row| (r, row)));
+        let Some((range, row)) = found else {
+            return Err(BankError::BadCsrStarts {
+                section: SectionKind::NodeTriStarts,
+                entry: k as u32,
+            });
+        };
+        let mut prev: Option<u32> = None;
+        for (offset, &t) in row.iter().enumerate() {
+            let Some(tri) = triangles.get(t as usize) else {
+                return Err(BankError::IndexOutOfRange {
+                    section: SectionKind::NodeTriItems,
+                    entry: (range.start + offset) as u32,
+                });
+            };
+            let ascending = prev.is_none_or(|p| t > p);
+            if !ascending || !tri.iter().any(|&v| usize::from(v) == k) {
+                return Err(BankError::NodeTriangleMismatch { node: k as u32 });
+            }
+            prev = Some(t);
+        }
+    }
+    Ok((starts, items))
+}
+
+/// `SPEC.md` "Validation" rule 10, the collision grid: the geometry
+/// ([`check_grid_geometry`]), cells + 1 starts and n items, CSR starts, then the buckets
+/// ([`check_grid_buckets`]).
+fn parse_grid<'a>(sections: &Sections<'a>, positions: &[[f32; 3]]) -> Result<Grid<'a>, BankError> {
+    let header: &GridHeader = sections.single(SectionKind::Grid)?;
+    let cells = check_grid_geometry(header)?;
+    let starts: &[u32] = sections.slice(SectionKind::GridStarts)?;
+    let items: &[u16] = sections.slice(SectionKind::GridItems)?;
+    expect_count(starts.len(), cells + 1, SectionKind::GridStarts)?;
+    expect_count(items.len(), positions.len(), SectionKind::GridItems)?;
+    check_starts(starts, items.len(), SectionKind::GridStarts)?;
+    let grid = Grid {
+        header,
+        starts,
+        items,
+    };
+    check_grid_buckets(&grid, positions, cells)?;
+    Ok(grid)
+}
+
+/// `SPEC.md` "Validation" rule 10, grid geometry: finite, reserved zero, cell size > 0,
+/// dims >= 1 and cells < 2^32 - 1. Returns the number of cells.
+fn check_grid_geometry(header: &GridHeader) -> Result<usize, BankError> {
+    if !all_finite(&header.origin_m) || !header.cell_size_m.is_finite() {
+        return Err(BankError::NonFinite {
+            section: SectionKind::Grid,
+            entry: 0,
+        });
+    }
+    if header.reserved != 0 {
+        return Err(BankError::ReservedNotZero {
+            section: SectionKind::Grid,
+        });
+    }
+    let cells = header.dims.iter().map(|&d| u64::from(d)).product::<u64>();
+    if !(header.cell_size_m > 0.0) || cells == 0 || cells >= u64::from(u32::MAX) {
+        return Err(BankError::GridGeometry);
+    }
+    Ok(cells as usize)
+}
+
+/// `SPEC.md` "Validation" rule 10, per cell: items < n, strictly ascending, each in the cell
+/// its position maps to.
+fn check_grid_buckets(
+    grid: &Grid<'_>,
+    positions: &[[f32; 3]],
+    cells: usize,
+) -> Result<(), BankError> {
+    for c in 0..cells {
+        let Some(range) = csr_row(grid.starts, c) else {
+            return Err(BankError::BadCsrStarts {
+                section: SectionKind::GridStarts,
+                entry: c as u32,
+            });
+        };
+        let mut prev: Option<u16> = None;
+        for e in range {
+            let item = grid.items.get(e).copied().unwrap_or(u16::MAX);
+            let Some(p) = positions.get(usize::from(item)) else {
+                return Err(BankError::IndexOutOfRange {
+                    section: SectionKind::GridItems,
+                    entry: e as u32,
+                });
+            };
+            if prev.is_some_and(|q| item <= q) {
+                return Err(BankError::GridItemsNotSorted { cell: c as u32 });
+            }
+            prev = Some(item);
+            if grid.cell_of(*p).and_then(|cell| grid.cell_index(cell)) != Some(c) {
+                return Err(BankError::GridItemWrongCell {
+                    cell: c as u32,
+                    entry: e as u32,
+                });
+            }
+        }
+    }
+    Ok(())
+}
+
+/// `SPEC.md` "Validation" rule 11, C_kk: one per node, finite, symmetric positive definite
+/// ([`is_spd`]).
+fn parse_ckk<'a>(sections: &Sections<'a>, n: usize) -> Result<&'a [[f32; 6]], BankError> {
+    let ckk: &[[f32; 6]] = sections.slice(SectionKind::Ckk)?;
+    expect_count(ckk.len(), n, SectionKind::Ckk)?;
+    for (k, c) in ckk.iter().enumerate() {
+        if !all_finite(c) {
             return Err(BankError::NonFinite {
-                section: SectionKind::Meta,
-                entry: 0,
-            });
-        }
-        if !(meta.truncation_radius_m >= 0.0) {
-            return Err(BankError::BadTruncationRadius);
-        }
-
-        // Tissue law and device.
-        let law = TissueLaw::from_record(sections.single(SectionKind::TissueLaw)?)?;
-        let device: &DeviceCalibration = sections.single(SectionKind::Device)?;
-        check_device(device)?;
-
-        // Nodes.
-        let positions: &[[f32; 3]] = sections.slice(SectionKind::Positions)?;
-        let n = positions.len();
-        if n == 0 || n > MAX_NODES {
-            return Err(BankError::NodeCount { count: n as u32 });
-        }
-        if let Some(k) = positions.iter().position(|p| !all_finite(p)) {
-            return Err(BankError::NonFinite {
-                section: SectionKind::Positions,
+                section: SectionKind::Ckk,
                 entry: k as u32,
             });
         }
-        let mesh_ids: &[u32] = sections.slice(SectionKind::MeshIds)?;
-        expect_count(mesh_ids.len(), n, SectionKind::MeshIds)?;
+        if !is_spd::<3>(&sym3(c)) {
+            return Err(BankError::CkkNotSpd { node: k as u32 });
+        }
+    }
+    Ok(ckk)
+}
 
-        // Triangles and their adjacency.
-        let triangles: &[[u16; 3]] = sections.slice(SectionKind::Triangles)?;
-        for (t, tri) in triangles.iter().enumerate() {
-            if tri.iter().any(|&v| usize::from(v) >= n) {
+/// The neighbour sections `(starts, index, C_kl blocks)`, as [`parse_neighbours`] returns them.
+type NeighbourLists<'a> = (&'a [u32], &'a [u16], &'a [[f32; 9]]);
+
+/// `SPEC.md` "Validation" rule 12, neighbours: n + 1 starts, one C_kl block per index, CSR
+/// starts, blocks finite; per row, indices < n, != k, strictly ascending. Returns
+/// `(starts, index, blocks)`.
+fn parse_neighbours<'a>(
+    sections: &Sections<'a>,
+    n: usize,
+) -> Result<NeighbourLists<'a>, BankError> {
+    let starts: &[u32] = sections.slice(SectionKind::NeighbourStarts)?;
+    let index: &[u16] = sections.slice(SectionKind::NeighbourIndex)?;
+    let ckl: &[[f32; 9]] = sections.slice(SectionKind::NeighbourCkl)?;
+    expect_count(starts.len(), n + 1, SectionKind::NeighbourStarts)?;
+    expect_count(ckl.len(), index.len(), SectionKind::NeighbourCkl)?;
+    check_starts(starts, index.len(), SectionKind::NeighbourStarts)?;
+    if let Some(e) = ckl.iter().position(|c| !all_finite(c)) {
+        return Err(BankError::NonFinite {
+            section: SectionKind::NeighbourCkl,
+            entry: e as u32,
+        });
+    }
+    for k in 0..n {
+        let range = csr_row(starts, k).unwrap_or(0..0);
+        let mut prev: Option<u16> = None;
+        for e in range {
+            let l = index.get(e).copied().unwrap_or(u16::MAX);
+            if usize::from(l) >= n {
                 return Err(BankError::IndexOutOfRange {
-                    section: SectionKind::Triangles,
-                    entry: t as u32,
+                    section: SectionKind::NeighbourIndex,
+                    entry: e as u32,
                 });
             }
-            if tri[0] == tri[1] || tri[1] == tri[2] || tri[0] == tri[2] {
-                return Err(BankError::DegenerateTriangle { triangle: t as u32 });
+            if usize::from(l) == k {
+                return Err(BankError::NeighbourSelf { node: k as u32 });
             }
-        }
-        let node_tri_starts: &[u32] = sections.slice(SectionKind::NodeTriStarts)?;
-        let node_tri_items: &[u32] = sections.slice(SectionKind::NodeTriItems)?;
-        expect_count(node_tri_starts.len(), n + 1, SectionKind::NodeTriStarts)?;
-        expect_count(
-            node_tri_items.len(),
-            triangles.len().saturating_mul(3),
-            SectionKind::NodeTriItems,
-        )?;
-        check_starts(
-            node_tri_starts,
-            node_tri_items.len(),
-            SectionKind::NodeTriStarts,
-        )?;
-        for k in 0..n {
-            let row = csr_row(node_tri_starts, k)
-                .and_then(|r| node_tri_items.get(r.clone()).map(|items| (r, items)));
-            let Some((range, items)) = row else {
-                return Err(BankError::BadCsrStarts {
-                    section: SectionKind::NodeTriStarts,
-                    entry: k as u32,
-                });
-            };
-            let mut prev: Option<u32> = None;
-            for (offset, &t) in items.iter().enumerate() {
-                let Some(tri) = triangles.get(t as usize) else {
-                    return Err(BankError::IndexOutOfRange {
-                        section: SectionKind::NodeTriItems,
-                        entry: (range.start + offset) as u32,
-                    });
-                };
-                let ascending = prev.is_none_or(|p| t > p);
-                if !ascending || !tri.iter().any(|&v| usize::from(v) == k) {
-                    return Err(BankError::NodeTriangleMismatch { node: k as u32 });
-                }
-                prev = Some(t);
+            if prev.is_some_and(|q| l <= q) {
+                return Err(BankError::NeighbourNotSorted { node: k as u32 });
             }
+            prev = Some(l);
         }
+    }
+    Ok((starts, index, ckl))
+}
 
-        // Collision grid.
-        let grid_header: &GridHeader = sections.single(SectionKind::Grid)?;
-        if !all_finite(&grid_header.origin_m) || !grid_header.cell_size_m.is_finite() {
-            return Err(BankError::NonFinite {
-                section: SectionKind::Grid,
-                entry: 0,
-            });
-        }
-        if grid_header.reserved != 0 {
-            return Err(BankError::ReservedNotZero {
-                section: SectionKind::Grid,
-            });
-        }
-        let cells = grid_header
-            .dims
-            .iter()
-            .map(|&d| u64::from(d))
-            .product::<u64>();
-        if !(grid_header.cell_size_m > 0.0) || cells == 0 || cells >= u64::from(u32::MAX) {
-            return Err(BankError::GridGeometry);
-        }
-        let cells = cells as usize;
-        let grid_starts: &[u32] = sections.slice(SectionKind::GridStarts)?;
-        let grid_items: &[u16] = sections.slice(SectionKind::GridItems)?;
-        expect_count(grid_starts.len(), cells + 1, SectionKind::GridStarts)?;
-        expect_count(grid_items.len(), n, SectionKind::GridItems)?;
-        check_starts(grid_starts, grid_items.len(), SectionKind::GridStarts)?;
-        let grid = Grid {
-            header: grid_header,
-            starts: grid_starts,
-            items: grid_items,
-        };
-        for c in 0..cells {
-            let Some(range) = csr_row(grid_starts, c) else {
-                return Err(BankError::BadCsrStarts {
-                    section: SectionKind::GridStarts,
-                    entry: c as u32,
-                });
-            };
-            let mut prev: Option<u16> = None;
-            for e in range {
-                let item = grid_items.get(e).copied().unwrap_or(u16::MAX);
-                let Some(p) = positions.get(usize::from(item)) else {
-                    return Err(BankError::IndexOutOfRange {
-                        section: SectionKind::GridItems,
-                        entry: e as u32,
-                    });
-                };
-                if prev.is_some_and(|q| item <= q) {
-                    return Err(BankError::GridItemsNotSorted { cell: c as u32 });
-                }
-                prev = Some(item);
-                if grid.cell_of(*p).and_then(|cell| grid.cell_index(cell)) != Some(c) {
-                    return Err(BankError::GridItemWrongCell {
-                        cell: c as u32,
-                        entry: e as u32,
-                    });
-                }
-            }
-        }
-
-        // Self-compliance.
-        let ckk: &[[f32; 6]] = sections.slice(SectionKind::Ckk)?;
-        expect_count(ckk.len(), n, SectionKind::Ckk)?;
-        for (k, c) in ckk.iter().enumerate() {
-            if !all_finite(c) {
-                return Err(BankError::NonFinite {
-                    section: SectionKind::Ckk,
-                    entry: k as u32,
-                });
-            }
-            if !is_spd::<3>(&sym3(c)) {
-                return Err(BankError::CkkNotSpd { node: k as u32 });
-            }
-        }
-
-        // Neighbour lists and couplings.
-        let nb_starts: &[u32] = sections.slice(SectionKind::NeighbourStarts)?;
-        let nb_index: &[u16] = sections.slice(SectionKind::NeighbourIndex)?;
-        let nb_ckl: &[[f32; 9]] = sections.slice(SectionKind::NeighbourCkl)?;
-        expect_count(nb_starts.len(), n + 1, SectionKind::NeighbourStarts)?;
-        expect_count(nb_ckl.len(), nb_index.len(), SectionKind::NeighbourCkl)?;
-        check_starts(nb_starts, nb_index.len(), SectionKind::NeighbourStarts)?;
-        if let Some(e) = nb_ckl.iter().position(|c| !all_finite(c)) {
-            return Err(BankError::NonFinite {
-                section: SectionKind::NeighbourCkl,
-                entry: e as u32,
-            });
-        }
-        for k in 0..n {
-            let range = csr_row(nb_starts, k).unwrap_or(0..0);
-            let mut prev: Option<u16> = None;
-            for e in range {
-                let l = nb_index.get(e).copied().unwrap_or(u16::MAX);
-                if usize::from(l) >= n {
-                    return Err(BankError::IndexOutOfRange {
-                        section: SectionKind::NeighbourIndex,
-                        entry: e as u32,
-                    });
-                }
-                if usize::from(l) == k {
-                    return Err(BankError::NeighbourSelf { node: k as u32 });
-                }
-                if prev.is_some_and(|q| l <= q) {
-                    return Err(BankError::NeighbourNotSorted { node: k as u32 });
-                }
-                prev = Some(l);
-            }
-        }
+impl<'a> Bank<'a> {
+    /// Validate `bytes` and borrow it as a bank. `bytes` must start on a 4-byte boundary and
+    /// hold at least the header's `total_len` bytes; anything after that is ignored (a flash
+    /// region may be larger than the bank). See `SPEC.md` for every rule and its order: the
+    /// stages below run its "Validation" rules 1 to 14 in turn, each reporting its first failure.
+    pub fn parse(bytes: &'a [u8]) -> Result<Bank<'a>, BankError> {
+        let (header, bank) = check_header(bytes)?;
+        check_crc(header, bank)?;
+        check_header_reserved(header)?;
+        let table = read_table(header, bank)?;
+        let sections = Sections { bank, table };
+        let meta = parse_meta(&sections)?;
+        let law = parse_law(&sections)?;
+        let device = parse_device(&sections)?;
+        let positions = parse_positions(&sections)?;
+        let n = positions.len();
+        let mesh_ids = parse_mesh_ids(&sections, n)?;
+        let triangles = parse_triangles(&sections, n)?;
+        let (node_tri_starts, node_tri_items) = parse_node_triangles(&sections, triangles, n)?;
+        let grid = parse_grid(&sections, positions)?;
+        let ckk = parse_ckk(&sections, n)?;
+        let (nb_starts, nb_index, nb_ckl) = parse_neighbours(&sections, n)?;
         let bank = Bank {
             bytes: bank,
             header,
@@ -440,7 +546,8 @@ impl<'a> Bank<'a> {
         Ok(bank)
     }
 
-    /// Reciprocity, symmetry and pairwise positive definiteness of the couplings.
+    /// `SPEC.md` "Validation" rule 13: reciprocity, symmetry and pairwise positive
+    /// definiteness of the couplings, then every triangle edge coupled.
     fn check_couplings(&self) -> Result<(), BankError> {
         let n = self.node_count();
         for k in 0..n {
@@ -506,7 +613,7 @@ impl<'a> Bank<'a> {
         Ok(())
     }
 
-    /// Every pair closer than the truncation radius is coupled.
+    /// `SPEC.md` "Validation" rule 14: every pair closer than the truncation radius is coupled.
     fn check_coverage(&self) -> Result<(), BankError> {
         let r = self.meta.truncation_radius_m;
         if r <= 0.0 {
