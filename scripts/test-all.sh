@@ -60,6 +60,12 @@ RUSTDOCFLAGS="-D warnings" cargo doc --workspace --no-deps --quiet
 # The QEMU image is its own workspace (it only builds for the MCU).
 (cd firmware/qemu && cargo fmt --check && cargo clippy --release -- -D warnings)
 
+step "the FEM engine stands alone: no web, plot, serial, probe or CLI stack under host/fem"
+if cargo tree -p fem -e normal --prefix none | grep -E '^(axum|tokio|plotters|serialport|probe-rs|indicatif|clap) '; then
+    echo "error: the fem crate depends on the stacks above" >&2
+    exit 1
+fi
+
 step "no_std crates cross-compile for the MCU; the QEMU image links against memory.x"
 cargo build --release -p bank-format -p firmware --target thumbv7em-none-eabihf
 (cd firmware/qemu && cargo build --release)
