@@ -340,376 +340,22 @@ impl Scene {
             file: path.display().to_string(),
             text,
         };
-        let raw: RawScene = toml::from_str(text).map_err(|e| {
-            let message = e.message().trim().to_string();
-            let key = message
-                .split('`')
-                .nth(1)
-                .filter(|_| message.contains("field"))
-                .unwrap_or("(syntax)")
-                .to_string();
-            SceneError {
-                file: ctx.file.clone(),
-                line: e.span().map(|s| line_of(text, s.start)),
-                key,
-                message,
-            }
-        })?;
-
-        let mesh = if raw.mesh.get_ref() == BUILTIN_LIVER_NAME {
-            MeshSource::BuiltinLiver
-        } else if raw.mesh.get_ref().starts_with("builtin:") {
-            return Err(ctx.err(
-                raw.mesh.span(),
-                "mesh",
-                format!(
-                    "unknown built-in mesh {:?} (available: {BUILTIN_LIVER_NAME:?})",
-                    raw.mesh.get_ref()
-                ),
-            ));
-        } else {
-            let dir = path.parent().unwrap_or(Path::new("."));
-            MeshSource::File(dir.join(raw.mesh.get_ref()))
-        };
-
-        let m = &raw.material;
-        let (e, nu) = (*m.young_pa.get_ref(), *m.poisson.get_ref());
-        if !(e.is_finite() && e > 0.0) {
-            return Err(ctx.err(
-                m.young_pa.span(),
-                "material.young_pa",
-                format!("Young's modulus must be > 0 Pa, got {e}"),
-            ));
-        }
-        if !(nu > -1.0 && nu < 0.5) {
-            return Err(ctx.err(
-                m.poisson.span(),
-                "material.poisson",
-                format!("Poisson's ratio must lie in (-1, 0.5), got {nu}"),
-            ));
-        }
-        let material = Material::new(e, nu)
-            .map_err(|err| ctx.err(m.young_pa.span(), "material", err.to_string()))?;
-
-        let mut fix_boxes = Vec::new();
-        for b in &raw.fixed.boxes {
-            let key = "fixed.boxes";
-            let r = b.get_ref();
-            let mut bounds = [0.0; 6];
-            bounds[..3].copy_from_slice(&r.min);
-            bounds[3..].copy_from_slice(&r.max);
-            if bounds.iter().any(|v| !v.is_finite()) || (0..3).any(|a| r.min[a] > r.max[a]) {
-                return Err(ctx.err(
-                    b.span(),
-                    key,
-                    "box bounds must be finite with min <= max on every axis",
-                ));
-            }
-            let axes = match &r.axes {
-                None => [true; 3],
-                Some(s) => FixedSet::parse_axes(s)
-                    .map_err(|msg| ctx.err(b.span(), "fixed.boxes.axes", msg))?,
-            };
-            fix_boxes.push(FixBox {
-                bounds,
-                axes,
-                line: line_of(text, b.span().start),
-            });
-        }
-        let (fix_nodes, fix_nodes_line) = match &raw.fixed.nodes {
-            Some(n) => (n.get_ref().clone(), line_of(text, n.span().start)),
-            None => (Vec::new(), 0),
-        };
-        if fix_boxes.is_empty() && fix_nodes.is_empty() {
-            return Err(SceneError {
-                file: ctx.file.clone(),
-                line: Some(line_of(text, text.find("[fixed]").unwrap_or(0))),
-                key: "fixed".into(),
-                message: "nothing is fixed: give boxes and/or nodes (the body would float)".into(),
-            });
-        }
-
-        let tip = *raw.tool.tip_radius_m.get_ref();
-        if !(0.0..=0.05).contains(&tip) {
-            return Err(ctx.err(
-                raw.tool.tip_radius_m.span(),
-                "tool.tip_radius_m",
-                format!("must lie in [0, 0.05] m, got {tip}"),
-            ));
-        }
-
-        let d = &raw.device;
-        finite(&ctx, &d.fulcrum_m, "device.fulcrum_m")?;
-        let shaft = unit(&ctx, &d.shaft_axis, "device.shaft_axis")?;
-        let pitch_axis = unit(&ctx, &d.pitch_axis, "device.pitch_axis")?;
-        let yaw_axis = unit(&ctx, &d.yaw_axis, "device.yaw_axis")?;
-        let dot = |a: [f64; 3], b: [f64; 3]| a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
-        for (a, b, key, span) in [
-            (shaft, pitch_axis, "device.pitch_axis", d.pitch_axis.span()),
-            (shaft, yaw_axis, "device.yaw_axis", d.yaw_axis.span()),
-            (pitch_axis, yaw_axis, "device.yaw_axis", d.yaw_axis.span()),
-        ] {
-            if dot(a, b).abs() > 1e-3 {
-                return Err(ctx.err(
-                    span,
-                    key,
-                    "shaft_axis, pitch_axis and yaw_axis must be pairwise orthogonal",
-                ));
-            }
-        }
-        let pitch = range(&ctx, &d.pitch_range_rad, "device.pitch_range_rad")?;
-        let yaw = range(&ctx, &d.yaw_range_rad, "device.yaw_range_rad")?;
-        let ins = range(&ctx, &d.insertion_range_m, "device.insertion_range_m")?;
-        let half_pi = std::f64::consts::FRAC_PI_2;
-        if pitch[0] <= -half_pi || pitch[1] >= half_pi {
-            return Err(ctx.err(
-                d.pitch_range_rad.span(),
-                "device.pitch_range_rad",
-                "pitch must stay inside (-pi/2, pi/2)",
-            ));
-        }
-        if yaw[0] < -std::f64::consts::PI || yaw[1] > std::f64::consts::PI {
-            return Err(ctx.err(
-                d.yaw_range_rad.span(),
-                "device.yaw_range_rad",
-                "yaw must stay inside [-pi, pi]",
-            ));
-        }
-        if ins[0] < 0.0 {
-            return Err(ctx.err(
-                d.insertion_range_m.span(),
-                "device.insertion_range_m",
-                "insertion must be >= 0 m",
-            ));
-        }
-        let home = match &d.home {
-            Some(h) => {
-                finite(&ctx, h, "device.home")?;
-                let h3 = *h.get_ref();
-                for (j, r) in [pitch, yaw, ins].iter().enumerate() {
-                    if !(r[0] <= h3[j] && h3[j] <= r[1]) {
-                        return Err(ctx.err(
-                            h.span(),
-                            "device.home",
-                            format!("joint {j} home {} is outside [{}, {}]", h3[j], r[0], r[1]),
-                        ));
-                    }
-                }
-                h3
-            }
-            None => [
-                0.0f64.clamp(pitch[0], pitch[1]),
-                0.0f64.clamp(yaw[0], yaw[1]),
-                ins[0],
-            ],
-        };
-        if d.counts_per_rev.get_ref().contains(&0) {
-            return Err(ctx.err(
-                d.counts_per_rev.span(),
-                "device.counts_per_rev",
-                "counts per revolution must be > 0",
-            ));
-        }
-        finite(&ctx, &d.gear_ratio, "device.gear_ratio")?;
-        if d.gear_ratio.get_ref().iter().any(|g| g.abs() < 1e-6) {
-            return Err(ctx.err(
-                d.gear_ratio.span(),
-                "device.gear_ratio",
-                "gear ratios must be non-zero (|ratio| >= 1e-6; the sign is the motor direction)",
-            ));
-        }
-        let kt = positive3(
-            &ctx,
-            &d.torque_constant_nm_per_a,
-            "device.torque_constant_nm_per_a",
-            f64::MAX,
-        )?;
-        let imax = positive3(&ctx, &d.current_limit_a, "device.current_limit_a", 20.0)?;
-        let fmax = *d.max_force_n.get_ref();
-        if !(fmax > 0.0 && fmax <= 50.0) {
-            return Err(ctx.err(
-                d.max_force_n.span(),
-                "device.max_force_n",
-                format!("must lie in (0, 50] N, got {fmax}"),
-            ));
-        }
-        let f32s = |a: [f64; 3]| a.map(|x| x as f32);
-        let device = DeviceCalibration {
-            fulcrum_m: f32s(*d.fulcrum_m.get_ref()),
-            shaft_axis: f32s(shaft),
-            pitch_axis: f32s(pitch_axis),
-            yaw_axis: f32s(yaw_axis),
-            joint_min: f32s([pitch[0], yaw[0], ins[0]]),
-            joint_max: f32s([pitch[1], yaw[1], ins[1]]),
-            home_joint: f32s(home),
-            counts_per_rev: *d.counts_per_rev.get_ref(),
-            transmission: f32s(*d.gear_ratio.get_ref()),
-            torque_constant_nm_per_a: kt,
-            current_limit_a: imax,
-            max_force_n: fmax as f32,
-            tip_radius_m: tip as f32,
-        };
-        bank_format::validate_device(&device)
-            .map_err(|e| ctx.err(d.fulcrum_m.span(), "device", e.to_string()))?;
-
-        let l = &raw.law;
-        let law_key_span = l.kind.span();
-        let domain = match &l.domain_n {
-            Some(dn) => Some(range(&ctx, dn, "law.domain_n")?),
-            None => None,
-        };
-        let (law_spec, law) = match l.kind.get_ref().as_str() {
-            "linear" => {
-                if let Some(c) = &l.coeffs {
-                    return Err(ctx.err(c.span(), "law.coeffs", "only for kind = \"chebyshev\""));
-                }
-                let gain = l.gain.as_ref().map_or(1.0, |g| *g.get_ref());
-                let offset = l.offset_n.as_ref().map_or(0.0, |o| *o.get_ref());
-                if !(gain > 0.0 && gain.is_finite()) {
-                    let span = l.gain.as_ref().map_or(law_key_span.clone(), |g| g.span());
-                    return Err(ctx.err(span, "law.gain", format!("must be > 0, got {gain}")));
-                }
-                let domain_n = domain.unwrap_or([0.0, fmax]);
-                let law = TissueLaw::linear(offset as f32, gain as f32, domain_n.map(|v| v as f32))
-                    .map_err(|e| ctx.err(law_key_span.clone(), "law", e.to_string()))?;
-                (
-                    LawSpec::Linear {
-                        offset_n: offset,
-                        gain,
-                        domain_n,
-                    },
-                    law,
-                )
-            }
-            "chebyshev" => {
-                for (present, key) in [
-                    (l.gain.as_ref().map(|g| g.span()), "law.gain"),
-                    (l.offset_n.as_ref().map(|g| g.span()), "law.offset_n"),
-                ] {
-                    if let Some(span) = present {
-                        return Err(ctx.err(span, key, "only for kind = \"linear\""));
-                    }
-                }
-                let Some(c) = &l.coeffs else {
-                    return Err(ctx.err(law_key_span, "law.coeffs", "required for chebyshev"));
-                };
-                let Some(domain_n) = domain else {
-                    return Err(ctx.err(law_key_span, "law.domain_n", "required for chebyshev"));
-                };
-                let coeffs: Vec<f32> = c.get_ref().iter().map(|&v| v as f32).collect();
-                let law = TissueLaw::chebyshev(&coeffs, domain_n.map(|v| v as f32))
-                    .map_err(|e| ctx.err(c.span(), "law.coeffs", e.to_string()))?;
-                (
-                    LawSpec::Chebyshev {
-                        coeffs: c.get_ref().clone(),
-                        domain_n,
-                    },
-                    law,
-                )
-            }
-            other => {
-                return Err(ctx.err(
-                    law_key_span,
-                    "law.kind",
-                    format!("unknown law {other:?} (use \"linear\" or \"chebyshev\")"),
-                ));
-            }
-        };
-
-        let display_law = match &raw.display_law {
-            None => None,
-            Some(p) => {
-                if p.kind.get_ref() != "chebyshev" {
-                    return Err(ctx.err(
-                        p.kind.span(),
-                        "display_law.kind",
-                        format!("unknown law {:?} (use \"chebyshev\")", p.kind.get_ref()),
-                    ));
-                }
-                let domain = range(&ctx, &p.domain_m, "display_law.domain_m")?;
-                let coeffs: Vec<f32> = p.coeffs.get_ref().iter().map(|&v| v as f32).collect();
-                Some(
-                    TissueLaw::chebyshev(&coeffs, domain.map(|v| v as f32)).map_err(|e| {
-                        ctx.err(p.coeffs.span(), "display_law.coeffs", e.to_string())
-                    })?,
-                )
-            }
-        };
-        let friction_offset = match &d.friction_offset {
-            Some(f) => {
-                finite(&ctx, f, "device.friction_offset")?;
-                *f.get_ref()
-            }
-            None => [0.0; 3],
-        };
-
-        let b = &raw.bank;
-        let r = *b.truncation_radius_m.get_ref();
-        if !(r.is_finite() && r >= 0.0) {
-            return Err(ctx.err(
-                b.truncation_radius_m.span(),
-                "bank.truncation_radius_m",
-                format!("must be >= 0 m, got {r}"),
-            ));
-        }
-        if let Some(p) = &b.precision
-            && p.get_ref() != "f32"
-        {
-            return Err(ctx.err(
-                p.span(),
-                "bank.precision",
-                format!(
-                    "storage precision {:?} is not supported by bank format 1.0 (only \"f32\")",
-                    p.get_ref()
-                ),
-            ));
-        }
-        let max_contact_nodes = match &b.max_contact_nodes {
-            Some(m) => {
-                let v = *m.get_ref();
-                if v == 0 || v as usize > bank_format::MAX_CONTACTS {
-                    return Err(ctx.err(
-                        m.span(),
-                        "bank.max_contact_nodes",
-                        format!(
-                            "must lie in 1..={} (the link's contact list), got {v}",
-                            bank_format::MAX_CONTACTS
-                        ),
-                    ));
-                }
-                v
-            }
-            None => bank_format::MAX_CONTACTS as u32,
-        };
-        let grid_cell_m = match &b.grid_cell_m {
-            Some(g) => {
-                let v = *g.get_ref();
-                if !(v.is_finite() && v > 0.0) {
-                    return Err(ctx.err(
-                        g.span(),
-                        "bank.grid_cell_m",
-                        format!("must be > 0 m, got {v}"),
-                    ));
-                }
-                Some(v)
-            }
-            None => None,
-        };
-        let reach_margin_m = match &b.reach_margin_m {
-            Some(g) => {
-                let v = *g.get_ref();
-                if !(v.is_finite() && v >= 0.0) {
-                    return Err(ctx.err(
-                        g.span(),
-                        "bank.reach_margin_m",
-                        format!("must be >= 0 m, got {v}"),
-                    ));
-                }
-                v
-            }
-            None => 0.002,
-        };
-
+        let raw = parse_toml(&ctx)?;
+        let mesh = parse_mesh(&ctx, path, &raw.mesh)?;
+        let material = parse_material(&ctx, &raw.material)?;
+        let (fix_boxes, fix_nodes, fix_nodes_line) = parse_fixed(&ctx, &raw.fixed)?;
+        let tip_radius_m = parse_tool(&ctx, &raw.tool)?;
+        let device = parse_device(&ctx, &raw.device, tip_radius_m)?;
+        // Checked by `parse_device`; the linear law's default domain is [0, max_force_n].
+        let max_force_n = *raw.device.max_force_n.get_ref();
+        let (law_spec, law) = parse_law(&ctx, &raw.law, max_force_n)?;
+        let display_law = raw
+            .display_law
+            .as_ref()
+            .map(|p| parse_display_law(&ctx, p))
+            .transpose()?;
+        let friction_offset = parse_friction_offset(&ctx, &raw.device)?;
+        let bank = parse_bank(&ctx, &raw.bank)?;
         Ok(Scene {
             path: path.to_path_buf(),
             mesh,
@@ -717,18 +363,13 @@ impl Scene {
             fix_boxes,
             fix_nodes,
             fix_nodes_line,
-            tip_radius_m: tip,
+            tip_radius_m,
             device,
             law,
             law_spec,
             display_law,
             friction_offset,
-            bank: BankOptions {
-                truncation_radius_m: r,
-                max_contact_nodes,
-                grid_cell_m,
-                reach_margin_m,
-            },
+            bank,
             text_hash: fnv1a(FNV_OFFSET, text.as_bytes()),
         })
     }
@@ -780,6 +421,422 @@ impl Scene {
     pub fn scene_id(&self, mesh_hash: u64) -> u64 {
         fnv1a(self.text_hash, &mesh_hash.to_le_bytes())
     }
+}
+
+/// The whole file: TOML syntax, missing and unknown keys, value types. The error's key is the
+/// field the TOML error names (`(syntax)` when it names none).
+fn parse_toml(ctx: &Ctx) -> Result<RawScene, SceneError> {
+    toml::from_str(ctx.text).map_err(|e| {
+        let message = e.message().trim().to_string();
+        let key = message
+            .split('`')
+            .nth(1)
+            .filter(|_| message.contains("field"))
+            .unwrap_or("(syntax)")
+            .to_string();
+        SceneError {
+            file: ctx.file.clone(),
+            line: e.span().map(|s| line_of(ctx.text, s.start)),
+            key,
+            message,
+        }
+    })
+}
+
+/// `mesh`: [`BUILTIN_LIVER_NAME`], no other `builtin:` name, or a file path resolved against
+/// the scene file's directory.
+fn parse_mesh(ctx: &Ctx, path: &Path, mesh: &Spanned<String>) -> Result<MeshSource, SceneError> {
+    if mesh.get_ref() == BUILTIN_LIVER_NAME {
+        Ok(MeshSource::BuiltinLiver)
+    } else if mesh.get_ref().starts_with("builtin:") {
+        Err(ctx.err(
+            mesh.span(),
+            "mesh",
+            format!(
+                "unknown built-in mesh {:?} (available: {BUILTIN_LIVER_NAME:?})",
+                mesh.get_ref()
+            ),
+        ))
+    } else {
+        let dir = path.parent().unwrap_or(Path::new("."));
+        Ok(MeshSource::File(dir.join(mesh.get_ref())))
+    }
+}
+
+/// `[material]`: `young_pa` finite and > 0, `poisson` in (-1, 0.5), then whatever
+/// [`Material::new`] rejects.
+fn parse_material(ctx: &Ctx, m: &RawMaterial) -> Result<Material, SceneError> {
+    let (e, nu) = (*m.young_pa.get_ref(), *m.poisson.get_ref());
+    if !(e.is_finite() && e > 0.0) {
+        return Err(ctx.err(
+            m.young_pa.span(),
+            "material.young_pa",
+            format!("Young's modulus must be > 0 Pa, got {e}"),
+        ));
+    }
+    if !(nu > -1.0 && nu < 0.5) {
+        return Err(ctx.err(
+            m.poisson.span(),
+            "material.poisson",
+            format!("Poisson's ratio must lie in (-1, 0.5), got {nu}"),
+        ));
+    }
+    Material::new(e, nu).map_err(|err| ctx.err(m.young_pa.span(), "material", err.to_string()))
+}
+
+/// `[fixed]`: every box finite with min <= max, `axes` default "xyz"; `nodes` default none (line
+/// 0); at least one box or node. Returns the boxes, the nodes and the line of the node list.
+fn parse_fixed(
+    ctx: &Ctx,
+    fixed: &RawFixed,
+) -> Result<(Vec<FixBox>, Vec<usize>, usize), SceneError> {
+    let mut fix_boxes = Vec::new();
+    for b in &fixed.boxes {
+        let key = "fixed.boxes";
+        let r = b.get_ref();
+        let mut bounds = [0.0; 6];
+        bounds[..3].copy_from_slice(&r.min);
+        bounds[3..].copy_from_slice(&r.max);
+        if bounds.iter().any(|v| !v.is_finite()) || (0..3).any(|a| r.min[a] > r.max[a]) {
+            return Err(ctx.err(
+                b.span(),
+                key,
+                "box bounds must be finite with min <= max on every axis",
+            ));
+        }
+        let axes = match &r.axes {
+            None => [true; 3],
+            Some(s) => {
+                FixedSet::parse_axes(s).map_err(|msg| ctx.err(b.span(), "fixed.boxes.axes", msg))?
+            }
+        };
+        fix_boxes.push(FixBox {
+            bounds,
+            axes,
+            line: line_of(ctx.text, b.span().start),
+        });
+    }
+    let (fix_nodes, fix_nodes_line) = match &fixed.nodes {
+        Some(n) => (n.get_ref().clone(), line_of(ctx.text, n.span().start)),
+        None => (Vec::new(), 0),
+    };
+    if fix_boxes.is_empty() && fix_nodes.is_empty() {
+        return Err(SceneError {
+            file: ctx.file.clone(),
+            line: Some(line_of(ctx.text, ctx.text.find("[fixed]").unwrap_or(0))),
+            key: "fixed".into(),
+            message: "nothing is fixed: give boxes and/or nodes (the body would float)".into(),
+        });
+    }
+    Ok((fix_boxes, fix_nodes, fix_nodes_line))
+}
+
+/// `[tool]`: `tip_radius_m` in [0, 0.05]; returns it.
+fn parse_tool(ctx: &Ctx, tool: &RawTool) -> Result<f64, SceneError> {
+    let tip = *tool.tip_radius_m.get_ref();
+    if !(0.0..=0.05).contains(&tip) {
+        return Err(ctx.err(
+            tool.tip_radius_m.span(),
+            "tool.tip_radius_m",
+            format!("must lie in [0, 0.05] m, got {tip}"),
+        ));
+    }
+    Ok(tip)
+}
+
+/// `[device]` (all but `friction_offset`, see [`parse_friction_offset`]): finite fulcrum,
+/// orthonormal unit axes, non-empty joint ranges (pitch inside (-pi/2, pi/2), yaw inside
+/// [-pi, pi], insertion >= 0), `home` inside the ranges (default: 0 clamped into the pitch and yaw
+/// ranges, minimum insertion), counts > 0, non-zero finite gear ratios, torque constants > 0,
+/// current limits in (0, 20], `max_force_n` in (0, 50]; then
+/// [`bank_format::validate_device`]. `tip` is the tool's tip radius, m.
+fn parse_device(ctx: &Ctx, d: &RawDevice, tip: f64) -> Result<DeviceCalibration, SceneError> {
+    finite(ctx, &d.fulcrum_m, "device.fulcrum_m")?;
+    let shaft = unit(ctx, &d.shaft_axis, "device.shaft_axis")?;
+    let pitch_axis = unit(ctx, &d.pitch_axis, "device.pitch_axis")?;
+    let yaw_axis = unit(ctx, &d.yaw_axis, "device.yaw_axis")?;
+    let dot = |a: [f64; 3], b: [f64; 3]| a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+    for (a, b, key, span) in [
+        (shaft, pitch_axis, "device.pitch_axis", d.pitch_axis.span()),
+        (shaft, yaw_axis, "device.yaw_axis", d.yaw_axis.span()),
+        (pitch_axis, yaw_axis, "device.yaw_axis", d.yaw_axis.span()),
+    ] {
+        if dot(a, b).abs() > 1e-3 {
+            return Err(ctx.err(
+                span,
+                key,
+                "shaft_axis, pitch_axis and yaw_axis must be pairwise orthogonal",
+            ));
+        }
+    }
+    let pitch = range(ctx, &d.pitch_range_rad, "device.pitch_range_rad")?;
+    let yaw = range(ctx, &d.yaw_range_rad, "device.yaw_range_rad")?;
+    let ins = range(ctx, &d.insertion_range_m, "device.insertion_range_m")?;
+    let half_pi = std::f64::consts::FRAC_PI_2;
+    if pitch[0] <= -half_pi || pitch[1] >= half_pi {
+        return Err(ctx.err(
+            d.pitch_range_rad.span(),
+            "device.pitch_range_rad",
+            "pitch must stay inside (-pi/2, pi/2)",
+        ));
+    }
+    if yaw[0] < -std::f64::consts::PI || yaw[1] > std::f64::consts::PI {
+        return Err(ctx.err(
+            d.yaw_range_rad.span(),
+            "device.yaw_range_rad",
+            "yaw must stay inside [-pi, pi]",
+        ));
+    }
+    if ins[0] < 0.0 {
+        return Err(ctx.err(
+            d.insertion_range_m.span(),
+            "device.insertion_range_m",
+            "insertion must be >= 0 m",
+        ));
+    }
+    let home = match &d.home {
+        Some(h) => {
+            finite(ctx, h, "device.home")?;
+            let h3 = *h.get_ref();
+            for (j, r) in [pitch, yaw, ins].iter().enumerate() {
+                if !(r[0] <= h3[j] && h3[j] <= r[1]) {
+                    return Err(ctx.err(
+                        h.span(),
+                        "device.home",
+                        format!("joint {j} home {} is outside [{}, {}]", h3[j], r[0], r[1]),
+                    ));
+                }
+            }
+            h3
+        }
+        None => [
+            0.0f64.clamp(pitch[0], pitch[1]),
+            0.0f64.clamp(yaw[0], yaw[1]),
+            ins[0],
+        ],
+    };
+    if d.counts_per_rev.get_ref().contains(&0) {
+        return Err(ctx.err(
+            d.counts_per_rev.span(),
+            "device.counts_per_rev",
+            "counts per revolution must be > 0",
+        ));
+    }
+    finite(ctx, &d.gear_ratio, "device.gear_ratio")?;
+    if d.gear_ratio.get_ref().iter().any(|g| g.abs() < 1e-6) {
+        return Err(ctx.err(
+            d.gear_ratio.span(),
+            "device.gear_ratio",
+            "gear ratios must be non-zero (|ratio| >= 1e-6; the sign is the motor direction)",
+        ));
+    }
+    let kt = positive3(
+        ctx,
+        &d.torque_constant_nm_per_a,
+        "device.torque_constant_nm_per_a",
+        f64::MAX,
+    )?;
+    let imax = positive3(ctx, &d.current_limit_a, "device.current_limit_a", 20.0)?;
+    let fmax = *d.max_force_n.get_ref();
+    if !(fmax > 0.0 && fmax <= 50.0) {
+        return Err(ctx.err(
+            d.max_force_n.span(),
+            "device.max_force_n",
+            format!("must lie in (0, 50] N, got {fmax}"),
+        ));
+    }
+    let f32s = |a: [f64; 3]| a.map(|x| x as f32);
+    let device = DeviceCalibration {
+        fulcrum_m: f32s(*d.fulcrum_m.get_ref()),
+        shaft_axis: f32s(shaft),
+        pitch_axis: f32s(pitch_axis),
+        yaw_axis: f32s(yaw_axis),
+        joint_min: f32s([pitch[0], yaw[0], ins[0]]),
+        joint_max: f32s([pitch[1], yaw[1], ins[1]]),
+        home_joint: f32s(home),
+        counts_per_rev: *d.counts_per_rev.get_ref(),
+        transmission: f32s(*d.gear_ratio.get_ref()),
+        torque_constant_nm_per_a: kt,
+        current_limit_a: imax,
+        max_force_n: fmax as f32,
+        tip_radius_m: tip as f32,
+    };
+    bank_format::validate_device(&device)
+        .map_err(|e| ctx.err(d.fulcrum_m.span(), "device", e.to_string()))?;
+    Ok(device)
+}
+
+/// `[law]`: `domain_n` a non-empty range when given; `kind` "linear" (no `coeffs`; `gain` > 0,
+/// default 1; `offset_n` default 0; `domain_n` default [0, `fmax`]) or "chebyshev" (no `gain` or
+/// `offset_n`; `coeffs` and `domain_n` required); then what [`TissueLaw`] rejects. `fmax` is
+/// `device.max_force_n`, N.
+fn parse_law(ctx: &Ctx, l: &RawLaw, fmax: f64) -> Result<(LawSpec, TissueLaw), SceneError> {
+    let law_key_span = l.kind.span();
+    let domain = match &l.domain_n {
+        Some(dn) => Some(range(ctx, dn, "law.domain_n")?),
+        None => None,
+    };
+    match l.kind.get_ref().as_str() {
+        "linear" => {
+            if let Some(c) = &l.coeffs {
+                return Err(ctx.err(c.span(), "law.coeffs", "only for kind = \"chebyshev\""));
+            }
+            let gain = l.gain.as_ref().map_or(1.0, |g| *g.get_ref());
+            let offset = l.offset_n.as_ref().map_or(0.0, |o| *o.get_ref());
+            if !(gain > 0.0 && gain.is_finite()) {
+                let span = l.gain.as_ref().map_or(law_key_span.clone(), |g| g.span());
+                return Err(ctx.err(span, "law.gain", format!("must be > 0, got {gain}")));
+            }
+            let domain_n = domain.unwrap_or([0.0, fmax]);
+            let law = TissueLaw::linear(offset as f32, gain as f32, domain_n.map(|v| v as f32))
+                .map_err(|e| ctx.err(law_key_span.clone(), "law", e.to_string()))?;
+            Ok((
+                LawSpec::Linear {
+                    offset_n: offset,
+                    gain,
+                    domain_n,
+                },
+                law,
+            ))
+        }
+        "chebyshev" => {
+            for (present, key) in [
+                (l.gain.as_ref().map(|g| g.span()), "law.gain"),
+                (l.offset_n.as_ref().map(|g| g.span()), "law.offset_n"),
+            ] {
+                if let Some(span) = present {
+                    return Err(ctx.err(span, key, "only for kind = \"linear\""));
+                }
+            }
+            let Some(c) = &l.coeffs else {
+                return Err(ctx.err(law_key_span, "law.coeffs", "required for chebyshev"));
+            };
+            let Some(domain_n) = domain else {
+                return Err(ctx.err(law_key_span, "law.domain_n", "required for chebyshev"));
+            };
+            let coeffs: Vec<f32> = c.get_ref().iter().map(|&v| v as f32).collect();
+            let law = TissueLaw::chebyshev(&coeffs, domain_n.map(|v| v as f32))
+                .map_err(|e| ctx.err(c.span(), "law.coeffs", e.to_string()))?;
+            Ok((
+                LawSpec::Chebyshev {
+                    coeffs: c.get_ref().clone(),
+                    domain_n,
+                },
+                law,
+            ))
+        }
+        other => Err(ctx.err(
+            law_key_span,
+            "law.kind",
+            format!("unknown law {other:?} (use \"linear\" or \"chebyshev\")"),
+        )),
+    }
+}
+
+/// `[display_law]` (optional table): `kind` "chebyshev", `domain_m` a non-empty range, then what
+/// [`TissueLaw::chebyshev`] rejects in `coeffs`.
+fn parse_display_law(ctx: &Ctx, p: &RawDisplayLaw) -> Result<TissueLaw, SceneError> {
+    if p.kind.get_ref() != "chebyshev" {
+        return Err(ctx.err(
+            p.kind.span(),
+            "display_law.kind",
+            format!("unknown law {:?} (use \"chebyshev\")", p.kind.get_ref()),
+        ));
+    }
+    let domain = range(ctx, &p.domain_m, "display_law.domain_m")?;
+    let coeffs: Vec<f32> = p.coeffs.get_ref().iter().map(|&v| v as f32).collect();
+    TissueLaw::chebyshev(&coeffs, domain.map(|v| v as f32))
+        .map_err(|e| ctx.err(p.coeffs.span(), "display_law.coeffs", e.to_string()))
+}
+
+/// `device.friction_offset` (optional): finite, default 0. Checked after `[law]` and
+/// `[display_law]`, as it always was, so a file with several errors reports the same one.
+fn parse_friction_offset(ctx: &Ctx, d: &RawDevice) -> Result<[f64; 3], SceneError> {
+    match &d.friction_offset {
+        Some(f) => {
+            finite(ctx, f, "device.friction_offset")?;
+            Ok(*f.get_ref())
+        }
+        None => Ok([0.0; 3]),
+    }
+}
+
+/// `[bank]`: `truncation_radius_m` finite and >= 0; `precision` "f32" (default);
+/// `max_contact_nodes` in 1..=[`bank_format::MAX_CONTACTS`] (default the maximum);
+/// `grid_cell_m` > 0 (default `None`, the builder's choice); `reach_margin_m` >= 0 (default
+/// 0.002 m).
+fn parse_bank(ctx: &Ctx, b: &RawBank) -> Result<BankOptions, SceneError> {
+    let r = *b.truncation_radius_m.get_ref();
+    if !(r.is_finite() && r >= 0.0) {
+        return Err(ctx.err(
+            b.truncation_radius_m.span(),
+            "bank.truncation_radius_m",
+            format!("must be >= 0 m, got {r}"),
+        ));
+    }
+    if let Some(p) = &b.precision
+        && p.get_ref() != "f32"
+    {
+        return Err(ctx.err(
+            p.span(),
+            "bank.precision",
+            format!(
+                "storage precision {:?} is not supported by bank format 1.0 (only \"f32\")",
+                p.get_ref()
+            ),
+        ));
+    }
+    let max_contact_nodes = match &b.max_contact_nodes {
+        Some(m) => {
+            let v = *m.get_ref();
+            if v == 0 || v as usize > bank_format::MAX_CONTACTS {
+                return Err(ctx.err(
+                    m.span(),
+                    "bank.max_contact_nodes",
+                    format!(
+                        "must lie in 1..={} (the link's contact list), got {v}",
+                        bank_format::MAX_CONTACTS
+                    ),
+                ));
+            }
+            v
+        }
+        None => bank_format::MAX_CONTACTS as u32,
+    };
+    let grid_cell_m = match &b.grid_cell_m {
+        Some(g) => {
+            let v = *g.get_ref();
+            if !(v.is_finite() && v > 0.0) {
+                return Err(ctx.err(
+                    g.span(),
+                    "bank.grid_cell_m",
+                    format!("must be > 0 m, got {v}"),
+                ));
+            }
+            Some(v)
+        }
+        None => None,
+    };
+    let reach_margin_m = match &b.reach_margin_m {
+        Some(g) => {
+            let v = *g.get_ref();
+            if !(v.is_finite() && v >= 0.0) {
+                return Err(ctx.err(
+                    g.span(),
+                    "bank.reach_margin_m",
+                    format!("must be >= 0 m, got {v}"),
+                ));
+            }
+            v
+        }
+        None => 0.002,
+    };
+    Ok(BankOptions {
+        truncation_radius_m: r,
+        max_contact_nodes,
+        grid_cell_m,
+        reach_margin_m,
+    })
 }
 
 #[cfg(test)]
