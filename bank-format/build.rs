@@ -62,6 +62,7 @@ fn main() {
         |name: &str| region(&script, name).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
     let (firmware_origin, firmware_len) = read("FLASH");
     let (bank_origin, bank_len) = read("BANK");
+    let (ram_origin, ram_len) = read("RAM");
     let out = PathBuf::from(std::env::var_os("OUT_DIR").expect("cargo sets it")).join("region.rs");
     let code = format!(
         "/// Flash address of the firmware region (`memory.x`: FLASH).\n\
@@ -73,7 +74,11 @@ fn main() {
          pub const BANK_ORIGIN: u32 = {bank_origin:#010x};\n\
          /// Size of the bank region in bytes: the largest bank a device holds (`memory.x`: \
          BANK).\n\
-         pub const BANK_LEN: usize = {bank_len};\n"
+         pub const BANK_LEN: usize = {bank_len};\n\
+         /// Address of the RAM the images use (`memory.x`: RAM).\n\
+         pub const RAM_ORIGIN: u32 = {ram_origin:#010x};\n\
+         /// Size of that RAM in bytes (`memory.x`: RAM).\n\
+         pub const RAM_LEN: usize = {ram_len};\n"
     );
     std::fs::write(&out, code).unwrap_or_else(|e| panic!("{}: {e}", out.display()));
 }

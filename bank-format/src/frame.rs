@@ -12,11 +12,11 @@ use serde::de::DeserializeOwned;
 use serde::{Deserialize, Serialize};
 
 /// Version of the message set below; the device reports it in [`DeviceToHost::Hello`].
-pub const PROTOCOL_VERSION: u16 = 2;
+pub const PROTOCOL_VERSION: u16 = 3;
 /// Most contact nodes one telemetry message carries.
 pub const MAX_CONTACTS: usize = 8;
 /// Upper bound on a postcard-encoded message, bytes (the largest, a full telemetry message, is
-/// at most 187).
+/// at most 197).
 pub const MAX_MESSAGE: usize = 256;
 /// Bytes of CRC after the message.
 pub const FRAME_CRC_LEN: usize = 4;
@@ -98,6 +98,10 @@ pub struct Counters {
     pub overruns: u32,
     /// Longest tick so far, in CPU cycles (or instructions under QEMU).
     pub max_tick_cycles: u32,
+    /// Outgoing frames dropped because the link's queue was full (the host read too slowly).
+    pub tx_dropped: u32,
+    /// Received bytes dropped because the link's incoming queue was full.
+    pub rx_dropped: u32,
 }
 
 /// Periodic device status.

@@ -303,7 +303,7 @@ fn device_msg() -> impl Strategy<Value = DeviceToHost> {
         proptest::array::uniform3(f32_finite()),
         contacts,
         proptest::array::uniform3(f32_finite()),
-        proptest::array::uniform4(any::<u32>()),
+        proptest::array::uniform6(any::<u32>()),
     )
         .prop_map(
             |(tick, state, mode, fault, tip_m, contacts, currents_a, c)| {
@@ -323,6 +323,8 @@ fn device_msg() -> impl Strategy<Value = DeviceToHost> {
                         rx_errors: c[1],
                         overruns: c[2],
                         max_tick_cycles: c[3],
+                        tx_dropped: c[4],
+                        rx_dropped: c[5],
                     },
                 })
             },

@@ -1,6 +1,9 @@
 //! The device application around the loop, the same on every platform: per tick it latches the
-//! encoders, applies the host's link commands, runs [`HapticLoop::tick`], drives the motors and
-//! sends faults and decimated telemetry. The hardware comes in through [`crate::hal`].
+//! encoders and the interlocks, applies the host's link commands, runs [`HapticLoop::tick`],
+//! drives the motors (or puts them in their safe state) and queues faults and decimated
+//! telemetry. The hardware comes in through [`crate::hal`]; the host link through the tick's
+//! end of [`crate::link`]'s queues, so a tick never waits on I/O: a frame that finds the queue
+//! full is dropped whole and counted (telemetry's `tx_dropped`).
 //!
 //! A bank that fails validation leaves no loop to run: the application then keeps the motors at
 //! zero current, reports [`FaultReason::InvalidBank`] with the [`BankError::code`] as detail at
@@ -8,25 +11,45 @@
 
 use bank_format::{
     Bank, BankError, Counters, DeviceToHost, FaultReason, FrameDecoder, HostToDevice, MAX_FRAME,
-    Mode, PROTOCOL_VERSION, Telemetry, encode_frame, heapless,
+    Mode, PROTOCOL_VERSION, State, Telemetry, encode_frame, heapless,
 };
 
-use crate::hal::{Actuation, CycleCounter, LinkPort, Plant};
+use crate::hal::{CycleCounter, Plant};
+use crate::link::TickEnd;
 use crate::safety::{Fault, SafetyConfig, Supervisor, TickInput};
 use crate::tick::{HapticLoop, LoopInput};
 
 /// Telemetry goes out every this many ticks (100 Hz at 1 kHz).
 pub const TELEMETRY_EVERY_TICKS: u32 = 10;
-/// At most this many link bytes are read at each of the two link polls of a tick, so a flood
-/// cannot stretch a tick.
-pub const MAX_RX_BYTES_PER_POLL: usize = 64;
+/// At most this many received link bytes are taken per tick, so a flood cannot stretch a tick
+/// (the rest wait in the queue: 128 bytes a millisecond is more than a 921,600-baud UART
+/// carries).
+pub const MAX_RX_BYTES_PER_TICK: usize = 128;
 /// A link that delivers bytes but no valid frame for this many ticks more than the supervisor's
 /// link timeout counts as silent too (a host sending only garbage is as good as none). Bytes
 /// alone keep the link alive for that long because a slow UART (QEMU's carries about two bytes
 /// a tick) needs several ticks for one frame.
 pub const GARBLED_LINK_GRACE_TICKS: u32 = 90;
-/// Outgoing bytes buffered per tick (a message that does not fit is dropped).
-const TX_CAPACITY: usize = 3 * MAX_FRAME;
+
+/// What one tick did, for the caller (the software-in-the-loop image reports it to its
+/// harness; a board ignores it).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct TickReport {
+    /// The tick's number.
+    pub tick: u32,
+    /// Motor currents commanded, A (zero unless armed).
+    pub currents_a: [f32; 3],
+    /// Force rendered on the tool, N.
+    pub force_n: [f32; 3],
+    /// Safety state after the tick.
+    pub state: State,
+    /// Contact nodes this tick.
+    pub contact_nodes: u8,
+    /// Cost of this tick's loop body, cycles ([`CycleCounter`]).
+    pub body_cycles: u32,
+    /// Cost of the whole previous tick, cycles.
+    pub tick_cycles: u32,
+}
 
 /// What runs the ticks: the loop over a valid bank, or the zero-current stand-in without one.
 // The loop is the common, long-lived variant: boxing it would need a heap.
@@ -42,19 +65,20 @@ enum Core<'b> {
 }
 
 /// The application state (no heap: frame buffers are fixed-size).
-pub struct App<'b> {
+pub struct App<'b, 'q> {
     core: Core<'b>,
+    link: TickEnd<'q>,
     rx: FrameDecoder<HostToDevice>,
     ticks_since_host_frame: u32,
     ticks_since_host_byte: u32,
     last_tick_cycles: u32,
-    tx: heapless::Vec<u8, TX_CAPACITY>,
+    tx_dropped: u32,
 }
 
-impl<'b> App<'b> {
-    /// The application over the result of validating the bank region
-    /// ([`Bank::parse`]); queues the boot `Hello` (and the `InvalidBank` fault without a bank).
-    pub fn new(bank: Result<&'b Bank<'b>, BankError>) -> App<'b> {
+impl<'b, 'q> App<'b, 'q> {
+    /// The application over the result of validating the bank region ([`Bank::parse`]),
+    /// talking to the host through `link`; queues the boot `Hello`.
+    pub fn new(bank: Result<&'b Bank<'b>, BankError>, link: TickEnd<'q>) -> App<'b, 'q> {
         let core = match bank {
             Ok(bank) => Core::Loop(HapticLoop::new(bank)),
             Err(e) => Core::NoBank {
@@ -66,11 +90,12 @@ impl<'b> App<'b> {
         };
         let mut app = App {
             core,
+            link,
             rx: FrameDecoder::new(),
             ticks_since_host_frame: 0,
             ticks_since_host_byte: 0,
             last_tick_cycles: 0,
-            tx: heapless::Vec::new(),
+            tx_dropped: 0,
         };
         app.queue(&app.hello());
         app
@@ -92,28 +117,35 @@ impl<'b> App<'b> {
         c.max_tick_cycles = c.max_tick_cycles.max(cycles);
     }
 
-    /// One tick: encoders, link commands, the loop, motors, faults and telemetry. `overrun`
-    /// says whether the previous tick overran its period. Only a plant error stops it.
-    pub fn tick<P: Plant, L: LinkPort, C: CycleCounter>(
+    /// One tick: encoders and interlocks, link commands, the loop, motors, faults and
+    /// telemetry. `overrun` says whether the previous tick overran its period. Returns at once
+    /// whatever the link does; only a plant error stops it (the motors are then disabled).
+    pub fn tick<P: Plant, C: CycleCounter>(
         &mut self,
         plant: &mut P,
-        link: &mut L,
         clock: &C,
         overrun: bool,
-    ) -> Result<Actuation, P::Error> {
-        let tick = self.tick_count().wrapping_add(1);
-        let counts = plant.read_encoders(tick)?;
-        self.poll_link(link);
+    ) -> Result<TickReport, P::Error> {
+        let counts = match plant.read_encoders() {
+            Ok(c) => c,
+            Err(e) => {
+                plant.disable();
+                return Err(e);
+            }
+        };
+        let interlocks = plant.interlocks();
+        self.poll_link();
         let start = clock.cycles();
         let input = LoopInput {
             encoder_counts: counts,
             overrun,
             link_silence_ticks: self.link_silence(),
         };
+        let _ = interlocks;
         let (out, new_fault) = match &mut self.core {
             Core::Loop(lp) => {
                 let out = lp.tick(input);
-                let act = Actuation {
+                let report = TickReport {
                     tick: out.tick,
                     currents_a: out.currents_a,
                     force_n: out.tool_force_n,
@@ -122,7 +154,7 @@ impl<'b> App<'b> {
                     body_cycles: 0,
                     tick_cycles: self.last_tick_cycles,
                 };
-                (act, out.new_fault)
+                (report, out.new_fault)
             }
             Core::NoBank {
                 supervisor,
@@ -139,7 +171,7 @@ impl<'b> App<'b> {
                     counts,
                     ..TickInput::quiet()
                 });
-                let act = Actuation {
+                let report = TickReport {
                     tick: *tick,
                     currents_a: s.currents_a,
                     force_n: [0.0; 3],
@@ -148,19 +180,25 @@ impl<'b> App<'b> {
                     body_cycles: 0,
                     tick_cycles: self.last_tick_cycles,
                 };
-                (act, s.new_fault)
+                (report, s.new_fault)
             }
         };
-        let out = Actuation {
+        let out = TickReport {
             body_cycles: clock.cycles().wrapping_sub(start),
             ..out
         };
         self.ticks_since_host_frame = self.ticks_since_host_frame.saturating_add(1);
         self.ticks_since_host_byte = self.ticks_since_host_byte.saturating_add(1);
-        plant.actuate(&out)?;
-        // Again after the plant exchange: a UART holding one byte at a time (QEMU's) may have
-        // received another meanwhile; what arrives now applies from the next tick.
-        self.poll_link(link);
+        let driven = if out.state == State::Armed {
+            plant.drive(out.currents_a)
+        } else {
+            plant.disable();
+            Ok(())
+        };
+        if let Err(e) = driven {
+            plant.disable();
+            return Err(e);
+        }
         if let Some(f) = new_fault {
             self.queue(&DeviceToHost::Fault {
                 tick: out.tick,
@@ -171,15 +209,15 @@ impl<'b> App<'b> {
         if out.tick.is_multiple_of(TELEMETRY_EVERY_TICKS) {
             self.queue(&DeviceToHost::Telemetry(self.telemetry()));
         }
-        link.write(&self.tx);
-        self.tx.clear();
         Ok(out)
     }
 
-    /// Read and apply what the link has received, at most [`MAX_RX_BYTES_PER_POLL`] bytes.
-    fn poll_link<L: LinkPort>(&mut self, link: &mut L) {
-        for _ in 0..MAX_RX_BYTES_PER_POLL {
-            let Some(byte) = link.read_byte() else { break };
+    /// Take and apply what the link has received, at most [`MAX_RX_BYTES_PER_TICK`] bytes.
+    fn poll_link(&mut self) {
+        for _ in 0..MAX_RX_BYTES_PER_TICK {
+            let Some(byte) = self.link.receive() else {
+                break;
+            };
             self.receive(byte);
         }
     }
@@ -194,6 +232,13 @@ impl<'b> App<'b> {
 
     /// The telemetry of the last tick.
     pub fn telemetry(&self) -> Telemetry {
+        let mut t = self.core_telemetry();
+        t.counters.tx_dropped = self.tx_dropped;
+        t.counters.rx_dropped = self.link.rx_dropped();
+        t
+    }
+
+    fn core_telemetry(&self) -> Telemetry {
         match &self.core {
             Core::Loop(lp) => lp.telemetry(),
             Core::NoBank {
@@ -325,11 +370,16 @@ impl<'b> App<'b> {
         }
     }
 
-    /// Encode `msg` into the outgoing buffer; dropped when it does not fit this tick.
+    /// Encode `msg` and queue it for the link; dropped whole and counted when the queue is
+    /// full.
     fn queue(&mut self, msg: &DeviceToHost) {
         let mut buf = [0u8; MAX_FRAME];
-        if let Ok(frame) = encode_frame(msg, &mut buf) {
-            let _ = self.tx.extend_from_slice(frame);
+        let sent = match encode_frame(msg, &mut buf) {
+            Ok(frame) => self.link.send(frame),
+            Err(_) => false,
+        };
+        if !sent {
+            self.tx_dropped = self.tx_dropped.wrapping_add(1);
         }
     }
 }
@@ -353,52 +403,73 @@ mod tests {
     extern crate std;
     use super::*;
     use crate::fixtures::flat_patch;
+    use crate::link::{DriverEnd, Link};
     use bank_format::{FrameDecoder, State as WireState};
     use std::vec::Vec;
 
-    /// Encoders from a list (then held), currents recorded.
+    /// Encoders held, what was driven recorded.
     struct FakePlant {
         counts: [i32; 3],
-        out: Vec<Actuation>,
         fail_at: Option<u32>,
+        reads: u32,
+        driven: Vec<Option<[f32; 3]>>,
     }
 
     impl Plant for FakePlant {
         type Error = u32;
-        fn read_encoders(&mut self, tick: u32) -> Result<[i32; 3], u32> {
+        fn read_encoders(&mut self) -> Result<[i32; 3], u32> {
+            self.reads += 1;
             match self.fail_at {
-                Some(t) if t == tick => Err(tick),
+                Some(t) if t == self.reads => Err(t),
                 _ => Ok(self.counts),
             }
         }
-        fn actuate(&mut self, out: &Actuation) -> Result<(), u32> {
-            self.out.push(*out);
+        fn drive(&mut self, currents_a: [f32; 3]) -> Result<(), u32> {
+            self.driven.push(Some(currents_a));
             Ok(())
         }
+        fn disable(&mut self) {
+            self.driven.push(None);
+        }
     }
 
-    #[derive(Default)]
-    struct FakeLink {
-        rx: Vec<u8>,
-        tx: FrameDecoder<DeviceToHost>,
+    /// The host's side of the link: sends commands into the driver end, decodes what the
+    /// driver takes out, `per_tick` bytes at a time.
+    struct FakeHost<'q> {
+        driver: DriverEnd<'q>,
+        rx: FrameDecoder<DeviceToHost>,
         sent: Vec<DeviceToHost>,
+        per_tick: usize,
     }
 
-    impl FakeLink {
+    impl<'q> FakeHost<'q> {
+        fn new(driver: DriverEnd<'q>) -> FakeHost<'q> {
+            FakeHost {
+                driver,
+                rx: FrameDecoder::new(),
+                sent: Vec::new(),
+                per_tick: usize::MAX,
+            }
+        }
+
         fn send(&mut self, cmd: &HostToDevice) {
             let mut buf = [0u8; MAX_FRAME];
-            self.rx
-                .extend_from_slice(encode_frame(cmd, &mut buf).unwrap());
+            self.driver.put_rx(encode_frame(cmd, &mut buf).unwrap());
         }
-    }
 
-    impl LinkPort for FakeLink {
-        fn read_byte(&mut self) -> Option<u8> {
-            (!self.rx.is_empty()).then(|| self.rx.remove(0))
-        }
-        fn write(&mut self, bytes: &[u8]) {
-            for r in self.tx.feed_slice(bytes) {
-                self.sent.push(r.unwrap());
+        /// What the link driver does between ticks: take up to `per_tick` bytes and deliver them.
+        fn pump(&mut self) {
+            let mut left = self.per_tick;
+            let mut buf = [0u8; 64];
+            while left > 0 {
+                let n = self.driver.take_tx(&mut buf[..left.min(64)]);
+                if n == 0 {
+                    break;
+                }
+                left -= n;
+                for r in self.rx.feed_slice(&buf[..n]) {
+                    self.sent.push(r.unwrap());
+                }
             }
         }
     }
@@ -413,33 +484,38 @@ mod tests {
         }
     }
 
-    fn rig() -> (FakePlant, FakeLink, FakeClock) {
-        let plant = FakePlant {
+    fn plant() -> FakePlant {
+        FakePlant {
             counts: [0, 0, 0],
-            out: Vec::new(),
             fail_at: None,
-        };
-        (
-            plant,
-            FakeLink::default(),
-            FakeClock(core::cell::Cell::new(0)),
-        )
+            reads: 0,
+            driven: Vec::new(),
+        }
+    }
+
+    fn clock() -> FakeClock {
+        FakeClock(core::cell::Cell::new(0))
     }
 
     #[test]
     fn commands_arm_and_telemetry_flows() {
         let bytes = flat_patch();
         let bank = Bank::parse(bytes.as_slice()).unwrap();
-        let mut app = App::new(Ok(&bank));
-        let (mut plant, mut link, clock) = rig();
-        link.send(&HostToDevice::Hello);
-        link.send(&HostToDevice::Arm);
+        let mut link = Link::new();
+        let (tick_end, driver) = link.split();
+        let mut app = App::new(Ok(&bank), tick_end);
+        let mut host = FakeHost::new(driver);
+        let (mut plant, clock) = (plant(), clock());
+        host.send(&HostToDevice::Hello);
+        host.send(&HostToDevice::Arm);
         // A corrupt frame between them is dropped and counted.
-        link.rx.extend_from_slice(&[0x03, 0x11, 0x22, 0x00]);
-        link.send(&HostToDevice::SetMode(Mode::Transparent));
+        host.driver.put_rx(&[0x03, 0x11, 0x22, 0x00]);
+        host.send(&HostToDevice::SetMode(Mode::Transparent));
+        let mut reports = Vec::new();
         for _ in 0..20 {
-            app.tick(&mut plant, &mut link, &clock, false).unwrap();
-            link.send(&HostToDevice::Heartbeat);
+            reports.push(app.tick(&mut plant, &clock, false).unwrap());
+            host.pump();
+            host.send(&HostToDevice::Heartbeat);
         }
         let hello = DeviceToHost::Hello {
             protocol: PROTOCOL_VERSION,
@@ -448,8 +524,8 @@ mod tests {
             node_count: bank.node_count() as u16,
         };
         // Boot Hello, the requested Hello, telemetry at ticks 10 and 20.
-        assert_eq!(link.sent[..2], [hello.clone(), hello]);
-        let tel: Vec<_> = link.sent[2..]
+        assert_eq!(host.sent[..2], [hello.clone(), hello]);
+        let tel: Vec<_> = host.sent[2..]
             .iter()
             .map(|m| match m {
                 DeviceToHost::Telemetry(t) => t.clone(),
@@ -462,23 +538,31 @@ mod tests {
         // Hello, Arm, SetMode and the 19 heartbeats read so far.
         assert_eq!(tel[1].counters.rx_frames, 3 + 19);
         assert_eq!(tel[1].counters.rx_errors, 1);
-        assert_eq!(plant.out.len(), 20);
-        assert!(plant.out.iter().all(|a| a.state == WireState::Armed));
+        assert_eq!(tel[1].counters.tx_dropped, 0);
+        assert_eq!(reports.len(), 20);
+        assert!(reports.iter().all(|a| a.state == WireState::Armed));
+        // Armed: every tick drove the motors.
+        assert!(plant.driven.iter().all(Option::is_some));
         // The body was measured between two readings of the clock.
-        assert!(plant.out.iter().all(|a| a.body_cycles == 100));
+        assert!(reports.iter().all(|a| a.body_cycles == 100));
     }
 
     #[test]
     fn silence_while_armed_faults_and_reports_once() {
         let bytes = flat_patch();
         let bank = Bank::parse(bytes.as_slice()).unwrap();
-        let mut app = App::new(Ok(&bank));
-        let (mut plant, mut link, clock) = rig();
-        link.send(&HostToDevice::Arm);
+        let mut link = Link::new();
+        let (tick_end, driver) = link.split();
+        let mut app = App::new(Ok(&bank), tick_end);
+        let mut host = FakeHost::new(driver);
+        let (mut plant, clock) = (plant(), clock());
+        host.send(&HostToDevice::Arm);
+        let mut reports = Vec::new();
         for _ in 0..30 {
-            app.tick(&mut plant, &mut link, &clock, false).unwrap();
+            reports.push(app.tick(&mut plant, &clock, false).unwrap());
+            host.pump();
         }
-        let faults: Vec<_> = link
+        let faults: Vec<_> = host
             .sent
             .iter()
             .filter(|m| matches!(m, DeviceToHost::Fault { .. }))
@@ -492,10 +576,14 @@ mod tests {
                 detail: 11
             }]
         );
-        assert!(plant.out[11..].iter().all(|a| a.currents_a == [0.0; 3]));
-        // A plant error stops the tick and is returned.
+        assert!(reports[11..].iter().all(|a| a.currents_a == [0.0; 3]));
+        // From the fault on, the motors are disabled, not driven with zero.
+        assert!(plant.driven[11..].iter().all(Option::is_none));
+        // A plant error stops the tick, disables the motors and is returned.
         plant.fail_at = Some(31);
-        assert_eq!(app.tick(&mut plant, &mut link, &clock, false), Err(31));
+        let before = plant.driven.len();
+        assert_eq!(app.tick(&mut plant, &clock, false), Err(31));
+        assert_eq!(plant.driven[before..], [None]);
     }
 
     /// A slow link (one byte a tick, so a frame takes several ticks) is not silent; a link
@@ -504,31 +592,35 @@ mod tests {
     fn slow_link_stays_alive_and_garbage_alone_is_silence() {
         let bytes = flat_patch();
         let bank = Bank::parse(bytes.as_slice()).unwrap();
-        let mut app = App::new(Ok(&bank));
-        let (mut plant, mut link, clock) = rig();
-        link.send(&HostToDevice::Arm);
-        app.tick(&mut plant, &mut link, &clock, false).unwrap();
-        // Heartbeats trickled one byte per tick: never 10 ticks without a byte.
+        let mut link = Link::new();
+        let (tick_end, mut driver) = link.split();
+        let mut app = App::new(Ok(&bank), tick_end);
+        let (mut plant, clock) = (plant(), clock());
         let mut buf = [0u8; MAX_FRAME];
+        driver.put_rx(encode_frame(&HostToDevice::Arm, &mut buf).unwrap());
+        app.tick(&mut plant, &clock, false).unwrap();
+        // Heartbeats trickled one byte per tick: never 10 ticks without a byte.
         let beat = encode_frame(&HostToDevice::Heartbeat, &mut buf)
             .unwrap()
             .to_vec();
-        let mut slow = SlowLink::default();
+        let mut trickle: Vec<u8> = Vec::new();
+        let mut states = Vec::new();
         for _ in 0..200 {
-            if slow.queue.is_empty() {
-                slow.queue.extend_from_slice(&beat);
+            if trickle.is_empty() {
+                trickle.extend_from_slice(&beat);
             }
-            app.tick(&mut plant, &mut slow, &clock, false).unwrap();
+            driver.put_rx(&[trickle.remove(0)]);
+            states.push(app.tick(&mut plant, &clock, false).unwrap().state);
         }
-        assert!(plant.out.iter().all(|a| a.state == WireState::Armed));
+        assert!(states.iter().all(|&s| s == WireState::Armed));
         assert!(app.telemetry().counters.rx_frames > 20);
         // Now one garbage byte a tick (after what is left of a heartbeat): alive for the
         // grace, then silent.
         let mut states = Vec::new();
         for _ in 0..200u32 {
-            slow.queue.push(0x55);
-            app.tick(&mut plant, &mut slow, &clock, false).unwrap();
-            states.push(plant.out.last().unwrap().state);
+            trickle.push(0x55);
+            driver.put_rx(&[trickle.remove(0)]);
+            states.push(app.tick(&mut plant, &clock, false).unwrap().state);
         }
         let limit = (GARBLED_LINK_GRACE_TICKS + firmware_link_timeout()) as usize;
         assert!(states[..limit - 1].iter().all(|&s| s == WireState::Armed));
@@ -545,34 +637,70 @@ mod tests {
         crate::safety::DEFAULT_LINK_TIMEOUT_TICKS
     }
 
-    /// Delivers one queued byte per call of a tick (two reads per tick: the second finds none).
-    #[derive(Default)]
-    struct SlowLink {
-        queue: Vec<u8>,
-        read_this_tick: bool,
-    }
-
-    impl LinkPort for SlowLink {
-        fn read_byte(&mut self) -> Option<u8> {
-            if self.read_this_tick || self.queue.is_empty() {
-                self.read_this_tick = false;
-                return None;
+    /// A link that carries only one byte per tick (a tenth of a telemetry frame): the ticks
+    /// are exactly those of a fast link (the tick never waits for it), the frames that do not
+    /// fit are dropped whole and counted, and every frame the host receives decodes whole.
+    #[test]
+    fn a_one_byte_per_tick_link_costs_the_tick_nothing_and_loses_only_whole_frames() {
+        let bytes = flat_patch();
+        let bank = Bank::parse(bytes.as_slice()).unwrap();
+        let run = |per_tick: usize| {
+            let mut link = Link::new();
+            let (tick_end, driver) = link.split();
+            let mut app = App::new(Ok(&bank), tick_end);
+            let mut host = FakeHost::new(driver);
+            host.per_tick = per_tick;
+            let (mut plant, clock) = (plant(), clock());
+            host.send(&HostToDevice::Arm);
+            let mut reports = Vec::new();
+            for t in 0..3000 {
+                // Heartbeats stay in the incoming direction, which is not throttled.
+                if t % 2 == 0 {
+                    host.send(&HostToDevice::Heartbeat);
+                }
+                plant.counts = [t / 3, -(t / 5), t / 7];
+                reports.push(app.tick(&mut plant, &clock, false).unwrap());
+                host.pump();
             }
-            self.read_this_tick = true;
-            Some(self.queue.remove(0))
-        }
-        fn write(&mut self, _: &[u8]) {}
+            (reports, host.sent, app.telemetry().counters)
+        };
+        let (fast, fast_sent, fast_counters) = run(usize::MAX);
+        let (slow, slow_sent, slow_counters) = run(1);
+        // Ticks identical, cycle counts included: the link's speed does not reach the tick.
+        assert_eq!(fast, slow);
+        assert_eq!(fast_counters.tx_dropped, 0);
+        // Boot Hello + 300 telemetry frames queued; the fast host got them all.
+        assert_eq!(fast_sent.len(), 301);
+        // The slow one got whole frames only (the decoder would have failed on a torn one),
+        // and what it did not get was counted as dropped.
+        assert!(slow_counters.tx_dropped > 200, "{slow_counters:?}");
+        let got = slow_sent.len() as u32;
+        // The last telemetry frame counts frames dropped before it; frames still queued or
+        // being sent when the run ends are neither received nor dropped (at most TX_FRAMES).
+        let dropped = slow_counters.tx_dropped;
+        assert!(got + dropped <= 301 && got + dropped + crate::link::TX_FRAMES as u32 >= 301);
+        assert!(
+            slow_sent
+                .iter()
+                .skip(1)
+                .all(|m| matches!(m, DeviceToHost::Telemetry(_)))
+        );
     }
 
     #[test]
     fn invalid_bank_refuses_to_arm_and_says_why() {
-        let mut app = App::new(Err(BankError::BadMagic));
+        let mut link = Link::new();
+        let (tick_end, driver) = link.split();
+        let mut app = App::new(Err(BankError::BadMagic), tick_end);
         assert!(app.haptic_loop().is_none());
-        let (mut plant, mut link, clock) = rig();
-        link.send(&HostToDevice::Arm);
-        link.send(&HostToDevice::Hello);
+        let mut host = FakeHost::new(driver);
+        let (mut plant, clock) = (plant(), clock());
+        host.send(&HostToDevice::Arm);
+        host.send(&HostToDevice::Hello);
+        let mut reports = Vec::new();
         for _ in 0..3 {
-            app.tick(&mut plant, &mut link, &clock, false).unwrap();
+            reports.push(app.tick(&mut plant, &clock, false).unwrap());
+            host.pump();
         }
         let code = u32::from(BankError::BadMagic.code());
         let no_bank = DeviceToHost::Hello {
@@ -587,9 +715,10 @@ mod tests {
             detail: code,
         };
         // Boot Hello; the arm refusal (before tick 1 ran); the Hello reply; the tick-1 fault.
-        assert_eq!(link.sent, [no_bank.clone(), fault(0), no_bank, fault(1)]);
-        assert!(plant.out.iter().all(|a| a.currents_a == [0.0; 3]));
-        assert!(plant.out.iter().all(|a| a.state == WireState::Fault));
+        assert_eq!(host.sent, [no_bank.clone(), fault(0), no_bank, fault(1)]);
+        assert!(reports.iter().all(|a| a.currents_a == [0.0; 3]));
+        assert!(reports.iter().all(|a| a.state == WireState::Fault));
+        assert!(plant.driven.iter().all(Option::is_none));
         assert_eq!(app.telemetry().fault, Some(FaultReason::InvalidBank));
     }
 }

@@ -1,50 +1,42 @@
 //! The boundary between the portable firmware and the hardware: encoders in, motor currents
-//! out, link bytes both ways, and a cycle counter. An image implements these traits for its
-//! platform (the QEMU software-in-the-loop image: a lockstep plant channel, USART1 and SysTick;
-//! a board: timer-capture encoders, PWM current drivers, a UART and DWT) and hands them to
-//! [`crate::app::App::tick`], which holds everything else.
-
-use bank_format::State;
-
-/// What a tick asks of the motor drivers, with the tick's outcome (a board's driver uses only
-/// `currents_a`; the software-in-the-loop plant reports the rest to its harness).
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Actuation {
-    /// Tick the currents belong to.
-    pub tick: u32,
-    /// Motor currents to apply, A (zero unless armed).
-    pub currents_a: [f32; 3],
-    /// Force rendered on the tool, N.
-    pub force_n: [f32; 3],
-    /// Safety state after the tick.
-    pub state: State,
-    /// Contact nodes this tick.
-    pub contact_nodes: u8,
-    /// Cost of this tick's loop body, cycles ([`CycleCounter`]).
-    pub body_cycles: u32,
-    /// Cost of the whole previous tick, cycles.
-    pub tick_cycles: u32,
-}
+//! out, interlock inputs, and a cycle counter. An image implements these traits for its
+//! platform (the QEMU software-in-the-loop image: a lockstep plant channel and SysTick; the
+//! board: timer encoders, PWM set values and enable lines of current-mode amplifiers, GPIO
+//! interlocks and DWT) and hands them to [`crate::app::App::tick`], which holds everything
+//! else. The host link is not a trait: it is the pair of queues of [`crate::link`], drained by
+//! the image's link task.
 
 /// The gimbal's encoders and motor drivers.
 pub trait Plant {
     /// Why the plant could not be read or written (the image stops the loop on it).
     type Error;
 
-    /// Latch the encoder counts (pitch, yaw, insertion) for tick `tick`.
-    fn read_encoders(&mut self, tick: u32) -> Result<[i32; 3], Self::Error>;
+    /// Latch the encoder counts (pitch, yaw, insertion), extended to `i32`
+    /// ([`crate::encoder::Extender`] for 16-bit timers).
+    fn read_encoders(&mut self) -> Result<[i32; 3], Self::Error>;
 
-    /// Drive the motors with `out.currents_a`.
-    fn actuate(&mut self, out: &Actuation) -> Result<(), Self::Error>;
+    /// Drive the motors with `currents_a` (A, zero unless armed; the supervisor has clamped
+    /// them to their limits).
+    fn drive(&mut self, currents_a: [f32; 3]) -> Result<(), Self::Error>;
+
+    /// Put every motor in its safe state at once (amplifiers disabled, zero set value). Called
+    /// when the application stops driving; cannot fail.
+    fn disable(&mut self);
+
+    /// The interlock inputs this tick (e-stop, amplifier fault outputs). A plant without any
+    /// reports none.
+    fn interlocks(&mut self) -> Interlocks {
+        Interlocks::default()
+    }
 }
 
-/// The host link's byte stream (a UART).
-pub trait LinkPort {
-    /// One received byte, if any is waiting (never blocks).
-    fn read_byte(&mut self) -> Option<u8>;
-
-    /// Send `bytes` (may block until they are out).
-    fn write(&mut self, bytes: &[u8]);
+/// Hardware interlock inputs, read every tick; any one latches a fault with zero current.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Interlocks {
+    /// The emergency stop is pressed (or its loop is open).
+    pub estop: bool,
+    /// Amplifier `j` reports a fault on its fault output.
+    pub amplifier_fault: [bool; 3],
 }
 
 /// A free-running cycle counter (wrapping): CPU cycles on a board, instructions under QEMU.

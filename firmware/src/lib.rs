@@ -31,12 +31,15 @@ pub const TICK_HZ: u32 = 1_000;
 /// Tick period of the force loop, in seconds.
 pub const TICK_PERIOD_S: f32 = 1.0 / TICK_HZ as f32;
 
+pub mod amplifier;
 pub mod app;
 pub mod contact;
 pub mod device;
+pub mod encoder;
 #[cfg(any(test, feature = "test-fixtures"))]
 pub mod fixtures;
 pub mod hal;
+pub mod link;
 pub mod patch;
 pub mod safety;
 pub mod solve;

@@ -138,6 +138,33 @@ fn ten_seconds_of_slide_match_the_native_loop_without_overrun() {
     assert!(run.peak_force_n() > 0.05 && run.peak_force_n() <= bank.device().max_force_n);
 }
 
+/// A slow link: the image may send only 4 bytes per tick, about half of what telemetry needs
+/// (a frame every 10 ticks, 50-190 bytes each with the contacts). The tick does not notice: 1 kHz with no overrun and no fault, still
+/// bit-identical to the native loop; whole frames are dropped and counted, and every frame the
+/// host receives decodes.
+#[test]
+fn throttled_link_keeps_the_tick_and_drops_whole_frames() {
+    let (setup, bytes) = setup();
+    let bank = Bank::parse(&bytes).unwrap();
+    let mut session = Session::new(&bank, Script::Slide, 5.0).unwrap();
+    session.link_bytes_per_tick = Some(4);
+    let run = qemu(&setup, &session);
+    assert_eq!(run.stopped, None);
+    assert_eq!(run.ticks.len(), 5_000);
+    assert_eq!(run.missed_plant_frames(), 0);
+    assert_eq!(run.overruns(), 0);
+    assert!(run.faults().is_empty(), "{:?}", run.faults());
+    assert_eq!(run.link_stats.errors(), 0, "a torn frame reached the host");
+    let tel = run.telemetry();
+    let last = tel.last().expect("some telemetry gets through");
+    // 500 telemetry frames were queued; the link carried some 20 kB of them.
+    assert!(tel.len() > 150 && tel.len() < 450, "{} received", tel.len());
+    assert!(last.counters.tx_dropped > 50, "{:?}", last.counters);
+    assert_eq!(last.counters.overruns, 0);
+    assert!(run.ticks.iter().any(|t| t.state == State::Armed));
+    assert!(assert_matches_native(&bank, &run) > 1000);
+}
+
 #[test]
 fn press_and_strike_match_the_native_loop() {
     let (setup, bytes) = setup();

@@ -1,16 +1,24 @@
 //! The software-in-the-loop image: the firmware exactly as it would be flashed, run by QEMU's
-//! `netduinoplus2` (an STM32F405) against the host's plant simulator.
+//! `netduinoplus2` (an STM32F405) against the host's plant simulator. It has the board image's
+//! structure (`firmware/board`), so the SIL tests exercise what the board runs:
 //!
 //! - The bank is not compiled in. QEMU loads the bank file into the flash's bank region
-//!   (`-device loader,file=x.bank,addr=0x08040000`), as flashing would, and the image validates
-//!   it at boot with [`Bank::parse`] on `__bank_start..__bank_end` (linker symbols of the
-//!   top-level `memory.x`). An invalid bank leaves the motors at zero current and the reason on
-//!   the link ([`firmware::app`]).
-//! - embassy-executor runs the 1 kHz tick as a task on an embassy-time `Ticker`; the time
-//!   driver is SysTick ([`systick`]). The executor idles on WFI, which under QEMU's
-//!   `-icount shift=3,sleep=off` makes runs deterministic.
-//! - The host link is USART1 ([`usart`]), the plant (encoders in, currents out) a lockstep
-//!   semihosting channel ([`plant`]) that holds virtual time while the host answers.
+//!   (`-device loader,file=x.bank,addr=..`, the `BANK` origin of the top-level `memory.x`), as
+//!   flashing would, and the image validates it at boot with [`Bank::parse`] on
+//!   `__bank_start..__bank_end` (linker symbols of `memory.x`). An invalid bank leaves the
+//!   motors at zero current and the reason on the link ([`firmware::app`]).
+//! - **The tick runs at high priority**: an embassy executor driven by a spare interrupt
+//!   ([`TICK_IRQ`], pended in software, priority below SysTick and above thread mode) runs the
+//!   1 kHz tick task on an embassy-time `Ticker`; the time driver is SysTick ([`systick`]).
+//! - **The link runs in thread mode, below the tick**: a second executor runs the link task,
+//!   which moves bytes between USART1 ([`usart`]) and the tick's queues
+//!   ([`firmware::link`]); the tick never touches the UART. It idles on WFI, which under
+//!   QEMU's `-icount shift=3,sleep=off` makes runs deterministic.
+//! - The link task may send at most a budget of bytes per tick, read at boot from the file
+//!   `sil-link-budget` in QEMU's working directory (the harness writes it to model a slow
+//!   UART; absent: unlimited, as QEMU's USART is instantaneous).
+//! - The plant (encoders in, currents out) is a lockstep semihosting channel ([`plant`]) that
+//!   holds virtual time while the host answers.
 //!
 //! The image exits (semihosting) when the plant channel closes: code 0 for a clean close, 1
 //! for a plant error, 101 for a panic.
@@ -22,10 +30,15 @@ mod systick;
 mod usart;
 
 use bank_format::{Bank, BankError};
-use core::sync::atomic::{AtomicBool, Ordering};
+use core::sync::atomic::{AtomicBool, AtomicPtr, Ordering};
+use cortex_m::interrupt::InterruptNumber;
+use cortex_m::peripheral::NVIC;
+use cortex_m_rt::exception;
 use embassy_executor::raw::Executor;
-use embassy_time::{Duration, Ticker};
+use embassy_time::{Duration, Ticker, Timer};
 use firmware::app::App;
+use firmware::link::{DriverEnd, Link};
+use semihosting::io::Read;
 
 use crate::plant::{PlantChannel, PlantError};
 use crate::systick::InstructionCounter;
@@ -47,26 +60,71 @@ fn bank_region() -> &'static [u8] {
     }
 }
 
-/// Set by the executor's pender when a task was woken; cleared before each poll.
-static WORK: AtomicBool = AtomicBool::new(true);
+/// An interrupt the image does not otherwise use (UART4's, 52), pended in software to run the
+/// tick's executor.
+#[derive(Clone, Copy)]
+struct TickIrq;
 
-/// Wake the thread-mode executor loop (called by embassy when a task is woken).
-#[unsafe(export_name = "__pender")]
-fn pender(_context: *mut ()) {
-    WORK.store(true, Ordering::Release);
+// SAFETY: 52 is a valid STM32F405 interrupt number (UART4), unused by this image.
+unsafe impl InterruptNumber for TickIrq {
+    fn number(self) -> u16 {
+        52
+    }
 }
 
-/// The 1 kHz tick: wait for the period, run one [`App::tick`], measure it.
+/// The tick's interrupt.
+const TICK_IRQ: TickIrq = TickIrq;
+/// Its NVIC priority: below SysTick (0, so the period count advances during a long tick and
+/// an overrun is seen), above thread mode.
+const TICK_PRIORITY: u8 = 0x40;
+
+/// Set by the pender when a thread-mode task was woken; cleared before each poll.
+static WORK: AtomicBool = AtomicBool::new(true);
+
+/// Wake an executor (called by embassy when a task is woken): the thread-mode loop (null
+/// context) or the tick's interrupt (its number as context).
+#[unsafe(export_name = "__pender")]
+fn pender(context: *mut ()) {
+    if context.is_null() {
+        WORK.store(true, Ordering::Release);
+    } else {
+        NVIC::pend(TICK_IRQ);
+    }
+}
+
+/// The tick's executor, polled from [`TICK_IRQ`]'s handler (null until `main` starts it).
+static TICK_EXECUTOR: AtomicPtr<Executor> = AtomicPtr::new(core::ptr::null_mut());
+
+/// Device interrupts: only [`TICK_IRQ`] is enabled.
+#[exception]
+unsafe fn DefaultHandler(irqn: i16) {
+    if irqn == TICK_IRQ.number() as i16 {
+        // SAFETY: the pointer is null or the `'static` executor `main` stored before it
+        // unmasked this interrupt; the handler does not preempt itself, so the executor is
+        // never polled re-entrantly.
+        if let Some(executor) = unsafe { TICK_EXECUTOR.load(Ordering::Acquire).as_ref() } {
+            unsafe { executor.poll() };
+        }
+    } else {
+        semihosting::eprintln!("sil image: unexpected interrupt {irqn}");
+        semihosting::process::exit(1)
+    }
+}
+
+/// The 1 kHz tick: wait for the period, run one [`App::tick`], answer the plant, measure.
 #[embassy_executor::task]
-async fn haptic(mut app: App<'static>, mut plant: PlantChannel, mut link: Usart1) {
+async fn haptic(mut app: App<'static, 'static>, mut plant: PlantChannel) {
     let counter = InstructionCounter;
-    let mut ticker = Ticker::every(Duration::from_hz(firmware::TICK_HZ as u64));
+    let mut ticker = Ticker::every(Duration::from_hz(u64::from(firmware::TICK_HZ)));
     let mut overrun = false;
     loop {
         ticker.next().await;
         let period = systick::period();
-        match app.tick(&mut plant, &mut link, &counter, overrun) {
-            Ok(_) => {}
+        let replied = app
+            .tick(&mut plant, &counter, overrun)
+            .and_then(|report| plant.reply(&report));
+        match replied {
+            Ok(()) => {}
             Err(PlantError::Closed) => semihosting::process::exit(0),
             Err(e) => {
                 semihosting::eprintln!("sil image: plant channel: {e}");
@@ -76,20 +134,93 @@ async fn haptic(mut app: App<'static>, mut plant: PlantChannel, mut link: Usart1
         // Whole tick, from the SysTick interrupt that started it (executor wake included).
         app.record_tick_cycles(counter.since_period_start());
         overrun = systick::period() != period;
+        if overrun {
+            // Start afresh from now instead of catching up with back-to-back ticks, which
+            // would starve the link task of the time to report the fault.
+            ticker.reset();
+        }
+    }
+}
+
+/// How many empty polls of the UART, after a received byte, before the link task moves on
+/// (about 10 instructions each: some 2,000 of the tick period's 125,000).
+const RX_POLLS_AFTER_A_BYTE: u32 = 200;
+
+/// The link: received bytes into the tick's queue, queued frames out, at most `budget` bytes
+/// sent per tick period. Busy while there is traffic, asleep until the next period otherwise.
+#[embassy_executor::task]
+async fn link(mut end: DriverEnd<'static>, mut uart: Usart1, budget: u32) {
+    let (mut period, mut left) = (systick::period(), budget);
+    loop {
+        let mut busy = false;
+        // QEMU's USART holds one received byte; the next one is delivered by QEMU's I/O thread
+        // once this one is read. After a byte, keep polling a little while (as an RX
+        // interrupt would catch it), so a frame does not trickle in at one byte per tick.
+        let mut polls = 0;
+        while polls < RX_POLLS_AFTER_A_BYTE {
+            match uart.read_byte() {
+                Some(b) => {
+                    end.put_rx(&[b]);
+                    busy = true;
+                    polls = 0;
+                }
+                None if busy => polls += 1,
+                None => break,
+            }
+        }
+        let now = systick::period();
+        if now != period {
+            (period, left) = (now, budget);
+        }
+        let mut byte = [0u8];
+        while left > 0 && end.has_tx() {
+            // QEMU's transmit register is always free; a full one would wait for the next pass.
+            if end.take_tx(&mut byte) == 0 || !uart.try_write(byte[0]) {
+                break;
+            }
+            left -= 1;
+            busy = true;
+        }
+        if busy {
+            embassy_futures::yield_now().await;
+        } else {
+            Timer::after_ticks(1).await;
+        }
+    }
+}
+
+/// The link budget from `sil-link-budget` (decimal bytes per tick), unlimited without it.
+fn link_budget() -> u32 {
+    let Ok(mut f) = semihosting::fs::File::open(c"sil-link-budget") else {
+        return u32::MAX;
+    };
+    let mut buf = [0u8; 16];
+    let n = f.read(&mut buf).unwrap_or(0);
+    let text = buf.get(..n).and_then(|b| core::str::from_utf8(b).ok());
+    match text.map(str::trim).map(str::parse::<u32>) {
+        Some(Ok(v)) => v,
+        _ => {
+            semihosting::eprintln!("sil image: sil-link-budget is not a number of bytes");
+            semihosting::process::exit(1)
+        }
     }
 }
 
 #[cortex_m_rt::entry]
 fn main() -> ! {
     static mut BANK: Option<Result<Bank<'static>, BankError>> = None;
+    static mut LINK: Link = Link::new();
     static mut EXECUTOR: Option<Executor> = None;
+    static mut TICK: Option<Executor> = None;
 
     let bank: &'static Result<Bank<'static>, BankError> = BANK.insert(Bank::parse(bank_region()));
     if let Err(e) = bank {
         semihosting::eprintln!("sil image: bank region invalid: {e}");
     }
-    let app = App::new(bank.as_ref().map_err(|e| *e));
-    let link = Usart1::init();
+    let (tick_end, driver_end) = LINK.split();
+    let app = App::new(bank.as_ref().map_err(|e| *e), tick_end);
+    let uart = Usart1::init();
+    let budget = link_budget();
     let plant = match PlantChannel::open() {
         Ok(p) => p,
         Err(e) => {
@@ -98,12 +229,27 @@ fn main() -> ! {
         }
     };
     let mut core = cortex_m::Peripherals::take().unwrap_or_else(|| semihosting::process::exit(1));
+    // SAFETY: priorities are set before the interrupt is unmasked and never changed after.
+    unsafe { core.NVIC.set_priority(TICK_IRQ, TICK_PRIORITY) };
     systick::start(&mut core.SYST);
+
+    let tick_executor: &'static Executor =
+        TICK.insert(Executor::new(TICK_IRQ.number() as usize as *mut ()));
+    TICK_EXECUTOR.store(
+        core::ptr::from_ref(tick_executor).cast_mut(),
+        Ordering::Release,
+    );
+    tick_executor
+        .spawner()
+        .spawn(haptic(app, plant).unwrap_or_else(|_| semihosting::process::exit(1)));
+    // SAFETY: the handler only polls the executor initialised above.
+    unsafe { NVIC::unmask(TICK_IRQ) };
+    NVIC::pend(TICK_IRQ);
 
     let executor: &'static Executor = EXECUTOR.insert(Executor::new(core::ptr::null_mut()));
     executor
         .spawner()
-        .spawn(haptic(app, plant, link).unwrap_or_else(|_| semihosting::process::exit(1)));
+        .spawn(link(driver_end, uart, budget).unwrap_or_else(|_| semihosting::process::exit(1)));
     loop {
         if WORK.swap(false, Ordering::AcqRel) {
             // SAFETY: polled only from this thread-mode loop, never re-entrantly.

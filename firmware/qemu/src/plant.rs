@@ -9,7 +9,8 @@
 
 use bank_format::{DeviceToHost, FrameDecoder, FrameError, HostToDevice, MAX_FRAME, encode_frame};
 use core::fmt;
-use firmware::hal::{Actuation, Plant};
+use firmware::app::TickReport;
+use firmware::hal::Plant;
 use semihosting::fs::File;
 use semihosting::io::{Read, Write};
 
@@ -47,7 +48,7 @@ impl fmt::Display for PlantError {
     }
 }
 
-/// The two pipes and a receive buffer.
+/// The two pipes, a receive buffer, and the tick the channel is at.
 pub struct PlantChannel {
     rx: File,
     tx: File,
@@ -55,6 +56,8 @@ pub struct PlantChannel {
     buf: [u8; 64],
     pos: usize,
     len: usize,
+    /// The tick whose encoder frame was read last.
+    tick: u32,
 }
 
 impl PlantChannel {
@@ -69,6 +72,7 @@ impl PlantChannel {
             buf: [0; 64],
             pos: 0,
             len: 0,
+            tick: 0,
         })
     }
 
@@ -90,20 +94,10 @@ impl PlantChannel {
     }
 }
 
-impl Plant for PlantChannel {
-    type Error = PlantError;
-
-    fn read_encoders(&mut self, tick: u32) -> Result<[i32; 3], PlantError> {
-        match self.next_frame()? {
-            HostToDevice::Plant {
-                tick: t,
-                encoder_counts,
-            } if t == tick => Ok(encoder_counts),
-            _ => Err(PlantError::Unexpected { expected: tick }),
-        }
-    }
-
-    fn actuate(&mut self, out: &Actuation) -> Result<(), PlantError> {
+impl PlantChannel {
+    /// Answer the host with the tick's outcome: the currents (zero unless armed) and what the
+    /// harness records.
+    pub fn reply(&mut self, out: &TickReport) -> Result<(), PlantError> {
         let msg = DeviceToHost::Plant {
             tick: out.tick,
             currents_a: out.currents_a,
@@ -117,4 +111,30 @@ impl Plant for PlantChannel {
         let frame = encode_frame(&msg, &mut buf).map_err(PlantError::Frame)?;
         self.tx.write_all(frame).map_err(PlantError::Io)
     }
+}
+
+/// The host's plant is the motors: what the loop drives goes back in [`PlantChannel::reply`]
+/// (the tick report carries the same currents), so driving and disabling need no I/O here.
+impl Plant for PlantChannel {
+    type Error = PlantError;
+
+    fn read_encoders(&mut self) -> Result<[i32; 3], PlantError> {
+        let tick = self.tick.wrapping_add(1);
+        match self.next_frame()? {
+            HostToDevice::Plant {
+                tick: t,
+                encoder_counts,
+            } if t == tick => {
+                self.tick = tick;
+                Ok(encoder_counts)
+            }
+            _ => Err(PlantError::Unexpected { expected: tick }),
+        }
+    }
+
+    fn drive(&mut self, _currents_a: [f32; 3]) -> Result<(), PlantError> {
+        Ok(())
+    }
+
+    fn disable(&mut self) {}
 }

@@ -350,12 +350,8 @@ fn tick(args: TickArgs) -> Result<()> {
     Ok(())
 }
 
-/// memory.x: FLASH (firmware) and RAM regions.
-const FLASH_BYTES: u64 = 256 * 1024;
-const RAM_START: u32 = 0x2000_0000;
-const RAM_BYTES: u32 = 128 * 1024;
-
 fn sil(args: SilArgs) -> Result<()> {
+    use bank_format::region::{FIRMWARE_LEN, RAM_LEN, RAM_ORIGIN};
     use host::sil::cost::{by_contact_nodes, image_size};
     use host::sil::harness::{self, Session};
     use host::sil::script::Script;
@@ -379,7 +375,7 @@ fn sil(args: SilArgs) -> Result<()> {
         records.push(run.ticks);
     }
     let groups = by_contact_nodes(&records.concat());
-    let size = image_size(&setup.image, RAM_START, RAM_BYTES)?;
+    let size = image_size(&setup.image, RAM_ORIGIN, RAM_LEN as u32)?;
     let worst = groups.values().map(|g| g.body_max).max().unwrap_or(0);
     let worst_tick = groups.values().map(|g| g.tick_max).max().unwrap_or(0);
     if args.json {
@@ -393,9 +389,9 @@ fn sil(args: SilArgs) -> Result<()> {
             "worst_body_instructions": worst,
             "worst_tick_instructions": worst_tick,
             "flash_bytes": size.flash,
-            "flash_region_bytes": FLASH_BYTES,
+            "flash_region_bytes": FIRMWARE_LEN,
             "ram_static_bytes": size.ram,
-            "ram_region_bytes": RAM_BYTES,
+            "ram_region_bytes": RAM_LEN,
             "runs": scripts,
         });
         println!("{out}");
@@ -433,11 +429,11 @@ fn sil(args: SilArgs) -> Result<()> {
     println!(
         "image            flash {} B of {} B ({:.1}%), static RAM {} B of {} B ({:.1}%)",
         size.flash,
-        FLASH_BYTES,
-        100.0 * size.flash as f64 / FLASH_BYTES as f64,
+        FIRMWARE_LEN,
+        100.0 * size.flash as f64 / FIRMWARE_LEN as f64,
         size.ram,
-        RAM_BYTES,
-        100.0 * size.ram as f64 / f64::from(RAM_BYTES)
+        RAM_LEN,
+        100.0 * size.ram as f64 / RAM_LEN as f64
     );
     Ok(())
 }

@@ -90,6 +90,9 @@ pub struct Session {
     pub real_time: bool,
     /// Called with every message the image sends on the link, as it arrives.
     pub observer: Option<LinkObserver>,
+    /// At most this many link bytes sent by the image per tick (a slow UART: 921,600 baud
+    /// carries 92 a millisecond); `None`: as fast as QEMU's USART, which is instantaneous.
+    pub link_bytes_per_tick: Option<u32>,
 }
 
 /// A callback for the image's link messages ([`Session::observer`]).
@@ -124,6 +127,7 @@ impl Session {
             icount_shift: 3,
             real_time: false,
             observer: None,
+            link_bytes_per_tick: None,
         })
     }
 }
@@ -293,6 +297,11 @@ pub fn run(setup: &Setup, session: &Session) -> Result<Run> {
     );
     mkfifo(&in_path)?;
     mkfifo(&out_path)?;
+    if let Some(budget) = session.link_bytes_per_tick {
+        // Read by the image at boot (firmware/qemu: `link_budget`).
+        std::fs::write(dir.path().join("sil-link-budget"), budget.to_string())
+            .context("cannot write the link budget for the image")?;
+    }
     let listener = TcpListener::bind("127.0.0.1:0").context("cannot listen on 127.0.0.1")?;
     let port = listener.local_addr()?.port();
 
