@@ -79,6 +79,25 @@ impl Workspace {
     }
 }
 
+#[cfg(test)]
+impl Workspace {
+    /// Test fixture: a trocar 0.1 m above the plane z = 0, shaft straight down; pitch about x
+    /// tilts the shaft towards +-y, yaw about y towards +-x; both within +-atan(0.5), so at
+    /// margin 0 the tip reaches the square |x|, |y| <= 0.05 on the plane (exactly on the axes).
+    pub(crate) fn straight_down() -> Workspace {
+        let a = 0.5f64.atan();
+        Workspace {
+            fulcrum: [0.0, 0.0, 0.1],
+            shaft: [0.0, 0.0, -1.0],
+            pitch_axis: [1.0, 0.0, 0.0],
+            yaw_axis: [0.0, 1.0, 0.0],
+            pitch: [-a, a],
+            yaw: [-a, a],
+            insertion: [0.05, 0.2],
+        }
+    }
+}
+
 /// Rodrigues' rotation of `v` by `angle` about the unit axis `a` (right-handed).
 pub fn rotate(a: [f64; 3], angle: f64, v: [f64; 3]) -> [f64; 3] {
     let (s, c) = angle.sin_cos();
@@ -107,25 +126,9 @@ mod tests {
     use firmware::device::Device;
     use std::path::Path;
 
-    /// A trocar 0.1 m above the plane z = 0, shaft straight down; pitch about x tilts the shaft
-    /// towards +-y, yaw about y towards +-x; both within +-atan(0.5), so at margin 0 the tip
-    /// reaches the square |x|, |y| <= 0.05 on the plane (exactly on the axes).
-    fn down() -> Workspace {
-        let a = 0.5f64.atan();
-        Workspace {
-            fulcrum: [0.0, 0.0, 0.1],
-            shaft: [0.0, 0.0, -1.0],
-            pitch_axis: [1.0, 0.0, 0.0],
-            yaw_axis: [0.0, 1.0, 0.0],
-            pitch: [-a, a],
-            yaw: [-a, a],
-            insertion: [0.05, 0.2],
-        }
-    }
-
     #[test]
     fn inverse_kinematics_inverts_forward() {
-        let w = down();
+        let w = Workspace::straight_down();
         for (p, y) in [(0.0, 0.0), (0.3, -0.2), (-0.4, 0.4), (0.1, 0.45)] {
             let t = w.tip(p, y, 0.12);
             let (p2, y2) = w.angles(sub(t, w.fulcrum));
@@ -138,7 +141,7 @@ mod tests {
 
     #[test]
     fn tip_inverse_kinematics_inverts_forward() {
-        let w = down();
+        let w = Workspace::straight_down();
         for q in [[0.0, 0.0, 0.1], [0.3, -0.2, 0.12], [-0.4, 0.4, 0.07]] {
             let back = w.joints_for_tip(w.tip(q[0], q[1], q[2]));
             for i in 0..3 {

@@ -68,22 +68,6 @@ pub fn reachable(
 mod tests {
     use super::*;
 
-    /// A trocar 0.1 m above the plane z = 0, shaft straight down; pitch about x tilts the shaft
-    /// towards +-y, yaw about y towards +-x; both within +-atan(0.5), so at margin 0 the tip
-    /// reaches the square |x|, |y| <= 0.05 on the plane (exactly on the axes).
-    fn down() -> Workspace {
-        let a = 0.5f64.atan();
-        Workspace {
-            fulcrum: [0.0, 0.0, 0.1],
-            shaft: [0.0, 0.0, -1.0],
-            pitch_axis: [1.0, 0.0, 0.0],
-            yaw_axis: [0.0, 1.0, 0.0],
-            pitch: [-a, a],
-            yaw: [-a, a],
-            insertion: [0.05, 0.2],
-        }
-    }
-
     #[test]
     fn flat_box_under_a_vertical_trocar() {
         // Top face of a box, z = 0, nodes every 10 mm from -80 to 80 mm.
@@ -95,7 +79,7 @@ mod tests {
         }
         let at = |x: i32, y: i32| ((y + 8) * 17 + (x + 8)) as usize;
         let all: Vec<usize> = (0..positions.len()).collect();
-        let w = down();
+        let w = Workspace::straight_down();
         // Margin 1 um (0 would put the nodes exactly on the bounds at the mercy of rounding).
         // By hand: yaw = atan2(-x, 0.1), so |x| <= 50 mm; pitch = asin(y / |p - f|) <=
         // asin(1 / sqrt 5) needs 4 y^2 <= x^2 + 0.01: every |y| <= 50 mm passes, y = 60 mm

@@ -195,16 +195,14 @@ mod tests {
         assert_eq!(miss([0.2, 0.2, -1.0]), None);
     }
 
-    /// The flat-box workspace of `reach`'s tests: trocar 0.1 m above z = 0, shaft down.
+    /// The flat-box workspace of `reach`'s tests (trocar 0.1 m above z = 0, shaft down) with
+    /// wider ranges.
     fn down() -> Workspace {
         Workspace {
-            fulcrum: [0.0, 0.0, 0.1],
-            shaft: [0.0, 0.0, -1.0],
-            pitch_axis: [1.0, 0.0, 0.0],
-            yaw_axis: [0.0, 1.0, 0.0],
             pitch: [-0.4, 0.4],
             yaw: [-0.4, 0.4],
             insertion: [0.02, 0.2],
+            ..Workspace::straight_down()
         }
     }
 
