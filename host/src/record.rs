@@ -103,9 +103,9 @@ fn write_all(
             }
         }
         let u = solve_sequential(compliance, &forces);
-        write_atomic(&dir.join(&name), vtu(mesh, &u, &forces).as_bytes())?;
+        write_atomic(&dir.join(&name), vtu(mesh, &u, &forces).as_bytes(), &[])?;
         entries.push((job.time_s, name));
-        write_atomic(&dir.join("demo.pvd"), pvd(&entries).as_bytes())?;
+        write_atomic(&dir.join("demo.pvd"), pvd(&entries).as_bytes(), &[])?;
     }
     Ok(entries.len())
 }

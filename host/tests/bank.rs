@@ -119,12 +119,12 @@ fn failed_builds_leave_no_file() {
         files_in(dir.path())
     );
 
-    // The rename fails (the output is an existing directory): the temporary file is removed.
+    // The output is an existing directory: refused, nothing written.
     let target = dir.path().join("occupied");
     std::fs::create_dir(&target).unwrap();
     let o = host(&["bank", "build", s(&scene()), "-o", s(&target)]);
     assert!(!o.status.success());
-    assert!(stderr(&o).contains("cannot write"), "{}", stderr(&o));
+    assert!(stderr(&o).contains("not a regular file"), "{}", stderr(&o));
     assert_eq!(files_in(dir.path()), ["occupied"]);
 
     // A bad scene: error names the line and key, nothing written.
@@ -136,6 +136,69 @@ fn failed_builds_leave_no_file() {
     assert!(!o.status.success());
     assert!(stderr(&o).contains("material.poisson"), "{}", stderr(&o));
     assert!(!out.exists());
+}
+
+/// The output never destroys: not the scene it reads (through any path), not a FIFO or a
+/// device, not a symbolic link (its target gets the bank).
+#[test]
+fn outputs_never_replace_inputs_links_or_special_files() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene_copy = dir.path().join("liver.toml");
+    let text = std::fs::read_to_string(scene()).unwrap();
+    std::fs::write(&scene_copy, &text).unwrap();
+    let alias = dir.path().join("alias.toml");
+    std::os::unix::fs::symlink(&scene_copy, &alias).unwrap();
+    for out in [&scene_copy, &alias] {
+        let o = host(&["bank", "build", s(&scene_copy), "-o", s(out)]);
+        assert!(!o.status.success());
+        assert!(stderr(&o).contains("that is the input"), "{}", stderr(&o));
+    }
+    assert_eq!(std::fs::read_to_string(&scene_copy).unwrap(), text);
+
+    let fifo = dir.path().join("fifo");
+    assert!(
+        Command::new("mkfifo")
+            .arg(&fifo)
+            .status()
+            .unwrap()
+            .success()
+    );
+    for out in [fifo.as_path(), Path::new("/dev/null")] {
+        let o = host(&["bank", "build", s(&scene_copy), "-o", s(out)]);
+        assert!(!o.status.success(), "{out:?}");
+        assert!(stderr(&o).contains("not a regular file"), "{}", stderr(&o));
+    }
+    use std::os::unix::fs::FileTypeExt;
+    assert!(
+        std::fs::symlink_metadata(&fifo)
+            .unwrap()
+            .file_type()
+            .is_fifo()
+    );
+    assert!(
+        std::fs::symlink_metadata("/dev/null")
+            .unwrap()
+            .file_type()
+            .is_char_device()
+    );
+
+    let real = dir.path().join("real.bank");
+    let link = dir.path().join("link.bank");
+    std::os::unix::fs::symlink("real.bank", &link).unwrap();
+    let o = host(&["bank", "build", s(&scene_copy), "-o", s(&link)]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(
+        std::fs::symlink_metadata(&link)
+            .unwrap()
+            .file_type()
+            .is_symlink()
+    );
+    let bytes = std::fs::read(&real).unwrap();
+    assert!(Bank::parse(&AlignedBytes::new(&bytes)).is_ok());
+    assert_eq!(
+        files_in(dir.path()),
+        ["alias.toml", "fifo", "link.bank", "liver.toml", "real.bank"]
+    );
 }
 
 #[test]

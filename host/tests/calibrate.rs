@@ -358,6 +358,49 @@ fn run(args: &[&str]) -> (bool, String, String) {
     )
 }
 
+/// `--scene` through a symbolic link: the real scene is updated, the link stays a link, and
+/// the scene keeps its mode.
+#[test]
+fn calibrating_a_linked_private_scene_keeps_the_link_and_the_mode() {
+    use std::os::unix::fs::PermissionsExt;
+    let dir = tempfile::tempdir().unwrap();
+    let real = dir.path().join("real.toml");
+    std::fs::copy(manifest("scenes/liver.toml"), &real).unwrap();
+    std::fs::set_permissions(&real, std::fs::Permissions::from_mode(0o600)).unwrap();
+    let link = dir.path().join("scene.toml");
+    std::os::unix::fs::symlink("real.toml", &link).unwrap();
+    let brain = manifest(BRAIN);
+    let (ok, _, err) = run(&[
+        "calibrate",
+        "tissue",
+        "--csv",
+        brain.to_str().unwrap(),
+        "--x",
+        "linear_force_n",
+        "--y",
+        "force_n",
+        "--scene",
+        link.to_str().unwrap(),
+        "--plot",
+        dir.path().join("q").to_str().unwrap(),
+    ]);
+    assert!(ok, "{err}");
+    assert!(
+        std::fs::symlink_metadata(&link)
+            .unwrap()
+            .file_type()
+            .is_symlink()
+    );
+    let mode = std::fs::metadata(&real).unwrap().permissions().mode() & 0o777;
+    assert_eq!(mode, 0o600);
+    // The shipped scene's law is linear (two coefficients); the fitted one has degree >= 4.
+    let law = Scene::load(&real).unwrap().law;
+    assert!(
+        law.coeffs().len() >= 5,
+        "the real scene was not calibrated: {law:?}"
+    );
+}
+
 #[test]
 fn cli_fits_writes_scene_json_and_plots() {
     let dir = tempfile::tempdir().unwrap();

@@ -25,7 +25,7 @@ fn setup() -> (Setup, AlignedBytes) {
         let scene = harness::repo_root().join("host/scenes/liver.toml");
         let bytes = host::bank::scene_bank(&scene).expect("the liver scene's bank");
         let path = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("sil-liver.bank");
-        host::fsio::write_atomic(&path, &bytes).expect("writing the bank for QEMU");
+        host::fsio::write_atomic(&path, &bytes, &[]).expect("writing the bank for QEMU");
         (path, bytes)
     });
     let bank = bank.clone();

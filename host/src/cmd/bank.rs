@@ -11,6 +11,7 @@ use host::bank::{BuiltBank, Prepared};
 use host::contact::{ContactSurface, SurfaceHit, patch_force};
 use host::fsio::write_atomic;
 use host::progress::Bar;
+use host::scene::MeshSource;
 use std::collections::HashMap;
 use std::path::PathBuf;
 use std::time::Instant;
@@ -107,7 +108,11 @@ fn build(args: BuildArgs) -> Result<()> {
             prep.region.len()
         );
     }
-    write_atomic(&args.out, &bytes)?;
+    let mut inputs = vec![args.scene.as_path()];
+    if let MeshSource::File(mesh) = &prep.scene.mesh {
+        inputs.push(mesh);
+    }
+    write_atomic(&args.out, &bytes, &inputs)?;
     // Read back what was written.
     let written = std::fs::read(&args.out)?;
     let aligned = AlignedBytes::new(&written);

@@ -134,7 +134,8 @@ fn write_scene(path: &Path, edit: impl FnOnce(&str) -> Result<String>) -> Result
     let text = std::fs::read_to_string(path)
         .with_context(|| format!("{}: cannot read the scene", path.display()))?;
     let new = edit(&text)?;
-    write_atomic(path, new.as_bytes()).with_context(|| format!("writing {}", path.display()))
+    // The scene is edited in place on purpose (through a link to it, with its mode kept).
+    write_atomic(path, new.as_bytes(), &[]).with_context(|| format!("writing {}", path.display()))
 }
 
 #[derive(serde::Serialize)]

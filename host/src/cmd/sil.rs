@@ -89,7 +89,7 @@ fn cached_bank(scene: &Path) -> Result<PathBuf> {
             std::fs::create_dir_all(dir)
                 .with_context(|| format!("cannot create {}", dir.display()))?;
         }
-        write_atomic(&out, &bytes)?;
+        write_atomic(&out, &bytes, &[scene])?;
     }
     Ok(out)
 }
@@ -190,7 +190,11 @@ pub fn run(args: Args) -> Result<()> {
             text.push_str(&serde_json::to_string(t)?);
             text.push('\n');
         }
-        write_atomic(path, text.as_bytes())?;
+        write_atomic(
+            path,
+            text.as_bytes(),
+            &[&args.setup.scene, &setup.bank, &setup.image],
+        )?;
     }
     let s = Summary::new(args.script, &run);
     if args.json {
