@@ -22,9 +22,9 @@ fn headless_press_prints_the_figures_as_json() {
         "{}",
         String::from_utf8_lossy(&out.stderr)
     );
-    let stdout = String::from_utf8(out.stdout).unwrap();
-    let json = stdout.lines().last().unwrap();
-    let v: serde_json::Value = serde_json::from_str(json).unwrap();
+    // With --json, stdout is exactly one JSON object (the viewer's address goes to stderr).
+    let json = String::from_utf8(out.stdout).unwrap();
+    let v: serde_json::Value = serde_json::from_str(&json).unwrap();
     for key in [
         "tick_rate_hz",
         "max_jitter_us",
@@ -65,12 +65,34 @@ fn sil_source_drives_the_display() {
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(out.status.success(), "{err}");
     let json = String::from_utf8_lossy(&out.stdout);
-    let v: serde_json::Value = serde_json::from_str(json.lines().last().unwrap()).unwrap();
+    let v: serde_json::Value = serde_json::from_str(&json).unwrap();
     assert!(v["tick_rate_hz"].as_f64().unwrap() > 0.0, "{json}");
     let peak = v["peak_force_n"].as_f64().unwrap();
     assert!(peak > 0.05 && peak <= 5.0, "{json}");
     assert_eq!(v["faults"], 0, "{json}");
     assert!(v["frames"].as_u64().unwrap() > 0, "{json}");
+}
+
+/// Headless runs take any free port unless told otherwise, so two can run at once.
+#[test]
+fn two_headless_runs_at_once() {
+    let run = || {
+        host()
+            .args(["demo", "--headless", "--seconds", "2", "--json"])
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .unwrap()
+    };
+    let (a, b) = (run(), run());
+    for child in [a, b] {
+        let out = child.wait_with_output().unwrap();
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(out.status.success(), "{err}");
+        assert!(err.contains("viewer    http://127.0.0.1:"), "{err}");
+        let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+        assert_eq!(v["faults"], 0);
+    }
 }
 
 #[test]

@@ -46,9 +46,10 @@ pub struct Args {
     /// Serial baud rate for `--source serial:<port>`.
     #[arg(long, default_value_t = 921_600)]
     baud: u32,
-    /// Port of the viewer on 127.0.0.1 (0: any free port).
-    #[arg(long, default_value_t = 8080)]
-    port: u16,
+    /// Port of the viewer on 127.0.0.1 (0: any free port); default 8080, or any free port when
+    /// headless (so several headless runs can go at once).
+    #[arg(long)]
+    port: Option<u16>,
     /// Open the page in the default browser (xdg-open).
     #[arg(long)]
     open: bool,
@@ -193,9 +194,15 @@ pub fn run(args: Args) -> Result<()> {
         f
     });
     let mesh_bytes = Arc::new(display);
-    let server = Server::start(args.port, mesh_bytes.encode(), info, steer_fn)?;
+    let port = args.port.unwrap_or(if args.headless { 0 } else { 8080 });
+    let server = Server::start(port, mesh_bytes.encode(), info, steer_fn)?;
     let url = format!("http://{}/", server.addr);
-    println!("viewer    {url}");
+    if args.json {
+        // With --json, stdout carries exactly one JSON object.
+        eprintln!("viewer    {url}");
+    } else {
+        println!("viewer    {url}");
+    }
     if args.open {
         let _ = std::process::Command::new("xdg-open").arg(&url).spawn();
     }
