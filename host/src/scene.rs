@@ -687,6 +687,20 @@ fn parse_law(ctx: &Ctx, l: &RawLaw, fmax: f64) -> Result<(LawSpec, TissueLaw), S
                 let span = l.gain.as_ref().map_or(law_key_span.clone(), |g| g.span());
                 return Err(ctx.err(span, "law.gain", format!("must be > 0, got {gain}")));
             }
+            if !(offset >= 0.0 && offset.is_finite()) {
+                let span = l
+                    .offset_n
+                    .as_ref()
+                    .map_or(law_key_span.clone(), |o| o.span());
+                return Err(ctx.err(
+                    span,
+                    "law.offset_n",
+                    format!(
+                        "must be >= 0, got {offset}: Q(0) < 0 would pull the tool into the \
+                         tissue at first contact"
+                    ),
+                ));
+            }
             let domain_n = domain.unwrap_or([0.0, fmax]);
             let law = TissueLaw::linear(offset as f32, gain as f32, domain_n.map(|v| v as f32))
                 .map_err(|e| ctx.err(law_key_span.clone(), "law", e.to_string()))?;
@@ -717,6 +731,17 @@ fn parse_law(ctx: &Ctx, l: &RawLaw, fmax: f64) -> Result<(LawSpec, TissueLaw), S
             let coeffs: Vec<f32> = c.get_ref().iter().map(|&v| v as f32).collect();
             let law = TissueLaw::chebyshev(&coeffs, domain_n.map(|v| v as f32))
                 .map_err(|e| ctx.err(c.span(), "law.coeffs", e.to_string()))?;
+            let q0 = law.eval(0.0);
+            if !(q0 >= 0.0) {
+                return Err(ctx.err(
+                    c.span(),
+                    "law.coeffs",
+                    format!(
+                        "the law gives Q(0) = {q0} N < 0: it would pull the tool into the tissue \
+                         at first contact"
+                    ),
+                ));
+            }
             Ok((
                 LawSpec::Chebyshev {
                     coeffs: c.get_ref().clone(),

@@ -79,13 +79,35 @@ pub enum FitError {
         /// The bank reader's reason.
         reason: BankError,
     },
-    /// `auto` found no increasing fit.
-    #[error("no degree in {lo}..={hi} gives an increasing fit: is the data monotone?")]
+    /// `auto` found no increasing fit, and the data itself decreases somewhere.
+    #[error(
+        "no degree in {lo}..={hi} gives an increasing fit, and the data decreases: y falls \
+         from {y0} to {y1} between x = {x0} and x = {x1}"
+    )]
     NoMonotoneDegree {
         /// Smallest degree tried.
         lo: usize,
         /// Largest degree tried.
         hi: usize,
+        /// x where the data starts to fall.
+        x0: f64,
+        /// x of the next point.
+        x1: f64,
+        /// y at `x0`.
+        y0: f64,
+        /// y at `x1`.
+        y1: f64,
+    },
+    /// `auto` could try no degree: too few points for its cross-validation.
+    #[error(
+        "{points} points are too few for --degree auto (its 10-fold cross-validation needs at \
+         least {need}); give a --degree or more points"
+    )]
+    TooFewForAuto {
+        /// Points given.
+        points: usize,
+        /// Points the lowest degree needs.
+        need: usize,
     },
 }
 
@@ -285,11 +307,10 @@ pub fn fit_law(
         Some(d) => (d, Vec::new()),
         None => {
             let rows = survey(x, y, AUTO_DEGREES)?;
-            let d = choose(&rows, target_rms_rel).ok_or(FitError::NoMonotoneDegree {
-                lo: *AUTO_DEGREES.start(),
-                hi: *AUTO_DEGREES.end(),
-            })?;
-            (d, rows)
+            match choose(&rows, target_rms_rel) {
+                Some(d) => (d, rows),
+                None => return Err(why_no_degree(x, y, &rows)),
+            }
         }
     };
     let f = fit(x, y, degree)?;
@@ -297,9 +318,63 @@ pub fn fit_law(
     Ok((f, law, rows))
 }
 
+/// Why [`choose`] found nothing in `rows`: too few points to try any degree, data that
+/// decreases (where), or, for increasing data, what refuses the lowest degree's law (for
+/// example a domain too narrow for f32, or a slope that f32 rounds to zero).
+fn why_no_degree(x: &[f64], y: &[f64], rows: &[DegreeRow]) -> FitError {
+    let n = x.len().min(y.len());
+    let Some(first) = rows.first() else {
+        // A training set of the cross-validation leaves one point out of n <= FOLDS, and
+        // must still over-determine the lowest degree.
+        return FitError::TooFewForAuto {
+            points: n,
+            need: *AUTO_DEGREES.start() + 3,
+        };
+    };
+    let mut order: Vec<usize> = (0..n).collect();
+    order.sort_by(|&a, &b| x[a].total_cmp(&x[b]));
+    if let Some(w) = order.windows(2).find(|w| y[w[1]] < y[w[0]]) {
+        return FitError::NoMonotoneDegree {
+            lo: *AUTO_DEGREES.start(),
+            hi: *AUTO_DEGREES.end(),
+            x0: x[w[0]],
+            x1: x[w[1]],
+            y0: y[w[0]],
+            y1: y[w[1]],
+        };
+    }
+    match fit(x, y, first.degree).and_then(|f| f.law()) {
+        Err(e) => e,
+        // Increasing and storable, yet not chosen: its cross-validation failed.
+        Ok(_) => FitError::TooFewForAuto {
+            points: n,
+            need: first.degree + 3,
+        },
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn auto_says_why_it_found_no_degree() {
+        // Three points: monotone, but too few for the cross-validation.
+        let e = fit_law(&[0.0, 1.0, 2.0], &[0.0, 1.0, 2.0], None, 1e-3).unwrap_err();
+        assert_eq!(e, FitError::TooFewForAuto { points: 3, need: 4 });
+        // Decreasing data: where it falls.
+        let x: Vec<f64> = (0..20).map(f64::from).collect();
+        let y: Vec<f64> = x.iter().map(|v| 30.0 - v).collect();
+        let e = fit_law(&x, &y, None, 1e-3).unwrap_err().to_string();
+        assert!(
+            e.contains("falls from 30 to 29 between x = 0 and x = 1"),
+            "{e}"
+        );
+        // Increasing but so finely spaced that f32 cannot hold the domain: that is the reason.
+        let x: Vec<f64> = (0..20).map(|i| 1.0 + 1e-12 * f64::from(i)).collect();
+        let e = fit_law(&x, &x, None, 1e-3).unwrap_err();
+        assert!(matches!(e, FitError::Law { .. }), "{e}");
+    }
 
     #[test]
     fn exact_on_a_polynomial_of_the_fitted_degree() {
@@ -339,6 +414,6 @@ mod tests {
         );
         assert_eq!(survey(&[], &[], AUTO_DEGREES), Ok(vec![]));
         let e = fit_law(&[], &[], None, 0.0).unwrap_err();
-        assert_eq!(e, FitError::NoMonotoneDegree { lo: 1, hi: 10 });
+        assert_eq!(e, FitError::TooFewForAuto { points: 0, need: 4 });
     }
 }

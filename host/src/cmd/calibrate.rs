@@ -52,6 +52,14 @@ pub struct TissueArgs {
     /// `auto` is content with this cross-validated RMS error relative to full scale.
     #[arg(long, default_value_t = 0.001)]
     target_rms: f64,
+    /// Refuse a fit whose RMS error exceeds this fraction of full scale: 5 % is several times
+    /// what a load cell and a displacement stage leave (the shipped brain data fits to 0.03 %),
+    /// so a fit worse than that says the data is not a law of this kind.
+    #[arg(long, default_value_t = 0.05)]
+    max_rms: f64,
+    /// Write a fit beyond --max-rms anyway (the scene's comment says so).
+    #[arg(long)]
+    accept_poor_fit: bool,
     /// For a (displacement, measured) bench curve: the specimen's cylinder mesh (axis z, m).
     /// The --x column is then the platen displacement, and the law's x is the linear FEM's
     /// prediction for it (`calibrate specimen`): top force for Q, mid-height radial
@@ -174,9 +182,36 @@ fn tissue(a: TissueArgs) -> Result<()> {
         x.iter_mut().for_each(|v| *v *= per_m);
         x_name = format!("FEM x {}", a.x);
     }
+    if !(a.max_rms.is_finite() && a.max_rms > 0.0) {
+        bail!("--max-rms must be > 0, got {}", a.max_rms);
+    }
     let (f, law, survey) = fit::fit_law(&x, &y, degree, a.target_rms)
         .with_context(|| format!("{}: fitting {:?}", a.csv.display(), a.law))?;
     let errors = f.errors(&x, &y);
+    let poor = errors.rms_rel > a.max_rms;
+    if poor && !a.accept_poor_fit {
+        bail!(
+            "{}: the degree-{} fit leaves an RMS error of {:.1} % of full scale, more than \
+             --max-rms {:.1} %: the data does not follow a smooth increasing law (noise, a \
+             wrong column, mixed runs?); nothing was written. Pass --accept-poor-fit to write \
+             it anyway",
+            a.csv.display(),
+            f.degree,
+            100.0 * errors.rms_rel,
+            100.0 * a.max_rms
+        );
+    }
+    if matches!(a.law, Law::Q) {
+        let q0 = law.eval(0.0);
+        if !(q0 >= 0.0) {
+            bail!(
+                "{}: the fitted law gives Q(0) = {q0:.4} N < 0: rendered, it would pull the \
+                 tool into the tissue at first contact; nothing was written (check that the \
+                 data starts at zero force, or fit a lower --degree)",
+                a.csv.display()
+            );
+        }
+    }
     let name = match a.law {
         Law::Q => "Q",
         Law::P => "P",
@@ -233,12 +268,20 @@ fn tissue(a: TissueArgs) -> Result<()> {
 
     if let Some(scene) = &a.scene {
         let source = format!(
-            "{}, columns {} -> {}, degree {}, RMS {:.3} % of full scale",
+            "{}, columns {} -> {}, degree {}, RMS {:.3} % of full scale{}",
             a.csv.display(),
             a.x,
             a.y,
             f.degree,
-            100.0 * errors.rms_rel
+            100.0 * errors.rms_rel,
+            if poor {
+                format!(
+                    "; ABOVE --max-rms {:.1} %, written with --accept-poor-fit",
+                    100.0 * a.max_rms
+                )
+            } else {
+                String::new()
+            }
         );
         write_scene(scene, |text| {
             Ok(scene_edit::set_law(
