@@ -50,6 +50,13 @@ pub enum DeviceField {
     MaxForce,
     /// `tip_radius_m` not in `[0, 0.05]` m.
     TipRadius,
+    /// `max_tip_speed_m_s <= 0`.
+    MaxTipSpeed,
+    /// `max_joint_speed[axis] <= 0`.
+    MaxJointSpeed {
+        /// Joint index.
+        axis: u8,
+    },
 }
 
 impl fmt::Display for DeviceField {
@@ -79,6 +86,10 @@ impl fmt::Display for DeviceField {
             }
             DeviceField::MaxForce => f.write_str("maximum force is not in (0, 50] N"),
             DeviceField::TipRadius => f.write_str("tip radius is not in [0, 0.05] m"),
+            DeviceField::MaxTipSpeed => f.write_str("maximum tip speed is not positive"),
+            DeviceField::MaxJointSpeed { axis } => {
+                write!(f, "maximum speed of joint {axis} is not positive")
+            }
         }
     }
 }

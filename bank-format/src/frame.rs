@@ -57,7 +57,8 @@ pub enum Mode {
     },
 }
 
-/// Why the device went to [`State::Fault`].
+/// Why the device went to [`State::Fault`]. The variant order is the wire protocol: new
+/// reasons go at the end.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 pub enum FaultReason {
     /// A NaN or infinity appeared in the loop.
@@ -76,6 +77,13 @@ pub enum FaultReason {
     JointLimit,
     /// The contact solve failed (C_SS not positive definite).
     SolveFailed,
+    /// The emergency stop is pressed (or its loop is open).
+    EStop,
+    /// A motor amplifier reports a fault on its fault output (`detail` = motor).
+    AmplifierFault,
+    /// The armed device moved faster than the bank's speed thresholds over one tick (`detail`
+    /// = joint 0..2, or 3 for the tool tip).
+    Overspeed,
 }
 
 /// One contact node and the force on it.

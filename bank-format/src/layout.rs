@@ -8,8 +8,9 @@ use bytemuck::{Pod, Zeroable};
 
 /// The eight bytes a bank starts with.
 pub const MAGIC: [u8; 8] = *b"HAPTBANK";
-/// Major version this crate reads and writes. A reader rejects any other major version.
-pub const VERSION_MAJOR: u16 = 1;
+/// Major version this crate reads and writes. A reader rejects any other major version. 2: the
+/// device record gained the speed thresholds (`SPEC.md`, "Versioning").
+pub const VERSION_MAJOR: u16 = 2;
 /// Minor version this crate writes. Readers accept any minor version of their major version
 /// (minor versions only add optional sections, which older readers skip).
 pub const VERSION_MINOR: u16 = 0;
@@ -313,6 +314,9 @@ pub struct LawRecord {
 /// `2 pi n / counts_per_rev` motor radians divide by the transmission in rad/m). Motor current
 /// for a joint effort `tau` (N m, or N for insertion) is
 /// `i = tau / (transmission * torque_constant)`, then clamped to `current_limit`.
+///
+/// The speed thresholds are the scene's: while armed, the firmware faults (`Overspeed`) when the
+/// tip or a joint moved faster than them over the last tick.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, PartialEq, Pod, Zeroable)]
 pub struct DeviceCalibration {
@@ -345,6 +349,11 @@ pub struct DeviceCalibration {
     pub max_force_n: f32,
     /// Radius of the tool tip, m, in `[0, 0.05]`; contacts spread over the nodes under it.
     pub tip_radius_m: f32,
+    /// Tip speed above which the armed device disables its forces (`Overspeed`), m/s, `> 0`.
+    pub max_tip_speed_m_s: f32,
+    /// Joint speeds above which the armed device disables its forces (`Overspeed`): pitch rad/s,
+    /// yaw rad/s, insertion m/s, each `> 0`.
+    pub max_joint_speed: [f32; 3],
 }
 
 /// The CRC-32 of `bank` as the header's `crc32` field defines it: over all of `bank` with the
@@ -394,6 +403,6 @@ const _: () = {
     assert!(core::mem::size_of::<BankMeta>() == 16);
     assert!(core::mem::size_of::<GridHeader>() == 24);
     assert!(core::mem::size_of::<LawRecord>() == 80);
-    assert!(core::mem::size_of::<DeviceCalibration>() == 140);
+    assert!(core::mem::size_of::<DeviceCalibration>() == 156);
     assert!(core::mem::align_of::<DeviceCalibration>() == BANK_ALIGN);
 };

@@ -988,7 +988,8 @@ fn check_device(d: &DeviceCalibration) -> Result<(), BankError> {
         &d.transmission,
         &d.torque_constant_nm_per_a,
         &d.current_limit_a,
-        &[d.max_force_n, d.tip_radius_m],
+        &[d.max_force_n, d.tip_radius_m, d.max_tip_speed_m_s],
+        &d.max_joint_speed,
     ];
     if !floats.iter().all(|v| all_finite(v)) {
         return Err(BankError::NonFinite {
@@ -1053,6 +1054,14 @@ fn check_device(d: &DeviceCalibration) -> Result<(), BankError> {
     }
     if !(d.tip_radius_m >= 0.0 && d.tip_radius_m <= 0.05) {
         return fail(DeviceField::TipRadius);
+    }
+    if !(d.max_tip_speed_m_s > 0.0) {
+        return fail(DeviceField::MaxTipSpeed);
+    }
+    for (axis, &v) in (0..3u8).zip(&d.max_joint_speed) {
+        if !(v > 0.0) {
+            return fail(DeviceField::MaxJointSpeed { axis });
+        }
     }
     Ok(())
 }

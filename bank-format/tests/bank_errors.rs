@@ -42,6 +42,8 @@ const DEV_KT: usize = 108;
 const DEV_LIMIT: usize = 120;
 const DEV_FORCE: usize = 132;
 const DEV_TIP: usize = 136;
+const DEV_TIP_SPEED: usize = 140;
+const DEV_JOINT_SPEED: usize = 144;
 
 fn set_entry(kind: K, field: usize, value: u32) -> Result<(), E> {
     corrupt(|b| {
@@ -101,7 +103,9 @@ cases! {
         Bank::parse(&aligned[1..]).map(|_| ())
     };
     bad_magic: E::BadMagic => corrupt(|b| b[0] = b'X');
-    unsupported_version: E::UnsupportedVersion { major: 2, minor: 0 } => corrupt(|b| put_u16(b, 8, 2));
+    // A bank of the previous major version (its device record is 16 bytes shorter).
+    unsupported_version: E::UnsupportedVersion { major: 1, minor: 0 } => corrupt(|b| put_u16(b, 8, 1));
+    unsupported_later_version: E::UnsupportedVersion { major: 3, minor: 0 } => corrupt(|b| put_u16(b, 8, 3));
     bad_header_length: E::BadHeaderLength { header_len: 24 } => corrupt(|b| put_u16(b, 12, 24));
     too_many_sections: E::TooManySections { count: 33 } => corrupt(|b| put_u16(b, 14, 33));
     bad_total_length_unaligned: E::BadTotalLength { .. } => {
@@ -162,6 +166,10 @@ cases! {
     non_finite_law: E::NonFinite { section: K::TissueLaw, entry: 0 } =>
         corrupt_section(K::TissueLaw, |s| put_f32(s, 16, f32::NAN));
     non_finite_device: E::NonFinite { section: K::Device, entry: 0 } => device_f32(0, f32::NEG_INFINITY);
+    non_finite_tip_speed: E::NonFinite { section: K::Device, entry: 0 } =>
+        device_f32(DEV_TIP_SPEED, f32::INFINITY);
+    non_finite_joint_speed: E::NonFinite { section: K::Device, entry: 0 } =>
+        device_f32(DEV_JOINT_SPEED + 8, f32::NAN);
     non_finite_meta: E::NonFinite { section: K::Meta, entry: 0 } =>
         corrupt_section(K::Meta, |s| put_f32(s, 8, f32::NAN));
     triangle_index_out_of_range: E::IndexOutOfRange { section: K::Triangles, entry: 1 } =>
@@ -255,6 +263,14 @@ cases! {
     device_current_limit: E::Device { field: F::CurrentLimit { axis: 2 } } => device_f32(DEV_LIMIT + 8, 25.0);
     device_max_force: E::Device { field: F::MaxForce } => device_f32(DEV_FORCE, 0.0);
     device_tip_radius: E::Device { field: F::TipRadius } => device_f32(DEV_TIP, 0.1);
+    device_max_tip_speed_zero: E::Device { field: F::MaxTipSpeed } => device_f32(DEV_TIP_SPEED, 0.0);
+    device_max_tip_speed_negative: E::Device { field: F::MaxTipSpeed } => device_f32(DEV_TIP_SPEED, -1.0);
+    device_max_joint_speed_pitch: E::Device { field: F::MaxJointSpeed { axis: 0 } } =>
+        device_f32(DEV_JOINT_SPEED, 0.0);
+    device_max_joint_speed_yaw: E::Device { field: F::MaxJointSpeed { axis: 1 } } =>
+        device_f32(DEV_JOINT_SPEED + 4, -3.0);
+    device_max_joint_speed_insertion: E::Device { field: F::MaxJointSpeed { axis: 2 } } =>
+        device_f32(DEV_JOINT_SPEED + 8, -0.0);
 }
 
 #[test]

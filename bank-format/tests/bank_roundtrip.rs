@@ -374,3 +374,123 @@ fn the_builder_refuses_what_the_reader_rejects() {
         Err(BuildError::Rejected(BankError::Device { .. }))
     ));
 }
+
+/// `SPEC.md`'s device table, row by row: every field's offset and type, checked against where
+/// the writer put the field's value in the device section (and the record's total size).
+#[test]
+fn the_device_section_is_laid_out_as_spec_md_says() {
+    let spec = include_str!("../SPEC.md");
+    let table = spec
+        .split_once("### device (`DeviceCalibration`)")
+        .expect("device section in SPEC.md")
+        .1;
+    let rows: Vec<(usize, &str, &str)> = table
+        .lines()
+        .skip_while(|l| !l.starts_with("| 0 |"))
+        .take_while(|l| l.starts_with('|'))
+        .map(|l| {
+            let cells: Vec<&str> = l.split('|').map(str::trim).collect();
+            let field = cells[3].split(':').next().unwrap().trim();
+            (cells[1].parse().unwrap(), cells[2].trim_matches('`'), field)
+        })
+        .collect();
+    let d = device();
+    let bytes = valid_bytes();
+    let (_, off, len, count) = section(&bytes, SectionKind::Device);
+    assert_eq!((len, count), (156, 1));
+    assert_eq!(len, std::mem::size_of::<bank_format::DeviceCalibration>());
+    let s = &bytes[off..off + len];
+    let words = |at: usize, n: usize| -> Vec<[u8; 4]> {
+        (0..n)
+            .map(|i| s[at + 4 * i..at + 4 * i + 4].try_into().unwrap())
+            .collect()
+    };
+    let f32s = |v: &[f32]| v.iter().map(|x| x.to_le_bytes()).collect::<Vec<_>>();
+    let u32s = |v: &[u32]| v.iter().map(|x| x.to_le_bytes()).collect::<Vec<_>>();
+    let mut end = 0;
+    for &(at, ty, field) in &rows {
+        assert_eq!(at, end, "{field} should follow the previous field");
+        let want = match field {
+            "fulcrum_m" => f32s(&d.fulcrum_m),
+            "shaft_axis" => f32s(&d.shaft_axis),
+            "pitch_axis" => f32s(&d.pitch_axis),
+            "yaw_axis" => f32s(&d.yaw_axis),
+            "joint_min" => f32s(&d.joint_min),
+            "joint_max" => f32s(&d.joint_max),
+            "home_joint" => f32s(&d.home_joint),
+            "counts_per_rev" => u32s(&d.counts_per_rev),
+            "transmission" => f32s(&d.transmission),
+            "torque_constant_nm_per_a" => f32s(&d.torque_constant_nm_per_a),
+            "current_limit_a" => f32s(&d.current_limit_a),
+            "max_force_n" => f32s(&[d.max_force_n]),
+            "tip_radius_m" => f32s(&[d.tip_radius_m]),
+            "max_tip_speed_m_s" => f32s(&[d.max_tip_speed_m_s]),
+            "max_joint_speed" => f32s(&d.max_joint_speed),
+            other => panic!("SPEC.md names an unknown device field {other:?}"),
+        };
+        let n = match ty {
+            "f32" | "u32" => 1,
+            "[f32; 3]" | "[u32; 3]" => 3,
+            other => panic!("{field}: unexpected type {other:?}"),
+        };
+        assert_eq!(n, want.len(), "{field}: type {ty}");
+        assert_eq!(words(at, n), want, "{field} at offset {at}");
+        end = at + 4 * n;
+    }
+    assert_eq!(rows.len(), 15);
+    assert_eq!(end, len, "SPEC.md's device table covers the whole record");
+}
+
+#[test]
+fn the_speed_thresholds_round_trip_and_bad_ones_are_refused() {
+    let mut x = builder();
+    x.device.max_tip_speed_m_s = 0.75;
+    x.device.max_joint_speed = [4.0, 5.0, 0.6];
+    let aligned = AlignedBytes::new(&x.build().unwrap());
+    let bank = Bank::parse(&aligned).unwrap();
+    assert_eq!(bank.device().max_tip_speed_m_s, 0.75);
+    assert_eq!(bank.device().max_joint_speed, [4.0, 5.0, 0.6]);
+    assert_eq!(bank.device(), &x.device);
+    for (tip, joints, want) in [
+        (
+            0.0,
+            [1.0; 3],
+            BankError::Device {
+                field: bank_format::DeviceField::MaxTipSpeed,
+            },
+        ),
+        (
+            1.0,
+            [1.0, 1.0, -1.0],
+            BankError::Device {
+                field: bank_format::DeviceField::MaxJointSpeed { axis: 2 },
+            },
+        ),
+        (
+            f32::NAN,
+            [1.0; 3],
+            BankError::NonFinite {
+                section: SectionKind::Device,
+                entry: 0,
+            },
+        ),
+        (
+            1.0,
+            [f32::INFINITY, 1.0, 1.0],
+            BankError::NonFinite {
+                section: SectionKind::Device,
+                entry: 0,
+            },
+        ),
+    ] {
+        let mut x = builder();
+        x.device.max_tip_speed_m_s = tip;
+        x.device.max_joint_speed = joints;
+        assert_eq!(
+            x.build(),
+            Err(BuildError::Rejected(want)),
+            "{tip} {joints:?}"
+        );
+        assert_eq!(bank_format::validate_device(&x.device), Err(want));
+    }
+}

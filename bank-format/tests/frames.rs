@@ -72,6 +72,16 @@ fn device_messages() -> Vec<DeviceToHost> {
             reason: FaultReason::InvalidBank,
             detail: 27,
         },
+        DeviceToHost::Fault {
+            tick: 100,
+            reason: FaultReason::AmplifierFault,
+            detail: 2,
+        },
+        DeviceToHost::Fault {
+            tick: 101,
+            reason: FaultReason::Overspeed,
+            detail: 3,
+        },
     ]
 }
 
@@ -120,6 +130,30 @@ fn every_message_variant_round_trips() {
     }
     assert_eq!(dec.stats().ok, host_messages().len() as u32);
     assert_eq!(dec.stats().errors(), 0);
+}
+
+/// The variant order is the wire protocol: the reasons added in protocol 3 come after the
+/// earlier ones, whose indices stay what a deployed host decodes.
+#[test]
+fn fault_reasons_keep_their_wire_indices() {
+    let reasons = [
+        FaultReason::Nan,
+        FaultReason::InvalidBank,
+        FaultReason::LinkSilent,
+        FaultReason::Overrun,
+        FaultReason::EncoderJump,
+        FaultReason::CurrentLimit,
+        FaultReason::JointLimit,
+        FaultReason::SolveFailed,
+        FaultReason::EStop,
+        FaultReason::AmplifierFault,
+        FaultReason::Overspeed,
+    ];
+    for (index, reason) in reasons.into_iter().enumerate() {
+        let bytes = postcard::to_slice(&reason, &mut [0u8; 8]).unwrap().to_vec();
+        assert_eq!(bytes, [index as u8], "{reason:?}");
+    }
+    assert_eq!(PROTOCOL_VERSION, 3);
 }
 
 #[test]

@@ -282,6 +282,9 @@ fn fault() -> impl Strategy<Value = FaultReason> {
         Just(FaultReason::CurrentLimit),
         Just(FaultReason::JointLimit),
         Just(FaultReason::SolveFailed),
+        Just(FaultReason::EStop),
+        Just(FaultReason::AmplifierFault),
+        Just(FaultReason::Overspeed),
     ]
 }
 

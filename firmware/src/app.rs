@@ -8,6 +8,11 @@
 //! A bank that fails validation leaves no loop to run: the application then keeps the motors at
 //! zero current, reports [`FaultReason::InvalidBank`] with the [`BankError::code`] as detail at
 //! boot and on every arm attempt, and answers `Hello` with `bank_crc: None`.
+//!
+//! The interlocks ([`crate::hal::Interlocks`]: e-stop, amplifier fault outputs) go to the
+//! supervisor every tick, with or without a bank: an active one latches
+//! [`FaultReason::EStop`] or [`FaultReason::AmplifierFault`] and disables the motors, and an
+//! arm command is refused (the latched fault re-sent) while one is active.
 
 use bank_format::{
     Bank, BankError, Counters, DeviceToHost, FaultReason, FrameDecoder, HostToDevice, MAX_FRAME,
@@ -16,7 +21,7 @@ use bank_format::{
 
 use crate::hal::{CycleCounter, Plant};
 use crate::link::TickEnd;
-use crate::safety::{Fault, SafetyConfig, Supervisor, TickInput};
+use crate::safety::{ArmRefused, Fault, SafetyConfig, Supervisor, TickInput};
 use crate::tick::{HapticLoop, LoopInput};
 
 /// Telemetry goes out every this many ticks (100 Hz at 1 kHz).
@@ -140,8 +145,8 @@ impl<'b, 'q> App<'b, 'q> {
             encoder_counts: counts,
             overrun,
             link_silence_ticks: self.link_silence(),
+            interlocks,
         };
-        let _ = interlocks;
         let (out, new_fault) = match &mut self.core {
             Core::Loop(lp) => {
                 let out = lp.tick(input);
@@ -169,6 +174,7 @@ impl<'b, 'q> App<'b, 'q> {
                 let s = supervisor.tick(&TickInput {
                     bank_error: Some(*code),
                     counts,
+                    interlocks,
                     ..TickInput::quiet()
                 });
                 let report = TickReport {
@@ -342,12 +348,14 @@ impl<'b, 'q> App<'b, 'q> {
         }
     }
 
-    /// Arm, or say why not: a refusal re-sends the latched fault (the invalid bank's code).
+    /// Arm, or say why not: a refusal re-sends the latched fault (the invalid bank's code), or
+    /// the fault of the interlock that is still active.
     fn arm(&mut self) {
         let tick = self.tick_count();
         let refused = match &mut self.core {
             Core::Loop(lp) => match lp.arm() {
                 Ok(()) => None,
+                Err(ArmRefused::Interlock(f)) => Some(f),
                 Err(_) => lp.supervisor().fault(),
             },
             Core::NoBank {
@@ -394,6 +402,9 @@ fn no_bank_config() -> SafetyConfig {
         joint_min: [0.0; 3],
         joint_max: [0.0; 3],
         joint_limit_margin: [0.0; 3],
+        max_tip_speed_m_s: 0.0,
+        max_joint_speed: [0.0; 3],
+        tick_s: crate::TICK_PERIOD_S,
     }
 }
 
@@ -403,13 +414,15 @@ mod tests {
     extern crate std;
     use super::*;
     use crate::fixtures::flat_patch;
+    use crate::hal::Interlocks;
     use crate::link::{DriverEnd, Link};
     use bank_format::{FrameDecoder, State as WireState};
     use std::vec::Vec;
 
-    /// Encoders held, what was driven recorded.
+    /// Encoders and interlocks held (set them between ticks), what was driven recorded.
     struct FakePlant {
         counts: [i32; 3],
+        interlocks: Interlocks,
         fail_at: Option<u32>,
         reads: u32,
         driven: Vec<Option<[f32; 3]>>,
@@ -430,6 +443,9 @@ mod tests {
         }
         fn disable(&mut self) {
             self.driven.push(None);
+        }
+        fn interlocks(&mut self) -> Interlocks {
+            self.interlocks
         }
     }
 
@@ -487,6 +503,7 @@ mod tests {
     fn plant() -> FakePlant {
         FakePlant {
             counts: [0, 0, 0],
+            interlocks: Interlocks::default(),
             fail_at: None,
             reads: 0,
             driven: Vec::new(),
@@ -584,6 +601,107 @@ mod tests {
         let before = plant.driven.len();
         assert_eq!(app.tick(&mut plant, &clock, false), Err(31));
         assert_eq!(plant.driven[before..], [None]);
+    }
+
+    /// An e-stop pressed while armed and driving: from that tick the motors are disabled (not
+    /// driven with zero) and exactly one Fault frame goes out; arming is refused while it is
+    /// pressed, and works again once it is released and the fault cleared.
+    #[test]
+    fn an_estop_mid_run_disables_the_motors_and_reports_once() {
+        let bytes = flat_patch();
+        let bank = Bank::parse(bytes.as_slice()).unwrap();
+        let mut link = Link::new();
+        let (tick_end, driver) = link.split();
+        let mut app = App::new(Ok(&bank), tick_end);
+        let mut host = FakeHost::new(driver);
+        let (mut plant, clock) = (plant(), clock());
+        let drive = [0.5, -0.25, 0.0];
+        host.send(&HostToDevice::Arm);
+        host.send(&HostToDevice::SetMode(Mode::ConstantCurrent {
+            currents_a: drive,
+        }));
+        let mut reports = Vec::new();
+        let step = |app: &mut App, plant: &mut FakePlant, host: &mut FakeHost| {
+            let r = app.tick(plant, &clock, false).unwrap();
+            host.pump();
+            host.send(&HostToDevice::Heartbeat);
+            r
+        };
+        for t in 1..=40 {
+            plant.interlocks.estop = t >= 21;
+            reports.push(step(&mut app, &mut plant, &mut host));
+        }
+        assert!(reports[..20].iter().all(|r| r.state == WireState::Armed));
+        assert!(reports[..20].iter().all(|r| r.currents_a == drive));
+        assert_eq!(plant.driven[..20], [Some(drive); 20]);
+        assert!(reports[20..].iter().all(|r| r.state == WireState::Fault));
+        assert!(reports[20..].iter().all(|r| r.currents_a == [0.0; 3]));
+        assert_eq!(plant.driven[20..], [None; 20]);
+        let faults = |host: &FakeHost| -> Vec<DeviceToHost> {
+            host.sent
+                .iter()
+                .filter(|m| matches!(m, DeviceToHost::Fault { .. }))
+                .cloned()
+                .collect()
+        };
+        let e_stop = |tick| DeviceToHost::Fault {
+            tick,
+            reason: FaultReason::EStop,
+            detail: 0,
+        };
+        assert_eq!(faults(&host), [e_stop(21)]);
+        assert_eq!(app.telemetry().fault, Some(FaultReason::EStop));
+        // Cleared and armed while still pressed: the arm is refused with the e-stop (queued
+        // before tick 41 runs), and tick 41 latches it again.
+        host.send(&HostToDevice::ClearFault);
+        host.send(&HostToDevice::Arm);
+        let r = step(&mut app, &mut plant, &mut host);
+        assert_eq!((r.state, r.currents_a), (WireState::Fault, [0.0; 3]));
+        assert_eq!(plant.driven.last(), Some(&None));
+        assert_eq!(faults(&host), [e_stop(21), e_stop(40), e_stop(41)]);
+        // Released: still latched until cleared; then arming drives the motors again.
+        plant.interlocks.estop = false;
+        let r = step(&mut app, &mut plant, &mut host);
+        assert_eq!(
+            (r.state, plant.driven.last()),
+            (WireState::Fault, Some(&None))
+        );
+        host.send(&HostToDevice::ClearFault);
+        host.send(&HostToDevice::Arm);
+        let r = step(&mut app, &mut plant, &mut host);
+        assert_eq!((r.state, r.currents_a), (WireState::Armed, drive));
+        assert_eq!(plant.driven.last(), Some(&Some(drive)));
+        assert_eq!(faults(&host).len(), 3);
+    }
+
+    /// An amplifier's fault output latches `AmplifierFault` with the motor as detail, with or
+    /// without a valid bank, ahead of the invalid bank's own fault.
+    #[test]
+    fn an_amplifier_fault_names_the_motor() {
+        let bytes = flat_patch();
+        let bank = Bank::parse(bytes.as_slice()).unwrap();
+        for bank in [Ok(&bank), Err(BankError::BadMagic)] {
+            let mut link = Link::new();
+            let (tick_end, driver) = link.split();
+            let mut app = App::new(bank, tick_end);
+            let mut host = FakeHost::new(driver);
+            let (mut plant, clock) = (plant(), clock());
+            plant.interlocks.amplifier_fault = [false, false, true];
+            host.send(&HostToDevice::Arm);
+            let r = app.tick(&mut plant, &clock, false).unwrap();
+            host.pump();
+            assert_eq!((r.state, r.currents_a), (WireState::Fault, [0.0; 3]));
+            assert_eq!(plant.driven, [None]);
+            let last = host.sent.last().cloned();
+            assert_eq!(
+                last,
+                Some(DeviceToHost::Fault {
+                    tick: 1,
+                    reason: FaultReason::AmplifierFault,
+                    detail: 2
+                })
+            );
+        }
     }
 
     /// A slow link (one byte a tick, so a frame takes several ticks) is not silent; a link

@@ -316,6 +316,8 @@ mod tests {
             current_limit_a: [1.5, 3.0, 2.5],
             max_force_n: 8.0,
             tip_radius_m: 0.002,
+            max_tip_speed_m_s: 1.0,
+            max_joint_speed: [10.0, 10.0, 1.0],
         }
     }
 

@@ -3,25 +3,46 @@
 //! States: [`State::Disarmed`] (zero current, waiting for an arm command), [`State::Armed`] (the
 //! loop drives the motors) and [`State::Fault`] (zero current, the reason kept until the host
 //! clears it). Every fault path ends at zero current with its [`FaultReason`] and a detail
-//! (bank error code, joint or motor index, else 0); a fault is latched: the first reason stays,
-//! later ones do not overwrite it, and the state leaves `Fault` only on [`Supervisor::clear_fault`]
-//! (to `Disarmed`, never straight to `Armed`).
+//! (bank error code, joint or motor index, 3 for the tool tip, else 0); a fault is latched: the
+//! first reason stays, later ones do not overwrite it, and the state leaves `Fault` only on
+//! [`Supervisor::clear_fault`] (to `Disarmed`, never straight to `Armed`: re-arming is an
+//! explicit `Arm` after it).
 //!
 //! Checks per tick ([`Supervisor::tick`]), in this order (the first failing one is reported):
 //!
 //! | check | reason | detail | in |
 //! | --- | --- | --- | --- |
+//! | the emergency stop is pressed (or its loop open) | `EStop` | 0 | Disarmed, Armed |
+//! | an amplifier reports a fault (lowest motor first) | `AmplifierFault` | motor | Disarmed, Armed |
 //! | bank failed validation | `InvalidBank` | `BankError::code()` | Disarmed, Armed |
 //! | the previous tick overran | `Overrun` | 0 | Armed |
 //! | no valid host frame for more than `link_timeout_ticks` ticks | `LinkSilent` | ticks | Armed |
 //! | an encoder moved more than `max_counts_per_tick` since the last tick | `EncoderJump` | joint | Disarmed, Armed |
-//! | NaN or infinity in joints, force or requested currents | `Nan` | 0 | Disarmed, Armed |
+//! | NaN or infinity in joints, tip, force or requested currents | `Nan` | 0 | Disarmed, Armed |
 //! | the contact solve failed | `SolveFailed` | 0 | Disarmed, Armed |
+//! | the tip moved faster than `max_tip_speed_m_s` over the last tick | `Overspeed` | 3 | Armed |
+//! | a joint moved faster than its `max_joint_speed` over the last tick | `Overspeed` | joint | Armed |
 //! | a joint outside its range by more than `joint_limit_margin` | `JointLimit` | joint | Armed |
 //! | a requested current over `current_fault_ratio` x its limit | `CurrentLimit` | motor | Armed |
 //!
-//! Link silence, overruns, joint and current limits only matter while the motors are driven,
-//! so they are checked only when armed: a device waiting for its host on boot does not fault.
+//! **Interlocks first**: the hardware says stop, whatever else is wrong. They are checked in
+//! every state, so a pressed e-stop also latches while disarmed, and [`Supervisor::arm`] is
+//! refused while the interlocks the last tick read are active (one pressed since is caught by
+//! the next tick's check, before any current is driven).
+//!
+//! Link silence, overruns, overspeed, joint and current limits only matter while the motors are
+//! driven, so they are checked only when armed: a device waiting for its host on boot does not
+//! fault.
+//!
+//! **Overspeed and encoder jumps.** As on Force Dimension's controllers, above a programmed
+//! speed the forces are disabled: the bank's [`DeviceCalibration::max_tip_speed_m_s`] and
+//! [`DeviceCalibration::max_joint_speed`] (the scene's choice) against the change of the
+//! forward-kinematics tip and of the joints over one tick ([`SafetyConfig::tick_s`]). The tip
+//! is checked first (detail 3), then the joints (detail = joint). `EncoderJump` is a separate
+//! check for what no hand can do, a counter glitch or miscount, in counts per tick from
+//! [`DEFAULT_JUMP_SPEED`]; its limit must stay above the overspeed thresholds, so that a fast
+//! but real move is reported as `Overspeed` and only a glitch as `EncoderJump` (the host's
+//! scene parser refuses joint thresholds at or above it).
 //!
 //! **Current limit: clamp or fault.** The loop caps the tip force at `max_force_n` before
 //! `J^T`, so a correct calibration asks for at most about the limit; a request somewhat over it
@@ -31,6 +52,8 @@
 //! commanded current over the limit ends at zero current with the fault reported").
 
 use crate::device::clamp_symmetric;
+use crate::hal::Interlocks;
+use crate::vec3::dist2;
 use bank_format::{DeviceCalibration, FaultReason};
 use core::f32::consts::PI;
 
@@ -73,9 +96,10 @@ pub struct Fault {
     pub detail: u32,
 }
 
-/// Default largest joint speeds for [`SafetyConfig::from_calibration`]: rad/s, rad/s, m/s (far
-/// above what a hand does; an encoder glitch or a miscount is much faster).
-pub const DEFAULT_MAX_JOINT_SPEED: [f32; 3] = [20.0, 20.0, 2.0];
+/// Default encoder-jump speeds for [`SafetyConfig::from_calibration`]: rad/s, rad/s, m/s (far
+/// above what a hand does; an encoder glitch or a miscount is much faster). They must stay
+/// above the bank's overspeed thresholds (see the module notes).
+pub const DEFAULT_JUMP_SPEED: [f32; 3] = [20.0, 20.0, 2.0];
 /// Default host link timeout in ticks (10 ms at 1 kHz).
 pub const DEFAULT_LINK_TIMEOUT_TICKS: u32 = 10;
 /// Default ratio of requested current to limit beyond which clamping becomes a fault.
@@ -101,20 +125,28 @@ pub struct SafetyConfig {
     pub joint_max: [f32; 3],
     /// Tolerance outside `[joint_min, joint_max]` before a `JointLimit` fault.
     pub joint_limit_margin: [f32; 3],
+    /// Largest tip speed while armed, m/s; faster over one tick is an `Overspeed` (detail 3).
+    pub max_tip_speed_m_s: f32,
+    /// Largest joint speeds while armed: pitch rad/s, yaw rad/s, insertion m/s; faster over one
+    /// tick is an `Overspeed` (detail = joint).
+    pub max_joint_speed: [f32; 3],
+    /// The tick period the speeds are measured over, s.
+    pub tick_s: f32,
 }
 
 impl SafetyConfig {
-    /// Thresholds from a calibration: `max_counts_per_tick = max_speed * tick * counts_per_rev *
-    /// |transmission| / (2 pi)` (at least 1), with the defaults above for the rest.
+    /// Thresholds from a calibration: `max_counts_per_tick = jump_speed * tick * counts_per_rev *
+    /// |transmission| / (2 pi)` (at least 1), the overspeed thresholds, joint and current limits
+    /// from the calibration, with the defaults above for the rest.
     pub fn from_calibration(
         cal: &DeviceCalibration,
-        max_joint_speed: [f32; 3],
+        jump_speed: [f32; 3],
         tick_s: f32,
     ) -> SafetyConfig {
         let max_counts_per_tick = core::array::from_fn(|j| {
             let cpr = cal.counts_per_rev.get(j).copied().unwrap_or(1) as f32;
             let t = cal.transmission.get(j).copied().unwrap_or(1.0);
-            let v = max_joint_speed.get(j).copied().unwrap_or(0.0);
+            let v = jump_speed.get(j).copied().unwrap_or(0.0);
             // `as` saturates (NaN -> 0), never panics.
             let n = (v * tick_s * cpr * if t < 0.0 { -t } else { t } / (2.0 * PI)) as u32;
             n.max(1)
@@ -127,12 +159,15 @@ impl SafetyConfig {
             joint_min: cal.joint_min,
             joint_max: cal.joint_max,
             joint_limit_margin: DEFAULT_JOINT_LIMIT_MARGIN,
+            max_tip_speed_m_s: cal.max_tip_speed_m_s,
+            max_joint_speed: cal.max_joint_speed,
+            tick_s,
         }
     }
 
-    /// [`SafetyConfig::from_calibration`] with [`DEFAULT_MAX_JOINT_SPEED`] at 1 kHz.
+    /// [`SafetyConfig::from_calibration`] with [`DEFAULT_JUMP_SPEED`] at [`crate::TICK_HZ`].
     pub fn new(cal: &DeviceCalibration) -> SafetyConfig {
-        SafetyConfig::from_calibration(cal, DEFAULT_MAX_JOINT_SPEED, crate::TICK_PERIOD_S)
+        SafetyConfig::from_calibration(cal, DEFAULT_JUMP_SPEED, crate::TICK_PERIOD_S)
     }
 }
 
@@ -145,6 +180,8 @@ pub struct TickInput {
     pub counts: [i32; 3],
     /// Joint values computed from the counts (pitch rad, yaw rad, insertion m).
     pub joints: [f32; 3],
+    /// The tool tip from the joints (forward kinematics), m.
+    pub tip_m: [f32; 3],
     /// The force rendered (on the tool), N.
     pub force_n: [f32; 3],
     /// Motor currents requested before clamping, A.
@@ -156,22 +193,47 @@ pub struct TickInput {
     pub link_silence_ticks: u32,
     /// Whether the contact solve failed this tick.
     pub solve_failed: bool,
+    /// The hardware interlock inputs read this tick.
+    pub interlocks: Interlocks,
 }
 
 impl TickInput {
-    /// A quiet tick: valid bank, everything zero, host just heard.
+    /// A quiet tick: valid bank, everything zero, host just heard, no interlock active.
     pub const fn quiet() -> TickInput {
         TickInput {
             bank_error: None,
             counts: [0; 3],
             joints: [0.0; 3],
+            tip_m: [0.0; 3],
             force_n: [0.0; 3],
             requested_a: [0.0; 3],
             overrun: false,
             link_silence_ticks: 0,
             solve_failed: false,
+            interlocks: Interlocks {
+                estop: false,
+                amplifier_fault: [false; 3],
+            },
         }
     }
+}
+
+/// The interlock fault `interlocks` call for, if any: the e-stop first, then the lowest
+/// faulted amplifier.
+pub fn interlock_fault(interlocks: &Interlocks) -> Option<Fault> {
+    if interlocks.estop {
+        return Some(Fault {
+            reason: FaultReason::EStop,
+            detail: 0,
+        });
+    }
+    (0..3u32)
+        .zip(&interlocks.amplifier_fault)
+        .find(|&(_, &f)| f)
+        .map(|(motor, _)| Fault {
+            reason: FaultReason::AmplifierFault,
+            detail: motor,
+        })
 }
 
 /// The supervisor's decision for a tick.
@@ -194,6 +256,16 @@ pub enum ArmRefused {
     NotDisarmed(State),
     /// The bank failed validation.
     InvalidBank,
+    /// A hardware interlock was active at the last tick (the fault it raises).
+    Interlock(Fault),
+}
+
+/// What the last tick measured, for the encoder-jump and overspeed checks.
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct Previous {
+    counts: [i32; 3],
+    joints: [f32; 3],
+    tip_m: [f32; 3],
 }
 
 /// The state machine.
@@ -202,17 +274,19 @@ pub struct Supervisor {
     config: SafetyConfig,
     state: State,
     detail: u32,
-    last_counts: Option<[i32; 3]>,
+    previous: Option<Previous>,
+    interlocks: Interlocks,
 }
 
 impl Supervisor {
-    /// Disarmed, with no encoder history.
+    /// Disarmed, with no encoder history and no interlock seen.
     pub const fn new(config: SafetyConfig) -> Supervisor {
         Supervisor {
             config,
             state: State::Disarmed,
             detail: 0,
-            last_counts: None,
+            previous: None,
+            interlocks: TickInput::quiet().interlocks,
         }
     }
 
@@ -234,10 +308,14 @@ impl Supervisor {
         })
     }
 
-    /// Arm: only from `Disarmed` and with a valid bank.
+    /// Arm: only from `Disarmed`, with no interlock active at the last tick, and with a valid
+    /// bank.
     pub fn arm(&mut self, bank_valid: bool) -> Result<(), ArmRefused> {
         if self.state != State::Disarmed {
             return Err(ArmRefused::NotDisarmed(self.state));
+        }
+        if let Some(f) = interlock_fault(&self.interlocks) {
+            return Err(ArmRefused::Interlock(f));
         }
         if !bank_valid {
             return Err(ArmRefused::InvalidBank);
@@ -269,9 +347,10 @@ impl Supervisor {
         }
     }
 
-    /// Forget the encoder history (after zeroing the encoders, so the reset is not a jump).
+    /// Forget the encoder and motion history (after zeroing the encoders, so the reset is
+    /// neither a jump nor a move).
     pub fn rebase_encoders(&mut self) {
-        self.last_counts = None;
+        self.previous = None;
     }
 
     /// Enter `Fault` from any state (e.g. a fault found outside the tick's inputs). A latched
@@ -288,7 +367,12 @@ impl Supervisor {
     /// Run the checks for one tick and decide the currents (see the module notes).
     pub fn tick(&mut self, input: &TickInput) -> Output {
         let found = self.check(input);
-        self.last_counts = Some(input.counts);
+        self.previous = Some(Previous {
+            counts: input.counts,
+            joints: input.joints,
+            tip_m: input.tip_m,
+        });
+        self.interlocks = input.interlocks;
         let new_fault = found.filter(|f| self.raise(f.reason, f.detail));
         let mut out = Output {
             state: self.state,
@@ -313,6 +397,9 @@ impl Supervisor {
     fn check(&self, input: &TickInput) -> Option<Fault> {
         let armed = self.state == State::Armed;
         let fault = |reason, detail| Some(Fault { reason, detail });
+        if let Some(f) = interlock_fault(&input.interlocks) {
+            return Some(f);
+        }
         if let Some(code) = input.bank_error {
             return fault(FaultReason::InvalidBank, code);
         }
@@ -322,9 +409,9 @@ impl Supervisor {
         if armed && input.link_silence_ticks > self.config.link_timeout_ticks {
             return fault(FaultReason::LinkSilent, input.link_silence_ticks);
         }
-        if let Some(prev) = self.last_counts {
+        if let Some(prev) = &self.previous {
             let jump = (0..3u32)
-                .zip(prev.iter().zip(&input.counts))
+                .zip(prev.counts.iter().zip(&input.counts))
                 .find(|(j, (p, n))| {
                     let max = self.config.max_counts_per_tick.get(*j as usize);
                     max.is_none_or(|&m| n.abs_diff(**p) > m)
@@ -334,7 +421,11 @@ impl Supervisor {
             }
         }
         let finite = |v: &[f32; 3]| v.iter().all(|x| x.is_finite());
-        if !(finite(&input.joints) && finite(&input.force_n) && finite(&input.requested_a)) {
+        if !(finite(&input.joints)
+            && finite(&input.tip_m)
+            && finite(&input.force_n)
+            && finite(&input.requested_a))
+        {
             return fault(FaultReason::Nan, 0);
         }
         if input.solve_failed {
@@ -342,6 +433,13 @@ impl Supervisor {
         }
         if !armed {
             return None;
+        }
+        if let Some(detail) = self
+            .previous
+            .as_ref()
+            .and_then(|p| self.overspeed(p, input))
+        {
+            return fault(FaultReason::Overspeed, detail);
         }
         let c = &self.config;
         for (j, (((&q, &lo), &hi), &m)) in (0..3u32).zip(
@@ -373,6 +471,27 @@ impl Supervisor {
         }
         None
     }
+
+    /// The overspeed check against the last tick: 3 when the tip moved more than
+    /// `max_tip_speed_m_s * tick_s`, else the first joint that moved more than its
+    /// `max_joint_speed * tick_s`. A non-finite previous value (a tick that faulted `Nan`)
+    /// compares as no move.
+    fn overspeed(&self, prev: &Previous, input: &TickInput) -> Option<u32> {
+        let c = &self.config;
+        let tip_step = c.max_tip_speed_m_s * c.tick_s;
+        if dist2(prev.tip_m, input.tip_m) > tip_step * tip_step {
+            return Some(3);
+        }
+        (0..3u32)
+            .zip(
+                prev.joints
+                    .iter()
+                    .zip(&input.joints)
+                    .zip(&c.max_joint_speed),
+            )
+            .find(|(_, ((p, q), v))| (**q - **p).abs() > **v * c.tick_s)
+            .map(|(j, _)| j)
+    }
 }
 
 #[cfg(test)]
@@ -391,11 +510,34 @@ mod tests {
     }
 
     fn armed() -> Supervisor {
+        armed_at(liver_device().home_joint)
+    }
+
+    /// Armed, the last tick at `joints` (reached while disarmed, so not an overspeed).
+    fn armed_at(joints: [f32; 3]) -> Supervisor {
         let mut s = Supervisor::new(SafetyConfig::new(&liver_device()));
+        let at = TickInput {
+            joints,
+            ..ok_tick()
+        };
+        assert_eq!(s.tick(&at).state, State::Disarmed);
         assert_eq!(s.arm(true), Ok(()));
-        let out = s.tick(&ok_tick());
+        let out = s.tick(&at);
         assert_eq!(out.state, State::Armed);
         s
+    }
+
+    fn estop() -> Interlocks {
+        Interlocks {
+            estop: true,
+            amplifier_fault: [false; 3],
+        }
+    }
+
+    fn amplifier(motor: usize) -> Interlocks {
+        let mut i = Interlocks::default();
+        i.amplifier_fault[motor] = true;
+        i
     }
 
     #[test]
@@ -404,6 +546,9 @@ mod tests {
         // 20 rad/s * 1 ms * 4096 * 12 / 2 pi = 156.4; 2 m/s * 1 ms * 4096 * 400 / 2 pi = 521.5.
         assert_eq!(c.max_counts_per_tick, [156, 156, 521]);
         assert_eq!(c.link_timeout_ticks, 10);
+        assert_eq!(c.max_tip_speed_m_s, liver_device().max_tip_speed_m_s);
+        assert_eq!(c.max_joint_speed, liver_device().max_joint_speed);
+        assert_eq!(c.tick_s, crate::TICK_PERIOD_S);
         let c = SafetyConfig::from_calibration(&liver_device(), [0.0, f32::NAN, -1.0], 1e-3);
         assert_eq!(c.max_counts_per_tick, [1, 1, 1]);
     }
@@ -458,7 +603,64 @@ mod tests {
     /// Each fault input, armed: zero current this tick and after, the reason and detail kept.
     #[test]
     fn every_fault_reason_ends_at_zero_current() {
-        let cases: [(TickInput, FaultReason, u32); 12] = [
+        let home = liver_device().home_joint;
+        let cases: [(TickInput, FaultReason, u32); 16] = [
+            (
+                TickInput {
+                    interlocks: Interlocks {
+                        estop: true,
+                        amplifier_fault: [false; 3],
+                    },
+                    ..ok_tick()
+                },
+                FaultReason::EStop,
+                0,
+            ),
+            (
+                TickInput {
+                    interlocks: Interlocks {
+                        estop: false,
+                        amplifier_fault: [false, true, false],
+                    },
+                    ..ok_tick()
+                },
+                FaultReason::AmplifierFault,
+                1,
+            ),
+            // 1.1 mm in one tick: 1.1 m/s at the tip, over the 1 m/s threshold.
+            (
+                TickInput {
+                    tip_m: [0.0, 0.0011, 0.0],
+                    ..ok_tick()
+                },
+                FaultReason::Overspeed,
+                3,
+            ),
+            // 11 rad/s in pitch and yaw (threshold 10), 1.1 m/s in insertion (threshold 1).
+            (
+                TickInput {
+                    joints: [home[0] + 0.011, home[1], home[2]],
+                    ..ok_tick()
+                },
+                FaultReason::Overspeed,
+                0,
+            ),
+            (
+                TickInput {
+                    joints: [home[0], home[1] - 0.011, home[2]],
+                    ..ok_tick()
+                },
+                FaultReason::Overspeed,
+                1,
+            ),
+            (
+                TickInput {
+                    joints: [home[0], home[1], home[2] + 0.0011],
+                    ..ok_tick()
+                },
+                FaultReason::Overspeed,
+                2,
+            ),
             (
                 TickInput {
                     bank_error: Some(7),
@@ -525,22 +727,6 @@ mod tests {
             ),
             (
                 TickInput {
-                    joints: [0.41, 0.0, 0.05],
-                    ..ok_tick()
-                },
-                FaultReason::JointLimit,
-                0,
-            ),
-            (
-                TickInput {
-                    joints: [0.0, 0.0, 0.0249],
-                    ..ok_tick()
-                },
-                FaultReason::JointLimit,
-                2,
-            ),
-            (
-                TickInput {
                     requested_a: [0.0, 0.0, -2.6],
                     ..ok_tick()
                 },
@@ -582,6 +768,261 @@ mod tests {
             );
             assert_eq!(s.fault(), Some(Fault { reason, detail }));
         }
+    }
+
+    /// Joint limits, approached slowly enough not to be an overspeed.
+    #[test]
+    fn joint_limits_fault_when_armed() {
+        for (before, at, joint) in [
+            ([0.399, 0.0, 0.05], [0.405, 0.0, 0.05], 0),
+            ([0.0, -0.399, 0.05], [0.0, -0.405, 0.05], 1),
+            ([0.0, 0.0, 0.0252], [0.0, 0.0, 0.0249], 2),
+        ] {
+            let mut s = armed_at(before);
+            let out = s.tick(&TickInput {
+                joints: at,
+                ..ok_tick()
+            });
+            let want = Fault {
+                reason: FaultReason::JointLimit,
+                detail: joint,
+            };
+            assert_eq!((out.new_fault, out.currents_a), (Some(want), [0.0; 3]));
+        }
+    }
+
+    /// The e-stop and the amplifiers' fault outputs latch in every state, before any other
+    /// check, and hold the motors at zero until cleared.
+    #[test]
+    fn interlocks_latch_in_every_state_and_come_first() {
+        // Disarmed: a pressed e-stop latches too.
+        let mut s = Supervisor::new(SafetyConfig::new(&liver_device()));
+        let out = s.tick(&TickInput {
+            interlocks: estop(),
+            ..ok_tick()
+        });
+        let e_stop = Fault {
+            reason: FaultReason::EStop,
+            detail: 0,
+        };
+        assert_eq!(out.state, State::Fault(FaultReason::EStop));
+        assert_eq!((out.new_fault, out.currents_a), (Some(e_stop), [0.0; 3]));
+        // Armed: reported ahead of every other fault of the same tick, with zero current.
+        for (interlocks, want) in [
+            (estop(), e_stop),
+            (
+                amplifier(2),
+                Fault {
+                    reason: FaultReason::AmplifierFault,
+                    detail: 2,
+                },
+            ),
+            (
+                Interlocks {
+                    estop: false,
+                    amplifier_fault: [false, true, true],
+                },
+                Fault {
+                    reason: FaultReason::AmplifierFault,
+                    detail: 1,
+                },
+            ),
+        ] {
+            let mut s = armed();
+            let out = s.tick(&TickInput {
+                interlocks,
+                bank_error: Some(3),
+                overrun: true,
+                requested_a: [f32::NAN; 3],
+                ..ok_tick()
+            });
+            assert_eq!(out.new_fault, Some(want));
+            assert_eq!(
+                (out.state, out.currents_a),
+                (State::Fault(want.reason), [0.0; 3])
+            );
+            // Latched once the input is gone, until cleared.
+            let out = s.tick(&ok_tick());
+            assert_eq!((out.new_fault, out.currents_a), (None, [0.0; 3]));
+            assert_eq!(s.fault(), Some(want));
+            assert!(s.clear_fault());
+            assert_eq!(s.tick(&ok_tick()).state, State::Disarmed);
+        }
+    }
+
+    /// Arming is refused while the last tick saw an interlock, however the state got to
+    /// `Disarmed`; it works again once the input is gone and the fault cleared.
+    #[test]
+    fn arm_is_refused_while_an_interlock_is_active() {
+        let mut s = Supervisor::new(SafetyConfig::new(&liver_device()));
+        let pressed = TickInput {
+            interlocks: estop(),
+            ..ok_tick()
+        };
+        s.tick(&pressed);
+        assert_eq!(
+            s.arm(true),
+            Err(ArmRefused::NotDisarmed(State::Fault(FaultReason::EStop)))
+        );
+        // Cleared while still pressed: disarmed, but arming is refused and says why.
+        assert!(s.clear_fault());
+        assert_eq!(s.state(), State::Disarmed);
+        let refused = Err(ArmRefused::Interlock(Fault {
+            reason: FaultReason::EStop,
+            detail: 0,
+        }));
+        assert_eq!(s.arm(true), refused);
+        assert_eq!(s.state(), State::Disarmed);
+        // The next tick latches it again.
+        assert_eq!(
+            s.tick(&pressed).new_fault.map(|f| f.reason),
+            Some(FaultReason::EStop)
+        );
+        // An amplifier fault refuses arming the same way.
+        assert!(s.clear_fault());
+        s.tick(&TickInput {
+            interlocks: amplifier(0),
+            ..ok_tick()
+        });
+        assert!(s.clear_fault());
+        assert_eq!(
+            s.arm(true),
+            Err(ArmRefused::Interlock(Fault {
+                reason: FaultReason::AmplifierFault,
+                detail: 0,
+            }))
+        );
+        // Released: after one quiet tick (still disarmed, no fault), arming works and currents
+        // flow.
+        assert_eq!(s.tick(&ok_tick()).state, State::Disarmed);
+        assert_eq!(s.arm(true), Ok(()));
+        assert_eq!(s.tick(&ok_tick()).currents_a, [0.5, -0.5, 1.0]);
+    }
+
+    /// Overspeed, per joint and for the tip: at the threshold the loop runs on; beyond it zero
+    /// current, latched until the host clears the fault and arms again.
+    #[test]
+    fn overspeed_per_joint_and_tip_is_latched_until_clear_and_arm() {
+        let cal = liver_device();
+        let home = cal.home_joint;
+        let t = crate::TICK_PERIOD_S;
+        // (direction per tick of a unit speed, threshold, detail): joints from the home pose,
+        // the tip from the origin.
+        for axis in 0..4usize {
+            let limit = if axis == 3 {
+                cal.max_tip_speed_m_s
+            } else {
+                cal.max_joint_speed[axis]
+            };
+            let at_speed = |v: f32, from: &TickInput| {
+                let mut next = *from;
+                if axis == 3 {
+                    next.tip_m[1] += v * t;
+                } else {
+                    next.joints[axis] += v * t;
+                }
+                next
+            };
+            let mut s = armed();
+            let mut now = ok_tick();
+            // Just under the threshold, for a while (pitch and yaw stay inside their range).
+            for _ in 0..20 {
+                now = at_speed(0.98 * limit, &now);
+                let out = s.tick(&now);
+                assert_eq!(out.state, State::Armed, "axis {axis}: {now:?}");
+                assert_eq!(out.currents_a, [0.5, -0.5, 1.0]);
+            }
+            // Over it: Overspeed, detail = joint or 3 for the tip, zero current.
+            now = at_speed(1.05 * limit, &now);
+            let out = s.tick(&now);
+            let want = Fault {
+                reason: FaultReason::Overspeed,
+                detail: axis as u32,
+            };
+            assert_eq!(out.new_fault, Some(want), "axis {axis}");
+            assert_eq!(out.currents_a, [0.0; 3]);
+            // Latched, at rest too, and a later overspeed is not reported again.
+            for v in [0.0, 2.0 * limit, 0.0] {
+                now = at_speed(v, &now);
+                let out = s.tick(&now);
+                assert_eq!((out.new_fault, out.currents_a), (None, [0.0; 3]));
+                assert_eq!(s.fault(), Some(want));
+            }
+            // Re-arming is explicit: clear (-> Disarmed, still zero), then arm.
+            assert!(s.clear_fault());
+            assert_eq!(s.tick(&now).currents_a, [0.0; 3]);
+            assert_eq!(s.arm(true), Ok(()));
+            let out = s.tick(&now);
+            assert_eq!(
+                (out.state, out.currents_a),
+                (State::Armed, [0.5, -0.5, 1.0])
+            );
+        }
+        // The same moves while disarmed are no fault (only a driven device can be too fast).
+        let mut s = Supervisor::new(SafetyConfig::new(&cal));
+        s.tick(&ok_tick());
+        let out = s.tick(&TickInput {
+            joints: [home[0] + 0.1, home[1] - 0.1, home[2] + 0.01],
+            tip_m: [0.05, 0.0, 0.0],
+            ..ok_tick()
+        });
+        assert_eq!((out.state, out.new_fault), (State::Disarmed, None));
+    }
+
+    /// A zeroing of the encoders is not a move, and a NaN tick leaves no speed behind.
+    #[test]
+    fn overspeed_forgets_rebased_and_non_finite_history() {
+        let mut s = armed();
+        s.rebase_encoders();
+        let far = TickInput {
+            joints: [0.3, -0.3, 0.1],
+            tip_m: [0.02, -0.03, 0.05],
+            ..ok_tick()
+        };
+        assert_eq!(s.tick(&far).state, State::Armed);
+        // NaN faults as Nan, not as an overspeed; once cleared and re-armed, the next finite
+        // tick is compared against the NaN one without faulting.
+        let nan = TickInput {
+            tip_m: [f32::NAN; 3],
+            ..far
+        };
+        assert_eq!(s.tick(&nan).state, State::Fault(FaultReason::Nan));
+        assert!(s.clear_fault());
+        assert_eq!(s.arm(true), Ok(()));
+        assert_eq!(s.tick(&far).state, State::Armed);
+    }
+
+    /// The encoder-jump limit stays above the overspeed thresholds of the shipped scene, so a
+    /// real but fast move is an `Overspeed` and only a glitch an `EncoderJump`.
+    #[test]
+    #[allow(clippy::needless_range_loop)] // per joint across five arrays
+    fn encoder_jump_limit_is_above_the_overspeed_thresholds() {
+        let cal = liver_device();
+        let c = SafetyConfig::new(&cal);
+        for j in 0..3 {
+            let per_count = 2.0 * PI / (cal.counts_per_rev[j] as f32 * cal.transmission[j].abs());
+            let jump_speed = c.max_counts_per_tick[j] as f32 * per_count / c.tick_s;
+            assert!(
+                jump_speed > 1.5 * c.max_joint_speed[j],
+                "joint {j}: jump {jump_speed} vs overspeed {}",
+                c.max_joint_speed[j]
+            );
+            assert!(DEFAULT_JUMP_SPEED[j] > c.max_joint_speed[j]);
+        }
+        // A move between the two is an Overspeed, not an EncoderJump.
+        let mut s = armed();
+        let out = s.tick(&TickInput {
+            counts: [0, 0, 400],
+            joints: [0.0, 0.0, 0.03 + 400.0 * 2.0 * PI / (4096.0 * 400.0)],
+            ..ok_tick()
+        });
+        assert_eq!(
+            out.new_fault,
+            Some(Fault {
+                reason: FaultReason::Overspeed,
+                detail: 2
+            })
+        );
     }
 
     #[test]

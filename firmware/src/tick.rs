@@ -26,9 +26,11 @@
 //!    [`Mode::LinearLaw`]; the force on the tool is the *opposite* of the force on the tissue
 //!    (sign convention of [`crate::device`]); it is capped by [`Device::limit_force`];
 //! 5. `tau = J^T F`, requested currents ([`Device::requested_currents`]);
-//! 6. [`Supervisor::tick`]: NaN, encoder jumps, joint and current limits, link silence,
-//!    overruns and a failed solve end at zero current with the fault latched; otherwise the
-//!    clamped currents are applied (only when armed).
+//! 6. [`Supervisor::tick`]: the hardware interlocks (e-stop, amplifier faults), NaN, encoder
+//!    jumps, overspeed (the tip's and the joints' change since the previous tick against the
+//!    bank's thresholds), joint and current limits, link silence, overruns and a failed solve
+//!    end at zero current with the fault latched; otherwise the clamped currents are applied
+//!    (only when armed).
 //!
 //! A solve or law error (not positive definite, ill-conditioned, missing coupling, non-finite)
 //! is reported as [`FaultReason::SolveFailed`](bank_format::FaultReason::SolveFailed): the force
@@ -42,6 +44,7 @@ use bank_format::{Bank, Contact, Counters, MAX_CONTACTS, Mode, Telemetry, heaple
 
 use crate::contact::{ContactState, ContactTracker};
 use crate::device::{Device, transpose_mul};
+use crate::hal::Interlocks;
 use crate::patch::tool_patch;
 use crate::safety::{ArmRefused, Fault, SafetyConfig, State, Supervisor, TickInput};
 use crate::solve::{SolveError, WeightedSolve, apply_tissue_law};
@@ -60,6 +63,8 @@ pub struct LoopInput {
     /// How long the host link has been silent, in ticks (the application's measure: since the
     /// last byte, or since the last valid frame less a grace for a garbled link).
     pub link_silence_ticks: u32,
+    /// The hardware interlock inputs (e-stop, amplifier fault outputs) read this tick.
+    pub interlocks: Interlocks,
 }
 
 /// The result of one tick.
@@ -221,7 +226,8 @@ impl<'b> HapticLoop<'b> {
         &mut self.counters
     }
 
-    /// Arm (host command): only from `Disarmed`; the bank was validated when parsed.
+    /// Arm (host command): only from `Disarmed` and with no interlock active at the last tick;
+    /// the bank was validated when parsed.
     pub fn arm(&mut self) -> Result<(), ArmRefused> {
         self.supervisor.arm(true)
     }
@@ -244,8 +250,8 @@ impl<'b> HapticLoop<'b> {
 
     /// Declare the current pose (the last tick's raw counts) the calibration's home pose (host
     /// command). Refused (returns `false`) while armed, since the tip would jump under the
-    /// user's hand. Rebases the supervisor's jump check and drops any contact; the next tick
-    /// does not sweep the jump for contacts.
+    /// user's hand. Rebases the supervisor's jump and overspeed checks and drops any contact;
+    /// the next tick does not sweep the jump for contacts.
     pub fn zero_encoders(&mut self) -> bool {
         if self.supervisor.state() == State::Armed {
             return false;
@@ -290,11 +296,13 @@ impl<'b> HapticLoop<'b> {
             bank_error: None,
             counts,
             joints: q.to_array(),
+            tip_m: tip,
             force_n: force_on_tool,
             requested_a,
             overrun: input.overrun,
             link_silence_ticks: input.link_silence_ticks,
             solve_failed: solve_error.is_some(),
+            interlocks: input.interlocks,
         });
 
         self.last = Last {
@@ -436,6 +444,7 @@ mod tests {
             encoder_counts: counts,
             overrun: false,
             link_silence_ticks: 0,
+            interlocks: Interlocks::default(),
         }
     }
 
@@ -565,10 +574,24 @@ mod tests {
         assert_eq!(out.currents_a, [0.0; 3]);
         assert!((norm(out.tool_force_n) - cal.max_force_n).abs() < 1e-3);
 
-        // With the jump check relaxed, the strike is rendered: force capped at max_force_n,
-        // currents within the limits.
+        // With the jump check relaxed, it is what it would physically be, a 50 m/s strike: the
+        // tip's overspeed (threshold 1 m/s), zero current.
         let mut config = SafetyConfig::new(&cal);
         config.max_counts_per_tick = [u32::MAX; 3];
+        let mut lp = HapticLoop::with_config(&bank, config);
+        lp.arm().unwrap();
+        check(&lp.tick(input(counts_for_insertion(&dev, 0.08))), &cal);
+        let out = lp.tick(input(counts_for_insertion(&dev, 0.13)));
+        check(&out, &cal);
+        assert!(matches!(out.contact, ContactState::Touching { .. }));
+        assert_eq!(out.state, State::Fault(FaultReason::Overspeed));
+        assert_eq!(out.new_fault.unwrap().detail, 3);
+        assert_eq!(out.currents_a, [0.0; 3]);
+
+        // With the overspeed check relaxed too, the strike is rendered: force capped at
+        // max_force_n, currents within the limits.
+        config.max_tip_speed_m_s = f32::INFINITY;
+        config.max_joint_speed = [f32::INFINITY; 3];
         let mut lp = HapticLoop::with_config(&bank, config);
         lp.arm().unwrap();
         check(&lp.tick(input(counts_for_insertion(&dev, 0.08))), &cal);
@@ -578,6 +601,93 @@ mod tests {
         assert_eq!(out.state, State::Armed, "{out:?}");
         assert!((norm(out.tool_force_n) - cal.max_force_n).abs() < 1e-3);
         assert!(out.currents_a[2] < 0.0);
+    }
+
+    /// The tip pressed into the patch and rendering, then driven down 1.2 mm in one tick
+    /// (1.2 m/s, over the bank's 1 m/s but no encoder jump): `Overspeed` at the tip, zero current
+    /// from that tick on, reported once; explicit clear and arm render again.
+    #[test]
+    fn overspeed_at_the_tip_zeroes_the_currents_from_that_tick_on() {
+        let bytes = flat_patch();
+        let bank = Bank::parse(bytes.as_slice()).unwrap();
+        let cal = patch_device();
+        assert_eq!(cal.max_tip_speed_m_s, 1.0);
+        let mut lp = HapticLoop::new(&bank);
+        lp.arm().unwrap();
+        let dev = *lp.device();
+        // 0.5 m/s down to 3 mm deep: fast, but under the threshold.
+        let mut s = 0.095;
+        while s < 0.103 {
+            s += 0.5e-3;
+            let out = lp.tick(input(counts_for_insertion(&dev, s)));
+            check(&out, &cal);
+            assert_eq!(out.state, State::Armed, "{out:?}");
+        }
+        let pressed = lp.tick(input(counts_for_insertion(&dev, s)));
+        assert!(pressed.currents_a[2] < 0.0, "{pressed:?}");
+        let out = lp.tick(input(counts_for_insertion(&dev, s + 1.2e-3)));
+        check(&out, &cal);
+        assert_eq!(out.state, State::Fault(FaultReason::Overspeed));
+        assert_eq!(
+            out.new_fault,
+            Some(Fault {
+                reason: FaultReason::Overspeed,
+                detail: 3
+            })
+        );
+        assert_eq!(out.currents_a, [0.0; 3]);
+        // Still pressed, force computed, but nothing driven and nothing reported again.
+        for k in 0..50 {
+            let out = lp.tick(input(counts_for_insertion(
+                &dev,
+                s + 1.2e-3 - 1e-5 * k as f32,
+            )));
+            assert!(out.tool_force_n[2] > 0.0, "{out:?}");
+            assert_eq!((out.currents_a, out.new_fault), ([0.0; 3], None));
+            assert_eq!(out.fault.map(|f| f.reason), Some(FaultReason::Overspeed));
+        }
+        assert_eq!(lp.telemetry().fault, Some(FaultReason::Overspeed));
+        assert!(lp.arm().is_err(), "re-arming needs the fault cleared first");
+        assert!(lp.clear_fault());
+        lp.arm().unwrap();
+        let out = lp.tick(input(counts_for_insertion(&dev, s)));
+        assert_eq!(out.state, State::Armed);
+        assert!(out.currents_a[2] < 0.0, "{out:?}");
+    }
+
+    /// A fast pitch close to the fulcrum: 15 rad/s (threshold 10) moves the tip only 0.75 m/s,
+    /// so the joint's own threshold trips (detail 0); the constant currents stop that tick.
+    #[test]
+    fn overspeed_of_a_joint_near_the_fulcrum() {
+        let bytes = flat_patch();
+        let bank = Bank::parse(bytes.as_slice()).unwrap();
+        let cal = patch_device();
+        let mut lp = HapticLoop::new(&bank);
+        let per_rad = 1.0 / lp.device().joint_per_count()[0];
+        lp.set_mode(Mode::ConstantCurrent {
+            currents_a: [0.5, 0.5, 0.5],
+        });
+        lp.arm().unwrap();
+        let pitch_counts = |q: f32| [(q * per_rad).round() as i32, 0, 0];
+        // 5 rad/s for 20 ticks (0.25 m/s at the tip, 5 cm from the fulcrum).
+        let mut q = 0.0f32;
+        for _ in 0..20 {
+            q += 0.005;
+            let out = lp.tick(input(pitch_counts(q)));
+            assert_eq!(out.currents_a, [0.5, 0.5, 0.5], "{out:?}");
+        }
+        q += 0.015;
+        let out = lp.tick(input(pitch_counts(q)));
+        check(&out, &cal);
+        assert_eq!(
+            out.new_fault,
+            Some(Fault {
+                reason: FaultReason::Overspeed,
+                detail: 0
+            })
+        );
+        assert_eq!(out.currents_a, [0.0; 3]);
+        assert_eq!(lp.tick(input(pitch_counts(q))).currents_a, [0.0; 3]);
     }
 
     #[test]
@@ -593,6 +703,7 @@ mod tests {
                 overrun: false,
                 // No host at all: not a fault while disarmed.
                 link_silence_ticks: t,
+                interlocks: Interlocks::default(),
             });
             check(&out, &cal);
             assert_eq!(out.state, State::Disarmed);
@@ -625,17 +736,15 @@ mod tests {
         let s = counts_for_insertion(&dev, 0.103);
         for silent in 0..=10 {
             let out = lp.tick(LoopInput {
-                encoder_counts: s,
-                overrun: false,
                 link_silence_ticks: silent,
+                ..input(s)
             });
             assert_eq!(out.state, State::Armed);
             assert!(out.currents_a[2] < 0.0);
         }
         let out = lp.tick(LoopInput {
-            encoder_counts: s,
-            overrun: false,
             link_silence_ticks: 11,
+            ..input(s)
         });
         assert_eq!(out.state, State::Fault(FaultReason::LinkSilent));
         assert_eq!(out.new_fault.unwrap().reason, FaultReason::LinkSilent);
@@ -677,9 +786,8 @@ mod tests {
         let s = counts_for_insertion(&dev, 0.103);
         lp.tick(input(s));
         let out = lp.tick(LoopInput {
-            encoder_counts: s,
             overrun: true,
-            link_silence_ticks: 0,
+            ..input(s)
         });
         assert_eq!(out.state, State::Fault(FaultReason::Overrun));
         assert_eq!(out.currents_a, [0.0; 3]);

@@ -26,6 +26,24 @@ pub const BUILTIN_LIVER: &[u8] = include_bytes!("../meshes/liver-1k4.msh");
 /// The scene value that selects [`BUILTIN_LIVER`].
 pub const BUILTIN_LIVER_NAME: &str = "builtin:liver-1k4";
 
+/// Default `[device] max_tip_speed_m_s`, m/s: above it the armed device disables its forces
+/// (`Overspeed`). Twice the demo's virtual hand at its fastest along the shaft (0.5 m/s; 0.78 m/s
+/// with pitch, yaw and insertion all at their top rates at full insertion), so normal use never
+/// trips it; a 5 cm strike in one tick (50 m/s) and the SIL plant's scripted strike (1.4 m/s
+/// peak, 18 mm in 20 ms) do: an impact that fast is not rendered, the forces are cut.
+pub const DEFAULT_MAX_TIP_SPEED_M_S: f64 = 1.0;
+/// Lever of the default pitch and yaw thresholds, m: `max_joint_speed` defaults to
+/// `[v / lever, v / lever, v]` for the tip threshold `v`. The shipped liver's surface is 0.09 m
+/// below the trocar and the insertion reaches 0.14 m, so where the tool touches tissue the
+/// default 10 rad/s is 0.9 to 1.4 m/s at the tip, about where the tip check trips anyway: in
+/// normal use the joint check does not trip before the tip check (it guards the motors near the
+/// fulcrum, where a fast swing moves the tip little). Insertion defaults to `v` itself: the tip
+/// moves at least as fast as the insertion (the gimbal's motion is orthogonal to the shaft), so
+/// it never trips first. At the defaults, 10 rad/s and 1 m/s are 3.3 and 2 times the demo
+/// hand's 3 rad/s and 0.5 m/s, and half the firmware's encoder-jump speeds
+/// ([`firmware::safety::DEFAULT_JUMP_SPEED`]).
+pub const DEFAULT_SPEED_LEVER_M: f64 = 0.1;
+
 /// A scene-file error: file, 1-based line (when known), key and what is wrong.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 #[error("{file}:{}: {key}: {message}", line.map_or("?".to_string(), |l| l.to_string()))]
@@ -103,6 +121,10 @@ struct RawDevice {
     torque_constant_nm_per_a: Spanned<[f64; 3]>,
     current_limit_a: Spanned<[f64; 3]>,
     max_force_n: Spanned<f64>,
+    #[serde(default)]
+    max_tip_speed_m_s: Option<Spanned<f64>>,
+    #[serde(default)]
+    max_joint_speed: Option<Spanned<[f64; 3]>>,
     #[serde(default)]
     friction_offset: Option<Spanned<[f64; 3]>>,
 }
@@ -548,8 +570,9 @@ fn parse_tool(ctx: &Ctx, tool: &RawTool) -> Result<f64, SceneError> {
 /// orthonormal unit axes, non-empty joint ranges (pitch inside (-pi/2, pi/2), yaw inside
 /// [-pi, pi], insertion >= 0), `home` inside the ranges (default: 0 clamped into the pitch and yaw
 /// ranges, minimum insertion), counts > 0, non-zero finite gear ratios, torque constants > 0,
-/// current limits in (0, 20], `max_force_n` in (0, 50]; then
-/// [`bank_format::validate_device`]. `tip` is the tool's tip radius, m.
+/// current limits in (0, 20], `max_force_n` in (0, 50], the speed thresholds
+/// ([`parse_speed_limits`]); then [`bank_format::validate_device`]. `tip` is the tool's tip
+/// radius, m.
 fn parse_device(ctx: &Ctx, d: &RawDevice, tip: f64) -> Result<DeviceCalibration, SceneError> {
     finite(ctx, &d.fulcrum_m, "device.fulcrum_m")?;
     let shaft = unit(ctx, &d.shaft_axis, "device.shaft_axis")?;
@@ -645,6 +668,7 @@ fn parse_device(ctx: &Ctx, d: &RawDevice, tip: f64) -> Result<DeviceCalibration,
             format!("must lie in (0, 50] N, got {fmax}"),
         ));
     }
+    let (tip_speed, joint_speed) = parse_speed_limits(ctx, d)?;
     let f32s = |a: [f64; 3]| a.map(|x| x as f32);
     let device = DeviceCalibration {
         fulcrum_m: f32s(*d.fulcrum_m.get_ref()),
@@ -660,10 +684,82 @@ fn parse_device(ctx: &Ctx, d: &RawDevice, tip: f64) -> Result<DeviceCalibration,
         current_limit_a: imax,
         max_force_n: fmax as f32,
         tip_radius_m: tip as f32,
+        max_tip_speed_m_s: tip_speed as f32,
+        max_joint_speed: f32s(joint_speed),
     };
     bank_format::validate_device(&device)
         .map_err(|e| ctx.err(d.fulcrum_m.span(), "device", e.to_string()))?;
     Ok(device)
+}
+
+/// `device.max_tip_speed_m_s` (optional, default [`DEFAULT_MAX_TIP_SPEED_M_S`]) finite and > 0;
+/// `device.max_joint_speed` (optional, default derived from the tip's, see
+/// [`DEFAULT_SPEED_LEVER_M`]) finite, > 0 and below the firmware's encoder-jump speeds
+/// ([`firmware::safety::DEFAULT_JUMP_SPEED`]): a move faster than those counts as an encoder
+/// glitch, so a threshold at or above them would never report an overspeed. Returns the tip's
+/// (m/s) and the joints' (rad/s, rad/s, m/s).
+fn parse_speed_limits(ctx: &Ctx, d: &RawDevice) -> Result<(f64, [f64; 3]), SceneError> {
+    let jump = firmware::safety::DEFAULT_JUMP_SPEED.map(f64::from);
+    let tip = match &d.max_tip_speed_m_s {
+        Some(v) => {
+            let x = *v.get_ref();
+            if !(x.is_finite() && x > 0.0) {
+                return Err(ctx.err(
+                    v.span(),
+                    "device.max_tip_speed_m_s",
+                    format!("must be > 0 m/s, got {x}"),
+                ));
+            }
+            x
+        }
+        None => DEFAULT_MAX_TIP_SPEED_M_S,
+    };
+    let below_jump = |v: [f64; 3]| (0..3).all(|j| v[j] < jump[j]);
+    let joints = match &d.max_joint_speed {
+        Some(v) => {
+            finite(ctx, v, "device.max_joint_speed")?;
+            let x = *v.get_ref();
+            if !x.iter().all(|&s| s > 0.0) {
+                return Err(ctx.err(
+                    v.span(),
+                    "device.max_joint_speed",
+                    format!("every value must be > 0 (rad/s, rad/s, m/s), got {x:?}"),
+                ));
+            }
+            if !below_jump(x) {
+                return Err(ctx.err(
+                    v.span(),
+                    "device.max_joint_speed",
+                    format!(
+                        "{x:?} must stay below the firmware's encoder-jump speeds {jump:?} \
+                         (rad/s, rad/s, m/s), above which a move counts as an encoder glitch"
+                    ),
+                ));
+            }
+            x
+        }
+        None => {
+            let derived = [
+                tip / DEFAULT_SPEED_LEVER_M,
+                tip / DEFAULT_SPEED_LEVER_M,
+                tip,
+            ];
+            if !below_jump(derived) {
+                let span = d.max_tip_speed_m_s.as_ref().map_or(0..0, |v| v.span());
+                return Err(ctx.err(
+                    span,
+                    "device.max_tip_speed_m_s",
+                    format!(
+                        "the default device.max_joint_speed derived from it, {derived:?}, is not \
+                         below the firmware's encoder-jump speeds {jump:?}: give \
+                         device.max_joint_speed"
+                    ),
+                ));
+            }
+            derived
+        }
+    };
+    Ok((tip, joints))
 }
 
 /// `[law]`: `domain_n` a non-empty range when given; `kind` "linear" (no `coeffs`; `gain` > 0,
@@ -806,7 +902,7 @@ fn parse_bank(ctx: &Ctx, b: &RawBank) -> Result<BankOptions, SceneError> {
             p.span(),
             "bank.precision",
             format!(
-                "storage precision {:?} is not supported by bank format 1.0 (only \"f32\")",
+                "storage precision {:?} is not supported by bank format 2.0 (only \"f32\")",
                 p.get_ref()
             ),
         ));
@@ -941,6 +1037,36 @@ mod tests {
             ),
             ("precision", "precision = \"f16\"", "bank.precision"),
             (
+                "max_tip_speed_m_s",
+                "max_tip_speed_m_s = 0.0",
+                "device.max_tip_speed_m_s",
+            ),
+            (
+                "max_tip_speed_m_s",
+                "max_tip_speed_m_s = -1.0",
+                "device.max_tip_speed_m_s",
+            ),
+            (
+                "max_tip_speed_m_s",
+                "max_tip_speed_m_s = nan",
+                "device.max_tip_speed_m_s",
+            ),
+            (
+                "max_joint_speed",
+                "max_joint_speed = [10.0, 0.0, 1.0]",
+                "device.max_joint_speed",
+            ),
+            (
+                "max_joint_speed",
+                "max_joint_speed = [inf, 10.0, 1.0]",
+                "device.max_joint_speed",
+            ),
+            (
+                "max_joint_speed",
+                "max_joint_speed = [10.0, 10.0, 2.5]",
+                "device.max_joint_speed",
+            ),
+            (
                 "truncation_radius_m",
                 "truncation_radius_m = -1.0",
                 "bank.truncation_radius_m",
@@ -956,6 +1082,53 @@ mod tests {
                 "{e}"
             );
         }
+    }
+
+    /// The overspeed thresholds: the shipped scene's, the defaults when the keys are absent
+    /// (the joints' derived from the tip's), and a derived default the encoder-jump check would
+    /// shadow refused with the tip key's line.
+    #[test]
+    fn speed_thresholds_have_defaults_and_reach_the_calibration() {
+        let (_, t) = shipped();
+        let parse = |text: &str| Scene::parse(Path::new("scene.toml"), text).unwrap().device;
+        let d = parse(&t);
+        assert_eq!(
+            (d.max_tip_speed_m_s, d.max_joint_speed),
+            (1.0, [10.0, 10.0, 1.0])
+        );
+        let (no_tip, _) = with_line(&t, "max_tip_speed_m_s", "");
+        let (neither, _) = with_line(&no_tip, "max_joint_speed", "");
+        let d = parse(&neither);
+        assert_eq!(f64::from(d.max_tip_speed_m_s), DEFAULT_MAX_TIP_SPEED_M_S);
+        assert_eq!(d.max_joint_speed, [10.0, 10.0, 1.0]);
+        let (slow, _) = with_line(
+            &neither,
+            "max_force_n",
+            "max_force_n = 5.0\nmax_tip_speed_m_s = 0.5",
+        );
+        let d = parse(&slow);
+        assert_eq!(
+            (d.max_tip_speed_m_s, d.max_joint_speed),
+            (0.5, [5.0, 5.0, 0.5])
+        );
+        let (given, _) = with_line(&t, "max_joint_speed", "max_joint_speed = [4.0, 5.0, 0.6]");
+        assert_eq!(parse(&given).max_joint_speed, [4.0, 5.0, 0.6]);
+        // 3 m/s at the tip would derive 30 rad/s and 3 m/s: beyond the encoder-jump check.
+        let (fast, line) = with_line(
+            &neither,
+            "max_force_n",
+            "max_force_n = 5.0\nmax_tip_speed_m_s = 3.0",
+        );
+        let e = err_of(&fast);
+        assert_eq!(
+            (e.line, e.key.as_str()),
+            (Some(line + 1), "device.max_tip_speed_m_s"),
+            "{e}"
+        );
+        assert!(e.message.contains("device.max_joint_speed"), "{e}");
+        // Given explicitly below the jump speeds, a fast tip threshold is fine.
+        let (fast, _) = with_line(&t, "max_tip_speed_m_s", "max_tip_speed_m_s = 3.0");
+        assert_eq!(parse(&fast).max_tip_speed_m_s, 3.0);
     }
 
     #[test]

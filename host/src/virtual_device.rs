@@ -2,7 +2,8 @@
 //! ticking at 1 kHz in its own thread on the PC, with a virtual hand on the encoders.
 //!
 //! The hand follows a joint target (set by the mouse or a script through [`Source::steering`]) at a
-//! bounded speed, well under the supervisor's joint-speed limits, and its joint values become
+//! bounded speed, well under the supervisor's speed thresholds (the scene's defaults: 10 rad/s,
+//! 10 rad/s and 1 m/s per joint, 1 m/s at the tip), and its joint values become
 //! encoder counts through the bank's calibration ([`crate::kinematics::counts_for`], the inverse of
 //! [`firmware::device::Device::joints`]), so the tip goes through the same device model as on the
 //! hardware. Every tick publishes a [`Sample`]; readers take the newest one (a slow display
@@ -17,6 +18,7 @@ use crate::kinematics::{clamp_joints, counts_for};
 use crate::source::{LoopStats, Mailbox, Sample, Source, Steering};
 use anyhow::{Result, anyhow};
 use bank_format::{AlignedBytes, Bank, DeviceCalibration};
+use firmware::hal::Interlocks;
 use firmware::tick::{HapticLoop, LoopInput};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
@@ -164,6 +166,8 @@ fn run(bytes: &AlignedBytes, shared: &Shared, home: [f64; 3]) {
             encoder_counts: counts_for(&cal, q),
             overrun: false,
             link_silence_ticks: 0,
+            // A PC has no e-stop or amplifier fault lines.
+            interlocks: Interlocks::default(),
         });
         ticks += 1;
         if out.new_fault.is_some() {
@@ -218,6 +222,50 @@ fn percentile(histogram: &[u64], q: f64) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The hand at its top speed on all three joints at once, reversing at the ends of the
+    /// shipped scene's ranges, never trips the supervisor's speed checks (the scene's default
+    /// thresholds; the encoders quantise as the real ones do).
+    #[test]
+    fn the_hand_at_top_speed_never_trips_the_speed_checks() {
+        use firmware::device::Device;
+        use firmware::safety::{SafetyConfig, Supervisor, TickInput};
+        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/liver.toml");
+        let cal = crate::scene::Scene::load(&path).unwrap().device;
+        let dev = Device::new(&cal);
+        let mut sup = Supervisor::new(SafetyConfig::new(&cal));
+        let (lo, hi) = (cal.joint_min.map(f64::from), cal.joint_max.map(f64::from));
+        let mut q = clamp_joints(&cal, cal.home_joint.map(f64::from));
+        let mut target = hi;
+        let mut prev_tip: Option<[f32; 3]> = None;
+        let mut peak = 0.0f32;
+        sup.arm(true).unwrap();
+        for tick in 0..5000 {
+            for i in 0..3 {
+                if (target[i] - q[i]).abs() < 1e-12 {
+                    target[i] = if target[i] == hi[i] { lo[i] } else { hi[i] };
+                }
+                q[i] += (target[i] - q[i]).clamp(-MAX_STEP[i], MAX_STEP[i]);
+            }
+            let counts = counts_for(&cal, q);
+            let joints = dev.joints(counts);
+            let tip = dev.tip(&joints);
+            let out = sup.tick(&TickInput {
+                counts,
+                joints: joints.to_array(),
+                tip_m: tip,
+                ..TickInput::quiet()
+            });
+            assert_eq!(out.new_fault, None, "tick {tick}: {q:?}");
+            if let Some(p) = prev_tip {
+                let d: f32 = (0..3).map(|i| (tip[i] - p[i]).powi(2)).sum();
+                peak = peak.max(d.sqrt() * firmware::TICK_HZ as f32);
+            }
+            prev_tip = Some(tip);
+        }
+        // It really moved fast: well over half the 1 m/s tip threshold.
+        assert!(peak > 0.6 && peak < cal.max_tip_speed_m_s, "{peak}");
+    }
 
     #[test]
     fn percentile_reads_the_histogram() {

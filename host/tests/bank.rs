@@ -63,13 +63,27 @@ fn shipped_scene_builds_a_valid_bank_and_inspect_refuses_damaged_copies() {
         "{summary}"
     );
 
+    // The scene's speed thresholds are in the bank (format 2).
+    assert_eq!(bank.version().0, 2);
+    assert_eq!(bank.device().max_tip_speed_m_s, 1.0);
+    assert_eq!(bank.device().max_joint_speed, [10.0, 10.0, 1.0]);
     let o = host(&["bank", "inspect", s(&out)]);
     assert!(o.status.success(), "{}", stderr(&o));
+    let text = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        text.contains("overspeed tip 1 m/s; joints 10 rad/s, 10 rad/s, 1 m/s"),
+        "{text}"
+    );
     let o = host(&["bank", "inspect", s(&out), "--json"]);
     assert!(o.status.success(), "{}", stderr(&o));
     let v: serde_json::Value = serde_json::from_slice(&o.stdout).expect("one JSON object");
     assert_eq!(v["nodes"], n);
     assert_eq!(v["crc32"], format!("{:08x}", bank.crc()));
+    assert_eq!(v["device"]["max_tip_speed_m_s"], 1.0);
+    assert_eq!(
+        v["device"]["max_joint_speed"],
+        serde_json::json!([10.0, 10.0, 1.0])
+    );
 
     // One flipped byte in the middle (C_kl data): the CRC catches it.
     let mut damaged = bytes.clone();

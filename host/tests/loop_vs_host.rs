@@ -153,6 +153,7 @@ fn full_tick_forces_match_the_host_f64_reference_on_the_liver_bank() {
             encoder_counts: counts,
             overrun: false,
             link_silence_ticks: 0,
+            interlocks: firmware::hal::Interlocks::default(),
         });
         assert!(out.solve_error.is_none(), "{out:?}");
         let ContactState::Touching { displacement, .. } = out.contact else {

@@ -2,14 +2,17 @@
 //! 1 cm spacing, every pair coupled), driven by encoder counts computed here by inverse
 //! kinematics: a press followed by a 500-tick slide across the patch and a lift, contact nodes
 //! micrometres apart, a press at the edge of the region. Every tick:
-//! no NaN, the force within `max_force_n`, the currents within their limits.
+//! no NaN, the force within `max_force_n`, the currents within their limits. And a slide that
+//! speeds up past the bank's tip-speed threshold, which must end in `Overspeed` at zero current;
+//! the SIL plant's scripted strike, natively, likewise.
 
 #![allow(clippy::needless_range_loop)]
 
-use bank_format::{Bank, DeviceCalibration};
+use bank_format::{Bank, DeviceCalibration, FaultReason};
 use firmware::contact::ContactState;
 use firmware::fixtures::{flat_patch, patch_device};
-use firmware::safety::State;
+use firmware::hal::Interlocks;
+use firmware::safety::{Fault, State};
 use firmware::tick::{HapticLoop, LoopInput, LoopOutput};
 use host::kinematics::{Workspace, counts_for};
 
@@ -64,6 +67,7 @@ fn slide_across_the_patch_while_pressed() {
             encoder_counts: counts_for_tip(&cal, p),
             overrun: false,
             link_silence_ticks: 0,
+            interlocks: Interlocks::default(),
         });
         check(&out, &cal);
         for i in 0..3 {
@@ -136,6 +140,7 @@ fn contact_nodes_micrometres_apart() {
             encoder_counts: counts_for_tip(&cal, p),
             overrun: false,
             link_silence_ticks: 0,
+            interlocks: Interlocks::default(),
         });
         check(&out, &cal);
         assert!(out.solve_error.is_none(), "{out:?}");
@@ -183,6 +188,7 @@ fn contact_next_to_the_fixed_boundary() {
             encoder_counts: counts_for_tip(&cal, p),
             overrun: false,
             link_silence_ticks: 0,
+            interlocks: Interlocks::default(),
         });
         check(&out, &cal);
         assert!(out.solve_error.is_none(), "{out:?}");
@@ -193,4 +199,157 @@ fn contact_next_to_the_fixed_boundary() {
         }
     }
     assert!(touching > 80 && last > 0.1, "{touching} {last}");
+}
+
+/// Pressed 3 mm and sliding ever faster across the patch (0.1 mm/tick more every tick): the
+/// loop renders while the tip is under the bank's 1 m/s, faults `Overspeed` (detail 3, the tip)
+/// at the first tick it moves more than 1 mm, and drives no current from that tick on, though
+/// the tool still presses; clearing the fault and arming renders again.
+#[test]
+fn sliding_faster_than_the_tip_threshold_faults_overspeed() {
+    let bytes = flat_patch();
+    let bank = Bank::parse(bytes.as_slice()).unwrap();
+    let cal = patch_device();
+    let mut lp = HapticLoop::new(&bank);
+    lp.arm().unwrap();
+    let above = [0.004, 0.02, 0.002];
+    let start = [0.004, 0.02, -0.003];
+    let mut path: Vec<[f64; 3]> = (0..=50)
+        .map(|t| lerp(above, start, t as f64 / 50.0))
+        .collect();
+    // Steps 0.35, 0.45, ... mm: 0.95 mm (0.95 m/s) at the 7th, 1.05 mm at the 8th, the margin
+    // (50 um) well beyond the encoders' quantisation (about 13 um per pitch count at the tip).
+    let mut x = start[0];
+    for n in 0..14 {
+        x += (0.35 + 0.1 * f64::from(n)) * 1e-3;
+        path.push([x, start[1], start[2]]);
+    }
+    let limit = f64::from(cal.max_tip_speed_m_s) * f64::from(firmware::TICK_PERIOD_S);
+    let dist = |a: [f64; 3], b: [f64; 3]| (0..3).map(|i| (a[i] - b[i]).powi(2)).sum::<f64>().sqrt();
+    let first_fast = (1..path.len())
+        .find(|&n| dist(path[n], path[n - 1]) > limit)
+        .unwrap();
+    assert_eq!(first_fast, 51 + 7);
+    let mut faults = Vec::new();
+    for (n, &p) in path.iter().enumerate() {
+        let out = lp.tick(LoopInput {
+            encoder_counts: counts_for_tip(&cal, p),
+            overrun: false,
+            link_silence_ticks: 0,
+            interlocks: Interlocks::default(),
+        });
+        if let Some(f) = out.new_fault {
+            faults.push((n, f));
+        }
+        if n < first_fast {
+            check(&out, &cal);
+            if n > 30 {
+                assert!(out.currents_a.iter().any(|&i| i != 0.0), "{out:?}");
+            }
+        } else {
+            assert_eq!(out.state, State::Fault(FaultReason::Overspeed), "{out:?}");
+            assert_eq!(out.currents_a, [0.0; 3], "{out:?}");
+            assert!(
+                matches!(out.contact, ContactState::Touching { .. }),
+                "{out:?}"
+            );
+        }
+    }
+    assert_eq!(
+        faults,
+        [(
+            first_fast,
+            Fault {
+                reason: FaultReason::Overspeed,
+                detail: 3
+            }
+        )]
+    );
+    // Re-arming is explicit: clear, arm; held still, the press renders again.
+    let last = *path.last().unwrap();
+    let hold = LoopInput {
+        encoder_counts: counts_for_tip(&cal, last),
+        overrun: false,
+        link_silence_ticks: 0,
+        interlocks: Interlocks::default(),
+    };
+    assert!(lp.arm().is_err());
+    assert!(lp.clear_fault());
+    lp.arm().unwrap();
+    let out = lp.tick(hold);
+    check(&out, &cal);
+    assert!(out.currents_a.iter().any(|&i| i != 0.0), "{out:?}");
+}
+
+/// The SIL harness's `strike` (`host::sil::script`: from 10 mm above the liver, 18 mm down in
+/// 20 ms), natively: the simulated gimbal, pulled by the hand, reaches about 1.4 m/s, over the
+/// shipped scene's 1 m/s, while still above the surface. The loop, armed at the harness's arm
+/// tick, faults `Overspeed` at the tip during the descent, before any contact, and drives no
+/// current from then on (the press that follows is felt by nobody). `tests/sil.rs` expects the
+/// same of the QEMU image.
+#[test]
+fn the_sil_strike_trips_overspeed_before_contact() {
+    use host::sil::harness::ARM_TICK;
+    use host::sil::plant::{Gimbal, PlantParams, TICK_S};
+    use host::sil::script::{Script, Trajectory};
+    let scene = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../host/scenes/liver.toml");
+    let raw = host::bank::scene_bank(&scene).unwrap();
+    let bytes = bank_format::AlignedBytes::new(&raw);
+    let bank = Bank::parse(&bytes).unwrap();
+    let cal = *bank.device();
+    let trajectory = Trajectory::new(&bank, Script::Strike).unwrap();
+    let mut gimbal = Gimbal::new(&cal, PlantParams::default());
+    let mut lp = HapticLoop::new(&bank);
+    let mut hand_prev = trajectory.at(0.0);
+    let (mut faults, mut peak, mut prev_tip) = (Vec::new(), 0.0f32, None::<[f32; 3]>);
+    let mut first_contact = None;
+    for tick in 1..=2000u32 {
+        if tick == ARM_TICK {
+            lp.arm().unwrap();
+        }
+        let out = lp.tick(LoopInput {
+            encoder_counts: gimbal.encoder_counts(),
+            overrun: false,
+            link_silence_ticks: 0,
+            interlocks: Interlocks::default(),
+        });
+        if let Some(f) = out.new_fault {
+            faults.push((tick, f));
+        }
+        if !out.contacts.is_empty() && first_contact.is_none() {
+            first_contact = Some(tick);
+        }
+        if let Some(p) = prev_tip {
+            let d: f32 = (0..3).map(|i| (out.tip_m[i] - p[i]).powi(2)).sum();
+            peak = peak.max(d.sqrt() / firmware::TICK_PERIOD_S);
+        }
+        prev_tip = Some(out.tip_m);
+        if let Some(&(at, _)) = faults.first() {
+            assert_eq!(out.currents_a, [0.0; 3], "tick {tick}: {out:?}");
+            assert_eq!(
+                out.state,
+                State::Fault(FaultReason::Overspeed),
+                "tick {tick}"
+            );
+            assert!(tick >= at);
+        }
+        let hand = trajectory.at(f64::from(tick) * TICK_S);
+        gimbal.step(out.currents_a, hand_prev, hand);
+        hand_prev = hand;
+    }
+    assert_eq!(faults.len(), 1, "{faults:?}");
+    let (at, fault) = faults[0];
+    assert_eq!(
+        fault,
+        Fault {
+            reason: FaultReason::Overspeed,
+            detail: 3
+        }
+    );
+    // The strike starts 1.0 s into the run (0.5 s approach, 0.5 s hover); the fault comes
+    // within its 20 ms descent, before the tip reaches the surface.
+    assert!((1000..1020).contains(&at), "{at}");
+    let touched = first_contact.expect("the strike reaches the liver");
+    assert!(touched > at, "contact at {touched}, fault at {at}");
+    assert!(peak > 1.2 && peak < 1.6, "peak tip speed {peak} m/s");
 }

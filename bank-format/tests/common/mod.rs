@@ -89,6 +89,8 @@ pub fn device() -> DeviceCalibration {
         current_limit_a: [2.0, 2.0, 1.5],
         max_force_n: 5.0,
         tip_radius_m: 0.002,
+        max_tip_speed_m_s: 1.0,
+        max_joint_speed: [10.0, 12.0, 1.5],
     }
 }
 

@@ -242,7 +242,8 @@ fn inspect(args: InspectArgs) -> Result<()> {
                 "counts_per_rev": d.counts_per_rev, "transmission": d.transmission,
                 "torque_constant_nm_per_a": d.torque_constant_nm_per_a,
                 "current_limit_a": d.current_limit_a, "max_force_n": d.max_force_n,
-                "tip_radius_m": d.tip_radius_m,
+                "tip_radius_m": d.tip_radius_m, "max_tip_speed_m_s": d.max_tip_speed_m_s,
+                "max_joint_speed": d.max_joint_speed,
             },
             "sections": sections.iter().map(|(n, o, l, c)| serde_json::json!(
                 { "kind": n, "offset": o, "len": l, "count": c })).collect::<Vec<_>>(),
@@ -297,6 +298,10 @@ fn inspect(args: InspectArgs) -> Result<()> {
         d.current_limit_a,
         d.max_force_n,
         d.tip_radius_m
+    );
+    println!(
+        "overspeed tip {} m/s; joints {} rad/s, {} rad/s, {} m/s",
+        d.max_tip_speed_m_s, d.max_joint_speed[0], d.max_joint_speed[1], d.max_joint_speed[2]
     );
     println!("sections  kind                  offset     bytes   count");
     for (name, off, len, count) in sections {

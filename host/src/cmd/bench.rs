@@ -267,6 +267,7 @@ fn tick(args: TickArgs) -> Result<()> {
         encoder_counts: counts_for(&cal, q),
         overrun: false,
         link_silence_ticks: 0,
+        interlocks: firmware::hal::Interlocks::default(),
     };
     // Find first contact straight along the shaft at the home pose (disarmed probe).
     let step = 5e-5;
