@@ -783,7 +783,7 @@ fn parse_law(ctx: &Ctx, l: &RawLaw, fmax: f64) -> Result<(LawSpec, TissueLaw), S
                 let span = l.gain.as_ref().map_or(law_key_span.clone(), |g| g.span());
                 return Err(ctx.err(span, "law.gain", format!("must be > 0, got {gain}")));
             }
-            if !(offset >= 0.0 && offset.is_finite()) {
+            if !offset.is_finite() || offset < 0.0 {
                 let span = l
                     .offset_n
                     .as_ref()
@@ -828,7 +828,7 @@ fn parse_law(ctx: &Ctx, l: &RawLaw, fmax: f64) -> Result<(LawSpec, TissueLaw), S
             let law = TissueLaw::chebyshev(&coeffs, domain_n.map(|v| v as f32))
                 .map_err(|e| ctx.err(c.span(), "law.coeffs", e.to_string()))?;
             let q0 = law.eval(0.0);
-            if !(q0 >= 0.0) {
+            if q0.is_nan() || q0 < 0.0 {
                 return Err(ctx.err(
                     c.span(),
                     "law.coeffs",

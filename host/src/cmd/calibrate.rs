@@ -203,7 +203,7 @@ fn tissue(a: TissueArgs) -> Result<()> {
     }
     if matches!(a.law, Law::Q) {
         let q0 = law.eval(0.0);
-        if !(q0 >= 0.0) {
+        if q0.is_nan() || q0 < 0.0 {
             bail!(
                 "{}: the fitted law gives Q(0) = {q0:.4} N < 0: rendered, it would pull the \
                  tool into the tissue at first contact; nothing was written (check that the \
