@@ -70,6 +70,13 @@ step "no_std crates cross-compile for the MCU; the QEMU image links against memo
 cargo build --release -p bank-format -p firmware --target thumbv7em-none-eabihf
 (cd firmware/qemu && cargo build --release)
 
+step "the board image (STM32F405RG, embassy-stm32): format, lints, build, size against memory.x"
+# Its own workspace too; built only (no board here). The linker enforces memory.x's regions.
+# Lints also cover the bring-up builds' fault injection (features bringup-*).
+(cd firmware/board && cargo fmt --check && cargo clippy --release -- -D warnings &&
+    cargo clippy --release --all-features -- -D warnings && cargo build --release)
+cargo run --release -q -p host -- bench image firmware/board/target/thumbv7em-none-eabihf/release/firmware-board
+
 step "tests (profile checked: release speed, overflow checks and debug assertions on)"
 log=$(mktemp)
 trap 'rm -f "$log"' EXIT

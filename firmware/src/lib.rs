@@ -9,7 +9,9 @@
 //!
 //! Around the loop, [`app`] is the device application (link commands, faults, telemetry) and
 //! [`hal`] the trait boundary an image implements for its hardware; the QEMU
-//! software-in-the-loop image lives in `firmware/qemu/`.
+//! software-in-the-loop image lives in `firmware/qemu/`, the STM32F405 board image in
+//! `firmware/board/`. For the images: [`deadline`] (tick overruns on a cycle counter) and
+//! [`stm32_gpio`] (GPIO register words for the panic path).
 #![no_std]
 // No panic paths in the firmware: every module the tick calls is checked (tests may unwrap).
 #![cfg_attr(
@@ -34,6 +36,7 @@ pub const TICK_PERIOD_S: f32 = 1.0 / TICK_HZ as f32;
 pub mod amplifier;
 pub mod app;
 pub mod contact;
+pub mod deadline;
 pub mod device;
 pub mod encoder;
 #[cfg(any(test, feature = "test-fixtures"))]
@@ -43,5 +46,6 @@ pub mod link;
 pub mod patch;
 pub mod safety;
 pub mod solve;
+pub mod stm32_gpio;
 pub mod tick;
 mod vec3;

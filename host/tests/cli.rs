@@ -241,3 +241,65 @@ fn malformed_msh41_prints_only_the_error() {
     assert!(!stderr.contains("panicked"), "{stderr}");
     assert_eq!(stderr.trim().lines().count(), 1, "{stderr}");
 }
+
+/// A little-endian ELF32 file with the given sections `(type, flags, address, size)` (the file
+/// holds the headers only, which is all `bench image` reads).
+fn elf32(sections: &[(u32, u32, u32, u32)]) -> Vec<u8> {
+    let mut b = vec![0u8; 52];
+    b[..6].copy_from_slice(&[0x7f, b'E', b'L', b'F', 1, 1]);
+    b[0x20..0x24].copy_from_slice(&52u32.to_le_bytes()); // e_shoff
+    b[0x2e..0x30].copy_from_slice(&40u16.to_le_bytes()); // e_shentsize
+    let shnum = sections.len() as u16 + 1;
+    b[0x30..0x32].copy_from_slice(&shnum.to_le_bytes());
+    b.extend_from_slice(&[0u8; 40]); // the null section
+    for &(kind, flags, addr, size) in sections {
+        let mut h = [0u8; 40];
+        h[4..8].copy_from_slice(&kind.to_le_bytes());
+        h[8..12].copy_from_slice(&flags.to_le_bytes());
+        h[12..16].copy_from_slice(&addr.to_le_bytes());
+        h[20..24].copy_from_slice(&size.to_le_bytes());
+        b.extend_from_slice(&h);
+    }
+    b
+}
+
+#[test]
+fn bench_image_prints_flash_and_static_ram_against_memory_x() {
+    use bank_format::region::{FIRMWARE_LEN, RAM_LEN, RAM_ORIGIN};
+    const PROGBITS: u32 = 1;
+    const NOBITS: u32 = 8;
+    const ALLOC: u32 = 2;
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("image.elf");
+    // .text 65,536 B in flash; .data 256 B (in RAM, its initial values in flash); .bss
+    // 1,792 B; a debug section (not allocated) counts for neither.
+    let elf = elf32(&[
+        (PROGBITS, ALLOC | 4, 0x0800_0000, 65_536),
+        (PROGBITS, ALLOC | 1, RAM_ORIGIN, 256),
+        (NOBITS, ALLOC | 1, RAM_ORIGIN + 256, 1_792),
+        (PROGBITS, 0, 0, 99_999),
+    ]);
+    std::fs::write(&path, elf).unwrap();
+    let out = host(&["bench", "image", path.to_str().unwrap()]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let ram_pct = 100.0 * 2_048.0 / RAM_LEN as f64;
+    let flash_pct = 100.0 * 65_792.0 / FIRMWARE_LEN as f64;
+    assert_eq!(
+        String::from_utf8_lossy(&out.stdout),
+        format!(
+            "flash 65792 B of {FIRMWARE_LEN} B ({flash_pct:.1}%), static RAM 2048 B of \
+             {RAM_LEN} B ({ram_pct:.1}%)\n"
+        )
+    );
+    // Not an ELF file, and no file: an error naming it.
+    std::fs::write(&path, b"not an elf").unwrap();
+    fails_with(
+        &["bench", "image", path.to_str().unwrap()],
+        "not a little-endian ELF32",
+    );
+    fails_with(&["bench", "image", "/nonexistent/image.elf"], "cannot read");
+}

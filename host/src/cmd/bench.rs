@@ -29,6 +29,17 @@ pub enum Bench {
     /// Instructions one evaluation of the tissue law costs on the MCU (thumbv7em), per degree,
     /// counted on the disassembly of `TissueLaw::eval`.
     Law(super::bench_law::LawArgs),
+    /// Flash and static RAM of an MCU image (ELF) against the firmware and RAM regions of
+    /// memory.x (e.g. the board image,
+    /// firmware/board/target/thumbv7em-none-eabihf/release/firmware-board).
+    Image(ImageArgs),
+}
+
+/// Arguments of `host bench image`.
+#[derive(clap::Args, Debug)]
+pub struct ImageArgs {
+    /// The image (ELF32, linked against memory.x).
+    elf: PathBuf,
 }
 
 /// Arguments of `host bench sil`.
@@ -108,6 +119,7 @@ pub fn run(bench: Bench) -> Result<()> {
         Bench::Refinement(args) => super::refinement::run(args),
         Bench::Sil(args) => sil(args),
         Bench::Law(args) => super::bench_law::run(args),
+        Bench::Image(args) => image(args),
     }
 }
 
@@ -427,14 +439,51 @@ fn sil(args: SilArgs) -> Result<()> {
         );
     }
     println!("worst case       body {worst}, whole tick {worst_tick}");
-    println!(
-        "image            flash {} B of {} B ({:.1}%), static RAM {} B of {} B ({:.1}%)",
+    println!("image            {}", size_line(&size));
+    Ok(())
+}
+
+fn image(args: ImageArgs) -> Result<()> {
+    use bank_format::region::{RAM_LEN, RAM_ORIGIN};
+    let size = host::sil::cost::image_size(&args.elf, RAM_ORIGIN, RAM_LEN as u32)?;
+    println!("{}", size_line(&size));
+    Ok(())
+}
+
+/// An image's flash and static RAM against the firmware and RAM regions of memory.x, as
+/// `bench sil` and `bench image` print it.
+fn size_line(size: &host::sil::cost::ImageSize) -> String {
+    use bank_format::region::{FIRMWARE_LEN, RAM_LEN};
+    format!(
+        "flash {} B of {} B ({:.1}%), static RAM {} B of {} B ({:.1}%)",
         size.flash,
         FIRMWARE_LEN,
         100.0 * size.flash as f64 / FIRMWARE_LEN as f64,
         size.ram,
         RAM_LEN,
         100.0 * size.ram as f64 / RAM_LEN as f64
-    );
-    Ok(())
+    )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn size_line_against_the_regions() {
+        use bank_format::region::{FIRMWARE_LEN, RAM_LEN};
+        let size = host::sil::cost::ImageSize {
+            flash: FIRMWARE_LEN as u64 / 4,
+            ram: 1_000,
+        };
+        let ram_pct = 100.0 * 1_000.0 / RAM_LEN as f64;
+        assert_eq!(
+            size_line(&size),
+            format!(
+                "flash {} B of {FIRMWARE_LEN} B (25.0%), static RAM 1000 B of {RAM_LEN} B \
+                 ({ram_pct:.1}%)",
+                FIRMWARE_LEN / 4
+            )
+        );
+    }
 }
