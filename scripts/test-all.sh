@@ -75,7 +75,7 @@ step "the board image (STM32F405RG, embassy-stm32): format, lints, build, size a
 # Lints also cover the bring-up builds' fault injection (features bringup-*).
 (cd firmware/board && cargo fmt --check && cargo clippy --release -- -D warnings &&
     cargo clippy --release --all-features -- -D warnings && cargo build --release)
-cargo run --release -q -p host -- bench image firmware/board/target/thumbv7em-none-eabihf/release/firmware-board
+cargo run --profile checked -q -p host -- bench image firmware/board/target/thumbv7em-none-eabihf/release/firmware-board
 
 step "tests (profile checked: release speed, overflow checks and debug assertions on)"
 log=$(mktemp)
