@@ -494,6 +494,78 @@ fn cli_fits_writes_scene_json_and_plots() {
     assert!(dir.path().join("m-insertion.png").exists());
 }
 
+/// Pure noise (y = x + N(0, 1) on [0, 5], the case) is no tissue law: refused with
+/// the RMS error named and the scene left alone; forced with --accept-poor-fit, the law still
+/// may not pull the tool in at first contact, and when written the scene says it was forced.
+#[test]
+fn a_fit_to_noise_or_a_pulling_law_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = dir.path().join("scene.toml");
+    let original = std::fs::read_to_string(manifest("scenes/liver.toml")).unwrap();
+    std::fs::write(&scene, &original).unwrap();
+    let mut noise = Noise(7);
+    let rows: String = (0..200)
+        .map(|i| {
+            let x = 5.0 * f64::from(i) / 199.0;
+            format!("{x},{}\n", x + noise.normal())
+        })
+        .collect();
+    let csv = dir.path().join("noise.csv");
+    std::fs::write(&csv, format!("x,y\n{rows}")).unwrap();
+    let plot = dir.path().join("p");
+    let args = |extra: &[&'static str]| {
+        let mut v = vec![
+            "calibrate",
+            "tissue",
+            "--csv",
+            csv.to_str().unwrap(),
+            "--scene",
+            scene.to_str().unwrap(),
+            "--plot",
+            plot.to_str().unwrap(),
+        ];
+        v.extend_from_slice(extra);
+        v.into_iter().map(String::from).collect::<Vec<_>>()
+    };
+    let run_with = |extra: &[&'static str]| {
+        let a = args(extra);
+        run(&a.iter().map(String::as_str).collect::<Vec<_>>())
+    };
+    let (ok, _, err) = run_with(&[]);
+    assert!(!ok);
+    assert!(err.contains("more than --max-rms 5.0 %"), "{err}");
+    assert_eq!(std::fs::read_to_string(&scene).unwrap(), original);
+    // Forced: written with a note, unless the law pulls at zero force.
+    let (ok, _, err) = run_with(&["--accept-poor-fit", "--degree", "1"]);
+    let text = std::fs::read_to_string(&scene).unwrap();
+    if ok {
+        assert!(text.contains("written with --accept-poor-fit"), "{text}");
+        assert!(host::scene::pull_at_first_contact(&Scene::load(&scene).unwrap().law).is_none());
+    } else {
+        assert!(err.contains("pull the tool"), "{err}");
+        assert_eq!(text, original);
+    }
+}
+
+/// A scene whose law pulls at zero force (Q(0) < 0) is refused, naming the key.
+#[test]
+fn a_scene_law_that_pulls_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let original = std::fs::read_to_string(manifest("scenes/liver.toml")).unwrap();
+    let with = |law: &str| {
+        let text = original.replacen("\nkind = \"linear\"\n", &format!("\n{law}\n"), 1);
+        assert_ne!(text, original, "the scene's [law] kind line moved");
+        let p = dir.path().join("s.toml");
+        std::fs::write(&p, text).unwrap();
+        Scene::load(&p).map(|_| ()).map_err(|e| e.to_string())
+    };
+    assert!(with("kind = \"linear\"\noffset_n = 0.0").is_ok());
+    let e = with("kind = \"linear\"\noffset_n = -1.0").unwrap_err();
+    assert!(e.contains("law.offset_n") && e.contains("pull"), "{e}");
+    let e = with("kind = \"chebyshev\"\ncoeffs = [0.5, 1.0]\ndomain_n = [0.0, 5.0]").unwrap_err();
+    assert!(e.contains("law.coeffs") && e.contains("Q(0) = -0.5"), "{e}");
+}
+
 #[test]
 fn bad_csvs_name_the_line_and_leave_the_scene_alone() {
     let dir = tempfile::tempdir().unwrap();

@@ -88,6 +88,11 @@ async fn haptic(mut app: App<'static, 'static>, mut plant: BoardPlant, mut watch
         let timing = watch.end(clock.cycles());
         app.record_tick_cycles(timing.cycles);
         overrun = timing.overrun;
+        if overrun {
+            // Start afresh from now instead of catching up with back-to-back ticks, which
+            // would starve the link task of the time to report the fault.
+            ticker.reset();
+        }
         let state = match report.state {
             State::Disarmed => 0,
             State::Armed => 1,

@@ -201,16 +201,16 @@ fn tissue(a: TissueArgs) -> Result<()> {
             100.0 * a.max_rms
         );
     }
-    if matches!(a.law, Law::Q) {
-        let q0 = law.eval(0.0);
-        if q0.is_nan() || q0 < 0.0 {
-            bail!(
-                "{}: the fitted law gives Q(0) = {q0:.4} N < 0: rendered, it would pull the \
-                 tool into the tissue at first contact; nothing was written (check that the \
-                 data starts at zero force, or fit a lower --degree)",
-                a.csv.display()
-            );
-        }
+    if matches!(a.law, Law::Q)
+        && let Some(q0) = host::scene::pull_at_first_contact(&law)
+    {
+        bail!(
+            "{}: the fitted law gives Q(0) = {q0:.4} N, below -{:.1} % of its largest force: \
+             rendered, it would pull the tool into the tissue at first contact; nothing was \
+             written (check that the data starts at zero force, or fit a lower --degree)",
+            a.csv.display(),
+            100.0 * host::scene::PULL_TOLERANCE
+        );
     }
     let name = match a.law {
         Law::Q => "Q",
