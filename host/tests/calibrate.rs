@@ -566,6 +566,36 @@ fn a_scene_law_that_pulls_is_refused() {
     assert!(e.contains("law.coeffs") && e.contains("Q(0) = -0.5"), "{e}");
 }
 
+/// Materials a scene cannot model are refused, naming the key: a locked Poisson's ratio, a
+/// Young's modulus outside what the f32 bank represents.
+#[test]
+fn scene_materials_outside_what_works_are_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let original = std::fs::read_to_string(manifest("scenes/liver.toml")).unwrap();
+    let with = |from: &str, to: &str| {
+        let text = original.replacen(from, to, 1);
+        assert!(text != original, "{from} not in the scene");
+        let p = dir.path().join("s.toml");
+        std::fs::write(&p, text).unwrap();
+        Scene::load(&p)
+            .map(|s| s.warnings())
+            .map_err(|e| e.to_string())
+    };
+    let e = with("poisson = 0.45", "poisson = 0.49999999").unwrap_err();
+    assert!(e.contains("material.poisson") && e.contains("lock"), "{e}");
+    let w = with("poisson = 0.45", "poisson = 0.49").unwrap();
+    assert!(w.len() == 1 && w[0].contains("too stiff"), "{w:?}");
+    let shipped = Scene::load(&manifest("scenes/liver.toml")).unwrap();
+    assert_eq!(shipped.warnings(), Vec::<String>::new());
+    for young in ["1e300", "1e-300"] {
+        let e = with("young_pa = 3000.0", &format!("young_pa = {young}")).unwrap_err();
+        assert!(
+            e.contains("material.young_pa") && e.contains("Pa is outside"),
+            "{e}"
+        );
+    }
+}
+
 #[test]
 fn bad_csvs_name_the_line_and_leave_the_scene_alone() {
     let dir = tempfile::tempdir().unwrap();

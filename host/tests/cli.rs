@@ -303,3 +303,51 @@ fn bench_image_prints_flash_and_static_ram_against_memory_x() {
     );
     fails_with(&["bench", "image", "/nonexistent/image.elf"], "cannot read");
 }
+
+/// Near-incompressible material: P1 locks. Above 0.499 the command refuses (saying why); above
+/// 0.45 it warns with the expected stiffening; a Young's modulus that leaves no finite
+/// compliance fails instead of printing `null`.
+#[test]
+fn locking_and_unrepresentable_materials_are_refused_or_warned() {
+    let mesh = liver();
+    let m = mesh.to_str().unwrap();
+    let args = |young: &'static str, poisson: &'static str| {
+        [
+            "compliance",
+            "--mesh",
+            m,
+            "--young",
+            young,
+            "--poisson",
+            poisson,
+            "--fix-box",
+            BED,
+            "--nodes",
+            "700",
+        ]
+        .map(String::from)
+    };
+    let run = |young, poisson| {
+        let a = args(young, poisson);
+        host(&a.iter().map(String::as_str).collect::<Vec<_>>())
+    };
+    for nu in ["0.4999", "0.49999999"] {
+        let out = run("3000", nu);
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(!out.status.success() && out.stdout.is_empty(), "{nu}");
+        assert!(err.contains("lock") && err.contains("0.499"), "{err}");
+    }
+    let out = run("3000", "0.47");
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{err}");
+    assert!(
+        err.contains("warning") && err.contains("too stiff"),
+        "{err}"
+    );
+    let out = run("3000", "0.45");
+    assert!(out.status.success() && out.stderr.is_empty());
+    let out = run("1e-310", "0.45");
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success() && out.stdout.is_empty(), "{err}");
+    assert!(err.contains("not finite"), "{err}");
+}

@@ -94,6 +94,7 @@ fn section_table(bank: &Bank) -> Vec<(&'static str, u32, u32, u32)> {
 fn build(args: BuildArgs) -> Result<()> {
     let t = Instant::now();
     let prep = Prepared::load(&args.scene)?;
+    prep.scene.warnings().iter().for_each(|w| eprintln!("{w}"));
     let radius = prep.scene.bank.truncation_radius_m;
     let progress = Bar::new("supernodes");
     let BuiltBank { bytes, pairs } = prep.build_bank(Some(&progress))?;

@@ -1,10 +1,11 @@
 //! `host compliance`: compliance blocks of requested nodes as JSON (a stable interface).
 
 use super::fixing::{FixArgs, parse_list};
-use anyhow::{Context, Result};
+use anyhow::{Context, Result, bail};
 use fem::compliance::Compliance;
 use fem::elasticity::{Elasticity, Material};
 use host::progress::Bar;
+use host::scene::{Locking, p1_locking};
 use std::io::Write;
 use std::path::PathBuf;
 
@@ -38,12 +39,30 @@ pub fn run(args: Args) -> Result<()> {
     let mesh = fem::mesh::load(&args.mesh)?;
     let nodes = parse_list::<usize>(&args.nodes).context("--nodes")?;
     let material = Material::new(args.young, args.poisson)?;
+    match p1_locking(args.poisson) {
+        Locking::Meaningless(why) => bail!("--poisson: {why}"),
+        Locking::Stiffens(warning) => eprintln!("{warning}"),
+        Locking::Fine => {}
+    }
     let fixed = args.fix.build(&mesh)?;
     let body = Elasticity::new(&mesh, material)?;
     let compliance = Compliance::factorize(&body, &fixed)?;
     let progress = Bar::new("supernodes");
     let blocks = compliance.blocks(&nodes, Some(&progress))?;
     progress.finish();
+    if blocks
+        .iter()
+        .flatten()
+        .flatten()
+        .flatten()
+        .any(|v| !v.is_finite())
+    {
+        bail!(
+            "the compliance blocks are not finite numbers (--young {} Pa is outside what f64 \
+             can resolve for this mesh); nothing was printed",
+            args.young
+        );
+    }
     let flat: Vec<Vec<[f64; 9]>> = blocks
         .iter()
         .map(|row| {

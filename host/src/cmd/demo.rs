@@ -99,6 +99,7 @@ pub fn run(args: Args) -> Result<()> {
     }
     let t = Instant::now();
     eprintln!("preparing the scene (compliance factorisation, bank) ...");
+    scene.warnings().iter().for_each(|w| eprintln!("{w}"));
     let prep = Prepared::from_scene(scene)?;
     let BuiltBank {
         bytes: bank_bytes,
