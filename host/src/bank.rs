@@ -65,6 +65,32 @@ impl Prepared {
         let surface = fem::mesh::boundary(&mesh)?;
         let fixed: FixedSet = scene.fixed_set(&mesh)?;
         let workspace = Workspace::from_device(&scene.device);
+        if let Some(t) = mesh.tet_containing(workspace.fulcrum) {
+            bail!(
+                "{}: device.fulcrum_m lies inside the organ (tetrahedron {t}): the trocar must be \
+                 outside the tissue it enters",
+                path.display()
+            );
+        }
+        let home = scene.device.home_joint.map(f64::from);
+        let home_tip = workspace.tip(home[0], home[1], home[2]);
+        if let Some(t) = mesh.tet_containing(home_tip) {
+            bail!(
+                "{}: device.home puts the tool tip inside the organ (tetrahedron {t}, tip at \
+                 [{:.4}, {:.4}, {:.4}] m): the device starts with its tip outside the tissue",
+                path.display(),
+                home_tip[0],
+                home_tip[1],
+                home_tip[2]
+            );
+        }
+        if fixed.count() == 3 * mesh.nodes.len() {
+            bail!(
+                "{}: [fixed] holds every node of the mesh: nothing can deform (every compliance \
+                 would be zero); fix only the supports",
+                path.display()
+            );
+        }
         let region = reachable(
             &workspace,
             &mesh.nodes,
@@ -101,7 +127,8 @@ impl Prepared {
             .collect();
         let positions = region.iter().map(|&k| mesh.nodes[k]).collect();
         let body = Elasticity::new(&mesh, scene.material)?;
-        let compliance = Compliance::factorize(&body, &fixed)?;
+        let compliance = Compliance::factorize(&body, &fixed)
+            .with_context(|| format!("{}: [fixed]", path.display()))?;
         let scene_id = scene.scene_id(mesh_hash);
         Ok(Prepared {
             scene,

@@ -215,6 +215,58 @@ fn outputs_never_replace_inputs_links_or_special_files() {
     );
 }
 
+/// Scenes that cannot work are refused, naming the key: a trocar inside the organ, a home pose
+/// with the tip inside it, a fixed set that holds every node, supports that leave it free (the
+/// message names the scene file and its `[fixed]` table).
+#[test]
+fn scenes_that_cannot_work_are_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let text = std::fs::read_to_string(scene()).unwrap();
+    let liver = fem::mesh::parse_msh(host::scene::BUILTIN_LIVER).unwrap();
+    let build = |from: &str, to: &str| {
+        let edited = text.replacen(from, to, 1);
+        assert!(edited != text, "{from} not in the scene");
+        let p = dir.path().join("s.toml");
+        std::fs::write(&p, edited).unwrap();
+        let out = dir.path().join("s.bank");
+        let o = host(&["bank", "build", s(&p), "-o", s(&out)]);
+        assert!(!o.status.success(), "{to}");
+        assert!(!out.exists());
+        stderr(&o)
+    };
+    let [a, b, c, d] = liver.tets[0].map(|i| liver.nodes[i]);
+    let inside: [f64; 3] = std::array::from_fn(|i| (a[i] + b[i] + c[i] + d[i]) / 4.0);
+    let e = build(
+        "fulcrum_m = [0.0, 0.0, 0.16]",
+        &format!("fulcrum_m = [{}, {}, {}]", inside[0], inside[1], inside[2]),
+    );
+    assert!(e.contains("device.fulcrum_m lies inside the organ"), "{e}");
+    // The shaft points straight down from (0, 0, 0.16): the first depth inside the liver.
+    let depth = (30..=140)
+        .map(|mm| f64::from(mm) * 1e-3)
+        .find(|&d| liver.tet_containing([0.0, 0.0, 0.16 - d]).is_some())
+        .expect("the liver lies under the trocar");
+    let e = build(
+        "home = [0.0, 0.0, 0.03]",
+        &format!("home = [0.0, 0.0, {depth}]"),
+    );
+    assert!(
+        e.contains("device.home puts the tool tip inside the organ"),
+        "{e}"
+    );
+    let e = build("max = [1.0, 1.0, 0.01]", "max = [1.0, 1.0, 1.0]");
+    assert!(e.contains("holds every node"), "{e}");
+    let e = build(
+        "{ min = [-1.0, -1.0, -1.0], max = [1.0, 1.0, 0.01] },",
+        "{ min = [-1.0, -1.0, -1.0], max = [1.0, 1.0, 0.01], axes = \"z\" },",
+    );
+    assert!(
+        e.contains("s.toml: [fixed]") && e.contains("rigid motions"),
+        "{e}"
+    );
+    assert!(!e.contains("--fix-box"), "{e}");
+}
+
 #[test]
 fn sweep_prints_a_row_per_radius() {
     let o = host(&[

@@ -136,6 +136,10 @@ fn bad_input_is_reported_on_stderr_with_a_nonzero_exit() {
         fails_with(&refs, needle);
     };
     run(&["--nodes", "1"], "nothing is fixed");
+    run(
+        &["--fix-box", "-1,-1,-1,1,1,1", "--nodes", "1"],
+        "holds every node",
+    );
     run(&["--fix-box", BED, "--nodes", "1,x"], "\"x\"");
     run(&["--fix-box", BED, "--nodes", "999999"], "node 999999");
     run(

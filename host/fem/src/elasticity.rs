@@ -33,8 +33,8 @@ pub enum FemError {
     },
     /// The fixed set leaves a rigid-body motion free, so `K_ff` is singular.
     #[error(
-        "the fixed set leaves rigid motions free, so K_ff is singular: {0}. Fix more nodes \
-         (e.g. --fix-box around a support) so every connected part is held in all 6 directions"
+        "the fixed set leaves rigid motions free, so K_ff is singular: {0}. Fix more nodes (a \
+         box around a support) so every connected part is held in all 6 directions"
     )]
     RigidMotion(String),
     /// A fixed set built for a mesh with another number of nodes.

@@ -45,6 +45,9 @@ pub fn run(args: Args) -> Result<()> {
         Locking::Fine => {}
     }
     let fixed = args.fix.build(&mesh)?;
+    if fixed.count() == 3 * mesh.nodes.len() {
+        bail!("the fixed set holds every node: nothing can deform (every block would be zero)");
+    }
     let body = Elasticity::new(&mesh, material)?;
     let compliance = Compliance::factorize(&body, &fixed)?;
     let progress = Bar::new("supernodes");

@@ -53,6 +53,24 @@ impl TetMesh {
         dot(u, cross(v, w)) / 6.0
     }
 
+    /// A tetrahedron that holds `p` strictly inside (each of its four barycentric coordinates
+    /// above one millionth), if any: a point on the surface or outside gives `None`.
+    pub fn tet_containing(&self, p: [f64; 3]) -> Option<usize> {
+        let vol = |a: [f64; 3], b: [f64; 3], c: [f64; 3], d: [f64; 3]| {
+            dot(sub(b, a), cross(sub(c, a), sub(d, a)))
+        };
+        (0..self.tets.len()).find(|&t| {
+            let [a, b, c, d] = self.tets[t].map(|i| self.nodes[i]);
+            let whole = vol(a, b, c, d);
+            let least = 1e-6 * whole;
+            whole > 0.0
+                && vol(p, b, c, d) > least
+                && vol(a, p, c, d) > least
+                && vol(a, b, p, d) > least
+                && vol(a, b, c, p) > least
+        })
+    }
+
     /// Axis-aligned bounding box `(min, max)` of the nodes.
     pub fn bounding_box(&self) -> ([f64; 3], [f64; 3]) {
         let mut lo = [f64::INFINITY; 3];
