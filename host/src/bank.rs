@@ -50,6 +50,27 @@ pub struct Prepared {
     pub positions: Vec<[f64; 3]>,
     /// Boundary triangles with all three vertices in R, as indices into `region`.
     pub triangles: Vec<[u32; 3]>,
+    /// What is doubtful but not wrong (P1 locking, an implausible organ size), for the
+    /// commands to print.
+    pub warnings: Vec<String>,
+}
+
+/// Organ sizes (bounding-box diagonal, m) that are plausible in metres: a millimetre-sized
+/// specimen up to a whole torso.
+pub const ORGAN_SIZE_RANGE_M: (f64, f64) = (1e-3, 1.0);
+
+/// A warning when `mesh`'s size is implausible in metres (a mesh in millimetres is 1000 times
+/// too large, and silently 1000 times too soft per unit force).
+pub fn mesh_size_warning(mesh: &TetMesh, name: &str) -> Option<String> {
+    let (lo, hi) = mesh.bounding_box();
+    let size = fem::vec3::norm(fem::vec3::sub(hi, lo));
+    (!(ORGAN_SIZE_RANGE_M.0..=ORGAN_SIZE_RANGE_M.1).contains(&size)).then(|| {
+        format!(
+            "warning: {name} spans {size:.4} m, outside the [{}, {}] m an organ has: are its \
+             coordinates in metres (a mesh in millimetres is 1000 times too large)?",
+            ORGAN_SIZE_RANGE_M.0, ORGAN_SIZE_RANGE_M.1
+        )
+    })
 }
 
 impl Prepared {
@@ -130,6 +151,8 @@ impl Prepared {
         let compliance = Compliance::factorize(&body, &fixed)
             .with_context(|| format!("{}: [fixed]", path.display()))?;
         let scene_id = scene.scene_id(mesh_hash);
+        let mut warnings = scene.warnings();
+        warnings.extend(mesh_size_warning(&mesh, &mesh_name));
         Ok(Prepared {
             scene,
             mesh,
@@ -140,6 +163,7 @@ impl Prepared {
             region,
             positions,
             triangles,
+            warnings,
         })
     }
 

@@ -529,6 +529,9 @@ fn parse_material(ctx: &Ctx, m: &RawMaterial) -> Result<Material, SceneError> {
     Material::new(e, nu).map_err(|err| ctx.err(m.young_pa.span(), "material", err.to_string()))
 }
 
+/// Collision grid cells a scene may ask for, m.
+pub const GRID_CELL_RANGE_M: (f64, f64) = (1e-4, 1.0);
+
 /// Young's moduli a scene may have, Pa: from a gel to hard plastics. The bank stores compliance
 /// in f32, and a 10 cm organ's node compliance is about 1 / (E x 0.01 m): these bounds keep it
 /// within 1e-12..1e2 m/N, far inside f32's range and its SPD checks' resolution.
@@ -1015,11 +1018,15 @@ fn parse_bank(ctx: &Ctx, b: &RawBank) -> Result<BankOptions, SceneError> {
     let grid_cell_m = match &b.grid_cell_m {
         Some(g) => {
             let v = *g.get_ref();
-            if !(v.is_finite() && v > 0.0) {
+            if !(GRID_CELL_RANGE_M.0..=GRID_CELL_RANGE_M.1).contains(&v) {
                 return Err(ctx.err(
                     g.span(),
                     "bank.grid_cell_m",
-                    format!("must be > 0 m, got {v}"),
+                    format!(
+                        "{v} m is outside [{}, {}] m: smaller cells than a tenth of a millimetre \
+                         make a grid too large for the bank, larger ones hold the whole organ",
+                        GRID_CELL_RANGE_M.0, GRID_CELL_RANGE_M.1
+                    ),
                 ));
             }
             Some(v)

@@ -267,6 +267,45 @@ fn scenes_that_cannot_work_are_refused() {
     assert!(!e.contains("--fix-box"), "{e}");
 }
 
+/// The rest of the adversary's list: a sweep over no sites, a grid cell too small for any
+/// bank, a file that is not a firmware image.
+#[test]
+fn odd_arguments_are_refused_with_their_name() {
+    let o = host(&["bank", "sweep", s(&scene()), "--sites", "0"]);
+    assert!(!o.status.success());
+    assert!(
+        stderr(&o).contains("--sites must be at least 1"),
+        "{}",
+        stderr(&o)
+    );
+    let dir = tempfile::tempdir().unwrap();
+    let text = std::fs::read_to_string(scene()).unwrap();
+    let p = dir.path().join("s.toml");
+    let edited = text.replacen("# grid_cell_m = 0.02", "grid_cell_m = 1e-9", 1);
+    assert!(edited != text);
+    std::fs::write(&p, edited).unwrap();
+    let o = host(&["bank", "build", s(&p), "-o", s(&dir.path().join("x.bank"))]);
+    assert!(!o.status.success());
+    assert!(stderr(&o).contains("bank.grid_cell_m"), "{}", stderr(&o));
+    let garbage = dir.path().join("garbage.elf");
+    std::fs::write(&garbage, b"not a firmware image at all").unwrap();
+    let o = host(&[
+        "sil",
+        "--image",
+        s(&garbage),
+        "--scene",
+        s(&scene()),
+        "--seconds",
+        "0.1",
+    ]);
+    assert!(!o.status.success());
+    assert!(
+        stderr(&o).contains("not an image for this machine"),
+        "{}",
+        stderr(&o)
+    );
+}
+
 #[test]
 fn sweep_prints_a_row_per_radius() {
     let o = host(&[

@@ -355,3 +355,45 @@ fn locking_and_unrepresentable_materials_are_refused_or_warned() {
     assert!(!out.status.success() && out.stdout.is_empty(), "{err}");
     assert!(err.contains("not finite"), "{err}");
 }
+
+/// A mesh in millimetres is computed (it may be what the user wants) but warned about.
+#[test]
+fn a_mesh_in_millimetres_is_warned_about() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut mesh = fem::mesh::load(&liver()).unwrap();
+    mesh.nodes.iter_mut().flatten().for_each(|x| *x *= 1000.0);
+    let path = dir.path().join("liver-mm.msh");
+    let mut f = std::fs::File::create(&path).unwrap();
+    mesh.write_msh4_ascii(&mut f).unwrap();
+    drop(f);
+    let out = host(&[
+        "compliance",
+        "--mesh",
+        path.to_str().unwrap(),
+        "--young",
+        "3000",
+        "--poisson",
+        "0.45",
+        "--fix-box",
+        "-1000,-1000,-1000,1000,1000,10",
+        "--nodes",
+        "700",
+    ]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{err}");
+    assert!(err.contains("are its coordinates in metres"), "{err}");
+    let out = host(&[
+        "compliance",
+        "--mesh",
+        liver().to_str().unwrap(),
+        "--young",
+        "3000",
+        "--poisson",
+        "0.45",
+        "--fix-box",
+        BED,
+        "--nodes",
+        "700",
+    ]);
+    assert!(out.status.success() && out.stderr.is_empty());
+}

@@ -94,7 +94,7 @@ fn section_table(bank: &Bank) -> Vec<(&'static str, u32, u32, u32)> {
 fn build(args: BuildArgs) -> Result<()> {
     let t = Instant::now();
     let prep = Prepared::load(&args.scene)?;
-    prep.scene.warnings().iter().for_each(|w| eprintln!("{w}"));
+    prep.warnings.iter().for_each(|w| eprintln!("{w}"));
     let radius = prep.scene.bank.truncation_radius_m;
     let progress = Bar::new("supernodes");
     let BuiltBank { bytes, pairs } = prep.build_bank(Some(&progress))?;
@@ -507,6 +507,9 @@ impl<'p> PatchCheck<'p> {
 }
 
 fn sweep(args: SweepArgs) -> Result<()> {
+    if args.sites == 0 {
+        bail!("--sites must be at least 1");
+    }
     let radii = super::fixing::parse_list::<f64>(&args.radii).context("--radii")?;
     if radii.iter().any(|r| !(r.is_finite() && *r >= 0.0)) {
         bail!("--radii: every radius must be a number >= 0");

@@ -37,6 +37,9 @@ pub struct Args {
 /// Runs the command.
 pub fn run(args: Args) -> Result<()> {
     let mesh = fem::mesh::load(&args.mesh)?;
+    if let Some(w) = host::bank::mesh_size_warning(&mesh, &args.mesh.display().to_string()) {
+        eprintln!("{w}");
+    }
     let nodes = parse_list::<usize>(&args.nodes).context("--nodes")?;
     let material = Material::new(args.young, args.poisson)?;
     match p1_locking(args.poisson) {

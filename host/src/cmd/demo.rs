@@ -99,8 +99,8 @@ pub fn run(args: Args) -> Result<()> {
     }
     let t = Instant::now();
     eprintln!("preparing the scene (compliance factorisation, bank) ...");
-    scene.warnings().iter().for_each(|w| eprintln!("{w}"));
     let prep = Prepared::from_scene(scene)?;
+    prep.warnings.iter().for_each(|w| eprintln!("{w}"));
     let BuiltBank {
         bytes: bank_bytes,
         pairs,

@@ -290,6 +290,7 @@ pub fn run(setup: &Setup, session: &Session) -> Result<Run> {
             bail!("the {what} file {} does not exist", p.display());
         }
     }
+    check_image(&setup.image)?;
     let dir = tempfile::tempdir().context("cannot create a temporary directory for the pipes")?;
     let (in_path, out_path) = (
         dir.path().join("sil-plant-in"),
@@ -647,6 +648,28 @@ fn block_sigpipe() {
         libc::sigaddset(&mut set, libc::SIGPIPE);
         libc::pthread_sigmask(libc::SIG_BLOCK, &set, std::ptr::null_mut());
     }
+}
+
+/// Refuses a file that is not a 32-bit little-endian ARM ELF executable (QEMU would otherwise
+/// run whatever it is and dump registers).
+fn check_image(path: &Path) -> Result<()> {
+    let mut head = [0u8; 20];
+    let n = File::open(path)
+        .and_then(|mut f| f.read(&mut head))
+        .with_context(|| format!("cannot read the image {}", path.display()))?;
+    // ELF magic, ELFCLASS32, ELFDATA2LSB; e_type EXEC (2); e_machine ARM (40).
+    let elf = n == head.len()
+        && head[..6] == [0x7f, b'E', b'L', b'F', 1, 1]
+        && u16::from_le_bytes([head[16], head[17]]) == 2
+        && u16::from_le_bytes([head[18], head[19]]) == 40;
+    if !elf {
+        bail!(
+            "{}: not an image for this machine (a 32-bit ARM ELF executable, e.g. \
+             firmware/qemu's release build)",
+            path.display()
+        );
+    }
+    Ok(())
 }
 
 fn mkfifo(path: &Path) -> Result<()> {
