@@ -515,3 +515,64 @@ fn large_mesh_validates_and_has_its_boundary() {
     let s = mesh::boundary(&m).unwrap();
     assert_eq!(s.triangles.len(), 6 * 46 * 46 * 2);
 }
+
+/// One tetrahedron in MSH 4.1 ASCII whose `$Nodes` block lists `tags` for the corners
+/// `(0,0,0), (1,0,0), (0,1,0), (0,0,1)` cm given in `order`; the element names tags 1 2 3 4.
+fn msh41_one_tet(tags: [u64; 4], order: [usize; 4]) -> String {
+    let corners = [
+        [0.0, 0.0, 0.0],
+        [0.01, 0.0, 0.0],
+        [0.0, 0.01, 0.0],
+        [0.0, 0.0, 0.01],
+    ];
+    let mut s = String::from("$MeshFormat\n4.1 0 8\n$EndMeshFormat\n$Nodes\n1 4 1 4\n3 1 0 4\n");
+    for t in tags {
+        s.push_str(&format!("{t}\n"));
+    }
+    for i in order {
+        let [x, y, z] = corners[i];
+        s.push_str(&format!("{x} {y} {z}\n"));
+    }
+    s.push_str("$EndNodes\n$Elements\n1 1 1 1\n3 1 4 1\n1 1 2 3 4\n$EndElements\n");
+    s
+}
+
+/// MSH 4.1 node tags are read as the file gives them: permuted tags map to the right
+/// coordinates (`mshio` drops dense tags and file order would make this tetrahedron inverted),
+/// a repeated tag (with another missing) is refused, and node counts the file cannot hold are
+/// refused before anything is allocated.
+#[test]
+fn msh41_node_tags_are_what_the_file_says() {
+    // Tags 3, 1, 4, 2 listed with the coordinates of corners 2, 0, 3, 1.
+    let permuted = msh41_one_tet([3, 1, 4, 2], [2, 0, 3, 1]);
+    let m = mesh::parse_msh(permuted.as_bytes()).unwrap();
+    mesh::validate(&m).unwrap();
+    assert!(m.signed_volume(0) > 0.0);
+    let corner = |tag: usize| m.nodes[m.tets[0][tag - 1]];
+    assert_eq!(corner(1), [0.0, 0.0, 0.0]);
+    assert_eq!(corner(4), [0.0, 0.0, 0.01]);
+    // Tag 3 twice, tag 4 absent: the count still matches the header's dense range.
+    let repeated = msh41_one_tet([1, 2, 3, 3], [0, 1, 2, 3]);
+    let e = mesh::parse_msh(repeated.as_bytes())
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("node tag 3 is defined twice"), "{e}");
+    let huge = permuted.replace("$Nodes\n1 4 1 4\n", "$Nodes\n1 18446744073709551615 1 4\n");
+    let e = mesh::parse_msh(huge.as_bytes()).unwrap_err().to_string();
+    assert!(
+        e.contains("nodes declared, more than the file holds"),
+        "{e}"
+    );
+}
+
+/// A device or FIFO is not read (it would never end).
+#[test]
+fn special_files_are_not_read() {
+    let e = mesh::load(Path::new("/dev/zero.msh"));
+    assert!(e.is_err());
+    let dir = tempfile::tempdir().unwrap();
+    let link = dir.path().join("zero.msh");
+    std::os::unix::fs::symlink("/dev/zero", &link).unwrap();
+    let e = mesh::load(&link).unwrap_err().to_string();
+    assert!(e.contains("not a regular file"), "{e}");
+}

@@ -360,7 +360,99 @@ fn read_msh41(bytes: &[u8], header: &Header) -> Result<TetMesh, MeshError> {
             });
         }
     };
-    msh41_to_mesh(&msh)
+    let tags = node_tags_41(bytes, binary, header.data_size as usize)?;
+    msh41_to_mesh(&msh, &tags)
+}
+
+/// The node tags of an MSH 4.1 `$Nodes` section, in file order, read as the format defines
+/// them: `mshio` drops them when the header's tag range is dense (`max - min + 1` nodes), which
+/// would silently accept permuted, repeated or missing tags. Binary files use `size_t` of
+/// `data_size` bytes and 4-byte ints, little-endian (checked by `$MeshFormat`'s one).
+fn node_tags_41(bytes: &[u8], binary: bool, data_size: usize) -> Result<Vec<u64>, MeshError> {
+    let bad = |message: String| MeshError::Format {
+        file: nofile(),
+        message: format!("$Nodes: {message}"),
+    };
+    let start = bytes
+        .windows(7)
+        .position(|w| w == b"\n$Nodes")
+        .map(|i| i + 7)
+        .ok_or_else(|| bad("no $Nodes section".into()))?;
+    let body = bytes.get(start..).unwrap_or(&[]);
+    let body = body
+        .iter()
+        .position(|&b| b == b'\n')
+        .and_then(|i| body.get(i + 1..))
+        .unwrap_or(&[]);
+    let truncated = || bad("truncated".into());
+    let mut tags = Vec::new();
+    if binary {
+        let mut pos = 0usize;
+        let mut take = |n: usize| -> Result<&[u8], MeshError> {
+            let s = body.get(pos..pos + n).ok_or_else(truncated)?;
+            pos += n;
+            Ok(s)
+        };
+        let size_t = |b: &[u8]| -> u64 {
+            let mut w = [0u8; 8];
+            w[..b.len().min(8)].copy_from_slice(&b[..b.len().min(8)]);
+            u64::from_le_bytes(w)
+        };
+        let blocks = size_t(take(data_size)?);
+        let total = size_t(take(data_size)?);
+        take(2 * data_size)?; // min and max tag
+        // Each node needs at least its tag and three f64 coordinates.
+        if total.saturating_mul(data_size as u64 + 24) > body.len() as u64 {
+            return Err(bad(format!(
+                "{total} nodes declared, more than the file holds"
+            )));
+        }
+        for _ in 0..blocks {
+            take(4)?; // entity dim
+            take(4)?; // entity tag
+            let parametric = u32::from_le_bytes(take(4)?.try_into().map_err(|_| truncated())?);
+            let n = usize::try_from(size_t(take(data_size)?)).map_err(|_| truncated())?;
+            for _ in 0..n {
+                tags.push(size_t(take(data_size)?));
+            }
+            let per_node = 3 + if parametric != 0 { 3 } else { 0 };
+            take(n.checked_mul(8 * per_node).ok_or_else(truncated)?)?;
+        }
+    } else {
+        let text = std::str::from_utf8(body).map_err(|_| bad("not ASCII".into()))?;
+        let mut lines = text.lines().map(str::trim).filter(|l| !l.is_empty());
+        let mut numbers = |want: usize| -> Result<Vec<u64>, MeshError> {
+            let line = lines.next().ok_or_else(truncated)?;
+            let v: Vec<u64> = line
+                .split_whitespace()
+                .take(want)
+                .map(|t| t.parse::<u64>())
+                .collect::<Result<_, _>>()
+                .map_err(|_| bad(format!("expected {want} integers, found {line:?}")))?;
+            if v.len() < want {
+                return Err(bad(format!("expected {want} integers, found {line:?}")));
+            }
+            Ok(v)
+        };
+        let head = numbers(4)?;
+        let (blocks, total) = (head[0], head[1]);
+        if total > body.len() as u64 {
+            return Err(bad(format!(
+                "{total} nodes declared, more than the file holds"
+            )));
+        }
+        for _ in 0..blocks {
+            let b = numbers(4)?;
+            let n = b[3];
+            for _ in 0..n {
+                tags.push(numbers(1)?[0]);
+            }
+            for _ in 0..n {
+                numbers(0)?; // coordinates (and parametric ones), read by mshio
+            }
+        }
+    }
+    Ok(tags)
 }
 
 thread_local! {
@@ -445,7 +537,7 @@ fn convert_mshio_error(e: &mshio::MshParserError<&[u8]>, bytes: &[u8], binary: b
     }
 }
 
-fn msh41_to_mesh(msh: &mshio::MshFile<u64, i32, f64>) -> Result<TetMesh, MeshError> {
+fn msh41_to_mesh(msh: &mshio::MshFile<u64, i32, f64>, tags: &[u64]) -> Result<TetMesh, MeshError> {
     let fmt_err = |message: String| MeshError::Format {
         file: nofile(),
         message,
@@ -454,36 +546,24 @@ fn msh41_to_mesh(msh: &mshio::MshFile<u64, i32, f64>) -> Result<TetMesh, MeshErr
         return Err(fmt_err("no $Nodes section".into()));
     };
     let total: usize = sec.node_blocks.iter().map(|b| b.nodes.len()).sum();
-    let mut nodes = Vec::with_capacity(total);
-    // Sparse tags: `mshio` gives each block a tag -> index-in-block map. Dense tags: `mshio`
-    // drops them, and they are `min_node_tag + position` (which is how Gmsh writes them).
-    let sparse = sec.node_blocks.iter().any(|b| b.node_tags.is_some());
-    let mut tag_to_id: HashMap<u64, usize> = HashMap::new();
-    for block in &sec.node_blocks {
-        if sparse {
-            let Some(map) = &block.node_tags else {
-                return Err(fmt_err("node block without node tags".into()));
-            };
-            for (&tag, &i) in map {
-                if i >= block.nodes.len() {
-                    return Err(fmt_err(format!("node tag {tag}: bad index in its block")));
-                }
-                if tag_to_id.insert(tag, nodes.len() + i).is_some() {
-                    return Err(fmt_err(format!("node tag {tag} is defined twice")));
-                }
-            }
-        }
-        nodes.extend(block.nodes.iter().map(|n| [n.x, n.y, n.z]));
+    if tags.len() != total {
+        return Err(fmt_err(format!(
+            "$Nodes lists {} node tags for {total} nodes",
+            tags.len()
+        )));
     }
-    let min_tag = sec.min_node_tag;
-    let lookup = |tag: u64| -> Option<usize> {
-        if sparse {
-            tag_to_id.get(&tag).copied()
-        } else {
-            let i = usize::try_from(tag.checked_sub(min_tag)?).ok()?;
-            (i < nodes.len()).then_some(i)
+    let nodes: Vec<[f64; 3]> = sec
+        .node_blocks
+        .iter()
+        .flat_map(|b| b.nodes.iter().map(|n| [n.x, n.y, n.z]))
+        .collect();
+    let mut tag_to_id: HashMap<u64, usize> = HashMap::with_capacity(total);
+    for (id, &tag) in tags.iter().enumerate() {
+        if tag_to_id.insert(tag, id).is_some() {
+            return Err(fmt_err(format!("node tag {tag} is defined twice")));
         }
-    };
+    }
+    let lookup = |tag: u64| tag_to_id.get(&tag).copied();
 
     let mut tets = Vec::new();
     if let Some(el) = &msh.data.elements {

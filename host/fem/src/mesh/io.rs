@@ -52,14 +52,33 @@ pub fn parse_msh(bytes: &[u8]) -> Result<TetMesh, MeshError> {
     Ok(mesh)
 }
 
+/// The largest mesh file read, bytes (4 GiB: some 30 million tetrahedra in ASCII).
+pub const MAX_MESH_BYTES: u64 = 4 << 30;
+
 /// Read a mesh file (format from its extension) without validating the mesh, for tools that
 /// want to report every problem themselves.
 pub fn read(path: &Path) -> Result<TetMesh, MeshError> {
     let format = Format::from_path(path)?;
-    let bytes = std::fs::read(path).map_err(|source| MeshError::Io {
+    let io = |source| MeshError::Io {
         file: Origin(Some(path.to_path_buf())),
         source,
-    })?;
+    };
+    // Only a regular file of bounded size: `/dev/zero` or a FIFO would read forever.
+    let meta = std::fs::metadata(path).map_err(io)?;
+    if !meta.is_file() || meta.len() > MAX_MESH_BYTES {
+        return Err(MeshError::Format {
+            file: Origin(Some(path.to_path_buf())),
+            message: if meta.is_file() {
+                format!(
+                    "{} bytes, more than the {MAX_MESH_BYTES} a mesh file may have",
+                    meta.len()
+                )
+            } else {
+                "not a regular file".into()
+            },
+        });
+    }
+    let bytes = std::fs::read(path).map_err(io)?;
     read_bytes(&bytes, format).map_err(|e| e.with_path(path))
 }
 
