@@ -735,7 +735,8 @@ fn parse_device(ctx: &Ctx, d: &RawDevice, tip: f64) -> Result<DeviceCalibration,
         ctx,
         &d.torque_constant_nm_per_a,
         "device.torque_constant_nm_per_a",
-        f64::MAX,
+        // The largest DC motors of haptic devices have a few tenths of N m/A.
+        10.0,
     )?;
     let imax = positive3(ctx, &d.current_limit_a, "device.current_limit_a", 20.0)?;
     let fmax = *d.max_force_n.get_ref();

@@ -287,6 +287,20 @@ fn odd_arguments_are_refused_with_their_name() {
     let o = host(&["bank", "build", s(&p), "-o", s(&dir.path().join("x.bank"))]);
     assert!(!o.status.success());
     assert!(stderr(&o).contains("bank.grid_cell_m"), "{}", stderr(&o));
+    let edited = text.replacen(
+        "torque_constant_nm_per_a = [0.025, 0.025, 0.025]",
+        "torque_constant_nm_per_a = [0.0, 0.025, 0.025]",
+        1,
+    );
+    assert!(edited != text);
+    std::fs::write(&p, edited).unwrap();
+    let o = host(&["bank", "build", s(&p), "-o", s(&dir.path().join("x.bank"))]);
+    assert!(!o.status.success());
+    assert!(
+        stderr(&o).contains("must lie in (0, 10], got 0"),
+        "{}",
+        stderr(&o)
+    );
     let garbage = dir.path().join("garbage.elf");
     std::fs::write(&garbage, b"not a firmware image at all").unwrap();
     let o = host(&[

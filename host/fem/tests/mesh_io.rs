@@ -565,6 +565,15 @@ fn msh41_node_tags_are_what_the_file_says() {
     );
 }
 
+/// A file with no nodes says so (not "node tag 0 is reserved").
+#[test]
+fn an_empty_msh41_says_it_has_no_nodes() {
+    let text = "$MeshFormat\n4.1 0 8\n$EndMeshFormat\n$Nodes\n0 0 0 0\n$EndNodes\n\
+                $Elements\n0 0 0 0\n$EndElements\n";
+    let e = mesh::parse_msh(text.as_bytes()).unwrap_err().to_string();
+    assert!(e.contains("the mesh has no nodes"), "{e}");
+}
+
 /// A device or FIFO is not read (it would never end).
 #[test]
 fn special_files_are_not_read() {

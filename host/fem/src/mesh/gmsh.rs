@@ -346,6 +346,14 @@ fn read_msh41(bytes: &[u8], header: &Header) -> Result<TetMesh, MeshError> {
             ),
         });
     }
+    // The node tags first: they say what the file holds before `mshio` parses it.
+    let tags = node_tags_41(bytes, binary, header.data_size as usize)?;
+    if tags.is_empty() {
+        return Err(MeshError::Format {
+            file: nofile(),
+            message: "$Nodes: the mesh has no nodes".into(),
+        });
+    }
     // `mshio` has a few `unwrap`s and unchecked subtractions on malformed input; a panic there
     // must not take the caller down, nor print a panic message before the clean error.
     let parsed = catch_quietly(|| {
@@ -360,7 +368,6 @@ fn read_msh41(bytes: &[u8], header: &Header) -> Result<TetMesh, MeshError> {
             });
         }
     };
-    let tags = node_tags_41(bytes, binary, header.data_size as usize)?;
     msh41_to_mesh(&msh, &tags)
 }
 
