@@ -346,20 +346,19 @@ fn read_msh41(bytes: &[u8], header: &Header) -> Result<TetMesh, MeshError> {
             ),
         });
     }
-    // The node tags first: they say what the file holds before `mshio` parses it.
-    let tags = node_tags_41(bytes, binary, header.data_size as usize)?;
-    if tags.is_empty() {
-        return Err(MeshError::Format {
-            file: nofile(),
-            message: "$Nodes: the mesh has no nodes".into(),
-        });
-    }
     // `mshio` has a few `unwrap`s and unchecked subtractions on malformed input; a panic there
     // must not take the caller down, nor print a panic message before the clean error.
     let parsed = catch_quietly(|| {
         mshio::parse_msh_bytes(bytes).map_err(|e| convert_mshio_error(&e, bytes, binary))
     });
+    let tags = || node_tags_41(bytes, binary, header.data_size as usize);
+    let no_nodes = || MeshError::Format {
+        file: nofile(),
+        message: "$Nodes: the mesh has no nodes".into(),
+    };
     let msh = match parsed {
+        // `mshio` calls an empty node section a reserved tag 0; say what it is.
+        Ok(Err(_)) if tags().is_ok_and(|t| t.is_empty()) => return Err(no_nodes()),
         Ok(r) => r?,
         Err(_) => {
             return Err(MeshError::Format {
@@ -368,6 +367,10 @@ fn read_msh41(bytes: &[u8], header: &Header) -> Result<TetMesh, MeshError> {
             });
         }
     };
+    let tags = tags()?;
+    if tags.is_empty() {
+        return Err(no_nodes());
+    }
     msh41_to_mesh(&msh, &tags)
 }
 
