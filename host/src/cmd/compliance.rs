@@ -3,7 +3,7 @@
 use super::fixing::{FixArgs, parse_list};
 use anyhow::{Context, Result};
 use fem::compliance::Compliance;
-use fem::elasticity::{Elasticity, Material};
+use fem::elasticity::{Elasticity, Element, Material};
 use host::progress::Bar;
 use std::io::Write;
 use std::path::PathBuf;
@@ -31,6 +31,10 @@ pub struct Args {
     /// Nodes whose blocks are wanted, comma separated.
     #[arg(long, value_name = "i,j,...")]
     nodes: String,
+    /// Element formulation: `p1` (the paper's linear tetrahedron) or `anp` (average nodal
+    /// pressure, free of volumetric locking as --poisson approaches 0.5; same nodes).
+    #[arg(long, default_value_t = Element::P1, value_name = "p1|anp")]
+    element: Element,
 }
 
 /// Runs the command.
@@ -39,7 +43,7 @@ pub fn run(args: Args) -> Result<()> {
     let nodes = parse_list::<usize>(&args.nodes).context("--nodes")?;
     let material = Material::new(args.young, args.poisson)?;
     let fixed = args.fix.build(&mesh)?;
-    let body = Elasticity::new(&mesh, material)?;
+    let body = Elasticity::with_element(&mesh, material, args.element)?;
     let compliance = Compliance::factorize(&body, &fixed)?;
     let progress = Bar::new("supernodes");
     let blocks = compliance.blocks(&nodes, Some(&progress))?;
