@@ -316,9 +316,9 @@ pub enum Element {
 /// Both volumetric energies agree on linear fields, so any alpha passes the patch test; but
 /// alpha re-introduces P1's one-constraint-per-element with penalty `alpha kappa`, so it must
 /// stay small against `mu`. Measured (`tests/element.rs`, `examples/punch.rs`) at nu = 0.499:
-/// pure ANP (alpha = 0) already has no near-zero eigenvalue of `K_ff` (its lowest are 64-81 %
-/// of P1's on the 3x3x3 test box, 46-50 % on `liver-1k4` with the bed fixed: P1's are raised by
-/// locking); alpha = 0.001 raises them by about 1 % and costs 1.3 % of tip deflection on a 40x6x6
+/// pure ANP (alpha = 0) already has no near-zero eigenvalue of `K_ff` (its six lowest are
+/// 64-81 % of P1's on the 3x3x3 test box; its eight lowest 45-57 % on `liver-1k4` with the bed
+/// fixed, from a one-off dense eigensolve; P1's are raised by locking); alpha = 0.001 raises them by about 1 % and costs 1.3 % of tip deflection on a 40x6x6
 /// cantilever and 1.1 % of punch force on `liver-1k4`, where alpha = 0.01 costs 11 % and 8 %.
 /// The penalty grows like `alpha kappa / mu`, so at nu = 0.4999 alpha = 0.001 stiffens about
 /// as much as 0.01 does at 0.499.
