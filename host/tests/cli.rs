@@ -69,6 +69,58 @@ fn compliance_prints_one_json_object_matching_the_library() {
 }
 
 #[test]
+fn compliance_element_anp_matches_the_library_and_unknown_elements_are_refused() {
+    let mesh = liver();
+    let run = |element: &str| {
+        host(&[
+            "compliance",
+            "--mesh",
+            mesh.to_str().unwrap(),
+            "--young",
+            "3000",
+            "--poisson",
+            "0.499",
+            "--fix-box",
+            BED,
+            "--nodes",
+            "700",
+            "--element",
+            element,
+        ])
+    };
+    let out = run("anp");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).expect("stdout is JSON only");
+    let m = fem::mesh::load(&mesh).unwrap();
+    let material = fem::elasticity::Material::new(3000.0, 0.499).unwrap();
+    let mut fixed = fem::elasticity::FixedSet::none(m.nodes.len());
+    fixed
+        .fix_box(&m, [-1.0, -1.0, -1.0, 1.0, 1.0, 0.01], [true; 3])
+        .unwrap();
+    let block = |element| {
+        let body = fem::elasticity::Elasticity::with_element(&m, material, element).unwrap();
+        let c = fem::compliance::Compliance::factorize(&body, &fixed).unwrap();
+        c.blocks(&[700], None).unwrap()[0][0]
+    };
+    let anp = block(fem::elasticity::Element::Anp);
+    let p1 = block(fem::elasticity::Element::P1);
+    for i in 0..9 {
+        let got = v["blocks"][0][0][i].as_f64().unwrap();
+        assert!((got - anp[i / 3][i % 3]).abs() <= 1e-15 * anp[0][0].abs());
+    }
+    // P1 locks at nu = 0.499: its compliance is smaller.
+    assert!(anp[2][2] > 1.2 * p1[2][2], "{anp:?} vs {p1:?}");
+    let bad = run("p2");
+    assert!(!bad.status.success());
+    let err = String::from_utf8_lossy(&bad.stderr);
+    assert!(err.contains("p1 or anp"), "{err}");
+}
+
+#[test]
 fn fix_nodes_file_is_equivalent_to_the_box() {
     let mesh = liver();
     let m = fem::mesh::load(&mesh).unwrap();

@@ -1,4 +1,6 @@
-//! P1 linear elasticity on tetrahedra (the paper's section 3, eq. 1: `K u = f`).
+//! Linear elasticity on tetrahedra (the paper's section 3, eq. 1: `K u = f`): the paper's P1
+//! element, or the average nodal pressure (ANP) element that does not lock as nu -> 0.5
+//! ([`Element`]). Both have one node per mesh vertex.
 //!
 //! Displacements are numbered node-major: dof `3 i + c` is component `c` (x, y, z) of node `i`.
 //! Fixed dofs (`u = 0`) are removed; the remaining *free* dofs keep node-major order, so `K_ff`
@@ -231,12 +233,12 @@ impl DofMap {
 
 /// Shape-function gradients and volume of one P1 tetrahedron.
 #[derive(Debug, Clone, Copy)]
-struct Element {
+struct Tet {
     grad: [[f64; 3]; 4],
     volume: f64,
 }
 
-impl Element {
+impl Tet {
     fn new(x: [[f64; 3]; 4]) -> Self {
         // Columns of J are the edge vectors from vertex 0; rows of J^-1 are grad N1..N3.
         let e = [sub(x[1], x[0]), sub(x[2], x[0]), sub(x[3], x[0])];
@@ -277,11 +279,95 @@ pub struct Elasticity {
     material: Material,
     positions: Vec<[f64; 3]>,
     tets: Vec<[usize; 4]>,
-    elements: Vec<Element>,
+    elements: Vec<Tet>,
     /// CSR: tetrahedra incident to each node.
     node_tets: Csr,
     /// CSR: sorted neighbours of each node, itself included.
     node_adj: Csr,
+    /// The element formulation.
+    element: Element,
+    /// The nodal volumetric operator of [`Element::Anp`] (`None` for P1).
+    nodal: Option<NodalVolume>,
+}
+
+/// The element formulation: how the volumetric energy is integrated. Both keep one node per
+/// mesh vertex and three displacement dofs per node, so everything downstream of `K_ff`
+/// (compliance blocks, banks, firmware, display) is unchanged.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub enum Element {
+    /// Linear tetrahedron (the paper's element): constant strain per element. Locks as
+    /// nu -> 0.5 (one volumetric constraint per element, about 5 per node against 3 dofs).
+    #[default]
+    P1,
+    /// Average nodal pressure tetrahedron (Bonet & Burton, *Commun. Numer. Meth. Engng* 14,
+    /// 1998; Joldes, Wittek & Miller, *Commun. Numer. Meth. Engng* 25, 2009): the deviatoric
+    /// energy is P1's, the volumetric energy uses the nodally averaged volumetric strain
+    /// `theta_n = (1 / V_n) sum_{e ∋ n} (V_e / 4) tr(eps_e)`, `V_n = sum_{e ∋ n} V_e / 4`
+    /// (one constraint per node), stabilised by a fraction [`ANP_STABILISATION`] of P1's
+    /// element volumetric energy:
+    /// `W = sum_e V_e mu |dev eps_e|^2
+    ///    + (kappa / 2) [(1 - alpha) sum_n V_n theta_n^2 + alpha sum_e V_e tr(eps_e)^2]`.
+    Anp,
+}
+
+/// `alpha` of [`Element::Anp`]: the fraction of the element-wise (P1) volumetric energy kept
+/// to stabilise the nodal-pressure modes (volumetric strain fields that change sign from
+/// element to element with a zero nodal average, which pure ANP penalises only through `mu`).
+/// Both volumetric energies agree on linear fields, so any alpha passes the patch test; but
+/// alpha re-introduces P1's one-constraint-per-element with penalty `alpha kappa`, so it must
+/// stay small against `mu`. Measured (`tests/element.rs`, `examples/punch.rs`) at nu = 0.499:
+/// pure ANP (alpha = 0) already has no near-zero eigenvalue of `K_ff` (its six lowest are
+/// 64-81 % of P1's on the 3x3x3 test box; its eight lowest 45-57 % on `liver-1k4` with the bed
+/// fixed, from a one-off dense eigensolve; P1's are raised by locking); alpha = 0.001 raises them by about 1 % and costs 1.3 % of tip deflection on a 40x6x6
+/// cantilever and 1.1 % of punch force on `liver-1k4`, where alpha = 0.01 costs 11 % and 8 %.
+/// The penalty grows like `alpha kappa / mu`, so at nu = 0.4999 alpha = 0.001 stiffens about
+/// as much as 0.01 does at 0.499.
+pub const ANP_STABILISATION: f64 = 0.001;
+
+impl Element {
+    /// Every formulation, in the order [`Element::name`] lists them.
+    pub const ALL: [Element; 2] = [Element::P1, Element::Anp];
+
+    /// The formulation's name: `p1` or `anp`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Element::P1 => "p1",
+            Element::Anp => "anp",
+        }
+    }
+}
+
+impl std::fmt::Display for Element {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+impl std::str::FromStr for Element {
+    type Err = String;
+
+    /// Parses a name of [`Element::name`].
+    fn from_str(s: &str) -> Result<Element, String> {
+        Element::ALL
+            .into_iter()
+            .find(|e| e.name() == s)
+            .ok_or_else(|| format!("unknown element {s:?} (expected p1 or anp)"))
+    }
+}
+
+/// The nodal volumetric operator of the ANP element: `theta_n = (1 / V_n) sum_m w_nm . u_m`
+/// with `w_nm = sum_{e ∋ n, m} (V_e / 4) grad N^e_m`, so the nodal energy is
+/// `(1 - alpha) kappa / 2 sum_n (w_n . u)^2 / V_n`.
+#[derive(Debug, Clone)]
+struct NodalVolume {
+    /// `(1 - alpha) kappa / V_n` per node.
+    weight: Vec<f64>,
+    /// `w_nm`, aligned with the one-ring `Elasticity::ring` (row n, entry m).
+    w: Vec<[f64; 3]>,
+    /// One-ring neighbours (itself included); `node_adj` then holds the two-ring pattern.
+    ring: Csr,
+    /// `alpha`.
+    alpha: f64,
 }
 
 #[derive(Debug, Clone)]
@@ -297,12 +383,91 @@ impl Csr {
 }
 
 impl Elasticity {
-    /// Precomputes element gradients and the node graph.
+    /// Precomputes element gradients and the node graph of the P1 element.
     pub fn new(mesh: &TetMesh, material: Material) -> Result<Self, FemError> {
-        let elements: Vec<Element> = mesh
+        Self::with_element(mesh, material, Element::P1)
+    }
+
+    /// [`Elasticity::new`] with a chosen element formulation ([`Element::Anp`] with its
+    /// default stabilisation [`ANP_STABILISATION`]).
+    pub fn with_element(
+        mesh: &TetMesh,
+        material: Material,
+        element: Element,
+    ) -> Result<Self, FemError> {
+        let p1 = Self::p1(mesh, material)?;
+        match element {
+            Element::P1 => Ok(p1),
+            Element::Anp => p1.anp(ANP_STABILISATION),
+        }
+    }
+
+    /// The ANP element with stabilisation `alpha` in `[0, 1]` (0: pure nodal pressure, which
+    /// has spurious low-energy modes; 1: P1). For studying the choice of [`ANP_STABILISATION`].
+    pub fn with_anp_stabilisation(
+        mesh: &TetMesh,
+        material: Material,
+        alpha: f64,
+    ) -> Result<Self, FemError> {
+        if !(0.0..=1.0).contains(&alpha) {
+            return Err(FemError::Material(format!(
+                "the ANP stabilisation must lie in [0, 1], got {alpha}"
+            )));
+        }
+        Self::p1(mesh, material)?.anp(alpha)
+    }
+
+    /// Turns a P1 body into the ANP element: nodal volumes, the operator `w` and the two-ring
+    /// sparsity pattern (the nodal volumetric strain of `n` involves its one-ring, so its
+    /// energy couples every pair of nodes in that ring).
+    fn anp(mut self, alpha: f64) -> Result<Self, FemError> {
+        let n = self.nodes();
+        let ring = self.node_adj.clone();
+        let kappa = self.bulk_modulus();
+        let rows: Vec<(f64, Vec<[f64; 3]>)> = (0..n)
+            .into_par_iter()
+            .map(|node| {
+                let row = ring.row(node);
+                let mut w = vec![[0.0; 3]; row.len()];
+                let mut volume = 0.0;
+                for &t in self.node_tets.row(node) {
+                    let el = &self.elements[t];
+                    volume += el.volume / 4.0;
+                    for (a, &m) in self.tets[t].iter().enumerate() {
+                        let k = row.binary_search(&m).expect("tet vertices are neighbours");
+                        w[k] = add(w[k], scale(el.grad[a], el.volume / 4.0));
+                    }
+                }
+                let weight = if volume > 0.0 {
+                    (1.0 - alpha) * kappa / volume
+                } else {
+                    0.0
+                };
+                (weight, w)
+            })
+            .collect();
+        let mut weight = Vec::with_capacity(n);
+        let mut w = Vec::with_capacity(ring.idx.len());
+        for (c, row) in rows {
+            weight.push(c);
+            w.extend(row);
+        }
+        self.node_adj = two_ring(&ring);
+        self.element = Element::Anp;
+        self.nodal = Some(NodalVolume {
+            weight,
+            w,
+            ring,
+            alpha,
+        });
+        Ok(self)
+    }
+
+    fn p1(mesh: &TetMesh, material: Material) -> Result<Self, FemError> {
+        let elements: Vec<Tet> = mesh
             .tets
             .par_iter()
-            .map(|t| Element::new(t.map(|i| mesh.nodes[i])))
+            .map(|t| Tet::new(t.map(|i| mesh.nodes[i])))
             .collect();
         if let Some((tet, e)) = elements
             .iter()
@@ -324,7 +489,30 @@ impl Elasticity {
             elements,
             node_tets,
             node_adj,
+            element: Element::P1,
+            nodal: None,
         })
+    }
+
+    /// The element formulation.
+    pub fn element(&self) -> Element {
+        self.element
+    }
+
+    /// Bulk modulus `kappa = lambda + 2 mu / 3`.
+    fn bulk_modulus(&self) -> f64 {
+        let (lambda, mu) = self.material.lame();
+        lambda + 2.0 * mu / 3.0
+    }
+
+    /// The Lamé pair of the element-wise part of the energy: P1's, or for ANP the deviatoric
+    /// part plus the stabilisation, `W_e = (alpha kappa - 2 mu / 3) / 2 tr^2 + mu eps:eps`.
+    fn element_lame(&self) -> (f64, f64) {
+        let (lambda, mu) = self.material.lame();
+        match &self.nodal {
+            None => (lambda, mu),
+            Some(nodal) => (nodal.alpha * self.bulk_modulus() - 2.0 * mu / 3.0, mu),
+        }
     }
 
     /// Number of nodes.
@@ -337,49 +525,67 @@ impl Elasticity {
         self.material
     }
 
-    /// Sorted neighbours of `node` in the mesh (sharing a tetrahedron), itself included.
+    /// Sorted nodes coupled to `node` in `K`, itself included: those sharing a tetrahedron
+    /// for P1, the two-ring (neighbours of neighbours) for ANP. The sparsity pattern of `K_ff`
+    /// and the graph of the METIS ordering.
     pub fn neighbours(&self, node: usize) -> &[usize] {
         self.node_adj.row(node)
     }
 
-    /// The 3x3 block `K_mn` of the global stiffness (rows: components at `m`).
-    fn global_block(&self, m: usize, n: usize, lambda: f64, mu: f64, acc: &mut [[f64; 3]; 3]) {
-        for &t in self.node_tets.row(n) {
+    /// The 3x3 blocks `K_mp` (rows: components at `m`) of column node `p` for the sorted rows
+    /// `rows`, which must contain every `m <= p` coupled to `p`; entries outside `rows` are
+    /// skipped. Element part tet by tet, then the ANP nodal part `c_n w_nm w_np^T` summed
+    /// over the nodes `n` whose one-ring holds both.
+    fn column_blocks(&self, p: usize, rows: &[usize]) -> Vec<[[f64; 3]; 3]> {
+        let (lambda, mu) = self.element_lame();
+        let mut blocks = vec![[[0.0; 3]; 3]; rows.len()];
+        let mut add_block = |m: usize, k: [[f64; 3]; 3]| {
+            if let Ok(slot) = rows.binary_search(&m) {
+                for (acc, kr) in blocks[slot].iter_mut().zip(k) {
+                    for (x, y) in acc.iter_mut().zip(kr) {
+                        *x += y;
+                    }
+                }
+            }
+        };
+        for &t in self.node_tets.row(p) {
             let tet = &self.tets[t];
-            let (Some(a), Some(b)) = (
-                tet.iter().position(|&v| v == m),
-                tet.iter().position(|&v| v == n),
-            ) else {
-                continue;
-            };
-            let k = self.elements[t].block(a, b, lambda, mu);
-            for i in 0..3 {
-                for j in 0..3 {
-                    acc[i][j] += k[i][j];
+            let b = tet.iter().position(|&v| v == p).expect("incident tet");
+            for (a, &m) in tet.iter().enumerate() {
+                add_block(m, self.elements[t].block(a, b, lambda, mu));
+            }
+        }
+        if let Some(nodal) = &self.nodal {
+            for &n in nodal.ring.row(p) {
+                let range = nodal.ring.ptr[n]..nodal.ring.ptr[n + 1];
+                let ring = &nodal.ring.idx[range.clone()];
+                let w = &nodal.w[range];
+                let Ok(at_p) = ring.binary_search(&p) else {
+                    continue;
+                };
+                let wp = scale(w[at_p], nodal.weight[n]);
+                for (&m, wm) in ring.iter().zip(w) {
+                    add_block(
+                        m,
+                        std::array::from_fn(|i| std::array::from_fn(|j| wm[i] * wp[j])),
+                    );
                 }
             }
         }
+        blocks
     }
 
     /// Assembles the upper triangle of `K_ff` in CSC form (columns in parallel: each node's
     /// three columns only read shared data, so there are no write conflicts).
     pub fn stiffness(&self, dofs: &DofMap) -> SparseColMat<usize, f64> {
-        let (lambda, mu) = self.material.lame();
         let n = self.nodes();
         // Per node: (row indices, values) of its up-to-three columns, concatenated.
         let columns: Vec<[(Vec<usize>, Vec<f64>); 3]> = (0..n)
             .into_par_iter()
             .map(|node| {
-                let lower: Vec<usize> = self
-                    .neighbours(node)
-                    .iter()
-                    .copied()
-                    .filter(|&m| m <= node)
-                    .collect();
-                let mut blocks = vec![[[0.0; 3]; 3]; lower.len()];
-                for (m, acc) in lower.iter().zip(&mut blocks) {
-                    self.global_block(*m, node, lambda, mu, acc);
-                }
+                let all = self.neighbours(node);
+                let lower = &all[..all.partition_point(|&m| m <= node)];
+                let blocks = self.column_blocks(node, lower);
                 std::array::from_fn(|c| {
                     let mut rows = Vec::new();
                     let mut vals = Vec::new();
@@ -420,20 +626,51 @@ impl Elasticity {
     }
 
     /// Applies the full (unconstrained) stiffness: returns `K u` for a node-major field `u` of
-    /// length `3 N`. Element by element, independent of [`Elasticity::stiffness`]; used for
-    /// reaction forces and residual checks.
+    /// length `3 N`. Element by element (and, for ANP, through the nodal volumetric strains
+    /// `theta_n`), independent of [`Elasticity::stiffness`]; used for reaction forces and
+    /// residual checks.
     pub fn apply(&self, u: &[f64]) -> Vec<f64> {
-        let (lambda, mu) = self.material.lame();
+        let (lambda, mu) = self.element_lame();
         let n = self.nodes();
+        let at = |m: usize| [u[3 * m], u[3 * m + 1], u[3 * m + 2]];
+        // ANP: s_n = c_n (w_n . u), so that f_m += sum_{n in ring(m)} s_n w_nm.
+        let nodal_stress: Vec<f64> = match &self.nodal {
+            None => Vec::new(),
+            Some(nodal) => (0..n)
+                .into_par_iter()
+                .map(|node| {
+                    let range = nodal.ring.ptr[node]..nodal.ring.ptr[node + 1];
+                    let dilatation: f64 = nodal.ring.idx[range.clone()]
+                        .iter()
+                        .zip(&nodal.w[range])
+                        .map(|(&m, w)| dot(*w, at(m)))
+                        .sum();
+                    nodal.weight[node] * dilatation
+                })
+                .collect(),
+        };
         (0..n)
             .into_par_iter()
             .flat_map_iter(|m| {
                 let mut f = [0.0; 3];
-                for &nb in self.neighbours(m) {
-                    let mut k = [[0.0; 3]; 3];
-                    self.global_block(m, nb, lambda, mu, &mut k);
-                    for (i, fi) in f.iter_mut().enumerate() {
-                        *fi += (0..3).map(|j| k[i][j] * u[3 * nb + j]).sum::<f64>();
+                for &t in self.node_tets.row(m) {
+                    let tet = &self.tets[t];
+                    let a = tet.iter().position(|&v| v == m).expect("incident tet");
+                    for (b, &nb) in tet.iter().enumerate() {
+                        let k = self.elements[t].block(a, b, lambda, mu);
+                        let ub = at(nb);
+                        for (fi, ki) in f.iter_mut().zip(k) {
+                            *fi += dot(ki, ub);
+                        }
+                    }
+                }
+                if let Some(nodal) = &self.nodal {
+                    for &nd in nodal.ring.row(m) {
+                        let range = nodal.ring.ptr[nd]..nodal.ring.ptr[nd + 1];
+                        let k = nodal.ring.idx[range.clone()]
+                            .binary_search(&m)
+                            .expect("one-ring is symmetric");
+                        f = add(f, scale(nodal.w[range][k], nodal_stress[nd]));
                     }
                 }
                 f
@@ -580,6 +817,39 @@ fn incidence(n: usize, tets: &[[usize; 4]]) -> Csr {
     Csr { ptr, idx }
 }
 
+/// Two-ring of a symmetric one-ring graph: row `i` is the sorted union of the rows of its
+/// one-ring neighbours.
+fn two_ring(ring: &Csr) -> Csr {
+    let n = ring.ptr.len() - 1;
+    let rows: Vec<Vec<usize>> = (0..n)
+        .into_par_iter()
+        .map(|i| {
+            let mut row: Vec<usize> = ring
+                .row(i)
+                .iter()
+                .flat_map(|&j| ring.row(j).iter().copied())
+                .chain(std::iter::once(i))
+                .collect();
+            row.sort_unstable();
+            row.dedup();
+            row
+        })
+        .collect();
+    from_rows(rows)
+}
+
+fn from_rows(rows: Vec<Vec<usize>>) -> Csr {
+    let n = rows.len();
+    let mut ptr = Vec::with_capacity(n + 1);
+    ptr.push(0);
+    let mut idx = Vec::new();
+    for row in rows {
+        idx.extend(row);
+        ptr.push(idx.len());
+    }
+    Csr { ptr, idx }
+}
+
 fn adjacency(node_tets: &Csr, tets: &[[usize; 4]]) -> Csr {
     let n = node_tets.ptr.len() - 1;
     let rows: Vec<Vec<usize>> = (0..n)
@@ -596,12 +866,5 @@ fn adjacency(node_tets: &Csr, tets: &[[usize; 4]]) -> Csr {
             row
         })
         .collect();
-    let mut ptr = Vec::with_capacity(n + 1);
-    ptr.push(0);
-    let mut idx = Vec::new();
-    for row in rows {
-        idx.extend(row);
-        ptr.push(idx.len());
-    }
-    Csr { ptr, idx }
+    from_rows(rows)
 }

@@ -6,8 +6,9 @@
 //!
 //! 1. [`mesh`]: read a tetrahedral organ (Gmsh `.msh`, VTK `.vtu` / `.vtk`), validate it (every
 //!    error names the file and the element or node id) and find its boundary surface;
-//! 2. [`elasticity`]: P1 linear elasticity, the paper's section 3 (eq. 1, `K u = f`), with fixed
-//!    nodes or single fixed components;
+//! 2. [`elasticity`]: linear elasticity, the paper's section 3 (eq. 1, `K u = f`), with fixed
+//!    nodes or single fixed components, on the paper's P1 tetrahedron or the locking-free
+//!    average nodal pressure tetrahedron ([`elasticity::Element`]);
 //! 3. [`ordering`]: fill-reducing orderings of `K_ff` (METIS nested dissection, AMD);
 //! 4. [`compliance`]: one sparse Cholesky factorisation of `K_ff`, then the compliance blocks
 //!    `C_nk = (K_ff^-1)_nk` (the paper's "elementary deformations", section 4-1, in compliance

@@ -3,7 +3,7 @@
 use super::fixing::{FixArgs, parse_list};
 use anyhow::{Context, Result, bail};
 use fem::compliance::Compliance;
-use fem::elasticity::{Elasticity, Material};
+use fem::elasticity::{Elasticity, Element, Material};
 use host::progress::Bar;
 use host::scene::{Locking, p1_locking};
 use std::io::Write;
@@ -32,6 +32,10 @@ pub struct Args {
     /// Nodes whose blocks are wanted, comma separated.
     #[arg(long, value_name = "i,j,...")]
     nodes: String,
+    /// Element formulation: `p1` (the paper's linear tetrahedron) or `anp` (average nodal
+    /// pressure, free of volumetric locking as --poisson approaches 0.5; same nodes).
+    #[arg(long, default_value_t = Element::P1, value_name = "p1|anp")]
+    element: Element,
 }
 
 /// Runs the command.
@@ -42,16 +46,19 @@ pub fn run(args: Args) -> Result<()> {
     }
     let nodes = parse_list::<usize>(&args.nodes).context("--nodes")?;
     let material = Material::new(args.young, args.poisson)?;
-    match p1_locking(args.poisson) {
-        Locking::Meaningless(why) => bail!("--poisson: {why}"),
-        Locking::Stiffens(warning) => eprintln!("{warning}"),
-        Locking::Fine => {}
+    // Only the paper's linear tetrahedron locks; `anp` is free of it.
+    if args.element == Element::P1 {
+        match p1_locking(args.poisson) {
+            Locking::Meaningless(why) => bail!("--poisson: {why} (or use --element anp)"),
+            Locking::Stiffens(warning) => eprintln!("{warning} (or use --element anp)"),
+            Locking::Fine => {}
+        }
     }
     let fixed = args.fix.build(&mesh)?;
     if fixed.count() == 3 * mesh.nodes.len() {
         bail!("the fixed set holds every node: nothing can deform (every block would be zero)");
     }
-    let body = Elasticity::new(&mesh, material)?;
+    let body = Elasticity::with_element(&mesh, material, args.element)?;
     let compliance = Compliance::factorize(&body, &fixed)?;
     let progress = Bar::new("supernodes");
     let blocks = compliance.blocks(&nodes, Some(&progress))?;
