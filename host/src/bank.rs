@@ -147,7 +147,7 @@ impl Prepared {
             .filter_map(|t| Some([*local.get(&t[0])?, *local.get(&t[1])?, *local.get(&t[2])?]))
             .collect();
         let positions = region.iter().map(|&k| mesh.nodes[k]).collect();
-        let body = Elasticity::new(&mesh, scene.material)?;
+        let body = Elasticity::with_element(&mesh, scene.material, scene.element)?;
         let compliance = Compliance::factorize(&body, &fixed)
             .with_context(|| format!("{}: [fixed]", path.display()))?;
         let scene_id = scene.scene_id(mesh_hash);

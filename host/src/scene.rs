@@ -14,7 +14,7 @@
 //!   shaft_axis`.
 
 use bank_format::{DeviceCalibration, TissueLaw};
-use fem::elasticity::{FixedSet, Material};
+use fem::elasticity::{Element, FixedSet, Material};
 use fem::mesh::TetMesh;
 use serde::Deserialize;
 use std::ops::Range;
@@ -78,6 +78,8 @@ struct RawScene {
 struct RawMaterial {
     young_pa: Spanned<f64>,
     poisson: Spanned<f64>,
+    #[serde(default)]
+    element: Option<Spanned<String>>,
 }
 
 #[derive(Debug, Deserialize)]
@@ -227,6 +229,8 @@ pub struct Scene {
     pub mesh: MeshSource,
     /// Material.
     pub material: Material,
+    /// Element formulation (`[material] element`, default the paper's P1).
+    pub element: Element,
     /// Fixed boxes.
     pub fix_boxes: Vec<FixBox>,
     /// Fully fixed nodes.
@@ -347,8 +351,14 @@ impl Scene {
     /// Warnings about the scene that do not stop it (P1 locking above
     /// [`P1_LOCKING_WARN`]), for the commands to print.
     pub fn warnings(&self) -> Vec<String> {
+        if self.element != Element::P1 {
+            return Vec::new();
+        }
         match p1_locking(self.material.poisson) {
-            Locking::Stiffens(w) => vec![format!("{}: {w}", self.path.display())],
+            Locking::Stiffens(w) => vec![format!(
+                "{}: {w} (or set [material] element = \"anp\", free of locking)",
+                self.path.display()
+            )],
             _ => Vec::new(),
         }
     }
@@ -373,7 +383,7 @@ impl Scene {
         };
         let raw = parse_toml(&ctx)?;
         let mesh = parse_mesh(&ctx, path, &raw.mesh)?;
-        let material = parse_material(&ctx, &raw.material)?;
+        let (material, element) = parse_material(&ctx, &raw.material)?;
         let (fix_boxes, fix_nodes, fix_nodes_line) = parse_fixed(&ctx, &raw.fixed)?;
         let tip_radius_m = parse_tool(&ctx, &raw.tool)?;
         let device = parse_device(&ctx, &raw.device, tip_radius_m)?;
@@ -391,6 +401,7 @@ impl Scene {
             path: path.to_path_buf(),
             mesh,
             material,
+            element,
             fix_boxes,
             fix_nodes,
             fix_nodes_line,
@@ -494,9 +505,10 @@ fn parse_mesh(ctx: &Ctx, path: &Path, mesh: &Spanned<String>) -> Result<MeshSour
     }
 }
 
-/// `[material]`: `young_pa` finite and > 0, `poisson` in (-1, 0.5), then whatever
+/// `[material]`: `young_pa` in [`YOUNG_RANGE_PA`], `poisson` in (-1, 0.5) (for P1 at most
+/// [`P1_LOCKING_REFUSE`]), `element` one of [`Element::ALL`] (default `p1`), then whatever
 /// [`Material::new`] rejects.
-fn parse_material(ctx: &Ctx, m: &RawMaterial) -> Result<Material, SceneError> {
+fn parse_material(ctx: &Ctx, m: &RawMaterial) -> Result<(Material, Element), SceneError> {
     let (e, nu) = (*m.young_pa.get_ref(), *m.poisson.get_ref());
     if !(e.is_finite() && e > 0.0) {
         return Err(ctx.err(
@@ -523,10 +535,25 @@ fn parse_material(ctx: &Ctx, m: &RawMaterial) -> Result<Material, SceneError> {
             format!("Poisson's ratio must lie in (-1, 0.5), got {nu}"),
         ));
     }
-    if let Locking::Meaningless(why) = p1_locking(nu) {
-        return Err(ctx.err(m.poisson.span(), "material.poisson", why));
+    let element = match &m.element {
+        Some(name) => name
+            .get_ref()
+            .parse::<Element>()
+            .map_err(|why| ctx.err(name.span(), "material.element", why))?,
+        None => Element::P1,
+    };
+    if element == Element::P1
+        && let Locking::Meaningless(why) = p1_locking(nu)
+    {
+        return Err(ctx.err(
+            m.poisson.span(),
+            "material.poisson",
+            format!("{why} (or use element = \"anp\", free of locking)"),
+        ));
     }
-    Material::new(e, nu).map_err(|err| ctx.err(m.young_pa.span(), "material", err.to_string()))
+    let material = Material::new(e, nu)
+        .map_err(|err| ctx.err(m.young_pa.span(), "material", err.to_string()))?;
+    Ok((material, element))
 }
 
 /// Collision grid cells a scene may ask for, m.

@@ -320,6 +320,22 @@ fn odd_arguments_are_refused_with_their_name() {
     );
 }
 
+/// A scene with the locking-free element builds a valid bank at a Poisson's ratio P1 refuses.
+#[test]
+fn the_locking_free_element_builds_a_bank() {
+    let dir = tempfile::tempdir().unwrap();
+    let text = std::fs::read_to_string(scene()).unwrap();
+    let edited = text.replacen("poisson = 0.45", "poisson = 0.499\nelement = \"anp\"", 1);
+    let p = dir.path().join("anp.toml");
+    std::fs::write(&p, edited).unwrap();
+    let out = dir.path().join("anp.bank");
+    let o = host(&["bank", "build", s(&p), "-o", s(&out)]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(!stderr(&o).contains("warning"), "{}", stderr(&o));
+    let bytes = std::fs::read(&out).unwrap();
+    assert!(Bank::parse(&AlignedBytes::new(&bytes)).is_ok());
+}
+
 #[test]
 fn sweep_prints_a_row_per_radius() {
     let o = host(&[

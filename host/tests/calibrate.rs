@@ -587,6 +587,11 @@ fn scene_materials_outside_what_works_are_refused() {
     assert!(w.len() == 1 && w[0].contains("too stiff"), "{w:?}");
     let shipped = Scene::load(&manifest("scenes/liver.toml")).unwrap();
     assert_eq!(shipped.warnings(), Vec::<String>::new());
+    // The average-nodal-pressure element does not lock: no refusal, no warning.
+    let anp = "poisson = 0.4999\nelement = \"anp\"";
+    assert_eq!(with("poisson = 0.45", anp).unwrap(), Vec::<String>::new());
+    let e = with("poisson = 0.45", "poisson = 0.45\nelement = \"q2\"").unwrap_err();
+    assert!(e.contains("material.element"), "{e}");
     for young in ["1e300", "1e-300"] {
         let e = with("young_pa = 3000.0", &format!("young_pa = {young}")).unwrap_err();
         assert!(
