@@ -109,54 +109,7 @@ fn anp_passes_the_patch_test() {
     }
 }
 
-/// Free-slip uniaxial compression of a straight box: the exact solution is linear, so ANP
-/// reproduces it and the force `E A strain`.
-#[test]
-fn anp_box_uniaxial_compression_is_exact() {
-    let size = [0.03, 0.02, 0.025];
-    let mesh = box_mesh(size, [6, 4, 5]);
-    for nu in [0.45, 0.499] {
-        let e = 4.5e3;
-        let body = anp(&mesh, e, nu);
-        let strain = 0.02;
-        let mut held = FixedSet::none(mesh.nodes.len());
-        let mut u_held = vec![0.0; 3 * mesh.nodes.len()];
-        let mut top = Vec::new();
-        for (i, p) in mesh.nodes.iter().enumerate() {
-            if p[2] < 1e-12 {
-                held.fix_component(i, 2).unwrap();
-            }
-            if p[2] > size[2] - 1e-12 {
-                held.fix_component(i, 2).unwrap();
-                u_held[3 * i + 2] = -strain * size[2];
-                top.push(i);
-            }
-            if p[0] < 1e-12 && p[1] < 1e-12 {
-                held.fix_component(i, 0).unwrap();
-                held.fix_component(i, 1).unwrap();
-            }
-            if p[0] > size[0] - 1e-12 && p[1] < 1e-12 {
-                held.fix_component(i, 1).unwrap();
-            }
-        }
-        let (u, f) = solve_prescribed(&body, &held, &u_held).unwrap();
-        let mut worst = 0.0f64;
-        for (i, p) in mesh.nodes.iter().enumerate() {
-            let exact = [nu * strain * p[0], nu * strain * p[1], -strain * p[2]];
-            for c in 0..3 {
-                worst = worst.max((u[3 * i + c] - exact[c]).abs() / (strain * size[2]));
-            }
-        }
-        let force: f64 = top.iter().map(|&i| f[3 * i + 2]).sum();
-        let expected = -e * size[0] * size[1] * strain;
-        let force_err = (force - expected).abs() / expected.abs();
-        eprintln!("ANP box nu={nu}: displacement error {worst:.1e}, force error {force_err:.1e}");
-        assert!(
-            worst <= 1e-10 && force_err <= 1e-10,
-            "{worst:e} {force_err:e}"
-        );
-    }
-}
+// Free-slip uniaxial compression of a box, exact for both elements: fem_exact.rs.
 
 /// Dense full `K` of a body from `apply` on unit vectors.
 fn dense_by_apply(body: &Elasticity) -> faer::Mat<f64> {
