@@ -286,6 +286,21 @@ fn shipped_brain_data_meets_the_goal_and_matches_the_host_fem() {
     assert!(line.errors(&lf, &force).rms_rel > 0.05);
 }
 
+/// A box is no compression cylinder: refused, with where its side nodes lie.
+#[test]
+fn a_box_is_refused_as_a_specimen() {
+    let beam = fem::mesh::load(&manifest("meshes/beam.msh")).unwrap();
+    let e = specimen::compress(&beam, Material::new(3000.0, 0.45).unwrap())
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("not a cylinder along z"), "{e}");
+    let box_mesh = fem::mesh::structured::box_mesh([0.03, 0.03, 0.013], [6, 6, 3]);
+    let e = specimen::compress(&box_mesh, Material::new(3000.0, 0.45).unwrap())
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("not a cylinder along z"), "{e}");
+}
+
 #[test]
 fn specimen_fem_matches_the_papers_formulas() {
     // Paper, section 3-4: f^L = s E x / h, d_r^L = nu r x / h. The FEM's top face is the

@@ -34,6 +34,40 @@ pub struct SpecimenResponse {
     pub ring_nodes: usize,
 }
 
+/// How far a side node may lie inside the cylinder's radius, relative to it: a meshed circle
+/// of at least 24 segments stays within 1 % (its facets' midpoints are not nodes), while a box
+/// has side nodes down to 71 % of its corners' distance.
+pub const CYLINDER_TOLERANCE: f64 = 0.02;
+
+/// Refuses a specimen that is not a cylinder along z: every boundary node off the end faces
+/// must lie at the radius `r` (within [`CYLINDER_TOLERANCE`]).
+fn check_cylinder(
+    mesh: &TetMesh,
+    z_lo: f64,
+    z_hi: f64,
+    r: f64,
+    tol: f64,
+    dist: &dyn Fn(&[f64; 3]) -> f64,
+) -> Result<()> {
+    let surface = fem::mesh::boundary(mesh)?;
+    let side = surface
+        .nodes
+        .iter()
+        .map(|&n| &mesh.nodes[n])
+        .filter(|p| p[2] > z_lo + tol && p[2] < z_hi - tol);
+    let inner = side.map(dist).fold(f64::INFINITY, f64::min);
+    if inner.is_finite() && inner < (1.0 - CYLINDER_TOLERANCE) * r {
+        bail!(
+            "the specimen is not a cylinder along z: side nodes lie from {:.2} mm to {:.2} mm \
+             from its axis (a cylinder's all lie at its radius, within {} %)",
+            1e3 * inner,
+            1e3 * r,
+            100.0 * CYLINDER_TOLERANCE
+        );
+    }
+    Ok(())
+}
+
 /// Compresses a cylinder mesh with its axis along z (centred on its bounding box) by a unit
 /// top displacement; see the module documentation for the supports.
 pub fn compress(mesh: &TetMesh, material: Material) -> Result<SpecimenResponse> {
@@ -63,6 +97,7 @@ pub fn compress(mesh: &TetMesh, material: Material) -> Result<SpecimenResponse> 
             hi[2]
         );
     }
+    check_cylinder(mesh, lo[2], hi[2], r, tol, &dist)?;
     let body = Elasticity::new(mesh, material)?;
     let mut held = FixedSet::none(mesh.nodes.len());
     let mut u = vec![0.0; 3 * mesh.nodes.len()];
