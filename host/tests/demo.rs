@@ -10,8 +10,16 @@ fn host() -> Command {
     Command::new(env!("CARGO_BIN_EXE_host"))
 }
 
+/// One demo test at a time: each runs a 1 kHz loop, a display and sometimes QEMU or Chromium,
+/// and two at once on a 2-core machine starve the viewer's screenshot of its frames.
+fn one_at_a_time() -> std::sync::MutexGuard<'static, ()> {
+    static LOCK: std::sync::Mutex<()> = std::sync::Mutex::new(());
+    LOCK.lock().unwrap_or_else(|e| e.into_inner())
+}
+
 #[test]
 fn headless_press_prints_the_figures_as_json() {
+    let _turn = one_at_a_time();
     let out = host()
         .args(["demo", "--headless", "--seconds", "3", "--script", "press"])
         .args(["--json", "--port", "0"])
@@ -46,6 +54,7 @@ fn headless_press_prints_the_figures_as_json() {
 /// paced to real time; the scripted press renders a force, with no fault.
 #[test]
 fn sil_source_drives_the_display() {
+    let _turn = one_at_a_time();
     let out = host()
         .args([
             "demo",
@@ -76,6 +85,7 @@ fn sil_source_drives_the_display() {
 /// Headless runs take any free port unless told otherwise, so two can run at once.
 #[test]
 fn two_headless_runs_at_once() {
+    let _turn = one_at_a_time();
     let run = || {
         host()
             .args(["demo", "--headless", "--seconds", "2", "--json"])
@@ -97,6 +107,7 @@ fn two_headless_runs_at_once() {
 
 #[test]
 fn bad_sources_and_meshes_are_refused_with_a_clear_message() {
+    let _turn = one_at_a_time();
     let out = host().args(["demo", "--source", "usb"]).output().unwrap();
     assert!(!out.status.success());
     assert!(String::from_utf8_lossy(&out.stderr).contains("serial:<port>"));
@@ -118,6 +129,7 @@ fn bad_sources_and_meshes_are_refused_with_a_clear_message() {
 
 #[test]
 fn recorded_sequence_reads_back_with_every_node() {
+    let _turn = one_at_a_time();
     let dir = tempfile::tempdir().unwrap();
     let rec = dir.path().join("rec");
     let out = host()
@@ -165,6 +177,7 @@ fn recorded_sequence_reads_back_with_every_node() {
 
 #[test]
 fn stalled_viewers_do_not_hold_up_the_frames() {
+    let _turn = one_at_a_time();
     let mut child = host()
         .args([
             "demo",
@@ -337,6 +350,7 @@ mod image {
 
 #[test]
 fn viewer_renders_the_liver_and_the_press_deforms_it_under_the_tool() {
+    let _turn = one_at_a_time();
     let mut child = host()
         .args(["demo", "--port", "0", "--seconds", "180"])
         .stdout(Stdio::piped())

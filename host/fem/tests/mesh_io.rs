@@ -574,6 +574,17 @@ fn an_empty_msh41_says_it_has_no_nodes() {
     assert!(e.contains("the mesh has no nodes"), "{e}");
 }
 
+/// Nodes but an empty `$Elements` section: that is what the error says.
+#[test]
+fn an_msh41_without_elements_says_so() {
+    let text = msh41_one_tet([1, 2, 3, 4], [0, 1, 2, 3]).replace(
+        "$Elements\n1 1 1 1\n3 1 4 1\n1 1 2 3 4\n$EndElements",
+        "$Elements\n0 0 0 0\n$EndElements",
+    );
+    let e = mesh::parse_msh(text.as_bytes()).unwrap_err().to_string();
+    assert!(e.contains("the mesh has no elements"), "{e}");
+}
+
 /// A device or FIFO is not read (it would never end).
 #[test]
 fn special_files_are_not_read() {

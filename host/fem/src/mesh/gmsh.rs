@@ -359,6 +359,13 @@ fn read_msh41(bytes: &[u8], header: &Header) -> Result<TetMesh, MeshError> {
     let msh = match parsed {
         // `mshio` calls an empty node section a reserved tag 0; say what it is.
         Ok(Err(_)) if tags().is_ok_and(|t| t.is_empty()) => return Err(no_nodes()),
+        // Likewise an empty element section.
+        Ok(Err(_)) if !binary && first_count(bytes, b"\n$Elements") == Some(0) => {
+            return Err(MeshError::Format {
+                file: nofile(),
+                message: "$Elements: the mesh has no elements (no tetrahedra)".into(),
+            });
+        }
         Ok(r) => r?,
         Err(_) => {
             return Err(MeshError::Format {
@@ -372,6 +379,19 @@ fn read_msh41(bytes: &[u8], header: &Header) -> Result<TetMesh, MeshError> {
         return Err(no_nodes());
     }
     msh41_to_mesh(&msh, &tags)
+}
+
+/// The first number of an ASCII section's header line (its block count), if it reads.
+fn first_count(bytes: &[u8], section: &[u8]) -> Option<u64> {
+    let at = bytes.windows(section.len()).position(|w| w == section)? + section.len();
+    let rest = bytes.get(at..)?;
+    let line = rest.split(|&b| b == b'\n').nth(1)?;
+    std::str::from_utf8(line)
+        .ok()?
+        .split_whitespace()
+        .next()?
+        .parse()
+        .ok()
 }
 
 /// The node tags of an MSH 4.1 `$Nodes` section, in file order, read as the format defines
