@@ -4,7 +4,7 @@
 use super::organ::{OrganArgs, default_meshes};
 use anyhow::{Context, Result};
 use fem::compliance::Compliance;
-use fem::elasticity::{DofMap, Elasticity, FixedSet, Material};
+use fem::elasticity::{DofMap, Elasticity, Element, FixedSet, Material};
 use fem::ordering::{Ordering, permutation};
 use host::kinematics::counts_for;
 use std::path::{Path, PathBuf};
@@ -88,6 +88,9 @@ pub struct ComplianceArgs {
     /// Fill-reducing ordering: amd or nested-dissection.
     #[arg(long, default_value_t = Ordering::default())]
     ordering: Ordering,
+    /// Element formulation: p1 (the paper's) or anp (average nodal pressure, locking-free).
+    #[arg(long, default_value_t = Element::P1, value_name = "p1|anp")]
+    element: Element,
     /// Print one JSON object per mesh instead of a table.
     #[arg(long)]
     json: bool,
@@ -96,6 +99,7 @@ pub struct ComplianceArgs {
 #[derive(serde::Serialize)]
 struct Report {
     mesh: String,
+    element: String,
     nodes: usize,
     tets: usize,
     free_dofs: usize,
@@ -200,7 +204,7 @@ fn measure(path: &Path, material: Material, args: &ComplianceArgs) -> Result<Rep
 
     reset_peak_rss();
     let t = Instant::now();
-    let body = Elasticity::new(&mesh, material)?;
+    let body = Elasticity::with_element(&mesh, material, args.element)?;
     body.check_rigid_motions(&fixed)?;
     let dofs = DofMap::new(&fixed);
     let k = body.stiffness(&dofs);
@@ -233,6 +237,7 @@ fn measure(path: &Path, material: Material, args: &ComplianceArgs) -> Result<Rep
             || path.display().to_string(),
             |n| n.to_string_lossy().into(),
         ),
+        element: args.element.name().into(),
         nodes: mesh.nodes.len(),
         tets: mesh.tets.len(),
         free_dofs: stats.free_dofs,
