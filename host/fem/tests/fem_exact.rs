@@ -242,13 +242,13 @@ fn box_uniaxial_compression_is_exact() {
     }
 }
 
-/// Mean tip deflection of a cantilever clamped at x = 0 under a tip shear `p` spread over the
-/// tip face nodes, divided by the Timoshenko value.
-fn cantilever_ratio(cells: [usize; 3]) -> (usize, f64) {
+/// Mean tip deflection of a cantilever of `element`s clamped at x = 0 under a tip shear `p`
+/// spread over the tip face nodes, divided by the Timoshenko value; and the node count.
+fn cantilever_ratio(element: Element, nu: f64, cells: [usize; 3]) -> (usize, f64) {
     let (l, b, h) = (0.1, 0.01, 0.01);
-    let (e, nu) = (3.0e3, 0.45);
+    let e = 3.0e3;
     let mesh = box_mesh([l, b, h], cells);
-    let body = Elasticity::new(&mesh, Material::new(e, nu).unwrap()).unwrap();
+    let body = Elasticity::with_element(&mesh, Material::new(e, nu).unwrap(), element).unwrap();
     let mut fixed = FixedSet::none(mesh.nodes.len());
     fixed
         .fix_box(&mesh, [-1.0, -1.0, -1.0, 1e-9, 1.0, 1.0], [true; 3])
@@ -290,7 +290,7 @@ fn cantilever_converges_to_timoshenko() {
         [160, 16, 16],
     ]
     .into_iter()
-    .map(cantilever_ratio)
+    .map(|cells| cantilever_ratio(Element::P1, 0.45, cells))
     .collect();
     for (nodes, ratio) in &series {
         eprintln!("cantilever: {nodes:6} nodes  tip deflection / Timoshenko = {ratio:.4}");
@@ -303,4 +303,28 @@ fn cantilever_converges_to_timoshenko() {
     }
     let last = series.last().unwrap().1;
     assert!(last > 0.93 && last < 1.0, "finest ratio {last}");
+}
+
+/// At nu = 0.499 P1 locks on a cantilever (tip deflection a tenth of Timoshenko's); ANP
+/// stays within a few percent of its nu = 0.45 value, which is itself closer than P1's (linear
+/// tetrahedra are also stiff in bending at this resolution).
+#[test]
+fn anp_cantilever_does_not_lock() {
+    let cells = [40, 6, 6];
+    let mut table = Vec::new();
+    for nu in [0.45, 0.499] {
+        let (_, p1) = cantilever_ratio(Element::P1, nu, cells);
+        let (_, anp) = cantilever_ratio(Element::Anp, nu, cells);
+        eprintln!("cantilever {cells:?} nu={nu}: tip / Timoshenko  p1 {p1:.4}  anp {anp:.4}");
+        table.push((nu, p1, anp));
+    }
+    let (_, p1_45, anp_45) = table[0];
+    let (_, p1_499, anp_499) = table[1];
+    assert!(anp_45 > p1_45 && anp_45 < 1.0, "{table:?}");
+    assert!(p1_499 < 0.2, "P1 should lock: {table:?}");
+    assert!(anp_499 > 0.8 && anp_499 > 0.9 * anp_45, "{table:?}");
+    assert!(
+        (anp_499 - 1.0).abs() < 0.25 * (p1_499 - 1.0).abs(),
+        "{table:?}"
+    );
 }
