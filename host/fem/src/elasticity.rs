@@ -820,26 +820,31 @@ fn incidence(n: usize, tets: &[[usize; 4]]) -> Csr {
 /// Two-ring of a symmetric one-ring graph: row `i` is the sorted union of the rows of its
 /// one-ring neighbours.
 fn two_ring(ring: &Csr) -> Csr {
-    let n = ring.ptr.len() - 1;
+    union_rows(ring.ptr.len() - 1, |i| {
+        ring.row(i)
+            .iter()
+            .flat_map(|&j| ring.row(j).iter().copied())
+    })
+}
+
+/// Node adjacency: row `i` is node `i` and every node of the tetrahedra around it.
+fn adjacency(node_tets: &Csr, tets: &[[usize; 4]]) -> Csr {
+    union_rows(node_tets.ptr.len() - 1, |i| {
+        node_tets.row(i).iter().flat_map(|&t| tets[t])
+    })
+}
+
+/// The graph whose row `i` is `i` together with `around(i)`, sorted and without repeats.
+fn union_rows<I: Iterator<Item = usize>>(n: usize, around: impl Fn(usize) -> I + Sync) -> Csr {
     let rows: Vec<Vec<usize>> = (0..n)
         .into_par_iter()
         .map(|i| {
-            let mut row: Vec<usize> = ring
-                .row(i)
-                .iter()
-                .flat_map(|&j| ring.row(j).iter().copied())
-                .chain(std::iter::once(i))
-                .collect();
+            let mut row: Vec<usize> = around(i).chain(std::iter::once(i)).collect();
             row.sort_unstable();
             row.dedup();
             row
         })
         .collect();
-    from_rows(rows)
-}
-
-fn from_rows(rows: Vec<Vec<usize>>) -> Csr {
-    let n = rows.len();
     let mut ptr = Vec::with_capacity(n + 1);
     ptr.push(0);
     let mut idx = Vec::new();
@@ -848,23 +853,4 @@ fn from_rows(rows: Vec<Vec<usize>>) -> Csr {
         ptr.push(idx.len());
     }
     Csr { ptr, idx }
-}
-
-fn adjacency(node_tets: &Csr, tets: &[[usize; 4]]) -> Csr {
-    let n = node_tets.ptr.len() - 1;
-    let rows: Vec<Vec<usize>> = (0..n)
-        .into_par_iter()
-        .map(|i| {
-            let mut row: Vec<usize> = node_tets
-                .row(i)
-                .iter()
-                .flat_map(|&t| tets[t])
-                .chain(std::iter::once(i))
-                .collect();
-            row.sort_unstable();
-            row.dedup();
-            row
-        })
-        .collect();
-    from_rows(rows)
 }
