@@ -381,11 +381,19 @@ fn read_msh41(bytes: &[u8], header: &Header) -> Result<TetMesh, MeshError> {
     msh41_to_mesh(&msh, &tags)
 }
 
-/// The first number of an ASCII section's header line (its block count), if it reads.
-fn first_count(bytes: &[u8], section: &[u8]) -> Option<u64> {
+/// The bytes after the line that opens `section` (e.g. `b"\n$Nodes"`), if the file has it.
+fn section_body<'b>(bytes: &'b [u8], section: &[u8]) -> Option<&'b [u8]> {
     let at = bytes.windows(section.len()).position(|w| w == section)? + section.len();
     let rest = bytes.get(at..)?;
-    let line = rest.split(|&b| b == b'\n').nth(1)?;
+    rest.iter()
+        .position(|&b| b == b'\n')
+        .and_then(|i| rest.get(i + 1..))
+}
+
+/// The first number of an ASCII section's header line (its block count), if it reads.
+fn first_count(bytes: &[u8], section: &[u8]) -> Option<u64> {
+    let body = section_body(bytes, section)?;
+    let line = body.split(|&b| b == b'\n').next()?;
     std::str::from_utf8(line)
         .ok()?
         .split_whitespace()
@@ -403,17 +411,10 @@ fn node_tags_41(bytes: &[u8], binary: bool, data_size: usize) -> Result<Vec<u64>
         file: nofile(),
         message: format!("$Nodes: {message}"),
     };
-    let start = bytes
-        .windows(7)
-        .position(|w| w == b"\n$Nodes")
-        .map(|i| i + 7)
-        .ok_or_else(|| bad("no $Nodes section".into()))?;
-    let body = bytes.get(start..).unwrap_or(&[]);
-    let body = body
-        .iter()
-        .position(|&b| b == b'\n')
-        .and_then(|i| body.get(i + 1..))
-        .unwrap_or(&[]);
+    if !bytes.windows(7).any(|w| w == b"\n$Nodes") {
+        return Err(bad("no $Nodes section".into()));
+    }
+    let body = section_body(bytes, b"\n$Nodes").unwrap_or(&[]);
     let truncated = || bad("truncated".into());
     let mut tags = Vec::new();
     if binary {
