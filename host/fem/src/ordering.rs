@@ -5,7 +5,7 @@
 //! large organs tractable: its fill grows like `n^(4/3)` on 3D meshes, against far more for
 //! minimum degree.
 
-use crate::elasticity::{DofMap, Elasticity};
+use crate::elasticity::{DofMap, Stiffness};
 
 /// Which fill-reducing ordering to use.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -60,7 +60,7 @@ pub struct DofPermutation {
 /// The dof permutation of `ordering`, or `None` for faer's built-in AMD.
 pub fn permutation(
     ordering: Ordering,
-    body: &Elasticity,
+    body: &impl Stiffness,
     dofs: &DofMap,
 ) -> Result<Option<DofPermutation>, String> {
     match ordering {
@@ -70,7 +70,7 @@ pub fn permutation(
 }
 
 /// Nested dissection of the node graph of the nodes that have a free dof, expanded to dofs.
-pub fn nested_dissection(body: &Elasticity, dofs: &DofMap) -> Result<DofPermutation, String> {
+pub fn nested_dissection(body: &impl Stiffness, dofs: &DofMap) -> Result<DofPermutation, String> {
     let n = body.nodes();
     let has_free = |i: usize| (0..3).any(|c| dofs.free_dof(i, c).is_some());
     // Compact numbering of the nodes that take part.

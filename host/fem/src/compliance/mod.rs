@@ -11,7 +11,7 @@
 
 mod gram;
 
-use crate::elasticity::{DofMap, Elasticity, FemError, FixedSet};
+use crate::elasticity::{DofMap, Elasticity, FemError, FixedSet, Stiffness};
 use crate::ordering::{DofPermutation, Ordering, permutation};
 use crate::progress::Progress;
 use faer::dyn_stack::{MemBuffer, MemStack};
@@ -83,13 +83,13 @@ impl std::fmt::Debug for Compliance {
 impl Compliance {
     /// Assembles and factorises `K_ff` for `fixed`, after refusing fixed sets that leave rigid
     /// motions. Uses all rayon threads.
-    pub fn factorize(body: &Elasticity, fixed: &FixedSet) -> Result<Self, ComplianceError> {
+    pub fn factorize(body: &impl Stiffness, fixed: &FixedSet) -> Result<Self, ComplianceError> {
         Self::factorize_ordered(body, fixed, Ordering::default())
     }
 
     /// [`Compliance::factorize`] with a chosen fill-reducing ordering.
     pub fn factorize_ordered(
-        body: &Elasticity,
+        body: &impl Stiffness,
         fixed: &FixedSet,
         ordering: Ordering,
     ) -> Result<Self, ComplianceError> {
@@ -468,7 +468,7 @@ pub fn lagrange_forces(
 /// the reactions at the held dofs. `K u` is computed element by element, independently of the
 /// assembled matrix.
 pub fn solve_prescribed(
-    body: &Elasticity,
+    body: &impl Stiffness,
     held: &FixedSet,
     u_held: &[f64],
 ) -> Result<(Vec<f64>, Vec<f64>), ComplianceError> {

@@ -6,6 +6,8 @@
 //! Fixed dofs (`u = 0`) are removed; the remaining *free* dofs keep node-major order, so `K_ff`
 //! is assembled directly (upper triangle, CSC) in the layout the Cholesky factorisation wants.
 
+pub mod quadratic;
+
 use crate::mesh::TetMesh;
 use crate::vec3::{add, cross, dot, norm, scale, sub};
 use faer::sparse::{SparseColMat, SymbolicSparseColMat};
@@ -233,13 +235,13 @@ impl DofMap {
 
 /// Shape-function gradients and volume of one P1 tetrahedron.
 #[derive(Debug, Clone, Copy)]
-struct Tet {
-    grad: [[f64; 3]; 4],
-    volume: f64,
+pub(crate) struct Tet {
+    pub(crate) grad: [[f64; 3]; 4],
+    pub(crate) volume: f64,
 }
 
 impl Tet {
-    fn new(x: [[f64; 3]; 4]) -> Self {
+    pub(crate) fn new(x: [[f64; 3]; 4]) -> Self {
         // Columns of J are the edge vectors from vertex 0; rows of J^-1 are grad N1..N3.
         let e = [sub(x[1], x[0]), sub(x[2], x[0]), sub(x[3], x[0])];
         let det = dot(e[0], cross(e[1], e[2]));
@@ -258,18 +260,25 @@ impl Tet {
 
     /// The 3x3 block `K_ab` of the element stiffness `V B^T D B`, row index = component at `a`:
     /// `V (lambda g_a g_b^T + mu g_b g_a^T + mu (g_a . g_b) I)`.
-    fn block(&self, a: usize, b: usize, lambda: f64, mu: f64) -> [[f64; 3]; 3] {
-        let (ga, gb) = (self.grad[a], self.grad[b]);
-        let gg = dot(ga, gb);
-        let mut k = [[0.0; 3]; 3];
-        for (i, row) in k.iter_mut().enumerate() {
-            for (j, v) in row.iter_mut().enumerate() {
-                let diag = if i == j { mu * gg } else { 0.0 };
-                *v = self.volume * (lambda * ga[i] * gb[j] + mu * gb[i] * ga[j] + diag);
-            }
-        }
-        k
+    fn block(&self, a: usize, b: usize, lambda: f64, mu: f64) -> Block3 {
+        gradient_block(self.grad[a], self.grad[b], lambda, mu, self.volume)
     }
+}
+
+/// A 3x3 block of `K`, row index = component at the row node.
+pub(crate) type Block3 = [[f64; 3]; 3];
+
+/// `v (lambda g_a g_b^T + mu g_b g_a^T + mu (g_a . g_b) I)`: the stiffness block between two
+/// shape functions with gradients `g_a`, `g_b` at one point, weighted by the volume `v` it
+/// stands for (the integrand of `B^T D B`, eq. 1).
+pub(crate) fn gradient_block(ga: [f64; 3], gb: [f64; 3], lambda: f64, mu: f64, v: f64) -> Block3 {
+    let gg = dot(ga, gb);
+    std::array::from_fn(|i| {
+        std::array::from_fn(|j| {
+            let diag = if i == j { mu * gg } else { 0.0 };
+            v * (lambda * ga[i] * gb[j] + mu * gb[i] * ga[j] + diag)
+        })
+    })
 }
 
 /// The discretised elastic body: element data and the node graph, ready to assemble `K_ff`
@@ -370,14 +379,15 @@ struct NodalVolume {
     alpha: f64,
 }
 
+/// A graph or incidence in compressed sparse rows.
 #[derive(Debug, Clone)]
-struct Csr {
+pub(crate) struct Csr {
     ptr: Vec<usize>,
     idx: Vec<usize>,
 }
 
 impl Csr {
-    fn row(&self, i: usize) -> &[usize] {
+    pub(crate) fn row(&self, i: usize) -> &[usize] {
         &self.idx[self.ptr[i]..self.ptr[i + 1]]
     }
 }
@@ -578,51 +588,11 @@ impl Elasticity {
     /// Assembles the upper triangle of `K_ff` in CSC form (columns in parallel: each node's
     /// three columns only read shared data, so there are no write conflicts).
     pub fn stiffness(&self, dofs: &DofMap) -> SparseColMat<usize, f64> {
-        let n = self.nodes();
-        // Per node: (row indices, values) of its up-to-three columns, concatenated.
-        let columns: Vec<[(Vec<usize>, Vec<f64>); 3]> = (0..n)
-            .into_par_iter()
-            .map(|node| {
-                let all = self.neighbours(node);
-                let lower = &all[..all.partition_point(|&m| m <= node)];
-                let blocks = self.column_blocks(node, lower);
-                std::array::from_fn(|c| {
-                    let mut rows = Vec::new();
-                    let mut vals = Vec::new();
-                    if let Some(col) = dofs.free_dof(node, c) {
-                        for (m, block) in lower.iter().zip(&blocks) {
-                            for (cr, row_of_block) in block.iter().enumerate() {
-                                match dofs.free_dof(*m, cr) {
-                                    Some(row) if row <= col => {
-                                        rows.push(row);
-                                        vals.push(row_of_block[c]);
-                                    }
-                                    _ => {}
-                                }
-                            }
-                        }
-                    }
-                    (rows, vals)
-                })
-            })
-            .collect();
-        let nf = dofs.free_count();
-        let mut col_ptr = Vec::with_capacity(nf + 1);
-        col_ptr.push(0usize);
-        let nnz: usize = columns.iter().flatten().map(|(r, _)| r.len()).sum();
-        let mut row_idx = Vec::with_capacity(nnz);
-        let mut values = Vec::with_capacity(nnz);
-        for (node, cols) in columns.into_iter().enumerate() {
-            for (c, (rows, vals)) in cols.into_iter().enumerate() {
-                if dofs.free_dof(node, c).is_some() {
-                    row_idx.extend(rows);
-                    values.extend(vals);
-                    col_ptr.push(row_idx.len());
-                }
-            }
-        }
-        let symbolic = SymbolicSparseColMat::new_checked(nf, nf, col_ptr, None, row_idx);
-        SparseColMat::new(symbolic, values)
+        assemble_upper(
+            dofs,
+            |node| self.neighbours(node),
+            |node, rows| self.column_blocks(node, rows),
+        )
     }
 
     /// Applies the full (unconstrained) stiffness: returns `K u` for a node-major field `u` of
@@ -681,80 +651,138 @@ impl Elasticity {
     /// Refuses a fixed set that leaves a rigid-body motion free in some connected part of the
     /// mesh: the 6 rigid modes restricted to the fixed dofs of each part must have full rank.
     pub fn check_rigid_motions(&self, fixed: &FixedSet) -> Result<(), FemError> {
-        if fixed.nodes() != self.nodes() {
-            return Err(FemError::FixedSetMismatch {
-                fixed: fixed.nodes(),
-                nodes: self.nodes(),
-            });
-        }
-        for (part, members) in self.components().iter().enumerate() {
-            let centre = {
-                let mut c = [0.0; 3];
-                for &i in members {
-                    c = add(c, self.positions[i]);
-                }
-                scale(c, 1.0 / members.len() as f64)
-            };
-            let extent = members
-                .iter()
-                .map(|&i| norm(sub(self.positions[i], centre)))
-                .fold(0.0, f64::max)
-                .max(f64::MIN_POSITIVE);
-            // Gram matrix G = R^T R of the rigid modes sampled at the fixed dofs.
-            let mut gram = [[0.0; 6]; 6];
-            for &i in members {
-                let r = scale(sub(self.positions[i], centre), 1.0 / extent);
-                for axis in 0..3 {
-                    if !fixed.is_fixed(i, axis) {
-                        continue;
-                    }
-                    let row = rigid_mode_row(r, axis);
-                    for a in 0..6 {
-                        for b in 0..6 {
-                            gram[a][b] += row[a] * row[b];
-                        }
-                    }
-                }
-            }
-            if let Some(mode) = free_rigid_mode(gram) {
-                return Err(FemError::RigidMotion(format!(
-                    "part {part} of the mesh ({} nodes, first node {}) can move freely: {}",
-                    members.len(),
-                    members[0],
-                    describe_mode(mode)
-                )));
-            }
-        }
-        Ok(())
+        check_rigid_motions(
+            &self.positions,
+            |i| self.neighbours(i),
+            |i| !self.node_tets.row(i).is_empty(),
+            fixed,
+        )
     }
+}
 
-    /// Connected parts of the mesh (nodes sharing tetrahedra), each a sorted node list. Nodes
-    /// without tetrahedra are not listed.
-    fn components(&self) -> Vec<Vec<usize>> {
-        let n = self.nodes();
-        let mut seen = vec![false; n];
-        let mut parts = Vec::new();
-        for start in 0..n {
-            if seen[start] || self.node_tets.row(start).is_empty() {
-                continue;
+/// What the static solves of [`crate::compliance`] need of a discretised body: its node graph
+/// (the sparsity of `K` and the graph of the fill-reducing ordering), `K_ff`, `K u` and the
+/// rigid-motion check of a fixed set. Implemented by [`Elasticity`] (one node per mesh vertex:
+/// the bodies of banks) and [`quadratic::QuadraticBody`] (10-node tetrahedra, for references).
+pub trait Stiffness: Sync {
+    /// Number of nodes (three dofs each).
+    fn nodes(&self) -> usize;
+    /// Sorted nodes coupled to `node` in `K`, itself included.
+    fn neighbours(&self, node: usize) -> &[usize];
+    /// The upper triangle of `K_ff` in CSC form, free dofs numbered by `dofs`.
+    fn stiffness(&self, dofs: &DofMap) -> SparseColMat<usize, f64>;
+    /// `K u` for a node-major field of length `3 nodes`, element by element.
+    fn apply(&self, u: &[f64]) -> Vec<f64>;
+    /// Refuses a fixed set that leaves a rigid-body motion free.
+    fn check_rigid_motions(&self, fixed: &FixedSet) -> Result<(), FemError>;
+}
+
+impl Stiffness for Elasticity {
+    fn nodes(&self) -> usize {
+        Elasticity::nodes(self)
+    }
+    fn neighbours(&self, node: usize) -> &[usize] {
+        Elasticity::neighbours(self, node)
+    }
+    fn stiffness(&self, dofs: &DofMap) -> SparseColMat<usize, f64> {
+        Elasticity::stiffness(self, dofs)
+    }
+    fn apply(&self, u: &[f64]) -> Vec<f64> {
+        Elasticity::apply(self, u)
+    }
+    fn check_rigid_motions(&self, fixed: &FixedSet) -> Result<(), FemError> {
+        Elasticity::check_rigid_motions(self, fixed)
+    }
+}
+
+/// Refuses a fixed set that leaves a rigid-body motion free in some connected part of the
+/// mesh (`neighbours`: the node graph; `has_elements`: whether a node belongs to an element):
+/// the 6 rigid modes restricted to the fixed dofs of each part must have full rank.
+pub(crate) fn check_rigid_motions<'a>(
+    positions: &[[f64; 3]],
+    neighbours: impl Fn(usize) -> &'a [usize],
+    has_elements: impl Fn(usize) -> bool,
+    fixed: &FixedSet,
+) -> Result<(), FemError> {
+    if fixed.nodes() != positions.len() {
+        return Err(FemError::FixedSetMismatch {
+            fixed: fixed.nodes(),
+            nodes: positions.len(),
+        });
+    }
+    for (part, members) in components(positions.len(), neighbours, has_elements)
+        .iter()
+        .enumerate()
+    {
+        let centre = {
+            let mut c = [0.0; 3];
+            for &i in members {
+                c = add(c, positions[i]);
             }
-            let mut stack = vec![start];
-            seen[start] = true;
-            let mut members = Vec::new();
-            while let Some(i) = stack.pop() {
-                members.push(i);
-                for &j in self.neighbours(i) {
-                    if !seen[j] {
-                        seen[j] = true;
-                        stack.push(j);
+            scale(c, 1.0 / members.len() as f64)
+        };
+        let extent = members
+            .iter()
+            .map(|&i| norm(sub(positions[i], centre)))
+            .fold(0.0, f64::max)
+            .max(f64::MIN_POSITIVE);
+        // Gram matrix G = R^T R of the rigid modes sampled at the fixed dofs.
+        let mut gram = [[0.0; 6]; 6];
+        for &i in members {
+            let r = scale(sub(positions[i], centre), 1.0 / extent);
+            for axis in 0..3 {
+                if !fixed.is_fixed(i, axis) {
+                    continue;
+                }
+                let row = rigid_mode_row(r, axis);
+                for a in 0..6 {
+                    for b in 0..6 {
+                        gram[a][b] += row[a] * row[b];
                     }
                 }
             }
-            members.sort_unstable();
-            parts.push(members);
         }
-        parts
+        if let Some(mode) = free_rigid_mode(gram) {
+            return Err(FemError::RigidMotion(format!(
+                "part {part} of the mesh ({} nodes, first node {}) can move freely: {}",
+                members.len(),
+                members[0],
+                describe_mode(mode)
+            )));
+        }
     }
+    Ok(())
+}
+
+/// Connected parts of the mesh (nodes sharing tetrahedra), each a sorted node list. Nodes
+/// without tetrahedra are not listed.
+pub(crate) fn components<'a>(
+    n: usize,
+    neighbours: impl Fn(usize) -> &'a [usize],
+    has_elements: impl Fn(usize) -> bool,
+) -> Vec<Vec<usize>> {
+    let mut seen = vec![false; n];
+    let mut parts = Vec::new();
+    for start in 0..n {
+        if seen[start] || !has_elements(start) {
+            continue;
+        }
+        let mut stack = vec![start];
+        seen[start] = true;
+        let mut members = Vec::new();
+        while let Some(i) = stack.pop() {
+            members.push(i);
+            for &j in neighbours(i) {
+                if !seen[j] {
+                    seen[j] = true;
+                    stack.push(j);
+                }
+            }
+        }
+        members.sort_unstable();
+        parts.push(members);
+    }
+    parts
 }
 
 /// Row of the rigid-mode matrix for component `axis` at relative position `r`: translations
@@ -796,7 +824,8 @@ fn describe_mode(mode: [f64; 6]) -> String {
     }
 }
 
-fn incidence(n: usize, tets: &[[usize; 4]]) -> Csr {
+/// Node -> element incidence of elements with `N` nodes each.
+pub(crate) fn incidence<const N: usize>(n: usize, tets: &[[usize; N]]) -> Csr {
     let mut ptr = vec![0usize; n + 1];
     for t in tets {
         for &v in t {
@@ -827,8 +856,8 @@ fn two_ring(ring: &Csr) -> Csr {
     })
 }
 
-/// Node adjacency: row `i` is node `i` and every node of the tetrahedra around it.
-fn adjacency(node_tets: &Csr, tets: &[[usize; 4]]) -> Csr {
+/// Node adjacency: row `i` is node `i` and every node of the elements around it.
+pub(crate) fn adjacency<const N: usize>(node_tets: &Csr, tets: &[[usize; N]]) -> Csr {
     union_rows(node_tets.ptr.len() - 1, |i| {
         node_tets.row(i).iter().flat_map(|&t| tets[t])
     })
@@ -853,4 +882,60 @@ fn union_rows<I: Iterator<Item = usize>>(n: usize, around: impl Fn(usize) -> I +
         ptr.push(idx.len());
     }
     Csr { ptr, idx }
+}
+
+/// The upper triangle of `K_ff` in CSC form from each node's sorted neighbours (itself
+/// included) and its column blocks `K_mp` for the rows `m <= p` (see
+/// `Elasticity::column_blocks`). Columns in parallel: each node's three columns only read
+/// shared data, so there are no write conflicts.
+pub(crate) fn assemble_upper<'a>(
+    dofs: &DofMap,
+    neighbours: impl Fn(usize) -> &'a [usize] + Sync,
+    column_blocks: impl Fn(usize, &[usize]) -> Vec<Block3> + Sync,
+) -> SparseColMat<usize, f64> {
+    let n = dofs.nodes();
+    // Per node: (row indices, values) of its up-to-three columns, concatenated.
+    let columns: Vec<[(Vec<usize>, Vec<f64>); 3]> = (0..n)
+        .into_par_iter()
+        .map(|node| {
+            let all = neighbours(node);
+            let lower = &all[..all.partition_point(|&m| m <= node)];
+            let blocks = column_blocks(node, lower);
+            std::array::from_fn(|c| {
+                let mut rows = Vec::new();
+                let mut vals = Vec::new();
+                if let Some(col) = dofs.free_dof(node, c) {
+                    for (m, block) in lower.iter().zip(&blocks) {
+                        for (cr, row_of_block) in block.iter().enumerate() {
+                            match dofs.free_dof(*m, cr) {
+                                Some(row) if row <= col => {
+                                    rows.push(row);
+                                    vals.push(row_of_block[c]);
+                                }
+                                _ => {}
+                            }
+                        }
+                    }
+                }
+                (rows, vals)
+            })
+        })
+        .collect();
+    let nf = dofs.free_count();
+    let mut col_ptr = Vec::with_capacity(nf + 1);
+    col_ptr.push(0usize);
+    let nnz: usize = columns.iter().flatten().map(|(r, _)| r.len()).sum();
+    let mut row_idx = Vec::with_capacity(nnz);
+    let mut values = Vec::with_capacity(nnz);
+    for (node, cols) in columns.into_iter().enumerate() {
+        for (c, (rows, vals)) in cols.into_iter().enumerate() {
+            if dofs.free_dof(node, c).is_some() {
+                row_idx.extend(rows);
+                values.extend(vals);
+                col_ptr.push(row_idx.len());
+            }
+        }
+    }
+    let symbolic = SymbolicSparseColMat::new_checked(nf, nf, col_ptr, None, row_idx);
+    SparseColMat::new(symbolic, values)
 }
