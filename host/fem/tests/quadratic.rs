@@ -9,6 +9,7 @@ use fem::elasticity::quadratic::QuadraticBody;
 use fem::elasticity::{Elasticity, Element, FixedSet, Material, Stiffness};
 use fem::mesh::TetMesh;
 use fem::mesh::structured::box_mesh;
+use fem::reference::Punch;
 
 /// A box whose interior vertices are moved by up to `amount` of a cell (deterministic).
 fn distorted_box(size: [f64; 3], cells: [usize; 3], amount: f64) -> TetMesh {
@@ -234,4 +235,45 @@ fn anp_converges_faster_than_p1_on_the_cantilever() {
         }
         assert!(previous > 0.84, "nu {nu}: finest ANP {previous}");
     }
+}
+
+/// Issue 18's punch on `liver-1k4`, P1 and ANP against P2 on the same mesh: P1 locks (21 % too
+/// stiff at nu = 0.45, 2.85 times at 0.499), ANP does not (its ratio to P2 stays at 1.055
+/// +- 0.002 from 0.45 to 0.499). The issue's independent P2 figures are 0.366, 0.389 and
+/// 0.409 N.
+#[test]
+fn punch_on_the_liver_p1_locks_and_anp_does_not() {
+    let path = concat!(env!("CARGO_MANIFEST_DIR"), "/../meshes/liver-1k4.msh");
+    let mesh = fem::mesh::load(std::path::Path::new(path)).unwrap();
+    let surface = fem::mesh::boundary(&mesh).unwrap();
+    let linear = Punch::on_vertices(&mesh, &surface).unwrap();
+    let mut rows = Vec::new();
+    for nu in [0.45, 0.49, 0.499] {
+        let material = Material::new(3.0e3, nu).unwrap();
+        let force = |element| {
+            let body = Elasticity::with_element(&mesh, material, element).unwrap();
+            linear.force(&body).unwrap()
+        };
+        let body = QuadraticBody::new(&mesh, material).unwrap();
+        let p2 = Punch::on_quadratic(&mesh, &surface, &body)
+            .unwrap()
+            .force(&body)
+            .unwrap();
+        let (p1, anp) = (force(Element::P1), force(Element::Anp));
+        eprintln!("punch nu={nu}: p1 {p1:.4} anp {anp:.4} p2 {p2:.4} N");
+        rows.push((nu, p1 / p2, anp / p2, p2));
+    }
+    let issue = [0.366, 0.389, 0.409];
+    for (&(nu, p1, anp, p2), reference) in rows.iter().zip(issue) {
+        assert!(
+            (p2 - reference).abs() < 0.001,
+            "nu {nu}: P2 {p2} vs {reference}"
+        );
+        assert!((1.04..1.07).contains(&anp), "nu {nu}: ANP / P2 {anp}");
+        assert!(p1 > 1.2, "nu {nu}: P1 / P2 {p1}");
+    }
+    assert!(rows[2].1 > 2.5 && rows[1].1 > rows[0].1 && rows[2].1 > rows[1].1);
+    let spread = rows.iter().map(|r| r.2).fold(0.0f64, f64::max)
+        - rows.iter().map(|r| r.2).fold(f64::INFINITY, f64::min);
+    assert!(spread < 0.01, "ANP / P2 drifts with nu by {spread}");
 }
