@@ -36,11 +36,11 @@ need() {
     }
 }
 
-step "toolchain: thumbv7em-none-eabihf target, rustfmt, clippy"
+step "toolchain: thumbv7em-none-eabihf target, rustfmt, clippy, llvm-tools (llvm-objdump for the law cost)"
 if ! rustup target list --installed | grep -qx thumbv7em-none-eabihf; then
     rustup target add thumbv7em-none-eabihf
 fi
-for c in rustfmt clippy; do
+for c in rustfmt clippy llvm-tools; do
     rustup component list --installed | grep -q "^$c" || rustup component add "$c"
 done
 

@@ -51,10 +51,14 @@ pub fn write_atomic(out: &Path, bytes: &[u8], inputs: &[&Path]) -> Result<()> {
         .file_name()
         .with_context(|| format!("{}: the output path has no file name", out.display()))?;
     let written = (|| -> std::io::Result<()> {
-        let mut tmp = tempfile::Builder::new()
-            .prefix(&format!(".{}.", name.to_string_lossy()))
-            .suffix(".tmp")
-            .tempfile_in(&dir)?;
+        let prefix = format!(".{}.", name.to_string_lossy());
+        let mut builder = tempfile::Builder::new();
+        builder.prefix(&prefix).suffix(".tmp");
+        if existing.is_none() {
+            // As `File::create` does: 0666 less the umask (tempfile's own default is 0600).
+            builder.permissions(std::fs::Permissions::from_mode(0o666));
+        }
+        let mut tmp = builder.tempfile_in(&dir)?;
         tmp.write_all(bytes)?;
         if let Some(m) = &existing {
             tmp.as_file()
@@ -94,6 +98,17 @@ fn resolve(out: &Path) -> Result<PathBuf> {
 mod tests {
     use super::*;
     use std::os::unix::fs::{FileTypeExt, symlink};
+
+    #[test]
+    fn a_new_file_gets_the_mode_file_create_would_give() {
+        let dir = tempfile::tempdir().unwrap();
+        let reference = dir.path().join("reference");
+        std::fs::File::create(&reference).unwrap();
+        let out = dir.path().join("new");
+        write_atomic(&out, b"x", &[]).unwrap();
+        let mode = |p: &Path| std::fs::metadata(p).unwrap().permissions().mode() & 0o777;
+        assert_eq!(mode(&out), mode(&reference));
+    }
 
     #[test]
     fn replaces_a_file_keeping_its_mode_and_leaves_no_temporary_file() {

@@ -20,6 +20,7 @@ pub mod kinematics;
 pub mod progress;
 pub mod reach;
 pub mod record;
+pub mod report;
 pub mod scene;
 pub mod script;
 pub mod sil;

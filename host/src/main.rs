@@ -35,6 +35,8 @@ enum Command {
     Bench(cmd::bench::Bench),
     /// Software in the loop: the firmware image under QEMU against a simulated device.
     Sil(cmd::sil::Args),
+    /// Speed against error for every knob, and the hard cases, on one generated page.
+    Report(cmd::report::Args),
 }
 
 fn main() -> ExitCode {
@@ -53,6 +55,7 @@ fn main() -> ExitCode {
         Command::Calibrate(c) => cmd::calibrate::run(c),
         Command::Bank(bank) => cmd::bank::run(bank),
         Command::Sil(args) => cmd::sil::run(args),
+        Command::Report(args) => cmd::report::run(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

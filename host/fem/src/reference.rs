@@ -140,3 +140,63 @@ pub fn split_1_to_8(mesh: &TetMesh) -> TetMesh {
     }
     fine
 }
+
+/// Free-slip uniaxial compression of a box, whose exact solution is linear: what
+/// [`box_compression`] measures against it.
+#[derive(Debug, Clone, Copy)]
+pub struct BoxCompression {
+    /// Largest nodal displacement error, relative to the imposed displacement.
+    pub displacement_error: f64,
+    /// Relative error of the compressing force against `E A strain`.
+    pub force_error: f64,
+}
+
+/// The box `size` (meshed `cells`, structured) on free-slip supports (bottom `u_z = 0`, one
+/// bottom edge and corner held against rigid motion only) compressed by `strain` on its top:
+/// exact `u = (nu e x, nu e y, -e z)` and force `E A e`, for any element that passes the patch
+/// test, near incompressibility included.
+pub fn box_compression(
+    body: &impl Stiffness,
+    mesh: &TetMesh,
+    young: f64,
+    nu: f64,
+    size: [f64; 3],
+    strain: f64,
+) -> Result<BoxCompression, ComplianceError> {
+    let mut held = FixedSet::none(mesh.nodes.len());
+    let mut u_held = vec![0.0; 3 * mesh.nodes.len()];
+    let mut top = Vec::new();
+    let tol = 1e-9 * size.iter().fold(0.0f64, |m, &s| m.max(s));
+    for (i, p) in mesh.nodes.iter().enumerate() {
+        if p[2] < tol {
+            held.fix_component(i, 2)?;
+        }
+        if p[2] > size[2] - tol {
+            held.fix_component(i, 2)?;
+            u_held[3 * i + 2] = -strain * size[2];
+            top.push(i);
+        }
+        if p[0] < tol && p[1] < tol {
+            held.fix_component(i, 0)?;
+            held.fix_component(i, 1)?;
+        }
+        if p[0] > size[0] - tol && p[1] < tol {
+            held.fix_component(i, 1)?;
+        }
+    }
+    let (u, f) = solve_prescribed(body, &held, &u_held)?;
+    let mut displacement_error = 0.0f64;
+    for (i, p) in mesh.nodes.iter().enumerate() {
+        let exact = [nu * strain * p[0], nu * strain * p[1], -strain * p[2]];
+        for c in 0..3 {
+            displacement_error =
+                displacement_error.max((u[3 * i + c] - exact[c]).abs() / (strain * size[2]));
+        }
+    }
+    let force: f64 = top.iter().map(|&i| f[3 * i + 2]).sum();
+    let expected = -young * size[0] * size[1] * strain;
+    Ok(BoxCompression {
+        displacement_error,
+        force_error: ((force - expected) / expected).abs(),
+    })
+}

@@ -18,6 +18,8 @@ use faer::linalg::solvers::SolveLstsq;
 
 /// Highest degree the bank can store (`MAX_LAW_COEFFS - 1`).
 pub const MAX_DEGREE: usize = MAX_LAW_COEFFS - 1;
+/// The cross-validated RMS error (relative to full scale) `--degree auto` is content with.
+pub const DEFAULT_TARGET_RMS: f64 = 0.001;
 /// Degrees `--degree auto` considers: the paper's range, and below it for curves that need
 /// less.
 pub const AUTO_DEGREES: std::ops::RangeInclusive<usize> = 1..=10;

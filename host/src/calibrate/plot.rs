@@ -36,7 +36,8 @@ const COLORS: [RGBColor; 4] = [
     RGBColor(140, 60, 160),
 ];
 
-fn register_font() {
+/// Registers the embedded DejaVu Sans as plotters' `sans-serif` (once).
+pub(crate) fn register_font() {
     static ONCE: std::sync::Once = std::sync::Once::new();
     ONCE.call_once(|| {
         // The embedded font is a valid TrueType file; a failure would only lose the text.

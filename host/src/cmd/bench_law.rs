@@ -85,13 +85,18 @@ fn find_objdump() -> Result<PathBuf> {
     })
 }
 
-/// Runs the estimate and prints it.
-pub fn run(args: LawArgs) -> Result<()> {
-    let rlib = match args.rlib {
+/// The cost model of `TissueLaw::eval` from the thumbv7em disassembly: `rlib` (default: build
+/// bank-format for the MCU) read by `objdump` (default: rustup's llvm-tools). Returns the rlib
+/// read and the cost.
+pub fn measure(
+    rlib: Option<PathBuf>,
+    objdump: Option<PathBuf>,
+) -> Result<(PathBuf, cost::EvalCost)> {
+    let rlib = match rlib {
         Some(p) => p,
         None => build_rlib()?,
     };
-    let objdump = match args.objdump {
+    let objdump = match objdump {
         Some(p) => p,
         None => find_objdump()?,
     };
@@ -112,6 +117,12 @@ pub fn run(args: LawArgs) -> Result<()> {
     let insns = cost::function(&text, "TissueLaw::eval");
     let c =
         cost::estimate(&insns).with_context(|| format!("TissueLaw::eval in {}", rlib.display()))?;
+    Ok((rlib, c))
+}
+
+/// Runs the estimate and prints it.
+pub fn run(args: LawArgs) -> Result<()> {
+    let (rlib, c) = measure(args.rlib, args.objdump)?;
     let degrees: Vec<(usize, Option<usize>)> = (1..=10)
         .map(|d| (d, c.instructions_for_degree(d)))
         .collect();

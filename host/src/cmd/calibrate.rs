@@ -50,7 +50,7 @@ pub struct TissueArgs {
     #[arg(long, value_enum, default_value_t = Law::Q, ignore_case = true)]
     law: Law,
     /// `auto` is content with this cross-validated RMS error relative to full scale.
-    #[arg(long, default_value_t = 0.001)]
+    #[arg(long, default_value_t = fit::DEFAULT_TARGET_RMS)]
     target_rms: f64,
     /// Refuse a fit whose RMS error exceeds this fraction of full scale: 5 % is several times
     /// what a load cell and a displacement stage leave (the shipped brain data fits to 0.03 %),

@@ -9,4 +9,5 @@ pub mod demo;
 pub mod fixing;
 pub mod organ;
 pub mod refinement;
+pub mod report;
 pub mod sil;

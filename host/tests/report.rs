@@ -1,0 +1,124 @@
+//! `host report --quick`: the page renders in headless Chromium with every plot drawn and no
+//! console error; `report.json` holds each knob's series with at least three finite points; and
+//! its numbers agree with the tests' references.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+fn chromium() -> PathBuf {
+    let p = std::env::var_os("CHROMIUM")
+        .map_or_else(|| PathBuf::from("/usr/bin/chromium"), PathBuf::from);
+    assert!(
+        p.exists(),
+        "{} not found: scripts/test-all.sh installs chromium (apt-get install -y chromium)",
+        p.display()
+    );
+    p
+}
+
+/// `--dump-dom` of `page` and Chromium's stderr (with `--enable-logging=stderr`, console
+/// messages and uncaught errors appear there as `INFO:CONSOLE` lines).
+fn render(page: &Path) -> (String, String) {
+    let profile = tempfile::tempdir().unwrap();
+    let out = Command::new(chromium())
+        .args([
+            "--headless",
+            "--no-sandbox",
+            "--disable-gpu",
+            "--no-first-run",
+            "--disable-background-networking",
+            "--disable-component-update",
+            "--disable-sync",
+            "--enable-logging=stderr",
+            "--v=0",
+            "--virtual-time-budget=2000",
+            "--dump-dom",
+        ])
+        .arg(format!("--user-data-dir={}", profile.path().display()))
+        .arg(format!("file://{}", page.display()))
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "chromium failed");
+    (
+        String::from_utf8_lossy(&out.stdout).into_owned(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
+
+#[test]
+fn quick_report_renders_every_plot_and_agrees_with_the_references() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("report");
+    let run = Command::new(env!("CARGO_BIN_EXE_host"))
+        .args(["report", "--quick", "--out"])
+        .arg(&out)
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&run.stderr);
+    assert!(run.status.success(), "host report failed: {stderr}");
+    let stdout = String::from_utf8_lossy(&run.stdout);
+    assert!(stdout.contains("hard cases:"), "{stdout}");
+
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap();
+    let knobs = json["knobs"].as_array().unwrap();
+    assert!(knobs.len() >= 3, "{} knobs", knobs.len());
+    for knob in knobs {
+        for series in knob["series"].as_array().unwrap() {
+            let points = series["points"].as_array().unwrap();
+            assert!(points.len() >= 3, "{} / {}", knob["id"], series["name"]);
+            for p in points {
+                assert!(
+                    p["x"].as_f64().unwrap().is_finite() && p["y"].as_f64().unwrap().is_finite()
+                );
+            }
+        }
+    }
+    // Against the references the fem tests use: the issue's independent P2 punch forces on
+    // liver-1k4 (0.366, 0.389, 0.409 N) and the exact box compression.
+    let cases = json["hard_cases"].as_array().unwrap();
+    let find = |prefix: &str| {
+        cases
+            .iter()
+            .find(|c| c["case"].as_str().unwrap().starts_with(prefix))
+            .unwrap_or_else(|| panic!("no hard case {prefix}"))
+    };
+    for (nu, p2) in [("0.45", 0.366), ("0.49", 0.389), ("0.499", 0.409)] {
+        let row = find(&format!("nu = {nu}, anp"));
+        let reference = row["reference_value"].as_f64().unwrap();
+        assert!((reference - p2).abs() < 0.001, "nu {nu}: P2 {reference}");
+        assert_eq!(row["verdict"], "matches_reference", "{row}");
+        assert_eq!(find(&format!("nu = {nu}, p1"))["verdict"], "weakness");
+    }
+    for c in cases
+        .iter()
+        .filter(|c| c["case"].as_str().unwrap().contains("box compression"))
+    {
+        assert!(c["value"].as_f64().unwrap() < 1e-9, "{c}");
+    }
+    assert_eq!(find("contact at the fixed boundary")["verdict"], "refused");
+    assert_eq!(find("sliver")["verdict"], "refused");
+
+    let png = std::fs::read(out.join("headline.png")).unwrap();
+    assert_eq!(&png[..8], b"\x89PNG\r\n\x1a\n");
+
+    let (dom, log) = render(&out.join("index.html"));
+    let attr = |name: &str| {
+        let key = format!("data-{name}=\"");
+        let at = dom
+            .find(&key)
+            .unwrap_or_else(|| panic!("no {key} on <body>: script did not run"));
+        dom[at + key.len()..]
+            .split('"')
+            .next()
+            .unwrap()
+            .parse::<usize>()
+            .unwrap()
+    };
+    assert_eq!(attr("plots"), knobs.len());
+    assert_eq!(attr("drawn"), knobs.len(), "an empty plot");
+    // Chromium logs every console message (errors and uncaught exceptions included) as
+    // `INFO:CONSOLE`, without its level; the page writes none when all is well.
+    let console: Vec<&str> = log.lines().filter(|l| l.contains(":CONSOLE")).collect();
+    assert!(console.is_empty(), "console messages: {console:?}");
+}
