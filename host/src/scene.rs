@@ -23,6 +23,9 @@ use toml::Spanned;
 
 /// The embedded 1.4k-node liver (`mesh = "builtin:liver-1k4"`).
 pub const BUILTIN_LIVER: &[u8] = include_bytes!("../meshes/liver-1k4.msh");
+/// The default scene (`host/scenes/liver.toml`, embedded): what `demo` and `report` use
+/// without `--scene`.
+pub const DEFAULT_SCENE: &str = include_str!("../scenes/liver.toml");
 /// The scene value that selects [`BUILTIN_LIVER`].
 pub const BUILTIN_LIVER_NAME: &str = "builtin:liver-1k4";
 
@@ -360,6 +363,17 @@ impl Scene {
                 self.path.display()
             )],
             _ => Vec::new(),
+        }
+    }
+
+    /// The scene file at `path`, or the embedded default liver scene ([`DEFAULT_SCENE`]).
+    pub fn load_or_default(path: Option<&Path>) -> Result<Scene, SceneError> {
+        match path {
+            Some(p) => Scene::load(p),
+            None => Scene::parse(
+                Path::new("host/scenes/liver.toml (embedded)"),
+                DEFAULT_SCENE,
+            ),
         }
     }
 

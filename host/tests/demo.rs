@@ -1,8 +1,11 @@
 //! `host demo`: the headless figures, its errors, recording, and the viewer in headless Chromium.
 
+mod support;
+use support::chromium;
+
 use std::io::{BufRead, BufReader, Read, Write};
 use std::net::TcpStream;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
@@ -275,17 +278,6 @@ fn wait_for(what: &str, mut ok: impl FnMut() -> bool) {
         assert!(Instant::now() < end, "timed out waiting for {what}");
         std::thread::sleep(Duration::from_millis(100));
     }
-}
-
-fn chromium() -> PathBuf {
-    let p = std::env::var_os("CHROMIUM")
-        .map_or_else(|| PathBuf::from("/usr/bin/chromium"), PathBuf::from);
-    assert!(
-        p.exists(),
-        "{} not found: scripts/test-all.sh installs chromium (apt-get install -y chromium)",
-        p.display()
-    );
-    p
 }
 
 /// Screenshot of `url` (1000 x 700) by headless Chromium with software WebGL.

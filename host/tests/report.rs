@@ -2,19 +2,11 @@
 //! console error; `report.json` holds each knob's series with at least three finite points; and
 //! its numbers agree with the tests' references.
 
-use std::path::{Path, PathBuf};
-use std::process::Command;
+mod support;
+use support::chromium;
 
-fn chromium() -> PathBuf {
-    let p = std::env::var_os("CHROMIUM")
-        .map_or_else(|| PathBuf::from("/usr/bin/chromium"), PathBuf::from);
-    assert!(
-        p.exists(),
-        "{} not found: scripts/test-all.sh installs chromium (apt-get install -y chromium)",
-        p.display()
-    );
-    p
-}
+use std::path::Path;
+use std::process::Command;
 
 /// `--dump-dom` of `page` and Chromium's stderr (with `--enable-logging=stderr`, console
 /// messages and uncaught errors appear there as `INFO:CONSOLE` lines).

@@ -21,13 +21,10 @@ use host::sil::source::SilSource;
 use host::source::{LoopStats, SerialSource, Source, SourceSpec};
 use host::virtual_device::VirtualDevice;
 use std::collections::HashMap;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
-
-/// The shipped default scene, embedded.
-const LIVER_SCENE: &str = include_str!("../../scenes/liver.toml");
 
 /// Arguments of `host demo`.
 #[derive(clap::Args, Debug)]
@@ -87,10 +84,7 @@ pub fn run(args: Args) -> Result<()> {
     {
         bail!("--seconds must be a positive number, got {s}");
     }
-    let mut scene = match &args.scene {
-        Some(p) => Scene::load(p)?,
-        None => Scene::parse(Path::new("host/scenes/liver.toml (embedded)"), LIVER_SCENE)?,
-    };
+    let mut scene = Scene::load_or_default(args.scene.as_deref())?;
     if let Some(m) = &args.mesh {
         if !m.is_file() {
             bail!("--mesh {}: no such file", m.display());

@@ -12,7 +12,6 @@ use std::time::Instant;
 /// The bench data the tissue-law knob fits (model-generated; see its header).
 const BRAIN_DATA: &str = include_str!("../../data/brain-compression-500mm-min.csv");
 const BRAIN_DATA_NAME: &str = "host/data/brain-compression-500mm-min.csv";
-const LIVER_SCENE: &str = include_str!("../../scenes/liver.toml");
 
 /// Arguments of `host report`.
 #[derive(clap::Args, Debug)]
@@ -46,10 +45,7 @@ pub fn run(args: Args) -> Result<()> {
     }
     let started = Instant::now();
     let step = |what: &str| eprintln!("[{:>6.1} s] {what}", started.elapsed().as_secs_f64());
-    let scene = match &args.scene {
-        Some(p) => Scene::load(p)?,
-        None => Scene::parse(Path::new("host/scenes/liver.toml (embedded)"), LIVER_SCENE)?,
-    };
+    let scene = Scene::load_or_default(args.scene.as_deref())?;
     let (organ, organ_name, _) = scene.load_mesh()?;
     let mut knobs = Vec::new();
     let mut cases = Vec::new();

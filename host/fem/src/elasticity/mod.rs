@@ -241,6 +241,26 @@ pub(crate) struct Tet {
 }
 
 impl Tet {
+    /// The geometry of every tetrahedron of `mesh`; refuses one of non-positive volume.
+    pub(crate) fn all(mesh: &TetMesh) -> Result<Vec<Tet>, FemError> {
+        let elements: Vec<Tet> = mesh
+            .tets
+            .par_iter()
+            .map(|t| Tet::new(t.map(|i| mesh.nodes[i])))
+            .collect();
+        match elements
+            .iter()
+            .enumerate()
+            .find(|(_, e)| !(e.volume > 0.0 && e.volume.is_finite()))
+        {
+            Some((tet, e)) => Err(FemError::BadElement {
+                tet,
+                volume: e.volume,
+            }),
+            None => Ok(elements),
+        }
+    }
+
     pub(crate) fn new(x: [[f64; 3]; 4]) -> Self {
         // Columns of J are the edge vectors from vertex 0; rows of J^-1 are grad N1..N3.
         let e = [sub(x[1], x[0]), sub(x[2], x[0]), sub(x[3], x[0])];
@@ -474,21 +494,7 @@ impl Elasticity {
     }
 
     fn p1(mesh: &TetMesh, material: Material) -> Result<Self, FemError> {
-        let elements: Vec<Tet> = mesh
-            .tets
-            .par_iter()
-            .map(|t| Tet::new(t.map(|i| mesh.nodes[i])))
-            .collect();
-        if let Some((tet, e)) = elements
-            .iter()
-            .enumerate()
-            .find(|(_, e)| !(e.volume > 0.0 && e.volume.is_finite()))
-        {
-            return Err(FemError::BadElement {
-                tet,
-                volume: e.volume,
-            });
-        }
+        let elements = Tet::all(mesh)?;
         let n = mesh.nodes.len();
         let node_tets = incidence(n, &mesh.tets);
         let node_adj = adjacency(&node_tets, &mesh.tets);

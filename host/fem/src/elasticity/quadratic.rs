@@ -55,21 +55,7 @@ impl QuadraticBody {
     /// Adds the edge nodes to `mesh` and precomputes the element geometry. Refuses elements of
     /// non-positive volume, like [`super::Elasticity::new`].
     pub fn new(mesh: &TetMesh, material: Material) -> Result<Self, FemError> {
-        let elements: Vec<Tet> = mesh
-            .tets
-            .par_iter()
-            .map(|t| Tet::new(t.map(|i| mesh.nodes[i])))
-            .collect();
-        if let Some((tet, e)) = elements
-            .iter()
-            .enumerate()
-            .find(|(_, e)| !(e.volume > 0.0 && e.volume.is_finite()))
-        {
-            return Err(FemError::BadElement {
-                tet,
-                volume: e.volume,
-            });
-        }
+        let elements = Tet::all(mesh)?;
         let mut positions = mesh.nodes.clone();
         let mut edge_nodes = HashMap::new();
         let tets: Vec<[usize; 10]> = mesh
