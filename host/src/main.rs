@@ -35,6 +35,9 @@ enum Command {
     Bench(cmd::bench::Bench),
     /// Software in the loop: the firmware image under QEMU against a simulated device.
     Sil(cmd::sil::Args),
+    /// Write the board image and a bank to the STM32F405 through a debug probe (probe-rs),
+    /// checked before and after; --dry-run prints the plan without a probe.
+    Flash(cmd::flash::Args),
 }
 
 fn main() -> ExitCode {
@@ -53,6 +56,7 @@ fn main() -> ExitCode {
         Command::Calibrate(c) => cmd::calibrate::run(c),
         Command::Bank(bank) => cmd::bank::run(bank),
         Command::Sil(args) => cmd::sil::run(args),
+        Command::Flash(args) => cmd::flash::run(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

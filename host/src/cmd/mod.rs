@@ -7,6 +7,7 @@ pub mod calibrate;
 pub mod compliance;
 pub mod demo;
 pub mod fixing;
+pub mod flash;
 pub mod organ;
 pub mod refinement;
 pub mod sil;
