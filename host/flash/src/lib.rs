@@ -16,7 +16,8 @@
 
 use bank_format::region::{BANK_LEN, BANK_ORIGIN, FIRMWARE_LEN, FIRMWARE_ORIGIN};
 use bank_format::{AlignedBytes, Bank};
-use probe_rs::config::{MemoryRegion, Registry, Target};
+pub use probe_rs::config::Target;
+use probe_rs::config::{MemoryRegion, Registry};
 use probe_rs::flashing::{
     DownloadOptions, FlashAlgorithm, FlashLoader, FlashProgress, ProgressEvent, ProgressOperation,
 };
@@ -202,6 +203,16 @@ pub enum Error {
     },
 }
 
+/// probe-rs's built-in description of [`CHIP`] (memory map, flash algorithms).
+pub fn target() -> Result<Target, Error> {
+    Registry::from_builtin_families()
+        .get_target_by_name(CHIP)
+        .map_err(|e| Error::NoTarget {
+            chip: CHIP.into(),
+            reason: e.to_string(),
+        })
+}
+
 /// The chip as probe-rs describes it, checked against memory.x.
 pub struct Layout {
     target: Target,
@@ -214,12 +225,7 @@ impl Layout {
     /// probe-rs's built-in description of [`CHIP`] with memory.x's regions
     /// ([`bank_format::region`]), refused when they do not fit ([`Layout::with_regions`]).
     pub fn new() -> Result<Layout, Error> {
-        let target = Registry::from_builtin_families()
-            .get_target_by_name(CHIP)
-            .map_err(|e| Error::NoTarget {
-                chip: CHIP.into(),
-                reason: e.to_string(),
-            })?;
+        let target = target()?;
         let firmware = u64::from(FIRMWARE_ORIGIN)..u64::from(FIRMWARE_ORIGIN) + FIRMWARE_LEN as u64;
         let bank = u64::from(BANK_ORIGIN)..u64::from(BANK_ORIGIN) + BANK_LEN as u64;
         Layout::with_regions(target, firmware, bank)
@@ -530,8 +536,8 @@ pub fn list_probes() -> Vec<ProbeEntry> {
 
 /// The message for "no probe": what a person checks.
 const NO_PROBE_HELP: &str = "check that the probe (ST-Link, J-Link or CMSIS-DAP) is plugged in \
-     and shows up in `lsusb`, and that this user may open it: on Linux install probe-rs's udev \
-     rules (https://probe.rs/docs/getting-started/probe-setup/), reload them with `udevadm \
+     and shows up in `lsusb`, and that this user has the USB permissions to open it: on Linux \
+     install probe-rs's udev rules (https://probe.rs/docs/getting-started/probe-setup/), reload them with `udevadm \
      control --reload && udevadm trigger` and replug the probe";
 
 /// A flashing step, for progress bars.
