@@ -38,6 +38,9 @@ enum Command {
     /// Write the board image and a bank to the STM32F405 through a debug probe (probe-rs),
     /// checked before and after; --dry-run prints the plan without a probe.
     Flash(cmd::flash::Args),
+    /// A device on a serial port: `check` prints its live joints, tip and state (bring-up).
+    #[command(subcommand)]
+    Device(cmd::device::DeviceCmd),
 }
 
 fn main() -> ExitCode {
@@ -57,6 +60,7 @@ fn main() -> ExitCode {
         Command::Bank(bank) => cmd::bank::run(bank),
         Command::Sil(args) => cmd::sil::run(args),
         Command::Flash(args) => cmd::flash::run(args),
+        Command::Device(c) => cmd::device::run(c),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -6,6 +6,7 @@ pub mod bench_law;
 pub mod calibrate;
 pub mod compliance;
 pub mod demo;
+pub mod device;
 pub mod fixing;
 pub mod flash;
 pub mod organ;
