@@ -650,6 +650,8 @@ pub fn flash(
             });
         }
     }
+    // The sectors probe-rs's flasher lays out (reported once, before it erases).
+    let mut laid_out: Vec<Span> = Vec::new();
     let mut options = DownloadOptions::default();
     options.verify = true;
     options.progress = FlashProgress::new(|event| {
@@ -660,6 +662,14 @@ pub fn flash(
             ProgressOperation::Fill => None,
         };
         match event {
+            ProgressEvent::FlashLayoutReady { flash_layout } => {
+                laid_out.extend(flash_layout.iter().flat_map(|l| {
+                    l.sectors().iter().map(|s| Span {
+                        address: s.address(),
+                        size: s.size(),
+                    })
+                }));
+            }
             ProgressEvent::AddProgressBar {
                 operation,
                 total: Some(total),
