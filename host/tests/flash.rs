@@ -410,3 +410,38 @@ fn flash_without_a_probe_fails_with_what_to_check() {
     assert!(!out.status.success());
     assert!(stderr(&out).contains("VID:PID"), "{}", stderr(&out));
 }
+
+/// `--scene` builds the bank in memory as `host bank build` writes it: the plan programs
+/// exactly that file's bytes, and the text plan reports its CRC.
+#[test]
+fn dry_run_with_a_scene_programs_the_bank_host_bank_build_writes() {
+    let scene = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/liver.toml");
+    let dir = tempfile::tempdir().unwrap();
+    let file = dir.path().join("liver.bank");
+    let built = host(&[
+        "bank",
+        "build",
+        scene.to_str().unwrap(),
+        "-o",
+        file.to_str().unwrap(),
+    ]);
+    assert!(built.status.success(), "{}", stderr(&built));
+    let bytes = std::fs::read(&file).unwrap();
+    let args = [
+        "flash",
+        "--dry-run",
+        "--bank-only",
+        "--scene",
+        scene.to_str().unwrap(),
+    ];
+    let v = json(&host(&[&args[..], &["--json"]].concat()));
+    assert_eq!(
+        spans(&v, "program"),
+        [(u64::from(BANK_ORIGIN), bytes.len() as u64)]
+    );
+    let out = host(&args);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let crc = u32::from_le_bytes(bytes[20..24].try_into().unwrap());
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(text.contains(&format!("bank crc  {crc:#010x}")), "{text}");
+}
