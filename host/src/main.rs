@@ -35,6 +35,12 @@ enum Command {
     Bench(cmd::bench::Bench),
     /// Software in the loop: the firmware image under QEMU against a simulated device.
     Sil(cmd::sil::Args),
+    /// Write the board image and a bank to the STM32F405 through a debug probe (probe-rs),
+    /// checked before and after; --dry-run prints the plan without a probe.
+    Flash(cmd::flash::Args),
+    /// A device on a serial port: `check` prints its live joints, tip and state (bring-up).
+    #[command(subcommand)]
+    Device(cmd::device::DeviceCmd),
     /// Speed against error for every knob, and the hard cases, on one generated page.
     Report(cmd::report::Args),
 }
@@ -55,6 +61,8 @@ fn main() -> ExitCode {
         Command::Calibrate(c) => cmd::calibrate::run(c),
         Command::Bank(bank) => cmd::bank::run(bank),
         Command::Sil(args) => cmd::sil::run(args),
+        Command::Flash(args) => cmd::flash::run(args),
+        Command::Device(c) => cmd::device::run(c),
         Command::Report(args) => cmd::report::run(args),
     };
     match result {

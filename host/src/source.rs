@@ -7,10 +7,10 @@
 //! the QEMU image through the plant simulator ([`crate::sil::source::SilSource`], its telemetry
 //! over the emulated USART: the same frames a board sends).
 
-use anyhow::{Context, Result, anyhow};
+use anyhow::{Context, Result, anyhow, bail};
 use bank_format::{
-    DeviceToHost, FaultReason, FrameDecoder, HostToDevice, MAX_FRAME, State, TissueLaw,
-    encode_frame,
+    DeviceToHost, FaultReason, FrameDecoder, HostToDevice, MAX_FRAME, PROTOCOL_VERSION, State,
+    TissueLaw, encode_frame,
 };
 use firmware::solve::apply_tissue_law;
 use firmware::tick::Contacts;
@@ -190,15 +190,24 @@ pub struct SerialSource {
 }
 
 impl SerialSource {
-    /// Opens `port` at `baud` and greets the device; `law` and `max_force_n` come from the
-    /// bank the device runs (the same scene).
-    pub fn open(port: &str, baud: u32, law: TissueLaw, max_force_n: f32) -> Result<SerialSource> {
+    /// Opens `port` at `baud`, greets the device and checks its identity ([`await_identity`],
+    /// [`check_identity`]): the device must speak [`PROTOCOL_VERSION`] and run the bank whose
+    /// CRC is `bank_crc` (the bank of `scene`, the scene displayed), else the error says what to
+    /// reflash. `law` and `max_force_n` come from that bank.
+    pub fn open(
+        port: &str,
+        baud: u32,
+        bank_crc: u32,
+        scene: &str,
+        law: TissueLaw,
+        max_force_n: f32,
+    ) -> Result<SerialSource> {
         let mut handle = serialport::new(port, baud)
             .timeout(Duration::from_millis(2))
             .open()
             .with_context(|| format!("cannot open serial port {port}"))?;
-        send(&mut *handle, &HostToDevice::Hello)
-            .with_context(|| format!("{port}: cannot send Hello"))?;
+        let hello = await_identity(&mut *handle, port, HELLO_TIMEOUT)?;
+        check_identity(&hello, bank_crc, scene)?;
         let mailbox = Arc::new(Mailbox::default());
         let stop = Arc::new(AtomicBool::new(false));
         let link = Link {
@@ -216,6 +225,157 @@ impl SerialSource {
             thread: Some(thread),
             last_tick: None,
         })
+    }
+}
+
+/// How long [`SerialSource::open`] waits for the device's `Hello`.
+const HELLO_TIMEOUT: Duration = Duration::from_secs(3);
+
+/// The USB vendor and product id of the board's CDC-ACM port (`usb_vid_pid` in
+/// firmware/board/src/board.rs; a test keeps the two equal).
+pub const BOARD_USB_ID: (u16, u16) = (0x1209, 0x0001);
+
+/// What a device says it is ([`DeviceToHost::Hello`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Identity {
+    /// Its link protocol version.
+    pub protocol: u16,
+    /// CRC of the valid bank it runs, `None` without one.
+    pub bank_crc: Option<u32>,
+    /// The bank's scene id.
+    pub scene_id: u64,
+    /// Nodes in the bank's R.
+    pub node_count: u16,
+}
+
+/// Sends `HostToDevice::Hello` on `port` (named `name` in errors) and waits up to `timeout`
+/// for the device's `Hello`, sending heartbeats meanwhile; other messages are skipped.
+pub fn await_identity(
+    port: &mut dyn serialport::SerialPort,
+    name: &str,
+    timeout: Duration,
+) -> Result<Identity> {
+    send(port, &HostToDevice::Hello).with_context(|| format!("{name}: cannot send Hello"))?;
+    let mut decoder = FrameDecoder::<DeviceToHost>::new();
+    let mut buf = [0u8; 512];
+    let end = Instant::now() + timeout;
+    let mut last_heartbeat = Instant::now();
+    while Instant::now() < end {
+        if last_heartbeat.elapsed() >= Duration::from_millis(2) {
+            send(port, &HostToDevice::Heartbeat)
+                .with_context(|| format!("{name}: cannot send a heartbeat"))?;
+            last_heartbeat = Instant::now();
+        }
+        let n = match port.read(&mut buf) {
+            Ok(0) => bail!("{name}: the port closed before the device said Hello"),
+            Ok(n) => n,
+            Err(e) if e.kind() == ErrorKind::TimedOut => continue,
+            Err(e) => return Err(e).with_context(|| format!("{name}: read failed")),
+        };
+        for msg in decoder.feed_slice(buf.get(..n).unwrap_or(&[])).flatten() {
+            if let DeviceToHost::Hello {
+                protocol,
+                bank_crc,
+                scene_id,
+                node_count,
+            } = msg
+            {
+                return Ok(Identity {
+                    protocol,
+                    bank_crc,
+                    scene_id,
+                    node_count,
+                });
+            }
+        }
+    }
+    bail!(
+        "{name}: no Hello from the device within {:.1} s (is this the device's port, and its \
+         firmware running?)",
+        timeout.as_secs_f64()
+    )
+}
+
+/// Refuses a device that does not speak [`PROTOCOL_VERSION`] or does not run the bank whose
+/// CRC is `bank_crc` (`bank`, e.g. "the bank of host/scenes/liver.toml"), saying what to
+/// reflash.
+pub fn check_identity(device: &Identity, bank_crc: u32, bank: &str) -> Result<()> {
+    if device.protocol != PROTOCOL_VERSION {
+        bail!(
+            "the device speaks link protocol {}, this host {PROTOCOL_VERSION}: reflash the \
+             firmware built from this tree (host flash --scene S, or --bank F)",
+            device.protocol
+        );
+    }
+    match device.bank_crc {
+        None => bail!(
+            "the device has no valid bank: flash {bank} (host flash --bank-only --scene S or \
+             --bank F)"
+        ),
+        Some(crc) if crc != bank_crc => bail!(
+            "the device runs bank {crc:#010x} (scene id {:#x}, {} nodes), not {bank} \
+             ({bank_crc:#010x}): reflash the bank (host flash --bank-only --scene S or --bank F)",
+            device.scene_id,
+            device.node_count
+        ),
+        Some(_) => Ok(()),
+    }
+}
+
+/// Opens the device's serial port: `port` if given, else the one USB port with
+/// [`BOARD_USB_ID`], retried until `timeout` (the device enumerates after its reset).
+pub fn open_device_port(
+    port: Option<&str>,
+    timeout: Duration,
+) -> Result<(Box<dyn serialport::SerialPort>, String)> {
+    let end = Instant::now() + timeout;
+    loop {
+        let name = match port {
+            Some(p) => Some(p.to_string()),
+            None => board_port()?,
+        };
+        let last = match &name {
+            Some(n) => match serialport::new(n, 115_200)
+                .timeout(Duration::from_millis(2))
+                .open()
+            {
+                Ok(h) => return Ok((h, n.clone())),
+                Err(e) => format!("cannot open {n}: {e}"),
+            },
+            None => format!(
+                "no USB serial port with the board's id {:04x}:{:04x}",
+                BOARD_USB_ID.0, BOARD_USB_ID.1
+            ),
+        };
+        if Instant::now() >= end {
+            bail!(
+                "{last} within {:.1} s of the reset (is the board's USB cable plugged in? give \
+                 the port with --port)",
+                timeout.as_secs_f64()
+            );
+        }
+        std::thread::sleep(Duration::from_millis(200));
+    }
+}
+
+/// The serial port with [`BOARD_USB_ID`], if exactly one; several are an error.
+fn board_port() -> Result<Option<String>> {
+    let ports = serialport::available_ports().context("cannot list the serial ports")?;
+    let ours: Vec<String> = ports
+        .into_iter()
+        .filter(|p| {
+            matches!(&p.port_type, serialport::SerialPortType::UsbPort(u)
+                if (u.vid, u.pid) == BOARD_USB_ID)
+        })
+        .map(|p| p.port_name)
+        .collect();
+    match ours.as_slice() {
+        [] => Ok(None),
+        [one] => Ok(Some(one.clone())),
+        many => bail!(
+            "several ports have the board's USB id ({}): give one with --port",
+            many.join(", ")
+        ),
     }
 }
 
@@ -408,13 +568,52 @@ mod tests {
         }
     }
 
+    /// Plays the device on the pty master `device` in a thread: waits for the host's `Hello`,
+    /// answers `hello`, and hands the master back when joined.
+    #[cfg(target_os = "linux")]
+    fn answer_hello(
+        mut device: std::fs::File,
+        hello: DeviceToHost,
+    ) -> std::thread::JoinHandle<std::fs::File> {
+        use std::io::Write as _;
+        std::thread::spawn(move || {
+            let mut rx: FrameDecoder<HostToDevice> = FrameDecoder::new();
+            let mut bytes = [0u8; 256];
+            loop {
+                let n = device.read(&mut bytes).unwrap();
+                if rx
+                    .feed_slice(&bytes[..n])
+                    .any(|r| r == Ok(HostToDevice::Hello))
+                {
+                    break;
+                }
+            }
+            let mut buf = [0u8; MAX_FRAME];
+            device
+                .write_all(encode_frame(&hello, &mut buf).unwrap())
+                .unwrap();
+            device
+        })
+    }
+
+    fn hello(protocol: u16, bank_crc: Option<u32>) -> DeviceToHost {
+        DeviceToHost::Hello {
+            protocol,
+            bank_crc,
+            scene_id: 0x5ce9e,
+            node_count: 321,
+        }
+    }
+
     #[cfg(target_os = "linux")]
     #[test]
     fn serial_source_decodes_telemetry_and_sends_heartbeats() {
         use std::io::Write as _;
-        let (mut device, name, _slave) = pty();
+        let (device, name, _slave) = pty();
         let law = TissueLaw::linear(0.0, 1.0, [0.0, 5.0]).unwrap();
-        let mut src = SerialSource::open(&name, 115_200, law, 5.0).unwrap();
+        let answered = answer_hello(device, hello(PROTOCOL_VERSION, Some(0xC0FFEE)));
+        let mut src = SerialSource::open(&name, 115_200, 0xC0FFEE, "the bank", law, 5.0).unwrap();
+        let mut device = answered.join().unwrap();
         assert!(src.steering().is_none());
         let mut contacts = Contacts::new();
         contacts
@@ -448,16 +647,103 @@ mod tests {
         );
         assert_eq!(s.contacts, contacts);
         assert_eq!(s.tool_force_n, [0.0, -0.1, 0.3]);
-        // The host greeted the device and keeps the link alive.
+        // The host keeps the link alive.
         let mut rx: FrameDecoder<HostToDevice> = FrameDecoder::new();
         let mut got = Vec::new();
         let end = Instant::now() + Duration::from_secs(5);
         let mut bytes = [0u8; 256];
-        while !(got.contains(&HostToDevice::Hello) && got.contains(&HostToDevice::Heartbeat)) {
+        while !got.contains(&HostToDevice::Heartbeat) {
             assert!(Instant::now() < end, "got {got:?}");
             let n = device.read(&mut bytes).unwrap();
             got.extend(rx.feed_slice(&bytes[..n]).filter_map(|r| r.ok()));
         }
-        assert_eq!(got[0], HostToDevice::Hello);
+    }
+
+    /// Over a pty: a device answering with another bank, another protocol or no bank is
+    /// refused at open, the error saying what to reflash.
+    #[cfg(target_os = "linux")]
+    #[test]
+    fn serial_source_refuses_a_device_that_is_not_the_scene_displayed() {
+        let law = TissueLaw::linear(0.0, 1.0, [0.0, 5.0]).unwrap();
+        let cases = [
+            (
+                hello(PROTOCOL_VERSION, Some(0x1234_5678)),
+                vec![
+                    "0x12345678",
+                    "0xabcdef01",
+                    "reflash the bank",
+                    "scene id 0x5ce9e",
+                ],
+            ),
+            (
+                hello(PROTOCOL_VERSION + 1, Some(0xABCD_EF01)),
+                vec!["protocol", "reflash the firmware"],
+            ),
+            (hello(PROTOCOL_VERSION, None), vec!["no valid bank"]),
+        ];
+        for (answer, want) in cases {
+            let (device, name, _slave) = pty();
+            let answered = answer_hello(device, answer.clone());
+            let err = SerialSource::open(&name, 115_200, 0xABCD_EF01, "the liver bank", law, 5.0)
+                .err()
+                .unwrap_or_else(|| panic!("{answer:?} accepted"));
+            let msg = format!("{err:#}");
+            for w in want {
+                assert!(msg.contains(w), "{answer:?}: {msg:?} lacks {w:?}");
+            }
+            answered.join().unwrap();
+        }
+    }
+
+    /// Over a pty: the Hello is found among other frames and line noise.
+    #[cfg(target_os = "linux")]
+    #[test]
+    fn await_identity_skips_other_frames() {
+        use std::io::Write as _;
+        let (mut device, name, _slave) = pty();
+        let mut port = serialport::new(&name, 115_200)
+            .timeout(Duration::from_millis(2))
+            .open()
+            .unwrap();
+        let mut buf = [0u8; MAX_FRAME];
+        let fault = DeviceToHost::Fault {
+            tick: 3,
+            reason: FaultReason::LinkSilent,
+            detail: 0,
+        };
+        device
+            .write_all(encode_frame(&fault, &mut buf).unwrap())
+            .unwrap();
+        device.write_all(&[0x55, 0xAA, 0x00]).unwrap();
+        device
+            .write_all(encode_frame(&hello(7, Some(42)), &mut buf).unwrap())
+            .unwrap();
+        let id = await_identity(&mut *port, &name, Duration::from_secs(5)).unwrap();
+        assert_eq!(
+            id,
+            Identity {
+                protocol: 7,
+                bank_crc: Some(42),
+                scene_id: 0x5ce9e,
+                node_count: 321
+            }
+        );
+        // Silence: a timeout naming the port.
+        let err = await_identity(&mut *port, &name, Duration::from_millis(50)).unwrap_err();
+        assert!(format!("{err}").contains(&name), "{err}");
+    }
+
+    /// The board's USB id here is the one the board image announces.
+    #[test]
+    fn board_usb_id_is_the_board_images() {
+        let board = std::fs::read_to_string(
+            crate::sil::harness::repo_root().join("firmware/board/src/board.rs"),
+        )
+        .unwrap();
+        let want = format!(
+            "usb_vid_pid: ({:#06x}, {:#06x}),",
+            BOARD_USB_ID.0, BOARD_USB_ID.1
+        );
+        assert!(board.contains(&want), "board.rs lacks {want:?}");
     }
 }

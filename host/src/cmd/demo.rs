@@ -160,6 +160,14 @@ pub fn run(args: Args) -> Result<()> {
         SourceSpec::Serial(port) => Box::new(SerialSource::open(
             port,
             args.baud,
+            bank.crc(),
+            &format!(
+                "the bank of {}",
+                args.scene.as_deref().map_or_else(
+                    || "host/scenes/liver.toml (embedded)".into(),
+                    |p| p.display().to_string()
+                )
+            ),
             *bank.tissue_law(),
             cal.max_force_n,
         )?),
