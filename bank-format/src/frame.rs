@@ -12,7 +12,7 @@ use serde::de::DeserializeOwned;
 use serde::{Deserialize, Serialize};
 
 /// Version of the message set below; the device reports it in [`DeviceToHost::Hello`].
-pub const PROTOCOL_VERSION: u16 = 3;
+pub const PROTOCOL_VERSION: u16 = 4;
 /// Most contact nodes one telemetry message carries.
 pub const MAX_CONTACTS: usize = 8;
 /// Upper bound on a postcard-encoded message, bytes (the largest, a full telemetry message, is
@@ -49,8 +49,9 @@ pub enum Mode {
     LinearLaw,
     /// Contact tracking and telemetry only, zero current (free motion).
     Transparent,
-    /// Constant motor currents, A (motor constant calibration against a load cell); still
-    /// clamped to the current limits.
+    /// Constant motor currents, A (motor constant calibration against a load cell). Never
+    /// clamped: a current that is not finite or over its motor's limit is a
+    /// [`FaultReason::BadCommand`] fault (zero current).
     ConstantCurrent {
         /// Commanded currents per motor, A.
         currents_a: [f32; 3],
@@ -84,6 +85,11 @@ pub enum FaultReason {
     /// The armed device moved faster than the bank's speed thresholds over one tick (`detail`
     /// = joint 0..2, or 3 for the tool tip).
     Overspeed,
+    /// A host command that cannot be applied safely (added in protocol 4): a `ConstantCurrent`
+    /// current that is not finite or over its motor's limit (`detail` = motor 0..2, checked
+    /// every tick of that mode, armed or not), or `SetMode` while armed (`detail` = 3; the
+    /// mode is kept).
+    BadCommand,
 }
 
 /// One contact node and the force on it.

@@ -132,8 +132,8 @@ fn every_message_variant_round_trips() {
     assert_eq!(dec.stats().errors(), 0);
 }
 
-/// The variant order is the wire protocol: the reasons added in protocol 3 come after the
-/// earlier ones, whose indices stay what a deployed host decodes.
+/// The variant order is the wire protocol: the reasons added in protocols 3 and 4 come after
+/// the earlier ones, whose indices stay what a deployed host decodes.
 #[test]
 fn fault_reasons_keep_their_wire_indices() {
     let reasons = [
@@ -148,12 +148,13 @@ fn fault_reasons_keep_their_wire_indices() {
         FaultReason::EStop,
         FaultReason::AmplifierFault,
         FaultReason::Overspeed,
+        FaultReason::BadCommand,
     ];
     for (index, reason) in reasons.into_iter().enumerate() {
         let bytes = postcard::to_slice(&reason, &mut [0u8; 8]).unwrap().to_vec();
         assert_eq!(bytes, [index as u8], "{reason:?}");
     }
-    assert_eq!(PROTOCOL_VERSION, 3);
+    assert_eq!(PROTOCOL_VERSION, 4);
 }
 
 #[test]

@@ -285,6 +285,7 @@ fn fault() -> impl Strategy<Value = FaultReason> {
         Just(FaultReason::EStop),
         Just(FaultReason::AmplifierFault),
         Just(FaultReason::Overspeed),
+        Just(FaultReason::BadCommand),
     ]
 }
 

@@ -326,8 +326,15 @@ impl<'b, 'q> App<'b, 'q> {
                 }
             }
             HostToDevice::SetMode(mode) => {
-                if let Core::Loop(lp) = &mut self.core {
-                    lp.set_mode(mode);
+                if let Core::Loop(lp) = &mut self.core
+                    && let Err(f) = lp.set_mode(mode)
+                {
+                    let tick = lp.tick_count();
+                    self.queue(&DeviceToHost::Fault {
+                        tick,
+                        reason: f.reason,
+                        detail: f.detail,
+                    });
                 }
             }
             HostToDevice::ZeroEncoders => {
@@ -524,10 +531,10 @@ mod tests {
         let mut host = FakeHost::new(driver);
         let (mut plant, clock) = (plant(), clock());
         host.send(&HostToDevice::Hello);
-        host.send(&HostToDevice::Arm);
+        host.send(&HostToDevice::SetMode(Mode::Transparent));
         // A corrupt frame between them is dropped and counted.
         host.driver.put_rx(&[0x03, 0x11, 0x22, 0x00]);
-        host.send(&HostToDevice::SetMode(Mode::Transparent));
+        host.send(&HostToDevice::Arm);
         let mut reports = Vec::new();
         for _ in 0..20 {
             reports.push(app.tick(&mut plant, &clock, false).unwrap());
@@ -552,7 +559,7 @@ mod tests {
         assert_eq!(tel.iter().map(|t| t.tick).collect::<Vec<_>>(), [10, 20]);
         assert_eq!(tel[1].state, WireState::Armed);
         assert_eq!(tel[1].mode, Mode::Transparent);
-        // Hello, Arm, SetMode and the 19 heartbeats read so far.
+        // Hello, SetMode, Arm and the 19 heartbeats read so far.
         assert_eq!(tel[1].counters.rx_frames, 3 + 19);
         assert_eq!(tel[1].counters.rx_errors, 1);
         assert_eq!(tel[1].counters.tx_dropped, 0);
@@ -616,10 +623,10 @@ mod tests {
         let mut host = FakeHost::new(driver);
         let (mut plant, clock) = (plant(), clock());
         let drive = [0.5, -0.25, 0.0];
-        host.send(&HostToDevice::Arm);
         host.send(&HostToDevice::SetMode(Mode::ConstantCurrent {
             currents_a: drive,
         }));
+        host.send(&HostToDevice::Arm);
         let mut reports = Vec::new();
         let step = |app: &mut App, plant: &mut FakePlant, host: &mut FakeHost| {
             let r = app.tick(plant, &clock, false).unwrap();
@@ -672,6 +679,50 @@ mod tests {
         assert_eq!((r.state, r.currents_a), (WireState::Armed, drive));
         assert_eq!(plant.driven.last(), Some(&Some(drive)));
         assert_eq!(faults(&host).len(), 3);
+    }
+
+    /// `SetMode` while armed: refused (the mode stays), one `BadCommand` Fault frame (detail
+    /// 3) at once, the motors disabled from the next tick.
+    #[test]
+    fn set_mode_while_armed_is_refused_with_a_fault_frame() {
+        let bytes = flat_patch();
+        let bank = Bank::parse(bytes.as_slice()).unwrap();
+        let mut link = Link::new();
+        let (tick_end, driver) = link.split();
+        let mut app = App::new(Ok(&bank), tick_end);
+        let mut host = FakeHost::new(driver);
+        let (mut plant, clock) = (plant(), clock());
+        host.send(&HostToDevice::Arm);
+        for _ in 0..5 {
+            assert_eq!(
+                app.tick(&mut plant, &clock, false).unwrap().state,
+                WireState::Armed
+            );
+            host.pump();
+            host.send(&HostToDevice::Heartbeat);
+        }
+        host.send(&HostToDevice::SetMode(Mode::ConstantCurrent {
+            currents_a: [1.0; 3],
+        }));
+        let r = app.tick(&mut plant, &clock, false).unwrap();
+        host.pump();
+        assert_eq!((r.state, r.currents_a), (WireState::Fault, [0.0; 3]));
+        assert_eq!(plant.driven.last(), Some(&None));
+        let faults: Vec<_> = host
+            .sent
+            .iter()
+            .filter(|m| matches!(m, DeviceToHost::Fault { .. }))
+            .cloned()
+            .collect();
+        assert_eq!(
+            faults,
+            [DeviceToHost::Fault {
+                tick: 5,
+                reason: FaultReason::BadCommand,
+                detail: crate::tick::BAD_COMMAND_SET_MODE_ARMED,
+            }]
+        );
+        assert_eq!(app.telemetry().mode, Mode::Render);
     }
 
     /// An amplifier's fault output latches `AmplifierFault` with the motor as detail, with or

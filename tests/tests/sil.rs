@@ -359,31 +359,48 @@ fn with_current_limit(bytes: &AlignedBytes, limit_a: f32) -> Vec<u8> {
 }
 
 #[test]
-fn current_over_the_limit_faults_or_is_clamped() {
+fn current_commands_over_the_limit_and_mode_changes_while_armed_fault() {
     let (mut setup, bytes) = setup();
     let bank = Bank::parse(&bytes).unwrap();
-    let cal = *bank.device();
 
-    // The host commands constant currents over the limit (and a NaN): the device clamps them
-    // to the limit (NaN to 0 A) and never drives more.
-    let mut session = Session::new(&bank, Script::Press, 0.5).unwrap();
+    // The host commands constant currents over the limit (and a NaN) before arming: the
+    // supervisor sees them unclamped and faults `BadCommand` (motor 0, the first one over), so
+    // the arm that follows is refused and nothing is ever driven.
+    let mut session = Session::new(&bank, Script::Press, 0.3).unwrap();
     let asked = [10.0, -10.0, f32::NAN];
+    session.link.insert(
+        1,
+        (
+            5,
+            LinkSend::Command(HostToDevice::SetMode(Mode::ConstantCurrent {
+                currents_a: asked,
+            })),
+        ),
+    );
+    let run = qemu(&setup, &session);
+    let faults = run.faults();
+    assert!(!faults.is_empty(), "{:?}", run.stderr);
+    assert_eq!((faults[0].1, faults[0].2), (FaultReason::BadCommand, 0));
+    assert!(faults[0].0 <= ARM_TICK, "{faults:?}");
+    assert!(run.ticks.iter().all(|t| t.currents_a == [0.0; 3]));
+    assert!(run.ticks.iter().all(|t| t.state != State::Armed));
+
+    // `SetMode` while armed is refused and reported (`BadCommand`, detail 3), zero current
+    // from then on.
+    let mut session = Session::new(&bank, Script::Press, 0.3).unwrap();
     session.link.push((
-        100,
+        150,
         LinkSend::Command(HostToDevice::SetMode(Mode::ConstantCurrent {
-            currents_a: asked,
+            currents_a: [0.1; 3],
         })),
     ));
     let run = qemu(&setup, &session);
-    let limit = cal.current_limit_a;
-    assert!(
-        run.ticks
-            .iter()
-            .all(|t| (0..3).all(|j| t.currents_a[j].abs() <= limit[j]))
-    );
-    let last = run.ticks.last().unwrap();
-    assert_eq!(last.currents_a, [limit[0], -limit[1], 0.0]);
-    assert_eq!(last.state, State::Armed);
+    let faults = run.faults();
+    assert_eq!(faults.len(), 1, "{faults:?}");
+    let (tick, reason, detail) = faults[0];
+    assert_eq!((reason, detail), (FaultReason::BadCommand, 3));
+    assert!(run.ticks.iter().all(|t| t.currents_a != [0.1; 3]));
+    assert_zero_from(&run, tick + 1);
 
     // A calibration whose current limit is far below what the rendered force needs: the
     // request exceeds 1.25 x the limit as soon as the tool presses, which is a fault.
