@@ -528,8 +528,8 @@ pub fn condition_barycentric(
 
 /// The quasi non-linear law (paper eqs. 5-6) on a force `f` (N) produced by imposing the
 /// displacement `d` (m): `f = f_t + f_r` with `f_t = (f . d^) d^` along the imposed direction;
-/// `|f_t|` is replaced by `law.eval(|f_t|)` (linear continuation outside the fitted domain),
-/// `f_r` is kept. `d = 0` has no direction: `f` is returned unchanged; `f_t = 0` has none
+/// `|f_t|` is replaced by `max(law.eval(|f_t|), 0)` (linear continuation outside the fitted
+/// domain, clamped at 0 so a fit never pulls the tool in), `f_r` is kept. `d = 0` has no direction: `f` is returned unchanged; `f_t = 0` has none
 /// either: only `f_r` is returned. NaN or infinite input or result is an error.
 pub fn apply_tissue_law(law: &TissueLaw, f: [f32; 3], d: [f32; 3]) -> Result<[f32; 3], SolveError> {
     if !f.iter().chain(d.iter()).all(|v| v.is_finite()) {
@@ -550,7 +550,11 @@ pub fn apply_tissue_law(law: &TissueLaw, f: [f32; 3], d: [f32; 3]) -> Result<[f3
     if s == 0.0 {
         return Ok(fr);
     }
+    // Clamped at 0 (`SPEC.md`, tissue law): a fit continued below its domain can go negative,
+    // which would pull the tool into the tissue.
+    // (Written so that a NaN stays one and is reported below.)
     let q = law.eval(s.abs());
+    let q = if q < 0.0 { 0.0 } else { q };
     let qs = if s > 0.0 { q } else { -q };
     let out = [fr[0] + qs * dh[0], fr[1] + qs * dh[1], fr[2] + qs * dh[2]];
     if out.iter().all(|v| v.is_finite()) {
@@ -885,5 +889,39 @@ mod tests {
             apply_tissue_law(&law, [1.0, 0.0, 0.0], d).unwrap(),
             [1.0, 0.0, 0.0]
         );
+    }
+
+    /// A stiffening fit (convex, `Q(f_min) = 0.25 N` with slope 1.2 at `f_min = 0.5 N`) whose
+    /// linear continuation below its domain crosses zero at 0.29 N: at contact onset, when the
+    /// linear force along the press is 0.1 N, the continuation gives -0.23 N, which would pull
+    /// the tool into the tissue. Q is clamped at 0 (`SPEC.md`, tissue law): the component along
+    /// the press is zero, the transverse one kept.
+    #[test]
+    fn tissue_law_is_clamped_at_zero_below_a_stiffening_fit() {
+        // Q(x) = 1 + 0.9 T1 + 0.15 T2 on [0.5, 1.0] N: Q(-1) = 0.25, dQ/dx(-1) = 0.9 - 0.6 = 0.3,
+        // dQ/df = 0.3 * 2 / 0.5 = 1.2; Q'' > 0 (stiffening).
+        let law = TissueLaw::chebyshev(&[1.0, 0.9, 0.15], [0.5, 1.0]).unwrap();
+        let continued = law.eval(0.1);
+        assert!(
+            (continued - (0.25 + 1.2 * (0.1 - 0.5))).abs() < 1e-5,
+            "{continued}"
+        );
+        let d = [0.0, 0.0, 1e-4];
+        // Along the press only: nothing left.
+        assert_eq!(
+            apply_tissue_law(&law, [0.0, 0.0, 0.1], d).unwrap(),
+            [0.0; 3]
+        );
+        // With a transverse part: that part kept as is, none along the press.
+        let out = apply_tissue_law(&law, [0.05, 0.0, 0.1], d).unwrap();
+        assert_eq!(out, [0.05, 0.0, 0.0]);
+        // Pulled out (negative along d): -Q(|s|) clamped the same way.
+        assert_eq!(
+            apply_tissue_law(&law, [0.0, 0.0, -0.1], d).unwrap(),
+            [0.0; 3]
+        );
+        // Inside the domain it is the law itself.
+        let out = apply_tissue_law(&law, [0.0, 0.0, 0.75], d).unwrap();
+        assert!((out[2] - law.eval(0.75)).abs() < 1e-6 && out[2] > 0.0);
     }
 }
