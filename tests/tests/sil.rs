@@ -252,6 +252,33 @@ fn silent_host_link_faults_within_ten_ticks() {
     assert_eq!(last.fault, Some(FaultReason::LinkSilent));
 }
 
+/// A host that stops its heartbeats but keeps sending garbage (one byte a tick, never a valid
+/// frame): the QEMU image's link grace (20 ticks, for its slow USART) plus the 10-tick timeout,
+/// then `LinkSilent` and zero current; not the 100 ticks the old fixed grace allowed.
+#[test]
+fn garbage_only_link_faults_after_the_images_grace() {
+    let (setup, bytes) = setup();
+    let bank = Bank::parse(&bytes).unwrap();
+    let quiet_from = 300;
+    let mut session = Session::new(&bank, Script::Press, 0.5).unwrap();
+    session.heartbeat_until = Some(quiet_from);
+    for t in quiet_from..session.ticks {
+        session.link.push((t, LinkSend::Raw(vec![0x55])));
+    }
+    let run = qemu(&setup, &session);
+    let faults = run.faults();
+    assert_eq!(faults.len(), 1, "{faults:?}");
+    let (tick, reason, _) = faults[0];
+    assert_eq!(reason, FaultReason::LinkSilent);
+    // The last heartbeat may still have been in flight on the UART (a few ticks).
+    assert!(
+        tick > quiet_from + 10 && tick <= quiet_from + 10 + 20 + 10,
+        "{tick} vs {quiet_from}"
+    );
+    assert_eq!(run.ticks[quiet_from as usize].state, State::Armed);
+    assert_zero_from(&run, tick);
+}
+
 #[test]
 fn corrupt_and_truncated_frames_are_dropped_and_counted() {
     let (setup, bytes) = setup();
