@@ -268,6 +268,8 @@ impl<'b, 'q> App<'b, 'q> {
                 tip_m: [0.0; 3],
                 contacts: heapless::Vec::new(),
                 currents_a: [0.0; 3],
+                tool_force_n: [0.0; 3],
+                dropped_load: 0.0,
                 counters: *counters,
             },
         }

@@ -103,8 +103,18 @@ pub fn flat_patch() -> AlignedBytes {
 /// triangles per square (every interior node has six, lumped area `h^2`), the pairs closer than
 /// `truncation_m` coupled with [`kernel_block`], the [`patch_device`] and a Chebyshev law.
 pub fn grid_patch(n_side: usize, h: f64, truncation_m: f64) -> AlignedBytes {
+    grid_patch_with(n_side, h, truncation_m, patch_device())
+}
+
+/// [`grid_patch`] with the device calibration `device`.
+pub fn grid_patch_with(
+    n_side: usize,
+    h: f64,
+    truncation_m: f64,
+    device: DeviceCalibration,
+) -> AlignedBytes {
     let ticks: Vec<f64> = (0..n_side).map(|i| h * i as f64).collect();
-    grid_patch_at(&ticks, &ticks, truncation_m)
+    grid_bank(&ticks, &ticks, truncation_m, device)
 }
 
 /// [`grid_patch`] with node columns at `xs` and rows at `ys` (increasing, m): uneven grids,
@@ -113,6 +123,10 @@ pub fn grid_patch(n_side: usize, h: f64, truncation_m: f64) -> AlignedBytes {
 /// # Panics
 /// Only if the builder rejects it, which would be a bug in this fixture.
 pub fn grid_patch_at(xs: &[f64], ys: &[f64], truncation_m: f64) -> AlignedBytes {
+    grid_bank(xs, ys, truncation_m, patch_device())
+}
+
+fn grid_bank(xs: &[f64], ys: &[f64], truncation_m: f64, device: DeviceCalibration) -> AlignedBytes {
     let (nx, ny) = (xs.len(), ys.len());
     let mut p = Vec::new();
     for &y in ys {
@@ -156,7 +170,7 @@ pub fn grid_patch_at(xs: &[f64], ys: &[f64], truncation_m: f64) -> AlignedBytes 
         truncation_radius_m: truncation_m,
         scene_id: 7,
         law: TissueLaw::chebyshev(&[2.6, 2.5, -0.1], [0.0, 5.0]).expect("valid law"),
-        device: patch_device(),
+        device,
     };
     AlignedBytes::new(&b.build().expect("valid fixture bank"))
 }

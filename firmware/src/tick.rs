@@ -98,6 +98,12 @@ pub struct LoopOutput {
     pub solve_error: Option<SolveError>,
     /// Where the contact patch in use was built, when touching.
     pub patch: Option<PatchOrigin>,
+    /// Share of the patch's load on nodes it could not keep ([`crate::patch::Patch::dropped`]:
+    /// more than the solve carries, or not coupled in the bank), 0 when nothing was dropped or
+    /// when free. The kept weights are renormalised, so `contacts` and `tool_force_n` are
+    /// those of the narrower patch; telemetry reports the share and counts such ticks
+    /// (`Counters::capped_ticks`).
+    pub dropped_load: f32,
 }
 
 /// What the last tick produced, kept for [`HapticLoop::telemetry`].
@@ -106,6 +112,8 @@ struct Last {
     tip_m: [f32; 3],
     contacts: Contacts,
     currents_a: [f32; 3],
+    tool_force_n: [f32; 3],
+    dropped_load: f32,
 }
 
 /// The portable haptic loop over one validated bank.
@@ -141,6 +149,8 @@ pub const REPATCH_FRACTION: f32 = 0.1;
 struct Held {
     origin: PatchOrigin,
     solve: WeightedSolve,
+    /// The patch's [`crate::patch::Patch::dropped`].
+    dropped: f32,
 }
 
 /// Where the current contact patch was built ([`crate::patch::tool_patch`]'s arguments): the
@@ -185,6 +195,8 @@ impl<'b> HapticLoop<'b> {
                 tip_m: [0.0; 3],
                 contacts: Contacts::new(),
                 currents_a: [0.0; 3],
+                tool_force_n: [0.0; 3],
+                dropped_load: 0.0,
             },
             held: None,
         }
@@ -301,6 +313,13 @@ impl<'b> HapticLoop<'b> {
             Ok((contacts, f)) => (contacts, self.device.limit_force(f), None),
             Err(e) => (Contacts::new(), [0.0; 3], Some(e)),
         };
+        let dropped_load = match self.held {
+            Some(h) if solve_error.is_none() => h.dropped,
+            _ => 0.0,
+        };
+        if dropped_load > 0.0 {
+            self.counters.capped_ticks = self.counters.capped_ticks.wrapping_add(1);
+        }
         // A host's constant currents go to the supervisor as sent: it faults on one that is
         // not finite or over its limit instead of clamping it.
         let requested_a = match self.mode {
@@ -328,6 +347,8 @@ impl<'b> HapticLoop<'b> {
             tip_m: tip,
             contacts: contacts.clone(),
             currents_a: out.currents_a,
+            tool_force_n: force_on_tool,
+            dropped_load,
         };
         LoopOutput {
             tick: self.tick,
@@ -342,6 +363,7 @@ impl<'b> HapticLoop<'b> {
             new_fault: out.new_fault,
             solve_error,
             patch: self.held.map(|h| h.origin),
+            dropped_load,
         }
     }
 
@@ -355,6 +377,8 @@ impl<'b> HapticLoop<'b> {
             tip_m: self.last.tip_m,
             contacts: self.last.contacts.clone(),
             currents_a: self.last.currents_a,
+            tool_force_n: self.last.tool_force_n,
+            dropped_load: self.last.dropped_load,
             counters: self.counters,
         }
     }
@@ -404,6 +428,7 @@ impl<'b> HapticLoop<'b> {
                         radius_m: radius,
                     },
                     solve,
+                    dropped: patch.dropped,
                 });
                 solve
             }
@@ -645,6 +670,68 @@ mod tests {
         assert!(lp.clear_fault());
         assert_eq!(lp.set_mode(Mode::Transparent), Ok(()));
         assert_eq!(lp.mode(), Mode::Transparent);
+    }
+
+    /// A 3 mm tip on a 1 mm grid loads about 28 nodes, more than the 8 the solve carries: the
+    /// patch keeps the heaviest 8, renormalised, and the loss is not silent: every such tick
+    /// reports its dropped share, telemetry carries it and counts the ticks, and the rendered
+    /// force is that of the kept patch (node forces `w_k f_tool` summing to the tool force).
+    #[test]
+    fn a_patch_over_the_node_cap_reports_the_dropped_load() {
+        let bytes = crate::fixtures::grid_patch_with(
+            9,
+            0.001,
+            0.02,
+            DeviceCalibration {
+                fulcrum_m: [0.004, 0.004, 0.1],
+                ..patch_device()
+            },
+        );
+        let bank = Bank::parse(bytes.as_slice()).unwrap();
+        assert!(bank.device().tip_radius_m >= 0.003);
+        let mut lp = HapticLoop::new(&bank);
+        lp.set_mode(Mode::LinearLaw).unwrap();
+        lp.arm().unwrap();
+        let dev = *lp.device();
+        let (mut capped, mut touching) = (0, 0);
+        for t in 0..=80 {
+            let out = lp.tick(input(counts_for_insertion(
+                &dev,
+                0.099 + 0.03e-3 * t as f32,
+            )));
+            assert_eq!(out.state, State::Armed, "{out:?}");
+            let tel = lp.telemetry();
+            assert_eq!(tel.dropped_load, out.dropped_load);
+            assert_eq!(tel.tool_force_n, out.tool_force_n);
+            if !matches!(out.contact, ContactState::Touching { .. }) {
+                assert_eq!(out.dropped_load, 0.0);
+                continue;
+            }
+            touching += 1;
+            let radius = out.patch.unwrap().radius_m;
+            if radius == 0.0 {
+                // The first tick of a contact: the contact triangle alone, nothing dropped.
+                assert_eq!(out.dropped_load, 0.0, "{out:?}");
+                continue;
+            }
+            assert_eq!(out.contacts.len(), MAX_CONTACTS);
+            assert!(out.dropped_load > 0.2 && out.dropped_load < 1.0, "{out:?}");
+            capped += 1;
+            // Linear law: the node forces on the tissue sum to minus the tool force.
+            for i in 0..3 {
+                let sum: f32 = out.contacts.iter().map(|c| c.force_n[i]).sum();
+                assert!(
+                    (sum + out.tool_force_n[i]).abs() <= 1e-5 * norm(out.tool_force_n),
+                    "{out:?}"
+                );
+            }
+            assert_eq!(lp.counters().capped_ticks, capped);
+        }
+        assert!(
+            touching > 30 && capped == touching - 1,
+            "{touching} {capped}"
+        );
+        assert_eq!(lp.telemetry().counters.capped_ticks, capped);
     }
 
     #[test]

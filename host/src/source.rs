@@ -9,10 +9,8 @@
 
 use anyhow::{Context, Result, anyhow};
 use bank_format::{
-    DeviceToHost, FaultReason, FrameDecoder, HostToDevice, MAX_FRAME, State, TissueLaw,
-    encode_frame,
+    DeviceToHost, FaultReason, FrameDecoder, HostToDevice, MAX_FRAME, State, encode_frame,
 };
-use firmware::solve::apply_tissue_law;
 use firmware::tick::Contacts;
 use std::io::{ErrorKind, Read};
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -155,30 +153,6 @@ impl std::str::FromStr for SourceSpec {
     }
 }
 
-/// The force on the tool a serial device renders, rebuilt from its telemetry (which carries
-/// `f_S`, not the tool force): `-Q(sum f_S)`, the law applied along the linear force's own
-/// direction, capped at `max_force_n`. Exact for the linear law; for a non-linear law the
-/// firmware applies Q along the tip displacement, which the link does not carry, so this is
-/// then an approximation.
-pub fn tool_force_from_contacts(
-    law: &TissueLaw,
-    contacts: &Contacts,
-    max_force_n: f32,
-) -> [f32; 3] {
-    let mut f = [0.0f32; 3];
-    for c in contacts {
-        (0..3).for_each(|i| f[i] += c.force_n[i]);
-    }
-    let q = apply_tissue_law(law, f, f).unwrap_or([0.0; 3]);
-    let n = (q[0] * q[0] + q[1] * q[1] + q[2] * q[2]).sqrt();
-    let scale = if n > max_force_n {
-        max_force_n / n
-    } else {
-        1.0
-    };
-    q.map(|x| -x * scale)
-}
-
 /// A device on a serial port: a reader thread decodes `DeviceToHost::Telemetry` frames and
 /// sends a heartbeat every 2 ms (the firmware's link-silence watchdog expects one within 10
 /// ticks).
@@ -190,9 +164,8 @@ pub struct SerialSource {
 }
 
 impl SerialSource {
-    /// Opens `port` at `baud` and greets the device; `law` and `max_force_n` come from the
-    /// bank the device runs (the same scene).
-    pub fn open(port: &str, baud: u32, law: TissueLaw, max_force_n: f32) -> Result<SerialSource> {
+    /// Opens `port` at `baud` and greets the device.
+    pub fn open(port: &str, baud: u32) -> Result<SerialSource> {
         let mut handle = serialport::new(port, baud)
             .timeout(Duration::from_millis(2))
             .open()
@@ -204,7 +177,7 @@ impl SerialSource {
         let link = Link {
             port: handle,
             decoder: FrameDecoder::new(),
-            absorber: Absorber::new(law, max_force_n),
+            absorber: Absorber::default(),
         };
         let (m, st) = (Arc::clone(&mailbox), Arc::clone(&stop));
         let thread = std::thread::Builder::new()
@@ -252,10 +225,10 @@ struct Link {
     absorber: Absorber,
 }
 
-/// Turns a device's link messages into samples and stats (serial and SIL sources).
+/// Turns a device's link messages into samples and stats (serial and SIL sources). The tool
+/// force is telemetry's `tool_force_n`, the force the firmware rendered (protocol 4).
+#[derive(Default)]
 pub(crate) struct Absorber {
-    law: TissueLaw,
-    max_force_n: f32,
     first_tick: Option<(u32, Instant)>,
     stats: LoopStats,
 }
@@ -290,15 +263,6 @@ impl Link {
 }
 
 impl Absorber {
-    pub(crate) fn new(law: TissueLaw, max_force_n: f32) -> Absorber {
-        Absorber {
-            law,
-            max_force_n,
-            first_tick: None,
-            stats: LoopStats::default(),
-        }
-    }
-
     pub(crate) fn absorb(&mut self, msg: DeviceToHost, mailbox: &Mailbox) {
         match msg {
             DeviceToHost::Telemetry(t) => {
@@ -308,8 +272,7 @@ impl Absorber {
                     self.stats.tick_rate_hz =
                         f64::from(t.tick.wrapping_sub(t0)) / (now - i0).as_secs_f64();
                 }
-                let tool_force_n =
-                    tool_force_from_contacts(&self.law, &t.contacts, self.max_force_n);
+                let tool_force_n = t.tool_force_n;
                 let f = tool_force_n.iter().map(|x| x * x).sum::<f32>().sqrt();
                 self.stats.peak_force_n = self.stats.peak_force_n.max(f64::from(f));
                 let sample = Sample {
@@ -346,32 +309,6 @@ mod tests {
         );
         assert!("serial:".parse::<SourceSpec>().is_err());
         assert!("qemu".parse::<SourceSpec>().unwrap_err().contains("qemu"));
-    }
-
-    #[test]
-    fn tool_force_is_minus_the_law_of_the_total_contact_force() {
-        let mut c = Contacts::new();
-        c.push(Contact {
-            node: 1,
-            force_n: [0.0, 0.0, -0.4],
-        })
-        .unwrap();
-        c.push(Contact {
-            node: 2,
-            force_n: [0.1, 0.0, -0.2],
-        })
-        .unwrap();
-        // Linear law with gain 2: Q(|f|) = 2 |f| along f.
-        let law = TissueLaw::linear(0.0, 2.0, [0.0, 5.0]).unwrap();
-        let f = tool_force_from_contacts(&law, &c, 5.0);
-        let want = [-0.2f32, 0.0, 1.2];
-        for i in 0..3 {
-            assert!((f[i] - want[i]).abs() < 1e-6, "{f:?}");
-        }
-        // Capped at the device's largest force.
-        let capped = tool_force_from_contacts(&law, &c, 0.5);
-        let n = capped.iter().map(|x| x * x).sum::<f32>().sqrt();
-        assert!((n - 0.5).abs() < 1e-6);
     }
 
     /// A pseudo-terminal pair: the master end plays the device.
@@ -413,8 +350,7 @@ mod tests {
     fn serial_source_decodes_telemetry_and_sends_heartbeats() {
         use std::io::Write as _;
         let (mut device, name, _slave) = pty();
-        let law = TissueLaw::linear(0.0, 1.0, [0.0, 5.0]).unwrap();
-        let mut src = SerialSource::open(&name, 115_200, law, 5.0).unwrap();
+        let mut src = SerialSource::open(&name, 115_200).unwrap();
         assert!(src.steering().is_none());
         let mut contacts = Contacts::new();
         contacts
@@ -431,6 +367,9 @@ mod tests {
             tip_m: [0.01, 0.02, 0.05],
             contacts: contacts.clone(),
             currents_a: [0.1, 0.0, -0.2],
+            // Not what the contacts would give under any law: the sample must take it as sent.
+            tool_force_n: [0.05, -0.1, 0.7],
+            dropped_load: 0.0,
             counters: bank_format::Counters::default(),
         };
         let mut buf = [0u8; MAX_FRAME];
@@ -447,7 +386,7 @@ mod tests {
             (500, State::Armed, [0.01, 0.02, 0.05])
         );
         assert_eq!(s.contacts, contacts);
-        assert_eq!(s.tool_force_n, [0.0, -0.1, 0.3]);
+        assert_eq!(s.tool_force_n, [0.05, -0.1, 0.7]);
         // The host greeted the device and keeps the link alive.
         let mut rx: FrameDecoder<HostToDevice> = FrameDecoder::new();
         let mut got = Vec::new();

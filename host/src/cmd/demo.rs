@@ -156,19 +156,9 @@ pub fn run(args: Args) -> Result<()> {
                 .unwrap_or(if args.headless { 10.0 } else { 60.0 });
             let script = args.script.unwrap_or(Script::Press);
             let session = host::sil::harness::Session::new(&bank, script, seconds + 1.0)?;
-            Box::new(SilSource::start(
-                setup,
-                session,
-                *bank.tissue_law(),
-                cal.max_force_n,
-            )?)
+            Box::new(SilSource::start(setup, session)?)
         }
-        SourceSpec::Serial(port) => Box::new(SerialSource::open(
-            port,
-            args.baud,
-            *bank.tissue_law(),
-            cal.max_force_n,
-        )?),
+        SourceSpec::Serial(port) => Box::new(SerialSource::open(port, args.baud)?),
     };
     let steering = source.steering();
     let script = match (args.script, args.headless) {
