@@ -9,7 +9,6 @@ extern crate alloc;
 
 use alloc::vec::Vec;
 use bank_format::{AlignedBytes, BankBuilder, DeviceCalibration, TissueLaw};
-use nalgebra::ComplexField;
 
 /// The liver scene's device (`host/scenes/liver.toml`).
 pub fn liver_device() -> DeviceCalibration {
@@ -80,14 +79,14 @@ pub fn kernel_block(p: &[[f64; 3]], k: usize, l: usize) -> [[f64; 3]; 3] {
         [0.1e-3, 1.2e-3, 0.05e-3],
         [0.0, 0.05e-3, 2.0e-3],
     ];
-    // libm through nalgebra: this module is `no_std` too.
-    let d = ComplexField::sqrt(
+    // libm: this module is `no_std` too.
+    let d = libm::sqrt(
         (0..3)
             .map(|i| (p[k][i] - p[l][i]) * (p[k][i] - p[l][i]))
             .sum::<f64>(),
     );
-    let kern = ComplexField::exp(-d / 0.015);
-    let local = 0.3e-3 * ComplexField::exp(-d / 0.001);
+    let kern = libm::exp(-d / 0.015);
+    let local = 0.3e-3 * libm::exp(-d / 0.001);
     core::array::from_fn(|i| {
         core::array::from_fn(|j| kern * m[i][j] + if i == j { local } else { 0.0 })
     })
@@ -214,5 +213,5 @@ pub fn rel_err(got: &[[f32; 3]], want: &[f64]) -> f64 {
         .map(|(&a, b)| (f64::from(a) - b) * (f64::from(a) - b))
         .sum();
     let den: f64 = want.iter().map(|b| b * b).sum();
-    ComplexField::sqrt(num / den)
+    libm::sqrt(num / den)
 }

@@ -27,9 +27,9 @@
 //! host's `contact_forces`); [`ContactForces::tool_force_n`] is their sum, the force the tool
 //! exerts on the tissue. The force the user feels is its opposite.
 
+use crate::cholesky::Cholesky;
 use crate::vec3::dot;
 use bank_format::{Bank, TissueLaw};
-use nalgebra::{Cholesky, ComplexField, Const, SMatrix, SVector};
 
 /// Most nodes in one contact set (the link's contact list, [`bank_format::MAX_CONTACTS`]).
 pub const MAX_CONTACT_NODES: usize = bank_format::MAX_CONTACTS;
@@ -45,7 +45,7 @@ pub const WEIGHT_SUM_TOL: f32 = 1.0e-3;
 pub const MIN_PIVOT_REL: f32 = 1.0e-5;
 
 /// `C_SS` padded to the largest contact set.
-pub type CssMatrix = SMatrix<f32, MAX_DOFS, MAX_DOFS>;
+pub type CssMatrix = [[f32; MAX_DOFS]; MAX_DOFS];
 
 /// Why a contact solve gave no forces.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -157,11 +157,11 @@ impl ContactForces {
     }
 }
 
-/// A Cholesky factorisation of a fixed-size SPD matrix of which the leading `active` rows and
-/// columns are used, with its pivot statistics.
+/// A Cholesky factorisation ([`crate::cholesky`]) of a fixed-size SPD matrix of which the
+/// leading `active` rows and columns are used, with its pivot statistics.
 #[derive(Clone, Copy, Debug)]
 pub struct Factor<const D: usize> {
-    chol: Cholesky<f32, Const<D>>,
+    chol: Cholesky<D>,
     min_pivot: f32,
     max_pivot: f32,
     max_diag: f32,
@@ -170,19 +170,20 @@ pub struct Factor<const D: usize> {
 impl<const D: usize> Factor<D> {
     /// Factors `a` (only its lower triangle is read). Fails on NaN or infinite entries or when
     /// Cholesky breaks down; does *not* apply [`MIN_PIVOT_REL`] (see [`Factor::check`]).
-    pub fn new(a: SMatrix<f32, D, D>, active: usize) -> Result<Factor<D>, SolveError> {
-        if !a.iter().all(|x| x.is_finite()) {
+    pub fn new(a: [[f32; D]; D], active: usize) -> Result<Factor<D>, SolveError> {
+        if !a.iter().flatten().all(|x| x.is_finite()) {
             return Err(SolveError::NonFinite);
         }
         let active = active.min(D);
         let max_diag = a
-            .diagonal()
             .iter()
+            .enumerate()
             .take(active)
+            .filter_map(|(i, r)| r.get(i))
             .fold(0.0f32, |m, &x| m.max(x));
-        let chol = Cholesky::new(a).ok_or(SolveError::NotPositiveDefinite)?;
+        let chol = Cholesky::new(&a).ok_or(SolveError::NotPositiveDefinite)?;
         let (mut min_pivot, mut max_pivot) = (f32::INFINITY, 0.0f32);
-        for &l in chol.l_dirty().diagonal().iter().take(active) {
+        for &l in chol.diagonal().iter().take(active) {
             let p = l * l;
             min_pivot = min_pivot.min(p);
             max_pivot = max_pivot.max(p);
@@ -221,7 +222,7 @@ impl<const D: usize> Factor<D> {
     }
 
     /// `a^-1 b`.
-    pub fn solve(&self, b: &SVector<f32, D>) -> Result<SVector<f32, D>, SolveError> {
+    pub fn solve(&self, b: &[f32; D]) -> Result<[f32; D], SolveError> {
         let x = self.chol.solve(b);
         if x.iter().all(|v| v.is_finite()) {
             Ok(x)
@@ -258,7 +259,7 @@ fn check_nodes(bank: &Bank, nodes: &[u16], max: usize) -> Result<(), SolveError>
 /// solves the active part exactly. A pair the bank does not couple is an error, never zero.
 pub fn assemble_css(bank: &Bank, nodes: &[u16]) -> Result<CssMatrix, SolveError> {
     check_nodes(bank, nodes, MAX_IMPOSED_NODES)?;
-    let mut c = CssMatrix::zeros();
+    let mut c: CssMatrix = [[0.0; MAX_DOFS]; MAX_DOFS];
     for (a, &k) in nodes.iter().enumerate() {
         for (b, &l) in nodes.iter().enumerate() {
             let block = bank
@@ -269,7 +270,7 @@ pub fn assemble_css(bank: &Bank, nodes: &[u16]) -> Result<CssMatrix, SolveError>
                     if !v.is_finite() {
                         return Err(SolveError::NonFinite);
                     }
-                    if let Some(e) = c.get_mut((3 * a + i, 3 * b + j)) {
+                    if let Some(e) = c.get_mut(3 * a + i).and_then(|r| r.get_mut(3 * b + j)) {
                         *e = v;
                     }
                 }
@@ -277,14 +278,20 @@ pub fn assemble_css(bank: &Bank, nodes: &[u16]) -> Result<CssMatrix, SolveError>
         }
     }
     let active = 3 * nodes.len();
-    let mean = c.diagonal().iter().take(active).sum::<f32>() / active as f32;
+    let mean = c
+        .iter()
+        .enumerate()
+        .take(active)
+        .filter_map(|(i, r)| r.get(i))
+        .sum::<f32>()
+        / active as f32;
     let pad = if mean > 0.0 && mean.is_finite() {
         mean
     } else {
         1.0
     };
     for r in active..MAX_DOFS {
-        if let Some(e) = c.get_mut((r, r)) {
+        if let Some(e) = c.get_mut(r).and_then(|row| row.get_mut(r)) {
             *e = pad;
         }
     }
@@ -315,7 +322,7 @@ pub fn solve_imposed(
     }
     let factor = factor_css(bank, nodes)?;
     factor.check()?;
-    let mut u = SVector::<f32, MAX_DOFS>::zeros();
+    let mut u = [0.0f32; MAX_DOFS];
     for (a, d) in imposed_m.iter().enumerate() {
         for (i, &v) in d.iter().enumerate() {
             if let Some(e) = u.get_mut(3 * a + i) {
@@ -408,7 +415,7 @@ impl WeightedSolve {
             });
         }
         check_weights(weights)?;
-        let mut m = SMatrix::<f32, 3, 3>::zeros();
+        let mut m = [[0.0f32; 3]; 3];
         for (a, (&k, &wa)) in nodes.iter().zip(weights).enumerate() {
             // Blocks (a, b) and (b, a) are transposes: visit b >= a and add both.
             for (&l, &wb) in nodes.iter().zip(weights).skip(a) {
@@ -424,10 +431,10 @@ impl WeightedSolve {
                         // Symmetric by construction (C_lk = C_kl^T); the diagonal block
                         // is symmetrised by the same sum.
                         let scaled = if k == l { 0.5 * w * v } else { w * v };
-                        if let Some(e) = m.get_mut((i, j)) {
+                        if let Some(e) = m.get_mut(i).and_then(|r| r.get_mut(j)) {
                             *e += scaled;
                         }
-                        if let Some(e) = m.get_mut((j, i)) {
+                        if let Some(e) = m.get_mut(j).and_then(|r| r.get_mut(i)) {
                             *e += scaled;
                         }
                     }
@@ -470,8 +477,7 @@ impl WeightedSolve {
         if !d_m.iter().all(|v| v.is_finite()) {
             return Err(SolveError::NonFinite);
         }
-        let f = self.factor.solve(&SVector::<f32, 3>::from(d_m))?;
-        let tool = [f.x, f.y, f.z];
+        let tool = self.factor.solve(&d_m)?;
         let mut out = ContactForces {
             nodes: self.nodes,
             len: self.len,
@@ -542,7 +548,7 @@ pub fn apply_tissue_law(law: &TissueLaw, f: [f32; 3], d: [f32; 3]) -> Result<[f3
     if dd <= 0.0 {
         return Ok(f);
     }
-    let norm = ComplexField::sqrt(dd);
+    let norm = crate::vec3::sqrt(dd);
     let dh = d.map(|x| x / norm);
     let s = dot(f, dh);
     let ft = dh.map(|x| s * x);
