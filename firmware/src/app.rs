@@ -81,7 +81,7 @@ impl<'b, 'q> App<'b, 'q> {
     /// talking to the host through `link`; queues the boot `Hello`.
     ///
     /// `link_grace_ticks`: for how many ticks past the last valid frame received bytes alone
-    /// still count as link activity ([`App::link_silence`]). 0 on a board, whose link carries
+    /// still count as link activity. 0 on a board, whose link carries
     /// a whole frame within a tick: then only valid frames count, and a link that delivers
     /// only garbage faults `LinkSilent` as soon as a silent one does (the supervisor's
     /// timeout, 10 ticks). A slow link (QEMU's USART, a few bytes a tick) needs a grace of
