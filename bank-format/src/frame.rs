@@ -12,11 +12,11 @@ use serde::de::DeserializeOwned;
 use serde::{Deserialize, Serialize};
 
 /// Version of the message set below; the device reports it in [`DeviceToHost::Hello`].
-pub const PROTOCOL_VERSION: u16 = 3;
+pub const PROTOCOL_VERSION: u16 = 4;
 /// Most contact nodes one telemetry message carries.
 pub const MAX_CONTACTS: usize = 8;
 /// Upper bound on a postcard-encoded message, bytes (the largest, a full telemetry message, is
-/// at most 197).
+/// at most 218).
 pub const MAX_MESSAGE: usize = 256;
 /// Bytes of CRC after the message.
 pub const FRAME_CRC_LEN: usize = 4;
@@ -49,8 +49,9 @@ pub enum Mode {
     LinearLaw,
     /// Contact tracking and telemetry only, zero current (free motion).
     Transparent,
-    /// Constant motor currents, A (motor constant calibration against a load cell); still
-    /// clamped to the current limits.
+    /// Constant motor currents, A (motor constant calibration against a load cell). Never
+    /// clamped: a current that is not finite or over its motor's limit is a
+    /// [`FaultReason::BadCommand`] fault (zero current).
     ConstantCurrent {
         /// Commanded currents per motor, A.
         currents_a: [f32; 3],
@@ -84,6 +85,11 @@ pub enum FaultReason {
     /// The armed device moved faster than the bank's speed thresholds over one tick (`detail`
     /// = joint 0..2, or 3 for the tool tip).
     Overspeed,
+    /// A host command that cannot be applied safely (added in protocol 4): a `ConstantCurrent`
+    /// current that is not finite or over its motor's limit (`detail` = motor 0..2, checked
+    /// every tick of that mode, armed or not), or `SetMode` while armed (`detail` = 3; the
+    /// mode is kept).
+    BadCommand,
 }
 
 /// One contact node and the force on it.
@@ -110,6 +116,9 @@ pub struct Counters {
     pub tx_dropped: u32,
     /// Received bytes dropped because the link's incoming queue was full.
     pub rx_dropped: u32,
+    /// Ticks whose contact patch dropped load (protocol 4): nodes beyond the
+    /// [`MAX_CONTACTS`] the solve carries, or not coupled in the bank.
+    pub capped_ticks: u32,
 }
 
 /// Periodic device status.
@@ -129,6 +138,15 @@ pub struct Telemetry {
     pub contacts: heapless::Vec<Contact, MAX_CONTACTS>,
     /// Motor currents commanded this tick, A.
     pub currents_a: [f32; 3],
+    /// The force rendered on the tool this tick, N (protocol 4): after the law Q and the
+    /// force cap, opposite to the force on the tissue; what the motors produce when armed
+    /// (zero without contact, in `Transparent` and `ConstantCurrent`, and after a failed
+    /// solve).
+    pub tool_force_n: [f32; 3],
+    /// Share of the tool patch's load on nodes the patch could not keep (protocol 4): the
+    /// kept weights are renormalised, so `contacts` carries the whole force and the rendered
+    /// force is that of the narrower patch; 0 when nothing was dropped.
+    pub dropped_load: f32,
     /// Counters.
     pub counters: Counters,
 }

@@ -26,6 +26,8 @@ fn full_telemetry() -> Telemetry {
         tip_m: [0.01, -0.02, 0.03],
         contacts,
         currents_a: [0.1, 0.2, -0.3],
+        tool_force_n: [0.5, -0.25, 4.0],
+        dropped_load: 0.125,
         counters: Counters {
             rx_frames: u32::MAX,
             rx_errors: u32::MAX,
@@ -33,6 +35,7 @@ fn full_telemetry() -> Telemetry {
             max_tick_cycles: u32::MAX,
             tx_dropped: u32::MAX,
             rx_dropped: u32::MAX,
+            capped_ticks: u32::MAX,
         },
     }
 }
@@ -132,8 +135,8 @@ fn every_message_variant_round_trips() {
     assert_eq!(dec.stats().errors(), 0);
 }
 
-/// The variant order is the wire protocol: the reasons added in protocol 3 come after the
-/// earlier ones, whose indices stay what a deployed host decodes.
+/// The variant order is the wire protocol: the reasons added in protocols 3 and 4 come after
+/// the earlier ones, whose indices stay what a deployed host decodes.
 #[test]
 fn fault_reasons_keep_their_wire_indices() {
     let reasons = [
@@ -148,12 +151,13 @@ fn fault_reasons_keep_their_wire_indices() {
         FaultReason::EStop,
         FaultReason::AmplifierFault,
         FaultReason::Overspeed,
+        FaultReason::BadCommand,
     ];
     for (index, reason) in reasons.into_iter().enumerate() {
         let bytes = postcard::to_slice(&reason, &mut [0u8; 8]).unwrap().to_vec();
         assert_eq!(bytes, [index as u8], "{reason:?}");
     }
-    assert_eq!(PROTOCOL_VERSION, 3);
+    assert_eq!(PROTOCOL_VERSION, 4);
 }
 
 #[test]
@@ -161,7 +165,7 @@ fn the_largest_message_fits_max_message_and_max_frame() {
     let msg = DeviceToHost::Telemetry(full_telemetry());
     let body = postcard::to_slice(&msg, &mut [0u8; 1024]).unwrap().len();
     assert!(
-        body <= 197,
+        body <= 218,
         "telemetry grew to {body} bytes: update MAX_MESSAGE docs"
     );
     assert!(body <= MAX_MESSAGE);

@@ -285,6 +285,7 @@ fn fault() -> impl Strategy<Value = FaultReason> {
         Just(FaultReason::EStop),
         Just(FaultReason::AmplifierFault),
         Just(FaultReason::Overspeed),
+        Just(FaultReason::BadCommand),
     ]
 }
 
@@ -306,10 +307,23 @@ fn device_msg() -> impl Strategy<Value = DeviceToHost> {
         proptest::array::uniform3(f32_finite()),
         contacts,
         proptest::array::uniform3(f32_finite()),
-        proptest::array::uniform6(any::<u32>()),
+        proptest::array::uniform3(f32_finite()),
+        f32_finite(),
+        proptest::array::uniform7(any::<u32>()),
     )
         .prop_map(
-            |(tick, state, mode, fault, tip_m, contacts, currents_a, c)| {
+            |(
+                tick,
+                state,
+                mode,
+                fault,
+                tip_m,
+                contacts,
+                currents_a,
+                tool_force_n,
+                dropped_load,
+                c,
+            )| {
                 DeviceToHost::Telemetry(Telemetry {
                     tick,
                     state,
@@ -321,6 +335,8 @@ fn device_msg() -> impl Strategy<Value = DeviceToHost> {
                         .map(|(node, force_n)| Contact { node, force_n })
                         .collect(),
                     currents_a,
+                    tool_force_n,
+                    dropped_load,
                     counters: Counters {
                         rx_frames: c[0],
                         rx_errors: c[1],
@@ -328,6 +344,7 @@ fn device_msg() -> impl Strategy<Value = DeviceToHost> {
                         max_tick_cycles: c[3],
                         tx_dropped: c[4],
                         rx_dropped: c[5],
+                        capped_ticks: c[6],
                     },
                 })
             },

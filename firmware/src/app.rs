@@ -30,11 +30,6 @@ pub const TELEMETRY_EVERY_TICKS: u32 = 10;
 /// (the rest wait in the queue: 128 bytes a millisecond is more than a 921,600-baud UART
 /// carries).
 pub const MAX_RX_BYTES_PER_TICK: usize = 128;
-/// A link that delivers bytes but no valid frame for this many ticks more than the supervisor's
-/// link timeout counts as silent too (a host sending only garbage is as good as none). Bytes
-/// alone keep the link alive for that long because a slow UART (QEMU's carries about two bytes
-/// a tick) needs several ticks for one frame.
-pub const GARBLED_LINK_GRACE_TICKS: u32 = 90;
 
 /// What one tick did, for the caller (the software-in-the-loop image reports it to its
 /// harness; a board ignores it).
@@ -76,6 +71,7 @@ pub struct App<'b, 'q> {
     rx: FrameDecoder<HostToDevice>,
     ticks_since_host_frame: u32,
     ticks_since_host_byte: u32,
+    link_grace_ticks: u32,
     last_tick_cycles: u32,
     tx_dropped: u32,
 }
@@ -83,7 +79,18 @@ pub struct App<'b, 'q> {
 impl<'b, 'q> App<'b, 'q> {
     /// The application over the result of validating the bank region ([`Bank::parse`]),
     /// talking to the host through `link`; queues the boot `Hello`.
-    pub fn new(bank: Result<&'b Bank<'b>, BankError>, link: TickEnd<'q>) -> App<'b, 'q> {
+    ///
+    /// `link_grace_ticks`: for how many ticks past the last valid frame received bytes alone
+    /// still count as link activity. 0 on a board, whose link carries
+    /// a whole frame within a tick: then only valid frames count, and a link that delivers
+    /// only garbage faults `LinkSilent` as soon as a silent one does (the supervisor's
+    /// timeout, 10 ticks). A slow link (QEMU's USART, a few bytes a tick) needs a grace of
+    /// about as many ticks as its longest frame takes.
+    pub fn new(
+        bank: Result<&'b Bank<'b>, BankError>,
+        link: TickEnd<'q>,
+        link_grace_ticks: u32,
+    ) -> App<'b, 'q> {
         let core = match bank {
             Ok(bank) => Core::Loop(HapticLoop::new(bank)),
             Err(e) => Core::NoBank {
@@ -99,6 +106,7 @@ impl<'b, 'q> App<'b, 'q> {
             rx: FrameDecoder::new(),
             ticks_since_host_frame: 0,
             ticks_since_host_byte: 0,
+            link_grace_ticks,
             last_tick_cycles: 0,
             tx_dropped: 0,
         };
@@ -260,6 +268,8 @@ impl<'b, 'q> App<'b, 'q> {
                 tip_m: [0.0; 3],
                 contacts: heapless::Vec::new(),
                 currents_a: [0.0; 3],
+                tool_force_n: [0.0; 3],
+                dropped_load: 0.0,
                 counters: *counters,
             },
         }
@@ -290,11 +300,13 @@ impl<'b, 'q> App<'b, 'q> {
     }
 
     /// How long the host has been silent, in ticks, for the supervisor's link timeout: since
-    /// the last byte, or since the last valid frame less [`GARBLED_LINK_GRACE_TICKS`].
+    /// the last valid frame less the link grace ([`App::new`]), and never less than since the
+    /// last byte (bytes count as activity only within the grace; with none, only valid frames
+    /// count).
     fn link_silence(&self) -> u32 {
         self.ticks_since_host_byte.max(
             self.ticks_since_host_frame
-                .saturating_sub(GARBLED_LINK_GRACE_TICKS),
+                .saturating_sub(self.link_grace_ticks),
         )
     }
 
@@ -326,8 +338,15 @@ impl<'b, 'q> App<'b, 'q> {
                 }
             }
             HostToDevice::SetMode(mode) => {
-                if let Core::Loop(lp) = &mut self.core {
-                    lp.set_mode(mode);
+                if let Core::Loop(lp) = &mut self.core
+                    && let Err(f) = lp.set_mode(mode)
+                {
+                    let tick = lp.tick_count();
+                    self.queue(&DeviceToHost::Fault {
+                        tick,
+                        reason: f.reason,
+                        detail: f.detail,
+                    });
                 }
             }
             HostToDevice::ZeroEncoders => {
@@ -520,14 +539,14 @@ mod tests {
         let bank = Bank::parse(bytes.as_slice()).unwrap();
         let mut link = Link::new();
         let (tick_end, driver) = link.split();
-        let mut app = App::new(Ok(&bank), tick_end);
+        let mut app = App::new(Ok(&bank), tick_end, 0);
         let mut host = FakeHost::new(driver);
         let (mut plant, clock) = (plant(), clock());
         host.send(&HostToDevice::Hello);
-        host.send(&HostToDevice::Arm);
+        host.send(&HostToDevice::SetMode(Mode::Transparent));
         // A corrupt frame between them is dropped and counted.
         host.driver.put_rx(&[0x03, 0x11, 0x22, 0x00]);
-        host.send(&HostToDevice::SetMode(Mode::Transparent));
+        host.send(&HostToDevice::Arm);
         let mut reports = Vec::new();
         for _ in 0..20 {
             reports.push(app.tick(&mut plant, &clock, false).unwrap());
@@ -552,7 +571,7 @@ mod tests {
         assert_eq!(tel.iter().map(|t| t.tick).collect::<Vec<_>>(), [10, 20]);
         assert_eq!(tel[1].state, WireState::Armed);
         assert_eq!(tel[1].mode, Mode::Transparent);
-        // Hello, Arm, SetMode and the 19 heartbeats read so far.
+        // Hello, SetMode, Arm and the 19 heartbeats read so far.
         assert_eq!(tel[1].counters.rx_frames, 3 + 19);
         assert_eq!(tel[1].counters.rx_errors, 1);
         assert_eq!(tel[1].counters.tx_dropped, 0);
@@ -570,7 +589,7 @@ mod tests {
         let bank = Bank::parse(bytes.as_slice()).unwrap();
         let mut link = Link::new();
         let (tick_end, driver) = link.split();
-        let mut app = App::new(Ok(&bank), tick_end);
+        let mut app = App::new(Ok(&bank), tick_end, 0);
         let mut host = FakeHost::new(driver);
         let (mut plant, clock) = (plant(), clock());
         host.send(&HostToDevice::Arm);
@@ -612,14 +631,14 @@ mod tests {
         let bank = Bank::parse(bytes.as_slice()).unwrap();
         let mut link = Link::new();
         let (tick_end, driver) = link.split();
-        let mut app = App::new(Ok(&bank), tick_end);
+        let mut app = App::new(Ok(&bank), tick_end, 0);
         let mut host = FakeHost::new(driver);
         let (mut plant, clock) = (plant(), clock());
         let drive = [0.5, -0.25, 0.0];
-        host.send(&HostToDevice::Arm);
         host.send(&HostToDevice::SetMode(Mode::ConstantCurrent {
             currents_a: drive,
         }));
+        host.send(&HostToDevice::Arm);
         let mut reports = Vec::new();
         let step = |app: &mut App, plant: &mut FakePlant, host: &mut FakeHost| {
             let r = app.tick(plant, &clock, false).unwrap();
@@ -674,6 +693,50 @@ mod tests {
         assert_eq!(faults(&host).len(), 3);
     }
 
+    /// `SetMode` while armed: refused (the mode stays), one `BadCommand` Fault frame (detail
+    /// 3) at once, the motors disabled from the next tick.
+    #[test]
+    fn set_mode_while_armed_is_refused_with_a_fault_frame() {
+        let bytes = flat_patch();
+        let bank = Bank::parse(bytes.as_slice()).unwrap();
+        let mut link = Link::new();
+        let (tick_end, driver) = link.split();
+        let mut app = App::new(Ok(&bank), tick_end, 0);
+        let mut host = FakeHost::new(driver);
+        let (mut plant, clock) = (plant(), clock());
+        host.send(&HostToDevice::Arm);
+        for _ in 0..5 {
+            assert_eq!(
+                app.tick(&mut plant, &clock, false).unwrap().state,
+                WireState::Armed
+            );
+            host.pump();
+            host.send(&HostToDevice::Heartbeat);
+        }
+        host.send(&HostToDevice::SetMode(Mode::ConstantCurrent {
+            currents_a: [1.0; 3],
+        }));
+        let r = app.tick(&mut plant, &clock, false).unwrap();
+        host.pump();
+        assert_eq!((r.state, r.currents_a), (WireState::Fault, [0.0; 3]));
+        assert_eq!(plant.driven.last(), Some(&None));
+        let faults: Vec<_> = host
+            .sent
+            .iter()
+            .filter(|m| matches!(m, DeviceToHost::Fault { .. }))
+            .cloned()
+            .collect();
+        assert_eq!(
+            faults,
+            [DeviceToHost::Fault {
+                tick: 5,
+                reason: FaultReason::BadCommand,
+                detail: crate::tick::BAD_COMMAND_SET_MODE_ARMED,
+            }]
+        );
+        assert_eq!(app.telemetry().mode, Mode::Render);
+    }
+
     /// An amplifier's fault output latches `AmplifierFault` with the motor as detail, with or
     /// without a valid bank, ahead of the invalid bank's own fault.
     #[test]
@@ -683,7 +746,7 @@ mod tests {
         for bank in [Ok(&bank), Err(BankError::BadMagic)] {
             let mut link = Link::new();
             let (tick_end, driver) = link.split();
-            let mut app = App::new(bank, tick_end);
+            let mut app = App::new(bank, tick_end, 0);
             let mut host = FakeHost::new(driver);
             let (mut plant, clock) = (plant(), clock());
             plant.interlocks.amplifier_fault = [false, false, true];
@@ -705,14 +768,15 @@ mod tests {
     }
 
     /// A slow link (one byte a tick, so a frame takes several ticks) is not silent; a link
-    /// that delivers only garbage is, once the garbled-link grace has run out.
+    /// that delivers only garbage is, once the link grace (30 ticks here) has run out.
     #[test]
     fn slow_link_stays_alive_and_garbage_alone_is_silence() {
+        const GRACE: u32 = 30;
         let bytes = flat_patch();
         let bank = Bank::parse(bytes.as_slice()).unwrap();
         let mut link = Link::new();
         let (tick_end, mut driver) = link.split();
-        let mut app = App::new(Ok(&bank), tick_end);
+        let mut app = App::new(Ok(&bank), tick_end, GRACE);
         let (mut plant, clock) = (plant(), clock());
         let mut buf = [0u8; MAX_FRAME];
         driver.put_rx(encode_frame(&HostToDevice::Arm, &mut buf).unwrap());
@@ -740,7 +804,7 @@ mod tests {
             driver.put_rx(&[trickle.remove(0)]);
             states.push(app.tick(&mut plant, &clock, false).unwrap().state);
         }
-        let limit = (GARBLED_LINK_GRACE_TICKS + firmware_link_timeout()) as usize;
+        let limit = (GRACE + firmware_link_timeout()) as usize;
         assert!(states[..limit - 1].iter().all(|&s| s == WireState::Armed));
         // The partial heartbeat may complete up to a frame's length into the garbage.
         assert!(
@@ -749,6 +813,41 @@ mod tests {
                 .all(|&s| s == WireState::Fault)
         );
         assert_eq!(app.telemetry().fault, Some(FaultReason::LinkSilent));
+    }
+
+    /// With the board's grace (none: only valid frames count as link activity), a link that
+    /// delivers only garbage, a byte every tick, keeps the device armed for at most the
+    /// supervisor's 10-tick timeout after the last valid frame, as a silent one does.
+    #[test]
+    fn garbage_only_link_faults_within_ten_ticks_with_the_board_grace() {
+        let bytes = flat_patch();
+        let bank = Bank::parse(bytes.as_slice()).unwrap();
+        for garbage in [true, false] {
+            let mut link = Link::new();
+            let (tick_end, mut driver) = link.split();
+            let mut app = App::new(Ok(&bank), tick_end, 0);
+            let (mut plant, clock) = (plant(), clock());
+            let mut buf = [0u8; MAX_FRAME];
+            driver.put_rx(encode_frame(&HostToDevice::Arm, &mut buf).unwrap());
+            assert_eq!(
+                app.tick(&mut plant, &clock, false).unwrap().state,
+                WireState::Armed
+            );
+            let mut armed = 0;
+            for _ in 0..200 {
+                if garbage {
+                    driver.put_rx(&[0x55, 0x13, 0x00]);
+                }
+                if app.tick(&mut plant, &clock, false).unwrap().state == WireState::Armed {
+                    armed += 1;
+                }
+            }
+            assert!(
+                armed <= firmware_link_timeout(),
+                "garbage {garbage}: {armed}"
+            );
+            assert_eq!(app.telemetry().fault, Some(FaultReason::LinkSilent));
+        }
     }
 
     fn firmware_link_timeout() -> u32 {
@@ -765,7 +864,7 @@ mod tests {
         let run = |per_tick: usize| {
             let mut link = Link::new();
             let (tick_end, driver) = link.split();
-            let mut app = App::new(Ok(&bank), tick_end);
+            let mut app = App::new(Ok(&bank), tick_end, 0);
             let mut host = FakeHost::new(driver);
             host.per_tick = per_tick;
             let (mut plant, clock) = (plant(), clock());
@@ -809,7 +908,7 @@ mod tests {
     fn invalid_bank_refuses_to_arm_and_says_why() {
         let mut link = Link::new();
         let (tick_end, driver) = link.split();
-        let mut app = App::new(Err(BankError::BadMagic), tick_end);
+        let mut app = App::new(Err(BankError::BadMagic), tick_end, 0);
         assert!(app.haptic_loop().is_none());
         let mut host = FakeHost::new(driver);
         let (mut plant, clock) = (plant(), clock());

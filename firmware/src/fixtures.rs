@@ -9,7 +9,6 @@ extern crate alloc;
 
 use alloc::vec::Vec;
 use bank_format::{AlignedBytes, BankBuilder, DeviceCalibration, TissueLaw};
-use nalgebra::ComplexField;
 
 /// The liver scene's device (`host/scenes/liver.toml`).
 pub fn liver_device() -> DeviceCalibration {
@@ -80,14 +79,14 @@ pub fn kernel_block(p: &[[f64; 3]], k: usize, l: usize) -> [[f64; 3]; 3] {
         [0.1e-3, 1.2e-3, 0.05e-3],
         [0.0, 0.05e-3, 2.0e-3],
     ];
-    // libm through nalgebra: this module is `no_std` too.
-    let d = ComplexField::sqrt(
+    // libm: this module is `no_std` too.
+    let d = libm::sqrt(
         (0..3)
             .map(|i| (p[k][i] - p[l][i]) * (p[k][i] - p[l][i]))
             .sum::<f64>(),
     );
-    let kern = ComplexField::exp(-d / 0.015);
-    let local = 0.3e-3 * ComplexField::exp(-d / 0.001);
+    let kern = libm::exp(-d / 0.015);
+    let local = 0.3e-3 * libm::exp(-d / 0.001);
     core::array::from_fn(|i| {
         core::array::from_fn(|j| kern * m[i][j] + if i == j { local } else { 0.0 })
     })
@@ -103,8 +102,18 @@ pub fn flat_patch() -> AlignedBytes {
 /// triangles per square (every interior node has six, lumped area `h^2`), the pairs closer than
 /// `truncation_m` coupled with [`kernel_block`], the [`patch_device`] and a Chebyshev law.
 pub fn grid_patch(n_side: usize, h: f64, truncation_m: f64) -> AlignedBytes {
+    grid_patch_with(n_side, h, truncation_m, patch_device())
+}
+
+/// [`grid_patch`] with the device calibration `device`.
+pub fn grid_patch_with(
+    n_side: usize,
+    h: f64,
+    truncation_m: f64,
+    device: DeviceCalibration,
+) -> AlignedBytes {
     let ticks: Vec<f64> = (0..n_side).map(|i| h * i as f64).collect();
-    grid_patch_at(&ticks, &ticks, truncation_m)
+    grid_bank(&ticks, &ticks, truncation_m, device)
 }
 
 /// [`grid_patch`] with node columns at `xs` and rows at `ys` (increasing, m): uneven grids,
@@ -113,6 +122,10 @@ pub fn grid_patch(n_side: usize, h: f64, truncation_m: f64) -> AlignedBytes {
 /// # Panics
 /// Only if the builder rejects it, which would be a bug in this fixture.
 pub fn grid_patch_at(xs: &[f64], ys: &[f64], truncation_m: f64) -> AlignedBytes {
+    grid_bank(xs, ys, truncation_m, patch_device())
+}
+
+fn grid_bank(xs: &[f64], ys: &[f64], truncation_m: f64, device: DeviceCalibration) -> AlignedBytes {
     let (nx, ny) = (xs.len(), ys.len());
     let mut p = Vec::new();
     for &y in ys {
@@ -156,7 +169,7 @@ pub fn grid_patch_at(xs: &[f64], ys: &[f64], truncation_m: f64) -> AlignedBytes 
         truncation_radius_m: truncation_m,
         scene_id: 7,
         law: TissueLaw::chebyshev(&[2.6, 2.5, -0.1], [0.0, 5.0]).expect("valid law"),
-        device: patch_device(),
+        device,
     };
     AlignedBytes::new(&b.build().expect("valid fixture bank"))
 }
@@ -200,5 +213,5 @@ pub fn rel_err(got: &[[f32; 3]], want: &[f64]) -> f64 {
         .map(|(&a, b)| (f64::from(a) - b) * (f64::from(a) - b))
         .sum();
     let den: f64 = want.iter().map(|b| b * b).sum();
-    ComplexField::sqrt(num / den)
+    libm::sqrt(num / den)
 }

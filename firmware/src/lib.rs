@@ -35,6 +35,7 @@ pub const TICK_PERIOD_S: f32 = 1.0 / TICK_HZ as f32;
 
 pub mod amplifier;
 pub mod app;
+pub mod cholesky;
 pub mod contact;
 pub mod deadline;
 pub mod device;

@@ -18,6 +18,7 @@
 //! | the previous tick overran | `Overrun` | 0 | Armed |
 //! | no valid host frame for more than `link_timeout_ticks` ticks | `LinkSilent` | ticks | Armed |
 //! | an encoder moved more than `max_counts_per_tick` since the last tick | `EncoderJump` | joint | Disarmed, Armed |
+//! | a host's `ConstantCurrent` current not finite or over its limit | `BadCommand` | motor | Disarmed, Armed |
 //! | NaN or infinity in joints, tip, force or requested currents | `Nan` | 0 | Disarmed, Armed |
 //! | the contact solve failed | `SolveFailed` | 0 | Disarmed, Armed |
 //! | the tip moved faster than `max_tip_speed_m_s` over the last tick | `Overspeed` | 3 | Armed |
@@ -49,7 +50,10 @@
 //! (up to `current_fault_ratio`, default 1.25) is clamped to the limit and reported in
 //! [`Output::clamped`]. A request beyond that means a wrong calibration, a diverging solve or a
 //! bad host command, so it is a `CurrentLimit` fault and the motors go to zero (the issue's "a
-//! commanded current over the limit ends at zero current with the fault reported").
+//! commanded current over the limit ends at zero current with the fault reported"). A host's
+//! `ConstantCurrent` command ([`TickInput::host_currents`]) has no such tolerance: it reaches
+//! the supervisor unclamped, and any current over its limit, or not finite, is a `BadCommand`
+//! fault naming the motor.
 
 use crate::device::clamp_symmetric;
 use crate::hal::Interlocks;
@@ -186,6 +190,10 @@ pub struct TickInput {
     pub force_n: [f32; 3],
     /// Motor currents requested before clamping, A.
     pub requested_a: [f32; 3],
+    /// Whether `requested_a` is a host's `ConstantCurrent` command rather than the loop's
+    /// `J^T F`: then a current that is not finite or over its limit is a `BadCommand` fault
+    /// (never clamped), checked in every state.
+    pub host_currents: bool,
     /// Whether the previous tick overran its period.
     pub overrun: bool,
     /// How long the host link has been silent, in ticks (the application's measure: since the
@@ -207,6 +215,7 @@ impl TickInput {
             tip_m: [0.0; 3],
             force_n: [0.0; 3],
             requested_a: [0.0; 3],
+            host_currents: false,
             overrun: false,
             link_silence_ticks: 0,
             solve_failed: false,
@@ -418,6 +427,15 @@ impl Supervisor {
                 });
             if let Some((j, _)) = jump {
                 return fault(FaultReason::EncoderJump, j);
+            }
+        }
+        if input.host_currents {
+            // Written so that NaN (in the request or the limit) counts as over.
+            let bad = (0..3u32)
+                .zip(input.requested_a.iter().zip(&self.config.current_limit_a))
+                .find(|(_, (i, lim))| !(i.is_finite() && i.abs() <= **lim));
+            if let Some((motor, _)) = bad {
+                return fault(FaultReason::BadCommand, motor);
             }
         }
         let finite = |v: &[f32; 3]| v.iter().all(|x| x.is_finite());

@@ -27,9 +27,9 @@
 //! host's `contact_forces`); [`ContactForces::tool_force_n`] is their sum, the force the tool
 //! exerts on the tissue. The force the user feels is its opposite.
 
+use crate::cholesky::Cholesky;
 use crate::vec3::dot;
 use bank_format::{Bank, TissueLaw};
-use nalgebra::{Cholesky, ComplexField, Const, SMatrix, SVector};
 
 /// Most nodes in one contact set (the link's contact list, [`bank_format::MAX_CONTACTS`]).
 pub const MAX_CONTACT_NODES: usize = bank_format::MAX_CONTACTS;
@@ -45,7 +45,7 @@ pub const WEIGHT_SUM_TOL: f32 = 1.0e-3;
 pub const MIN_PIVOT_REL: f32 = 1.0e-5;
 
 /// `C_SS` padded to the largest contact set.
-pub type CssMatrix = SMatrix<f32, MAX_DOFS, MAX_DOFS>;
+pub type CssMatrix = [[f32; MAX_DOFS]; MAX_DOFS];
 
 /// Why a contact solve gave no forces.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -157,11 +157,11 @@ impl ContactForces {
     }
 }
 
-/// A Cholesky factorisation of a fixed-size SPD matrix of which the leading `active` rows and
-/// columns are used, with its pivot statistics.
+/// A Cholesky factorisation ([`crate::cholesky`]) of a fixed-size SPD matrix of which the
+/// leading `active` rows and columns are used, with its pivot statistics.
 #[derive(Clone, Copy, Debug)]
 pub struct Factor<const D: usize> {
-    chol: Cholesky<f32, Const<D>>,
+    chol: Cholesky<D>,
     min_pivot: f32,
     max_pivot: f32,
     max_diag: f32,
@@ -170,19 +170,20 @@ pub struct Factor<const D: usize> {
 impl<const D: usize> Factor<D> {
     /// Factors `a` (only its lower triangle is read). Fails on NaN or infinite entries or when
     /// Cholesky breaks down; does *not* apply [`MIN_PIVOT_REL`] (see [`Factor::check`]).
-    pub fn new(a: SMatrix<f32, D, D>, active: usize) -> Result<Factor<D>, SolveError> {
-        if !a.iter().all(|x| x.is_finite()) {
+    pub fn new(a: [[f32; D]; D], active: usize) -> Result<Factor<D>, SolveError> {
+        if !a.iter().flatten().all(|x| x.is_finite()) {
             return Err(SolveError::NonFinite);
         }
         let active = active.min(D);
         let max_diag = a
-            .diagonal()
             .iter()
+            .enumerate()
             .take(active)
+            .filter_map(|(i, r)| r.get(i))
             .fold(0.0f32, |m, &x| m.max(x));
-        let chol = Cholesky::new(a).ok_or(SolveError::NotPositiveDefinite)?;
+        let chol = Cholesky::new(&a).ok_or(SolveError::NotPositiveDefinite)?;
         let (mut min_pivot, mut max_pivot) = (f32::INFINITY, 0.0f32);
-        for &l in chol.l_dirty().diagonal().iter().take(active) {
+        for &l in chol.diagonal().iter().take(active) {
             let p = l * l;
             min_pivot = min_pivot.min(p);
             max_pivot = max_pivot.max(p);
@@ -221,7 +222,7 @@ impl<const D: usize> Factor<D> {
     }
 
     /// `a^-1 b`.
-    pub fn solve(&self, b: &SVector<f32, D>) -> Result<SVector<f32, D>, SolveError> {
+    pub fn solve(&self, b: &[f32; D]) -> Result<[f32; D], SolveError> {
         let x = self.chol.solve(b);
         if x.iter().all(|v| v.is_finite()) {
             Ok(x)
@@ -258,7 +259,7 @@ fn check_nodes(bank: &Bank, nodes: &[u16], max: usize) -> Result<(), SolveError>
 /// solves the active part exactly. A pair the bank does not couple is an error, never zero.
 pub fn assemble_css(bank: &Bank, nodes: &[u16]) -> Result<CssMatrix, SolveError> {
     check_nodes(bank, nodes, MAX_IMPOSED_NODES)?;
-    let mut c = CssMatrix::zeros();
+    let mut c: CssMatrix = [[0.0; MAX_DOFS]; MAX_DOFS];
     for (a, &k) in nodes.iter().enumerate() {
         for (b, &l) in nodes.iter().enumerate() {
             let block = bank
@@ -269,7 +270,7 @@ pub fn assemble_css(bank: &Bank, nodes: &[u16]) -> Result<CssMatrix, SolveError>
                     if !v.is_finite() {
                         return Err(SolveError::NonFinite);
                     }
-                    if let Some(e) = c.get_mut((3 * a + i, 3 * b + j)) {
+                    if let Some(e) = c.get_mut(3 * a + i).and_then(|r| r.get_mut(3 * b + j)) {
                         *e = v;
                     }
                 }
@@ -277,14 +278,20 @@ pub fn assemble_css(bank: &Bank, nodes: &[u16]) -> Result<CssMatrix, SolveError>
         }
     }
     let active = 3 * nodes.len();
-    let mean = c.diagonal().iter().take(active).sum::<f32>() / active as f32;
+    let mean = c
+        .iter()
+        .enumerate()
+        .take(active)
+        .filter_map(|(i, r)| r.get(i))
+        .sum::<f32>()
+        / active as f32;
     let pad = if mean > 0.0 && mean.is_finite() {
         mean
     } else {
         1.0
     };
     for r in active..MAX_DOFS {
-        if let Some(e) = c.get_mut((r, r)) {
+        if let Some(e) = c.get_mut(r).and_then(|row| row.get_mut(r)) {
             *e = pad;
         }
     }
@@ -315,7 +322,7 @@ pub fn solve_imposed(
     }
     let factor = factor_css(bank, nodes)?;
     factor.check()?;
-    let mut u = SVector::<f32, MAX_DOFS>::zeros();
+    let mut u = [0.0f32; MAX_DOFS];
     for (a, d) in imposed_m.iter().enumerate() {
         for (i, &v) in d.iter().enumerate() {
             if let Some(e) = u.get_mut(3 * a + i) {
@@ -408,7 +415,7 @@ impl WeightedSolve {
             });
         }
         check_weights(weights)?;
-        let mut m = SMatrix::<f32, 3, 3>::zeros();
+        let mut m = [[0.0f32; 3]; 3];
         for (a, (&k, &wa)) in nodes.iter().zip(weights).enumerate() {
             // Blocks (a, b) and (b, a) are transposes: visit b >= a and add both.
             for (&l, &wb) in nodes.iter().zip(weights).skip(a) {
@@ -424,10 +431,10 @@ impl WeightedSolve {
                         // Symmetric by construction (C_lk = C_kl^T); the diagonal block
                         // is symmetrised by the same sum.
                         let scaled = if k == l { 0.5 * w * v } else { w * v };
-                        if let Some(e) = m.get_mut((i, j)) {
+                        if let Some(e) = m.get_mut(i).and_then(|r| r.get_mut(j)) {
                             *e += scaled;
                         }
-                        if let Some(e) = m.get_mut((j, i)) {
+                        if let Some(e) = m.get_mut(j).and_then(|r| r.get_mut(i)) {
                             *e += scaled;
                         }
                     }
@@ -470,8 +477,7 @@ impl WeightedSolve {
         if !d_m.iter().all(|v| v.is_finite()) {
             return Err(SolveError::NonFinite);
         }
-        let f = self.factor.solve(&SVector::<f32, 3>::from(d_m))?;
-        let tool = [f.x, f.y, f.z];
+        let tool = self.factor.solve(&d_m)?;
         let mut out = ContactForces {
             nodes: self.nodes,
             len: self.len,
@@ -528,8 +534,8 @@ pub fn condition_barycentric(
 
 /// The quasi non-linear law (paper eqs. 5-6) on a force `f` (N) produced by imposing the
 /// displacement `d` (m): `f = f_t + f_r` with `f_t = (f . d^) d^` along the imposed direction;
-/// `|f_t|` is replaced by `law.eval(|f_t|)` (linear continuation outside the fitted domain),
-/// `f_r` is kept. `d = 0` has no direction: `f` is returned unchanged; `f_t = 0` has none
+/// `|f_t|` is replaced by `max(law.eval(|f_t|), 0)` (linear continuation outside the fitted
+/// domain, clamped at 0 so a fit never pulls the tool in), `f_r` is kept. `d = 0` has no direction: `f` is returned unchanged; `f_t = 0` has none
 /// either: only `f_r` is returned. NaN or infinite input or result is an error.
 pub fn apply_tissue_law(law: &TissueLaw, f: [f32; 3], d: [f32; 3]) -> Result<[f32; 3], SolveError> {
     if !f.iter().chain(d.iter()).all(|v| v.is_finite()) {
@@ -542,7 +548,7 @@ pub fn apply_tissue_law(law: &TissueLaw, f: [f32; 3], d: [f32; 3]) -> Result<[f3
     if dd <= 0.0 {
         return Ok(f);
     }
-    let norm = ComplexField::sqrt(dd);
+    let norm = crate::vec3::sqrt(dd);
     let dh = d.map(|x| x / norm);
     let s = dot(f, dh);
     let ft = dh.map(|x| s * x);
@@ -550,7 +556,11 @@ pub fn apply_tissue_law(law: &TissueLaw, f: [f32; 3], d: [f32; 3]) -> Result<[f3
     if s == 0.0 {
         return Ok(fr);
     }
+    // Clamped at 0 (`SPEC.md`, tissue law): a fit continued below its domain can go negative,
+    // which would pull the tool into the tissue.
+    // (Written so that a NaN stays one and is reported below.)
     let q = law.eval(s.abs());
+    let q = if q < 0.0 { 0.0 } else { q };
     let qs = if s > 0.0 { q } else { -q };
     let out = [fr[0] + qs * dh[0], fr[1] + qs * dh[1], fr[2] + qs * dh[2]];
     if out.iter().all(|v| v.is_finite()) {
@@ -885,5 +895,39 @@ mod tests {
             apply_tissue_law(&law, [1.0, 0.0, 0.0], d).unwrap(),
             [1.0, 0.0, 0.0]
         );
+    }
+
+    /// A stiffening fit (convex, `Q(f_min) = 0.25 N` with slope 1.2 at `f_min = 0.5 N`) whose
+    /// linear continuation below its domain crosses zero at 0.29 N: at contact onset, when the
+    /// linear force along the press is 0.1 N, the continuation gives -0.23 N, which would pull
+    /// the tool into the tissue. Q is clamped at 0 (`SPEC.md`, tissue law): the component along
+    /// the press is zero, the transverse one kept.
+    #[test]
+    fn tissue_law_is_clamped_at_zero_below_a_stiffening_fit() {
+        // Q(x) = 1 + 0.9 T1 + 0.15 T2 on [0.5, 1.0] N: Q(-1) = 0.25, dQ/dx(-1) = 0.9 - 0.6 = 0.3,
+        // dQ/df = 0.3 * 2 / 0.5 = 1.2; Q'' > 0 (stiffening).
+        let law = TissueLaw::chebyshev(&[1.0, 0.9, 0.15], [0.5, 1.0]).unwrap();
+        let continued = law.eval(0.1);
+        assert!(
+            (continued - (0.25 + 1.2 * (0.1 - 0.5))).abs() < 1e-5,
+            "{continued}"
+        );
+        let d = [0.0, 0.0, 1e-4];
+        // Along the press only: nothing left.
+        assert_eq!(
+            apply_tissue_law(&law, [0.0, 0.0, 0.1], d).unwrap(),
+            [0.0; 3]
+        );
+        // With a transverse part: that part kept as is, none along the press.
+        let out = apply_tissue_law(&law, [0.05, 0.0, 0.1], d).unwrap();
+        assert_eq!(out, [0.05, 0.0, 0.0]);
+        // Pulled out (negative along d): -Q(|s|) clamped the same way.
+        assert_eq!(
+            apply_tissue_law(&law, [0.0, 0.0, -0.1], d).unwrap(),
+            [0.0; 3]
+        );
+        // Inside the domain it is the law itself.
+        let out = apply_tissue_law(&law, [0.0, 0.0, 0.75], d).unwrap();
+        assert!((out[2] - law.eval(0.75)).abs() < 1e-6 && out[2] > 0.0);
     }
 }

@@ -38,7 +38,8 @@
 //!
 //! Modes ([`HapticLoop::set_mode`]): `Render` (the above), `LinearLaw` (Q bypassed),
 //! `Transparent` (tracking and telemetry, zero force) and `ConstantCurrent` (the given currents,
-//! clamped to the limits, still under the supervisor).
+//! under the supervisor, which faults `BadCommand` on one that is not finite or over its limit
+//! rather than clamping it). The mode is set only while not armed ([`HapticLoop::set_mode`]).
 
 use bank_format::{Bank, Contact, Counters, MAX_CONTACTS, Mode, Telemetry, heapless};
 
@@ -97,6 +98,12 @@ pub struct LoopOutput {
     pub solve_error: Option<SolveError>,
     /// Where the contact patch in use was built, when touching.
     pub patch: Option<PatchOrigin>,
+    /// Share of the patch's load on nodes it could not keep ([`crate::patch::Patch::dropped`]:
+    /// more than the solve carries, or not coupled in the bank), 0 when nothing was dropped or
+    /// when free. The kept weights are renormalised, so `contacts` and `tool_force_n` are
+    /// those of the narrower patch; telemetry reports the share and counts such ticks
+    /// (`Counters::capped_ticks`).
+    pub dropped_load: f32,
 }
 
 /// What the last tick produced, kept for [`HapticLoop::telemetry`].
@@ -105,6 +112,8 @@ struct Last {
     tip_m: [f32; 3],
     contacts: Contacts,
     currents_a: [f32; 3],
+    tool_force_n: [f32; 3],
+    dropped_load: f32,
 }
 
 /// The portable haptic loop over one validated bank.
@@ -124,6 +133,10 @@ pub struct HapticLoop<'b> {
     held: Option<Held>,
 }
 
+/// [`FaultReason::BadCommand`](bank_format::FaultReason::BadCommand)'s detail for a `SetMode`
+/// refused while armed (0..2 name the motor of a bad `ConstantCurrent`).
+pub const BAD_COMMAND_SET_MODE_ARMED: u32 = 3;
+
 /// A sliding contact keeps its patch (weights and factored solve) until the anchor has moved
 /// this fraction of the tip radius from where the patch was built: the displacement still
 /// follows the anchor every tick, and rebuilding the patch (quadrature points located on the
@@ -136,6 +149,8 @@ pub const REPATCH_FRACTION: f32 = 0.1;
 struct Held {
     origin: PatchOrigin,
     solve: WeightedSolve,
+    /// The patch's [`crate::patch::Patch::dropped`].
+    dropped: f32,
 }
 
 /// Where the current contact patch was built ([`crate::patch::tool_patch`]'s arguments): the
@@ -180,6 +195,8 @@ impl<'b> HapticLoop<'b> {
                 tip_m: [0.0; 3],
                 contacts: Contacts::new(),
                 currents_a: [0.0; 3],
+                tool_force_n: [0.0; 3],
+                dropped_load: 0.0,
             },
             held: None,
         }
@@ -243,9 +260,22 @@ impl<'b> HapticLoop<'b> {
         self.supervisor.clear_fault()
     }
 
-    /// Select the rendering mode (host command), effective from the next tick.
-    pub fn set_mode(&mut self, mode: Mode) {
+    /// Select the rendering mode (host command), effective from the next tick. Refused while
+    /// armed: the mode is kept and a [`FaultReason::BadCommand`](bank_format::FaultReason)
+    /// fault (detail [`BAD_COMMAND_SET_MODE_ARMED`]) is latched and returned, for the caller to
+    /// report (the ticks do not report it again). A mode change under the user's hand would
+    /// bypass what the supervisor let through so far.
+    pub fn set_mode(&mut self, mode: Mode) -> Result<(), Fault> {
+        if self.supervisor.state() == State::Armed {
+            let fault = Fault {
+                reason: bank_format::FaultReason::BadCommand,
+                detail: BAD_COMMAND_SET_MODE_ARMED,
+            };
+            self.supervisor.raise(fault.reason, fault.detail);
+            return Err(fault);
+        }
         self.mode = mode;
+        Ok(())
     }
 
     /// Declare the current pose (the last tick's raw counts) the calibration's home pose (host
@@ -283,10 +313,17 @@ impl<'b> HapticLoop<'b> {
             Ok((contacts, f)) => (contacts, self.device.limit_force(f), None),
             Err(e) => (Contacts::new(), [0.0; 3], Some(e)),
         };
+        let dropped_load = match self.held {
+            Some(h) if solve_error.is_none() => h.dropped,
+            _ => 0.0,
+        };
+        if dropped_load > 0.0 {
+            self.counters.capped_ticks = self.counters.capped_ticks.wrapping_add(1);
+        }
+        // A host's constant currents go to the supervisor as sent: it faults on one that is
+        // not finite or over its limit instead of clamping it.
         let requested_a = match self.mode {
-            Mode::ConstantCurrent { currents_a } => {
-                self.device.clamp_currents(currents_a).applied_a
-            }
+            Mode::ConstantCurrent { currents_a } => currents_a,
             _ if solve_error.is_some() => [0.0; 3],
             _ => self
                 .device
@@ -299,6 +336,7 @@ impl<'b> HapticLoop<'b> {
             tip_m: tip,
             force_n: force_on_tool,
             requested_a,
+            host_currents: matches!(self.mode, Mode::ConstantCurrent { .. }),
             overrun: input.overrun,
             link_silence_ticks: input.link_silence_ticks,
             solve_failed: solve_error.is_some(),
@@ -309,6 +347,8 @@ impl<'b> HapticLoop<'b> {
             tip_m: tip,
             contacts: contacts.clone(),
             currents_a: out.currents_a,
+            tool_force_n: force_on_tool,
+            dropped_load,
         };
         LoopOutput {
             tick: self.tick,
@@ -323,6 +363,7 @@ impl<'b> HapticLoop<'b> {
             new_fault: out.new_fault,
             solve_error,
             patch: self.held.map(|h| h.origin),
+            dropped_load,
         }
     }
 
@@ -336,6 +377,8 @@ impl<'b> HapticLoop<'b> {
             tip_m: self.last.tip_m,
             contacts: self.last.contacts.clone(),
             currents_a: self.last.currents_a,
+            tool_force_n: self.last.tool_force_n,
+            dropped_load: self.last.dropped_load,
             counters: self.counters,
         }
     }
@@ -385,6 +428,7 @@ impl<'b> HapticLoop<'b> {
                         radius_m: radius,
                     },
                     solve,
+                    dropped: patch.dropped,
                 });
                 solve
             }
@@ -531,7 +575,10 @@ mod tests {
         }
         let s = counts_for_insertion(&dev, 0.102);
         let render = lp.tick(input(s));
-        lp.set_mode(Mode::LinearLaw);
+        // The mode is set while disarmed.
+        assert!(lp.disarm());
+        lp.set_mode(Mode::LinearLaw).unwrap();
+        lp.arm().unwrap();
         let linear = lp.tick(input(s));
         // The node forces (linear model) sum to minus the linear tool force.
         let sum: [f32; 3] =
@@ -544,16 +591,147 @@ mod tests {
         }
         assert_eq!(render.contacts, linear.contacts);
         assert!((render.tool_force_n[2] - linear.tool_force_n[2]).abs() > 1e-3);
-        lp.set_mode(Mode::Transparent);
+        // The mode is set while disarmed.
+        assert!(lp.disarm());
+        lp.set_mode(Mode::Transparent).unwrap();
+        lp.arm().unwrap();
         let out = lp.tick(input(s));
         assert_eq!(out.currents_a, [0.0; 3]);
         assert_eq!(out.contacts.len(), 7);
-        lp.set_mode(Mode::ConstantCurrent {
-            currents_a: [0.5, -9.0, f32::NAN],
-        });
-        let out = lp.tick(input(s));
-        assert_eq!(out.currents_a, [0.5, -2.0, 0.0]);
-        assert_eq!(out.state, State::Armed);
+    }
+
+    /// A host's `ConstantCurrent` command reaches the supervisor as sent: a current over its
+    /// motor's limit (-9 A against 2 A) or a NaN is a `BadCommand` fault naming the motor, with
+    /// zero current, not a request silently clamped to the limit (issue 15, item 4).
+    #[test]
+    fn constant_current_over_the_limit_or_not_finite_is_a_bad_command() {
+        let bytes = flat_patch();
+        let bank = Bank::parse(bytes.as_slice()).unwrap();
+        let cal = patch_device();
+        assert_eq!(cal.current_limit_a, [2.0; 3]);
+        for (currents_a, motor) in [
+            ([0.5, -9.0, 0.0], 1),
+            ([0.5, 0.0, f32::NAN], 2),
+            ([f32::INFINITY, 0.0, 0.0], 0),
+            ([0.0, 2.0 + 1e-3, 0.0], 1),
+        ] {
+            let mut lp = HapticLoop::new(&bank);
+            assert_eq!(lp.set_mode(Mode::ConstantCurrent { currents_a }), Ok(()));
+            lp.arm().unwrap();
+            let out = lp.tick(input([0, 0, 0]));
+            let want = Fault {
+                reason: FaultReason::BadCommand,
+                detail: motor,
+            };
+            assert_eq!(out.new_fault, Some(want), "{currents_a:?}");
+            assert_eq!(out.state, State::Fault(FaultReason::BadCommand));
+            assert_eq!(out.currents_a, [0.0; 3]);
+        }
+        // Within the limits (the limit itself included) it is driven as given.
+        let mut lp = HapticLoop::new(&bank);
+        let ok = [0.5, -2.0, 2.0];
+        lp.set_mode(Mode::ConstantCurrent { currents_a: ok })
+            .unwrap();
+        lp.arm().unwrap();
+        let out = lp.tick(input([0, 0, 0]));
+        assert_eq!((out.state, out.currents_a), (State::Armed, ok));
+    }
+
+    /// `SetMode` while armed is refused (the mode stays) and reported as a latched
+    /// `BadCommand` (detail 3): a mode change under the user's hand, e.g. from rendering to
+    /// constant currents, would bypass what the user was feeling.
+    #[test]
+    fn set_mode_while_armed_is_refused_and_reported() {
+        let bytes = flat_patch();
+        let bank = Bank::parse(bytes.as_slice()).unwrap();
+        let mut lp = HapticLoop::new(&bank);
+        lp.arm().unwrap();
+        assert_eq!(lp.tick(input([0, 0, 0])).state, State::Armed);
+        let want = Fault {
+            reason: FaultReason::BadCommand,
+            detail: BAD_COMMAND_SET_MODE_ARMED,
+        };
+        assert_eq!(
+            lp.set_mode(Mode::ConstantCurrent {
+                currents_a: [1.0; 3]
+            }),
+            Err(want)
+        );
+        assert_eq!(lp.mode(), Mode::Render);
+        let out = lp.tick(input([0, 0, 0]));
+        assert_eq!(
+            (out.state, out.currents_a),
+            (State::Fault(FaultReason::BadCommand), [0.0; 3])
+        );
+        // Reported by the refusal, not again by the tick.
+        assert_eq!(out.new_fault, None);
+        assert_eq!(out.fault, Some(want));
+        // Disarmed (after clearing), the mode can be set.
+        assert!(lp.clear_fault());
+        assert_eq!(lp.set_mode(Mode::Transparent), Ok(()));
+        assert_eq!(lp.mode(), Mode::Transparent);
+    }
+
+    /// A 3 mm tip on a 1 mm grid loads about 28 nodes, more than the 8 the solve carries: the
+    /// patch keeps the heaviest 8, renormalised, and the loss is not silent: every such tick
+    /// reports its dropped share, telemetry carries it and counts the ticks, and the rendered
+    /// force is that of the kept patch (node forces `w_k f_tool` summing to the tool force).
+    #[test]
+    fn a_patch_over_the_node_cap_reports_the_dropped_load() {
+        let bytes = crate::fixtures::grid_patch_with(
+            9,
+            0.001,
+            0.02,
+            DeviceCalibration {
+                fulcrum_m: [0.004, 0.004, 0.1],
+                ..patch_device()
+            },
+        );
+        let bank = Bank::parse(bytes.as_slice()).unwrap();
+        assert!(bank.device().tip_radius_m >= 0.003);
+        let mut lp = HapticLoop::new(&bank);
+        lp.set_mode(Mode::LinearLaw).unwrap();
+        lp.arm().unwrap();
+        let dev = *lp.device();
+        let (mut capped, mut touching) = (0, 0);
+        for t in 0..=80 {
+            let out = lp.tick(input(counts_for_insertion(
+                &dev,
+                0.099 + 0.03e-3 * t as f32,
+            )));
+            assert_eq!(out.state, State::Armed, "{out:?}");
+            let tel = lp.telemetry();
+            assert_eq!(tel.dropped_load, out.dropped_load);
+            assert_eq!(tel.tool_force_n, out.tool_force_n);
+            if !matches!(out.contact, ContactState::Touching { .. }) {
+                assert_eq!(out.dropped_load, 0.0);
+                continue;
+            }
+            touching += 1;
+            let radius = out.patch.unwrap().radius_m;
+            if radius == 0.0 {
+                // The first tick of a contact: the contact triangle alone, nothing dropped.
+                assert_eq!(out.dropped_load, 0.0, "{out:?}");
+                continue;
+            }
+            assert_eq!(out.contacts.len(), MAX_CONTACTS);
+            assert!(out.dropped_load > 0.2 && out.dropped_load < 1.0, "{out:?}");
+            capped += 1;
+            // Linear law: the node forces on the tissue sum to minus the tool force.
+            for i in 0..3 {
+                let sum: f32 = out.contacts.iter().map(|c| c.force_n[i]).sum();
+                assert!(
+                    (sum + out.tool_force_n[i]).abs() <= 1e-5 * norm(out.tool_force_n),
+                    "{out:?}"
+                );
+            }
+            assert_eq!(lp.counters().capped_ticks, capped);
+        }
+        assert!(
+            touching > 30 && capped == touching - 1,
+            "{touching} {capped}"
+        );
+        assert_eq!(lp.telemetry().counters.capped_ticks, capped);
     }
 
     #[test]
@@ -666,7 +844,8 @@ mod tests {
         let per_rad = 1.0 / lp.device().joint_per_count()[0];
         lp.set_mode(Mode::ConstantCurrent {
             currents_a: [0.5, 0.5, 0.5],
-        });
+        })
+        .unwrap();
         lp.arm().unwrap();
         let pitch_counts = |q: f32| [(q * per_rad).round() as i32, 0, 0];
         // 5 rad/s for 20 ticks (0.25 m/s at the tip, 5 cm from the fulcrum).

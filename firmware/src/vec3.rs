@@ -1,11 +1,10 @@
-//! Small 3-vector helpers on `[f32; 3]` shared by the loop's modules (f32, `libm` square root
-//! through nalgebra, so the MCU image and a native build compute bit for bit alike).
+//! Small 3-vector helpers on `[f32; 3]` shared by the loop's modules (f32, the `libm` square
+//! root, so the MCU image and a native build compute bit for bit alike).
 
-use nalgebra::ComplexField;
-
-/// `sqrt(x)` (libm).
+/// `sqrt(x)` (`libm::sqrtf`: correctly rounded, 53 instructions on the MCU; micromath's is
+/// 10 but 6% off, README "the card's crates").
 pub(crate) fn sqrt(x: f32) -> f32 {
-    ComplexField::sqrt(x)
+    libm::sqrtf(x)
 }
 
 /// `a - b`.

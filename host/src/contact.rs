@@ -221,6 +221,23 @@ impl ContactSurface {
     }
 }
 
+/// The firmware's cap on a patch (`firmware::patch`, with every pair coupled, as on the
+/// untruncated compliance): the `max_nodes` heaviest of `patch` (heaviest first, as
+/// [`ContactSurface::tool_patch`] returns it), renormalised to sum 1, and the share of the load
+/// dropped (`Patch::dropped`, telemetry's `dropped_load`).
+pub fn capped_patch(patch: &[(usize, f64)], max_nodes: usize) -> (Vec<(usize, f64)>, f64) {
+    let mut kept: Vec<(usize, f64)> = patch.iter().take(max_nodes).copied().collect();
+    let total: f64 = patch.iter().map(|p| p.1).sum();
+    let sum: f64 = kept.iter().map(|p| p.1).sum();
+    if !(sum > 0.0 && total > 0.0) {
+        return (Vec::new(), if total > 0.0 { 1.0 } else { 0.0 });
+    }
+    for p in &mut kept {
+        p.1 /= sum;
+    }
+    (kept, (1.0 - sum / total).max(0.0))
+}
+
 /// Scales the weights to sum 1 after dropping non-positive ones; `false` if none is left.
 fn normalise(loads: &mut Vec<(usize, f64)>) -> bool {
     loads.retain(|l| l.1 > 0.0);

@@ -10,9 +10,8 @@
 use anyhow::{Context, Result, anyhow, bail};
 use bank_format::{
     DeviceToHost, FaultReason, FrameDecoder, HostToDevice, MAX_FRAME, PROTOCOL_VERSION, State,
-    TissueLaw, encode_frame,
+    encode_frame,
 };
-use firmware::solve::apply_tissue_law;
 use firmware::tick::Contacts;
 use std::io::{ErrorKind, Read};
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -155,30 +154,6 @@ impl std::str::FromStr for SourceSpec {
     }
 }
 
-/// The force on the tool a serial device renders, rebuilt from its telemetry (which carries
-/// `f_S`, not the tool force): `-Q(sum f_S)`, the law applied along the linear force's own
-/// direction, capped at `max_force_n`. Exact for the linear law; for a non-linear law the
-/// firmware applies Q along the tip displacement, which the link does not carry, so this is
-/// then an approximation.
-pub fn tool_force_from_contacts(
-    law: &TissueLaw,
-    contacts: &Contacts,
-    max_force_n: f32,
-) -> [f32; 3] {
-    let mut f = [0.0f32; 3];
-    for c in contacts {
-        (0..3).for_each(|i| f[i] += c.force_n[i]);
-    }
-    let q = apply_tissue_law(law, f, f).unwrap_or([0.0; 3]);
-    let n = (q[0] * q[0] + q[1] * q[1] + q[2] * q[2]).sqrt();
-    let scale = if n > max_force_n {
-        max_force_n / n
-    } else {
-        1.0
-    };
-    q.map(|x| -x * scale)
-}
-
 /// A device on a serial port: a reader thread decodes `DeviceToHost::Telemetry` frames and
 /// sends a heartbeat every 2 ms (the firmware's link-silence watchdog expects one within 10
 /// ticks).
@@ -193,15 +168,8 @@ impl SerialSource {
     /// Opens `port` at `baud`, greets the device and checks its identity ([`await_identity`],
     /// [`check_identity`]): the device must speak [`PROTOCOL_VERSION`] and run the bank whose
     /// CRC is `bank_crc` (the bank of `scene`, the scene displayed), else the error says what to
-    /// reflash. `law` and `max_force_n` come from that bank.
-    pub fn open(
-        port: &str,
-        baud: u32,
-        bank_crc: u32,
-        scene: &str,
-        law: TissueLaw,
-        max_force_n: f32,
-    ) -> Result<SerialSource> {
+    /// reflash.
+    pub fn open(port: &str, baud: u32, bank_crc: u32, scene: &str) -> Result<SerialSource> {
         let mut handle = serialport::new(port, baud)
             .timeout(Duration::from_millis(2))
             .open()
@@ -213,7 +181,7 @@ impl SerialSource {
         let link = Link {
             port: handle,
             decoder: FrameDecoder::new(),
-            absorber: Absorber::new(law, max_force_n),
+            absorber: Absorber::default(),
         };
         let (m, st) = (Arc::clone(&mailbox), Arc::clone(&stop));
         let thread = std::thread::Builder::new()
@@ -412,10 +380,10 @@ struct Link {
     absorber: Absorber,
 }
 
-/// Turns a device's link messages into samples and stats (serial and SIL sources).
+/// Turns a device's link messages into samples and stats (serial and SIL sources). The tool
+/// force is telemetry's `tool_force_n`, the force the firmware rendered (protocol 4).
+#[derive(Default)]
 pub(crate) struct Absorber {
-    law: TissueLaw,
-    max_force_n: f32,
     first_tick: Option<(u32, Instant)>,
     stats: LoopStats,
 }
@@ -450,15 +418,6 @@ impl Link {
 }
 
 impl Absorber {
-    pub(crate) fn new(law: TissueLaw, max_force_n: f32) -> Absorber {
-        Absorber {
-            law,
-            max_force_n,
-            first_tick: None,
-            stats: LoopStats::default(),
-        }
-    }
-
     pub(crate) fn absorb(&mut self, msg: DeviceToHost, mailbox: &Mailbox) {
         match msg {
             DeviceToHost::Telemetry(t) => {
@@ -468,8 +427,7 @@ impl Absorber {
                     self.stats.tick_rate_hz =
                         f64::from(t.tick.wrapping_sub(t0)) / (now - i0).as_secs_f64();
                 }
-                let tool_force_n =
-                    tool_force_from_contacts(&self.law, &t.contacts, self.max_force_n);
+                let tool_force_n = t.tool_force_n;
                 let f = tool_force_n.iter().map(|x| x * x).sum::<f32>().sqrt();
                 self.stats.peak_force_n = self.stats.peak_force_n.max(f64::from(f));
                 let sample = Sample {
@@ -506,32 +464,6 @@ mod tests {
         );
         assert!("serial:".parse::<SourceSpec>().is_err());
         assert!("qemu".parse::<SourceSpec>().unwrap_err().contains("qemu"));
-    }
-
-    #[test]
-    fn tool_force_is_minus_the_law_of_the_total_contact_force() {
-        let mut c = Contacts::new();
-        c.push(Contact {
-            node: 1,
-            force_n: [0.0, 0.0, -0.4],
-        })
-        .unwrap();
-        c.push(Contact {
-            node: 2,
-            force_n: [0.1, 0.0, -0.2],
-        })
-        .unwrap();
-        // Linear law with gain 2: Q(|f|) = 2 |f| along f.
-        let law = TissueLaw::linear(0.0, 2.0, [0.0, 5.0]).unwrap();
-        let f = tool_force_from_contacts(&law, &c, 5.0);
-        let want = [-0.2f32, 0.0, 1.2];
-        for i in 0..3 {
-            assert!((f[i] - want[i]).abs() < 1e-6, "{f:?}");
-        }
-        // Capped at the device's largest force.
-        let capped = tool_force_from_contacts(&law, &c, 0.5);
-        let n = capped.iter().map(|x| x * x).sum::<f32>().sqrt();
-        assert!((n - 0.5).abs() < 1e-6);
     }
 
     /// A pseudo-terminal pair: the master end plays the device.
@@ -610,9 +542,8 @@ mod tests {
     fn serial_source_decodes_telemetry_and_sends_heartbeats() {
         use std::io::Write as _;
         let (device, name, _slave) = pty();
-        let law = TissueLaw::linear(0.0, 1.0, [0.0, 5.0]).unwrap();
         let answered = answer_hello(device, hello(PROTOCOL_VERSION, Some(0xC0FFEE)));
-        let mut src = SerialSource::open(&name, 115_200, 0xC0FFEE, "the bank", law, 5.0).unwrap();
+        let mut src = SerialSource::open(&name, 115_200, 0xC0FFEE, "the bank").unwrap();
         let mut device = answered.join().unwrap();
         assert!(src.steering().is_none());
         let mut contacts = Contacts::new();
@@ -630,6 +561,9 @@ mod tests {
             tip_m: [0.01, 0.02, 0.05],
             contacts: contacts.clone(),
             currents_a: [0.1, 0.0, -0.2],
+            // Not what the contacts would give under any law: the sample must take it as sent.
+            tool_force_n: [0.05, -0.1, 0.7],
+            dropped_load: 0.0,
             counters: bank_format::Counters::default(),
         };
         let mut buf = [0u8; MAX_FRAME];
@@ -646,7 +580,7 @@ mod tests {
             (500, State::Armed, [0.01, 0.02, 0.05])
         );
         assert_eq!(s.contacts, contacts);
-        assert_eq!(s.tool_force_n, [0.0, -0.1, 0.3]);
+        assert_eq!(s.tool_force_n, [0.05, -0.1, 0.7]);
         // The host keeps the link alive.
         let mut rx: FrameDecoder<HostToDevice> = FrameDecoder::new();
         let mut got = Vec::new();
@@ -664,7 +598,6 @@ mod tests {
     #[cfg(target_os = "linux")]
     #[test]
     fn serial_source_refuses_a_device_that_is_not_the_scene_displayed() {
-        let law = TissueLaw::linear(0.0, 1.0, [0.0, 5.0]).unwrap();
         let cases = [
             (
                 hello(PROTOCOL_VERSION, Some(0x1234_5678)),
@@ -684,7 +617,7 @@ mod tests {
         for (answer, want) in cases {
             let (device, name, _slave) = pty();
             let answered = answer_hello(device, answer.clone());
-            let err = SerialSource::open(&name, 115_200, 0xABCD_EF01, "the liver bank", law, 5.0)
+            let err = SerialSource::open(&name, 115_200, 0xABCD_EF01, "the liver bank")
                 .err()
                 .unwrap_or_else(|| panic!("{answer:?} accepted"));
             let msg = format!("{err:#}");

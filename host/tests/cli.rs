@@ -449,3 +449,40 @@ fn a_mesh_in_millimetres_is_warned_about() {
     ]);
     assert!(out.status.success() && out.stderr.is_empty());
 }
+
+/// `host sil --trajectory` with a bad file fails before QEMU starts, naming the file's line.
+#[test]
+fn sil_trajectory_file_errors_name_the_line() {
+    let dir = tempfile::tempdir().unwrap();
+    let bank = dir.path().join("patch.bank");
+    std::fs::write(&bank, firmware::fixtures::flat_patch().as_slice()).unwrap();
+    let csv = dir.path().join("hand.csv");
+    std::fs::write(
+        &csv,
+        "t_s,pitch_rad,yaw_rad,insertion_m\n0,0,0,0.09\n0.5,0.1,0,0.09\n0.4,0,0,0.09\n",
+    )
+    .unwrap();
+    let (b, c) = (bank.to_str().unwrap(), csv.to_str().unwrap());
+    let args = [
+        "sil",
+        "--bank",
+        b,
+        "--image",
+        "/nonexistent",
+        "--trajectory",
+        c,
+    ];
+    fails_with(&args, &format!("{c}:4: column \"t_s\" must increase"));
+    fails_with(
+        &[
+            "sil",
+            "--bank",
+            b,
+            "--image",
+            "/nonexistent",
+            "--trajectory",
+            "/nonexistent.csv",
+        ],
+        "/nonexistent.csv: cannot read",
+    );
+}

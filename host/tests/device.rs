@@ -94,6 +94,8 @@ fn device(
                     tip_m: tip,
                     contacts: Default::default(),
                     currents_a: [0.0; 3],
+                    tool_force_n: [0.0; 3],
+                    dropped_load: 0.0,
                     counters: Counters::default(),
                 };
                 let _ =

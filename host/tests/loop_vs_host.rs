@@ -131,7 +131,8 @@ fn full_tick_forces_match_the_host_f64_reference_on_the_liver_bank() {
     let cal = *bank.device();
 
     let mut lp = HapticLoop::new(&bank);
-    lp.set_mode(bank_format::Mode::LinearLaw);
+    lp.set_mode(bank_format::Mode::LinearLaw)
+        .expect("the mode is set before arming");
     // Straight down the trocar (pitch = yaw = 0), 0.02 mm per tick, slightly off-centre.
     let per_unit: Vec<f64> = (0..3)
         .map(|i| {

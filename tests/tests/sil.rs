@@ -8,8 +8,9 @@ use bank_format::{
     Mode, State, encode_frame, reseal,
 };
 use firmware::tick::{HapticLoop, LoopInput};
+use host::sil::cost::Phases;
 use host::sil::harness::{self, ARM_TICK, LinkSend, Run, Session, Setup};
-use host::sil::script::Script;
+use host::sil::script::{Script, Trajectory, surface_insertion};
 use std::path::PathBuf;
 use std::sync::{Mutex, OnceLock};
 
@@ -252,6 +253,33 @@ fn silent_host_link_faults_within_ten_ticks() {
     assert_eq!(last.fault, Some(FaultReason::LinkSilent));
 }
 
+/// A host that stops its heartbeats but keeps sending garbage (one byte a tick, never a valid
+/// frame): the QEMU image's link grace (20 ticks, for its slow USART) plus the 10-tick timeout,
+/// then `LinkSilent` and zero current; not the 100 ticks the old fixed grace allowed.
+#[test]
+fn garbage_only_link_faults_after_the_images_grace() {
+    let (setup, bytes) = setup();
+    let bank = Bank::parse(&bytes).unwrap();
+    let quiet_from = 300;
+    let mut session = Session::new(&bank, Script::Press, 0.5).unwrap();
+    session.heartbeat_until = Some(quiet_from);
+    for t in quiet_from..session.ticks {
+        session.link.push((t, LinkSend::Raw(vec![0x55])));
+    }
+    let run = qemu(&setup, &session);
+    let faults = run.faults();
+    assert_eq!(faults.len(), 1, "{faults:?}");
+    let (tick, reason, _) = faults[0];
+    assert_eq!(reason, FaultReason::LinkSilent);
+    // The last heartbeat may still have been in flight on the UART (a few ticks).
+    assert!(
+        tick > quiet_from + 10 && tick <= quiet_from + 10 + 20 + 10,
+        "{tick} vs {quiet_from}"
+    );
+    assert_eq!(run.ticks[quiet_from as usize].state, State::Armed);
+    assert_zero_from(&run, tick);
+}
+
 #[test]
 fn corrupt_and_truncated_frames_are_dropped_and_counted() {
     let (setup, bytes) = setup();
@@ -359,31 +387,48 @@ fn with_current_limit(bytes: &AlignedBytes, limit_a: f32) -> Vec<u8> {
 }
 
 #[test]
-fn current_over_the_limit_faults_or_is_clamped() {
+fn current_commands_over_the_limit_and_mode_changes_while_armed_fault() {
     let (mut setup, bytes) = setup();
     let bank = Bank::parse(&bytes).unwrap();
-    let cal = *bank.device();
 
-    // The host commands constant currents over the limit (and a NaN): the device clamps them
-    // to the limit (NaN to 0 A) and never drives more.
-    let mut session = Session::new(&bank, Script::Press, 0.5).unwrap();
+    // The host commands constant currents over the limit (and a NaN) before arming: the
+    // supervisor sees them unclamped and faults `BadCommand` (motor 0, the first one over), so
+    // the arm that follows is refused and nothing is ever driven.
+    let mut session = Session::new(&bank, Script::Press, 0.3).unwrap();
     let asked = [10.0, -10.0, f32::NAN];
+    session.link.insert(
+        1,
+        (
+            5,
+            LinkSend::Command(HostToDevice::SetMode(Mode::ConstantCurrent {
+                currents_a: asked,
+            })),
+        ),
+    );
+    let run = qemu(&setup, &session);
+    let faults = run.faults();
+    assert!(!faults.is_empty(), "{:?}", run.stderr);
+    assert_eq!((faults[0].1, faults[0].2), (FaultReason::BadCommand, 0));
+    assert!(faults[0].0 <= ARM_TICK, "{faults:?}");
+    assert!(run.ticks.iter().all(|t| t.currents_a == [0.0; 3]));
+    assert!(run.ticks.iter().all(|t| t.state != State::Armed));
+
+    // `SetMode` while armed is refused and reported (`BadCommand`, detail 3), zero current
+    // from then on.
+    let mut session = Session::new(&bank, Script::Press, 0.3).unwrap();
     session.link.push((
-        100,
+        150,
         LinkSend::Command(HostToDevice::SetMode(Mode::ConstantCurrent {
-            currents_a: asked,
+            currents_a: [0.1; 3],
         })),
     ));
     let run = qemu(&setup, &session);
-    let limit = cal.current_limit_a;
-    assert!(
-        run.ticks
-            .iter()
-            .all(|t| (0..3).all(|j| t.currents_a[j].abs() <= limit[j]))
-    );
-    let last = run.ticks.last().unwrap();
-    assert_eq!(last.currents_a, [limit[0], -limit[1], 0.0]);
-    assert_eq!(last.state, State::Armed);
+    let faults = run.faults();
+    assert_eq!(faults.len(), 1, "{faults:?}");
+    let (tick, reason, detail) = faults[0];
+    assert_eq!((reason, detail), (FaultReason::BadCommand, 3));
+    assert!(run.ticks.iter().all(|t| t.currents_a != [0.1; 3]));
+    assert_zero_from(&run, tick + 1);
 
     // A calibration whose current limit is far below what the rendered force needs: the
     // request exceeds 1.25 x the limit as soon as the tool presses, which is a fault.
@@ -428,4 +473,64 @@ fn overrun_faults_to_zero_current() {
     let last = run.telemetry().last().copied().cloned().unwrap();
     assert!(last.counters.overruns >= 1, "{:?}", last.counters);
     assert_eq!(last.fault, Some(FaultReason::Overrun));
+}
+
+/// `host sil --trajectory`: a recorded hand motion replayed through the plant. A pseudo-random
+/// (seeded) near-surface path in joints, written as a CSV file: pitch and yaw wander within
+/// +-0.08 rad, the tip goes from 3 mm above the surface under it to 3 mm into it and back, so
+/// the run has free motion just above the surface, first contacts, held and sliding contacts
+/// and releases. The image renders it without overrun or fault, bit-identical to the native
+/// loop, and every phase of the run occurs.
+#[test]
+fn a_recorded_near_surface_trajectory_replays_bit_identical_to_the_native_loop() {
+    let (setup, bytes) = setup();
+    let bank = Bank::parse(&bytes).unwrap();
+    let mut state = 0x2545_f491_u64;
+    let mut uniform = move || {
+        state = state
+            .wrapping_mul(6_364_136_223_846_793_005)
+            .wrapping_add(1_442_695_040_888_963_407);
+        (state >> 11) as f64 / (1u64 << 53) as f64
+    };
+    // Waypoints every 0.25 s, linearly interpolated every 10 ms in the file.
+    let waypoints: Vec<[f64; 2]> = (0..9)
+        .map(|_| [0.16 * uniform() - 0.08, 0.16 * uniform() - 0.08])
+        .collect();
+    let mut text = String::from("# seeded near-surface path\nt_s,pitch_rad,yaw_rad,insertion_m\n");
+    for i in 0..=200 {
+        let t = 0.01 * f64::from(i);
+        let (k, f) = ((t / 0.25).floor() as usize, (t / 0.25).fract());
+        let (a, b) = (waypoints[k.min(8)], waypoints[(k + 1).min(8)]);
+        let angles = [a[0] + f * (b[0] - a[0]), a[1] + f * (b[1] - a[1])];
+        let depth = -0.003 * (std::f64::consts::TAU * t / 0.8).cos();
+        let s = surface_insertion(&bank, angles).unwrap() + depth;
+        text.push_str(&format!("{t},{},{},{s}\n", angles[0], angles[1]));
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let file = dir.path().join("near-surface.csv");
+    std::fs::write(&file, &text).unwrap();
+    let trajectory = Trajectory::from_csv(&bank, &file).unwrap();
+    let seconds = trajectory.recorded_end_s().unwrap() + 0.2;
+    let run = qemu(
+        &setup,
+        &Session::with_trajectory(&bank, trajectory, seconds).unwrap(),
+    );
+    assert_eq!(run.stopped, None);
+    assert_eq!(run.missed_plant_frames(), 0);
+    assert_eq!(run.overruns(), 0);
+    assert!(run.faults().is_empty(), "{:?}", run.faults());
+    assert!(assert_matches_native(&bank, &run) > 500);
+    let phases = Phases::of(&run.ticks);
+    for (name, p) in [
+        ("free", phases.free),
+        ("first contact", phases.first_contact),
+        ("contact", phases.contact),
+        ("release", phases.release),
+    ] {
+        assert!(p.ticks > 0, "no {name} tick: {phases:?}");
+        eprintln!(
+            "{name}: {} ticks, body max {}, whole tick max {}",
+            p.ticks, p.max_body_instructions, p.max_tick_instructions
+        );
+    }
 }

@@ -67,6 +67,12 @@ fn bank_region() -> &'static [u8] {
 }
 
 /// The safety state after the last tick, for the LED (0 disarmed, 1 armed, 2 fault).
+/// The link grace of the application ([`App::new`]): none. The USB CDC link delivers a whole
+/// frame within a tick, so only valid frames count as link activity, and a host that sends
+/// nothing or only garbage faults `LinkSilent` after the supervisor's 10-tick timeout (the
+/// device is armed for at most 10 ms of it).
+const LINK_GRACE_TICKS: u32 = 0;
+
 static STATE: AtomicU8 = AtomicU8::new(0);
 
 /// The 1 kHz tick: wait for the period, run one [`App::tick`], measure it against its
@@ -170,7 +176,7 @@ fn main() -> ! {
 
     let bank: &'static Result<Bank<'static>, BankError> = BANK.init(Bank::parse(bank_region()));
     let (tick_end, driver_end) = LINK.init(Link::new()).split();
-    let app = App::new(bank.as_ref().map_err(|e| *e), tick_end);
+    let app = App::new(bank.as_ref().map_err(|e| *e), tick_end, LINK_GRACE_TICKS);
     let plant = BoardPlant::new(parts.hardware);
 
     let tick_spawner = board::start_tick_executor();

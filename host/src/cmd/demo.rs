@@ -150,12 +150,7 @@ pub fn run(args: Args) -> Result<()> {
                 .unwrap_or(if args.headless { 10.0 } else { 60.0 });
             let script = args.script.unwrap_or(Script::Press);
             let session = host::sil::harness::Session::new(&bank, script, seconds + 1.0)?;
-            Box::new(SilSource::start(
-                setup,
-                session,
-                *bank.tissue_law(),
-                cal.max_force_n,
-            )?)
+            Box::new(SilSource::start(setup, session)?)
         }
         SourceSpec::Serial(port) => Box::new(SerialSource::open(
             port,
@@ -168,8 +163,6 @@ pub fn run(args: Args) -> Result<()> {
                     |p| p.display().to_string()
                 )
             ),
-            *bank.tissue_law(),
-            cal.max_force_n,
         )?),
     };
     let steering = source.steering();

@@ -68,14 +68,7 @@ fn check(args: CheckArgs) -> Result<()> {
     let bank = Bank::parse(&aligned).map_err(|e| anyhow::anyhow!("{name}: invalid bank: {e}"))?;
     let cal = *bank.device();
     let workspace = Workspace::from_device(&cal);
-    let mut source = SerialSource::open(
-        &args.port,
-        args.baud,
-        bank.crc(),
-        &name,
-        *bank.tissue_law(),
-        cal.max_force_n,
-    )?;
+    let mut source = SerialSource::open(&args.port, args.baud, bank.crc(), &name)?;
     if !args.json {
         eprintln!(
             "device on {}: {name}; move each joint by hand: pitch and yaw in degrees, insertion \

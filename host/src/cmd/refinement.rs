@@ -1,12 +1,15 @@
 //! `host bench refinement`: the same tool press on one organ meshed at several sizes, with point
 //! contact and with the finite tool tip (design notes, "a trap worth knowing"). A point force
 //! has unbounded displacement, so the point contact's force falls as the mesh is refined; the
-//! tip's pressure patch should converge. Prints a table (or JSON), asserts nothing.
+//! tip's pressure patch should converge. Prints a table (or JSON), asserts nothing. A patch
+//! with more nodes than the firmware carries is also solved capped as the firmware caps it (its
+//! heaviest `MAX_CONTACT_NODES`, renormalised): its force, error and dropped share.
 
 use anyhow::{Context, Result};
 use fem::compliance::Compliance;
 use fem::elasticity::{Elasticity, FixedSet, Material};
-use host::contact::{ContactSurface, patch_force};
+use firmware::solve::MAX_CONTACT_NODES;
+use host::contact::{ContactSurface, capped_patch, patch_force};
 use std::path::PathBuf;
 use std::time::Instant;
 
@@ -42,6 +45,9 @@ struct Row {
     point_force_n: f64,
     /// `(radius_m, nodes in the patch, force_n)` for each tip radius.
     tips: Vec<(f64, usize, f64)>,
+    /// `(radius_m, force_n, dropped share)` of the patch the firmware would use, capped at its
+    /// `MAX_CONTACT_NODES` heaviest nodes renormalised (the same as `tips` when it fits).
+    capped: Vec<(f64, f64, f64)>,
     seconds: f64,
 }
 
@@ -105,6 +111,7 @@ pub fn run(args: Args) -> Result<()> {
             press,
         )?);
         let mut tips = Vec::new();
+        let mut capped = Vec::new();
         for &r in &args.radius {
             let patch = contact.tool_patch(&hit, r, free);
             tips.push((
@@ -112,6 +119,8 @@ pub fn run(args: Args) -> Result<()> {
                 patch.len(),
                 along(patch_force(&compliance, &patch, press)?),
             ));
+            let (kept, dropped) = capped_patch(&patch, MAX_CONTACT_NODES);
+            capped.push((r, along(patch_force(&compliance, &kept, press)?), dropped));
         }
         let row = Row {
             mesh: path.display().to_string(),
@@ -119,6 +128,7 @@ pub fn run(args: Args) -> Result<()> {
             mean_surface_edge_m: contact.mean_edge(),
             point_force_n: point,
             tips,
+            capped,
             seconds: t.elapsed().as_secs_f64(),
         };
         if args.json {
@@ -130,7 +140,18 @@ pub fn run(args: Args) -> Result<()> {
             let tips: Vec<String> = row
                 .tips
                 .iter()
-                .map(|(_, n, f)| format!("{f:>12.4} ({n:>2})"))
+                .zip(&row.capped)
+                .map(|((_, n, f), (_, fc, dropped))| {
+                    if *n > MAX_CONTACT_NODES {
+                        format!(
+                            "{f:>12.4} ({n:>2}; capped {fc:.4}, {:+.1} %, {:.0} % dropped)",
+                            100.0 * (fc - f) / f,
+                            100.0 * dropped
+                        )
+                    } else {
+                        format!("{f:>12.4} ({n:>2})")
+                    }
+                })
                 .collect();
             println!(
                 "{name:<22} {:>8} {:>10.2} {:>10.4}  {}",

@@ -1,12 +1,14 @@
 //! `host sil`: run the firmware image under QEMU against the simulated device for a scripted
-//! hand motion and print a summary (one JSON object with `--json`).
+//! or recorded (`--trajectory FILE`) hand motion and print a summary (one JSON object with
+//! `--json`).
 
 use anyhow::{Context, Result, bail};
 use bank_format::{AlignedBytes, Bank};
 use host::bank::scene_bank;
 use host::fsio::write_atomic;
+use host::sil::cost::Phases;
 use host::sil::harness::{self, Run, Session, Setup};
-use host::sil::script::Script;
+use host::sil::script::{Script, Trajectory};
 use std::path::{Path, PathBuf};
 
 /// Arguments of `host sil`.
@@ -15,9 +17,16 @@ pub struct Args {
     /// The hand's scripted motion.
     #[arg(long, value_enum, default_value_t = Script::Press)]
     pub script: Script,
-    /// Virtual seconds to run (1 kHz ticks).
-    #[arg(long, default_value_t = 5.0)]
-    pub seconds: f64,
+    /// Replay a recorded hand motion instead of a script: a CSV file with a header, either
+    /// `t_s,x_m,y_m,z_m` (tip targets, m, the bank's frame) or
+    /// `t_s,pitch_rad,yaw_rad,insertion_m` (joints); `#` lines are comments. The hand blends
+    /// from the home pose to the first sample in 0.5 s, then follows the samples.
+    #[arg(long, conflicts_with = "script")]
+    pub trajectory: Option<PathBuf>,
+    /// Virtual seconds to run (1 kHz ticks); default 5 for a script, the recorded motion's
+    /// length plus 0.2 s for a trajectory file.
+    #[arg(long)]
+    pub seconds: Option<f64>,
     /// Print one JSON object instead of text.
     #[arg(long)]
     pub json: bool,
@@ -97,7 +106,10 @@ fn cached_bank(scene: &Path) -> Result<PathBuf> {
 /// The JSON summary of a run.
 #[derive(serde::Serialize)]
 pub struct Summary {
-    script: Script,
+    /// The script (`null` for a recorded trajectory).
+    script: Option<Script>,
+    /// The recorded trajectory file, if one was replayed.
+    trajectory: Option<String>,
     virtual_s: f64,
     ticks: usize,
     missed_plant_frames: u32,
@@ -106,6 +118,11 @@ pub struct Summary {
     max_instructions_per_tick: u32,
     /// Loop body only, instructions.
     max_body_instructions: u32,
+    /// Whole tick, instructions (the same as `max_instructions_per_tick`).
+    max_tick_instructions: u32,
+    /// Per-phase maxima: free motion, the first tick of a contact, a held contact, the first
+    /// free tick after one ([`Phases`]).
+    phases: Phases,
     peak_force_n: f32,
     faults: Vec<FaultJson>,
     final_state: String,
@@ -126,32 +143,36 @@ struct FaultJson {
 }
 
 impl Summary {
-    /// Condense `run`.
-    pub fn new(script: Script, run: &Run) -> Summary {
+    /// Condense `run` of `script`, or of the recorded `trajectory` file.
+    pub fn new(script: Option<Script>, trajectory: Option<&Path>, run: &Run) -> Summary {
         let last = run
             .telemetry()
             .last()
             .map(|t| t.counters)
             .unwrap_or_default();
         let virtual_s = run.ticks.len() as f64 * 1e-3;
+        let max_tick = run
+            .ticks
+            .iter()
+            .map(|t| t.tick_instructions)
+            .max()
+            .unwrap_or(0);
         Summary {
             script,
+            trajectory: trajectory.map(|p| p.display().to_string()),
             virtual_s,
             ticks: run.ticks.len(),
             missed_plant_frames: run.missed_plant_frames(),
             overruns: run.overruns(),
-            max_instructions_per_tick: run
-                .ticks
-                .iter()
-                .map(|t| t.tick_instructions)
-                .max()
-                .unwrap_or(0),
+            max_instructions_per_tick: max_tick,
             max_body_instructions: run
                 .ticks
                 .iter()
                 .map(|t| t.body_instructions)
                 .max()
                 .unwrap_or(0),
+            max_tick_instructions: max_tick,
+            phases: Phases::of(&run.ticks),
             peak_force_n: run.peak_force_n(),
             faults: run
                 .faults()
@@ -182,7 +203,16 @@ pub fn run(args: Args) -> Result<()> {
     let (setup, bytes) = args.setup.resolve()?;
     let bank = Bank::parse(&bytes)
         .map_err(|e| anyhow::anyhow!("{}: invalid bank: {e}", setup.bank.display()))?;
-    let session = Session::new(&bank, args.script, args.seconds)?;
+    let session = match &args.trajectory {
+        Some(path) => {
+            let trajectory = Trajectory::from_csv(&bank, path)?;
+            let seconds = args
+                .seconds
+                .unwrap_or(trajectory.recorded_end_s().unwrap_or(0.0) + 0.2);
+            Session::with_trajectory(&bank, trajectory, seconds)?
+        }
+        None => Session::new(&bank, args.script, args.seconds.unwrap_or(5.0))?,
+    };
     let run = harness::run(&setup, &session)?;
     if let Some(path) = &args.trace {
         let mut text = String::new();
@@ -196,7 +226,8 @@ pub fn run(args: Args) -> Result<()> {
             &[&args.setup.scene, &setup.bank, &setup.image],
         )?;
     }
-    let s = Summary::new(args.script, &run);
+    let script = args.trajectory.is_none().then_some(args.script);
+    let s = Summary::new(script, args.trajectory.as_deref(), &run);
     if args.json {
         println!("{}", serde_json::to_string(&s)?);
     } else {

@@ -70,6 +70,54 @@ pub fn by_contact_nodes(records: &[TickRecord]) -> BTreeMap<u8, CostStats> {
         .collect()
 }
 
+/// The largest costs of one phase of a run.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]
+pub struct PhaseMax {
+    /// Ticks in the phase.
+    pub ticks: usize,
+    /// Largest loop-body instructions.
+    pub max_body_instructions: u32,
+    /// Largest whole-tick instructions (read from the successor, as in [`by_contact_nodes`]).
+    pub max_tick_instructions: u32,
+}
+
+/// Per-phase maxima of a run, every tick (armed or not: the loop runs the same contact work
+/// either way), classified by its contact set and the previous tick's.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]
+pub struct Phases {
+    /// No contact, and none in the previous tick either (free motion, near the surface or not).
+    pub free: PhaseMax,
+    /// The first tick of a contact (the detection found one; the previous tick was free).
+    pub first_contact: PhaseMax,
+    /// A contact held from the previous tick (pressing, sliding, patch rebuilds).
+    pub contact: PhaseMax,
+    /// The first free tick after a contact.
+    pub release: PhaseMax,
+}
+
+impl Phases {
+    /// The phases of `records` (in tick order). The last record has no successor, so its whole
+    /// tick is not known: it counts with whole-tick cost 0.
+    pub fn of(records: &[TickRecord]) -> Phases {
+        let mut p = Phases::default();
+        for (i, r) in records.iter().enumerate() {
+            let before = i.checked_sub(1).and_then(|j| records.get(j));
+            let was_touching = before.is_some_and(|b| b.contact_nodes > 0);
+            let phase = match (was_touching, r.contact_nodes > 0) {
+                (false, false) => &mut p.free,
+                (false, true) => &mut p.first_contact,
+                (true, true) => &mut p.contact,
+                (true, false) => &mut p.release,
+            };
+            let whole = records.get(i + 1).map_or(0, |n| n.tick_instructions);
+            phase.ticks += 1;
+            phase.max_body_instructions = phase.max_body_instructions.max(r.body_instructions);
+            phase.max_tick_instructions = phase.max_tick_instructions.max(whole);
+        }
+        p
+    }
+}
+
 /// Bytes of flash (code, read-only data and the initial values of `.data`) and of statically
 /// allocated RAM (`.data`, `.bss`, `.uninit`; the stack takes the rest) of an ELF32 image.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
@@ -162,6 +210,30 @@ mod tests {
             (6000, 6000, 6000)
         );
         assert_eq!((three.tick_mean, three.tick_max), (8000.0, 9000));
+    }
+
+    #[test]
+    fn phases_follow_the_contact_set_and_take_the_successors_tick_cost() {
+        let r = [
+            rec(1, 0, 500, 0, State::Disarmed),
+            rec(2, 0, 900, 100, State::Armed),
+            rec(3, 3, 8000, 200, State::Armed),
+            rec(4, 4, 4000, 9000, State::Armed),
+            rec(5, 3, 4500, 7000, State::Armed),
+            rec(6, 0, 1500, 7500, State::Armed),
+            rec(7, 0, 600, 3000, State::Armed),
+        ];
+        let p = Phases::of(&r);
+        let m = |ticks, body, tick| PhaseMax {
+            ticks,
+            max_body_instructions: body,
+            max_tick_instructions: tick,
+        };
+        // Ticks 1, 2 and 7 are free; 7 is last, so its whole tick is unknown (0).
+        assert_eq!(p.free, m(3, 900, 200));
+        assert_eq!(p.first_contact, m(1, 8000, 9000));
+        assert_eq!(p.contact, m(2, 4500, 7500));
+        assert_eq!(p.release, m(1, 1500, 3000));
     }
 
     #[test]

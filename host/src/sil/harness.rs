@@ -109,11 +109,17 @@ impl Session {
     /// `script` for `seconds` on `bank`: `Hello` at tick 1, `Arm` at [`ARM_TICK`], a heartbeat
     /// every 5 ticks.
     pub fn new(bank: &Bank, script: Script, seconds: f64) -> Result<Session> {
+        Session::with_trajectory(bank, Trajectory::new(bank, script)?, seconds)
+    }
+
+    /// [`Session::new`] with any hand trajectory (e.g. a recorded one,
+    /// [`Trajectory::from_csv`]).
+    pub fn with_trajectory(bank: &Bank, trajectory: Trajectory, seconds: f64) -> Result<Session> {
         if !(seconds.is_finite() && seconds > 0.0 && seconds <= 3600.0) {
             bail!("--seconds must be in (0, 3600], got {seconds}");
         }
         Ok(Session {
-            trajectory: Trajectory::new(bank, script)?,
+            trajectory,
             calibration: *bank.device(),
             plant: PlantParams::default(),
             ticks: (seconds / TICK_S).round().max(1.0) as u32,

@@ -9,11 +9,22 @@
 //!
 //! Waypoints are joined by smoothstep (`3 s^2 - 2 s^3`) blends, so the hand's speed is
 //! continuous.
+//!
+//! A recorded hand motion ([`Trajectory::from_csv`], `host sil --trajectory FILE`) replays a
+//! CSV file instead: a header, then `t_s,x_m,y_m,z_m` (tip targets in the bank's frame, turned
+//! into joints by the inverse kinematics [`Workspace::joints_for_tip`]) or
+//! `t_s,pitch_rad,yaw_rad,insertion_m` (joints). The hand rests at the home pose, blends to the
+//! first sample by 0.5 s (the scripts' approach), then follows the samples, linearly
+//! interpolated, with the file's first time mapped to 0.5 s; it holds the last sample after
+//! the file ends.
 
 use anyhow::{Result, bail};
 use bank_format::Bank;
 use firmware::device::{Device, Joints};
+use std::path::Path;
 
+use crate::calibrate::csv;
+use crate::kinematics::Workspace;
 use crate::script::ray_triangle;
 
 /// The scripted hand motions (the demo's names; the plant's hand follows its own version of
@@ -24,14 +35,26 @@ pub use crate::script::Script;
 const APPROACH_END_S: f64 = 0.5;
 const REST_S: f64 = 0.1;
 
-/// The hand's joint-space path for one script on one bank.
+/// The hand's joint-space path for one script, or a recorded motion, on one bank.
 #[derive(Clone, Debug)]
 pub struct Trajectory {
     home: [f64; 3],
     /// Insertion at which the tip meets the surface (pitch = yaw = 0).
     surface: f64,
-    script: Script,
+    path: Motion,
 }
+
+/// What the hand follows after its approach.
+#[derive(Clone, Debug)]
+enum Motion {
+    Script(Script),
+    /// Recorded samples: times (s, from 0 at the first sample) and joints.
+    Recorded(Vec<(f64, [f64; 3])>),
+}
+
+/// The columns of a recorded trajectory file.
+const TIP_COLUMNS: [&str; 4] = ["t_s", "x_m", "y_m", "z_m"];
+const JOINT_COLUMNS: [&str; 4] = ["t_s", "pitch_rad", "yaw_rad", "insertion_m"];
 
 impl Trajectory {
     /// The path of `script` for `bank`'s organ and device. Fails when the straight-down ray
@@ -43,7 +66,7 @@ impl Trajectory {
         let t = Trajectory {
             home,
             surface,
-            script,
+            path: Motion::Script(script),
         };
         let (lo, hi) = (f64::from(cal.joint_min[2]), f64::from(cal.joint_max[2]));
         let (deepest, highest) = (t.surface + t.depth_m(), t.surface - 0.01);
@@ -56,25 +79,125 @@ impl Trajectory {
         Ok(t)
     }
 
-    /// Insertion at which the tip meets the surface straight below the trocar, m.
+    /// A recorded hand motion from the CSV file at `path` (see the module notes), for `bank`'s
+    /// device. A file that cannot be read, lacks both column sets, has a bad value, times that
+    /// do not increase, fewer than two samples, or a sample outside the device's joint range
+    /// (or a tip the shaft cannot reach) is an error naming the file and the line.
+    pub fn from_csv(bank: &Bank, path: &Path) -> Result<Trajectory> {
+        let file = path.display().to_string();
+        let text = std::fs::read_to_string(path)
+            .map_err(|e| anyhow::anyhow!("{file}: cannot read: {e}"))?;
+        Trajectory::from_csv_text(bank, &file, &text)
+    }
+
+    /// [`Trajectory::from_csv`] on the text of a file named `file` (in errors).
+    pub fn from_csv_text(bank: &Bank, file: &str, text: &str) -> Result<Trajectory> {
+        let cal = bank.device();
+        let (table, tips) = match csv::parse(file, text, &TIP_COLUMNS) {
+            Ok(t) => (t, true),
+            Err(csv::CsvError::MissingColumn { .. }) => {
+                match csv::parse(file, text, &JOINT_COLUMNS) {
+                    Ok(t) => (t, false),
+                    Err(csv::CsvError::MissingColumn { line, header, .. }) => bail!(
+                        "{file}:{line}: expected the columns {} (tip targets) or {} (joints); the \
+                     header has: {header}",
+                        TIP_COLUMNS.join(","),
+                        JOINT_COLUMNS.join(",")
+                    ),
+                    Err(e) => return Err(e.into()),
+                }
+            }
+            Err(e) => return Err(e.into()),
+        };
+        table.require_rows(2, "a recorded motion needs at least two samples")?;
+        let cols: Vec<Vec<f64>> = (0..4).map(|c| table.numbers(c)).collect::<Result<_, _>>()?;
+        let (t, a, b, c) = (&cols[0], &cols[1], &cols[2], &cols[3]);
+        table.require_increasing(0, t)?;
+        let ws = Workspace::from_device(cal);
+        let (lo, hi) = (cal.joint_min.map(f64::from), cal.joint_max.map(f64::from));
+        let names = ["pitch", "yaw", "insertion"];
+        let mut samples = Vec::with_capacity(t.len());
+        for (i, &line) in table.lines.iter().enumerate() {
+            let q = if tips {
+                let tip = [a[i], b[i], c[i]];
+                let v: [f64; 3] = std::array::from_fn(|k| tip[k] - f64::from(cal.fulcrum_m[k]));
+                if v.iter().map(|x| x * x).sum::<f64>() == 0.0 {
+                    return Err(table
+                        .at(
+                            line,
+                            "the tip target is the fulcrum: no shaft direction".into(),
+                        )
+                        .into());
+                }
+                ws.joints_for_tip(tip)
+            } else {
+                [a[i], b[i], c[i]]
+            };
+            for k in 0..3 {
+                if !(q[k] >= lo[k] && q[k] <= hi[k]) {
+                    let what = if tips { "the tip target needs " } else { "" };
+                    return Err(table
+                        .at(
+                            line,
+                            format!(
+                                "{what}{} {:.6} outside the device's range [{}, {}]",
+                                names[k], q[k], lo[k], hi[k]
+                            ),
+                        )
+                        .into());
+                }
+            }
+            samples.push((t[i] - t[0], q));
+        }
+        Ok(Trajectory {
+            home: cal.home_joint.map(f64::from),
+            surface: 0.0,
+            path: Motion::Recorded(samples),
+        })
+    }
+
+    /// Seconds until the hand reaches the end of a recorded motion (the approach included);
+    /// `None` for a script, which repeats.
+    pub fn recorded_end_s(&self) -> Option<f64> {
+        match &self.path {
+            Motion::Recorded(s) => s.last().map(|l| APPROACH_END_S + l.0),
+            Motion::Script(_) => None,
+        }
+    }
+
+    /// The script, `None` for a recorded motion.
+    pub fn script(&self) -> Option<Script> {
+        match self.path {
+            Motion::Script(s) => Some(s),
+            Motion::Recorded(_) => None,
+        }
+    }
+
+    /// Insertion at which the tip meets the surface straight below the trocar, m (0 for a
+    /// recorded motion, which does not plan against the surface).
     pub fn surface_insertion_m(&self) -> f64 {
         self.surface
     }
 
-    /// Deepest point of the script below the surface, m.
+    /// Deepest point of the script below the surface, m (0 for a recorded motion).
     pub fn depth_m(&self) -> f64 {
-        match self.script {
-            Script::Press => 0.006,
-            Script::Slide => 0.004,
-            Script::Strike => 0.008,
+        match self.path {
+            Motion::Script(Script::Press) => 0.006,
+            Motion::Script(Script::Slide) => 0.004,
+            Motion::Script(Script::Strike) => 0.008,
+            Motion::Recorded(_) => 0.0,
         }
     }
 
     /// The hand's target joints at time `t` (s).
     pub fn at(&self, t: f64) -> [f64; 3] {
+        let script = match &self.path {
+            Motion::Script(s) => *s,
+            Motion::Recorded(samples) => return self.recorded_at(samples, t),
+        };
         let s0 = self.surface;
         let pose = |pitch: f64, depth: f64| [pitch, 0.0, s0 + depth];
-        let start = match self.script {
+        let start = match script {
             Script::Strike => pose(0.0, -0.01),
             _ => pose(0.0, -0.005),
         };
@@ -82,7 +205,7 @@ impl Trajectory {
             return blend(&[(REST_S, self.home), (APPROACH_END_S, start)], t);
         }
         let d = self.depth_m();
-        let (period, points): (f64, Vec<(f64, [f64; 3])>) = match self.script {
+        let (period, points): (f64, Vec<(f64, [f64; 3])>) = match script {
             Script::Press => (
                 2.5,
                 vec![
@@ -115,6 +238,26 @@ impl Trajectory {
             ),
         };
         blend(&points, (t - APPROACH_END_S).rem_euclid(period))
+    }
+
+    /// A recorded motion at `t`: the approach blend, then linear interpolation of the samples.
+    fn recorded_at(&self, samples: &[(f64, [f64; 3])], t: f64) -> [f64; 3] {
+        let Some(&(_, first)) = samples.first() else {
+            return self.home;
+        };
+        if t < APPROACH_END_S {
+            return blend(&[(REST_S, self.home), (APPROACH_END_S, first)], t);
+        }
+        let t = t - APPROACH_END_S;
+        let i = samples.partition_point(|s| s.0 <= t);
+        match (samples.get(i.wrapping_sub(1)), samples.get(i)) {
+            (Some(&(t0, a)), Some(&(t1, b))) => {
+                let k = (t - t0) / (t1 - t0);
+                std::array::from_fn(|j| a[j] + k * (b[j] - a[j]))
+            }
+            (Some(&(_, a)), None) => a,
+            _ => first,
+        }
     }
 }
 
@@ -180,5 +323,100 @@ mod tests {
         // Zero slope at the waypoints.
         let d = blend(&pts, 1.0 + 1e-4)[2] - blend(&pts, 1.0)[2];
         assert!(d < 1e-6, "{d}");
+    }
+
+    fn patch_bank() -> bank_format::AlignedBytes {
+        firmware::fixtures::flat_patch()
+    }
+
+    /// A joints file replays through the approach, then its samples linearly interpolated with
+    /// its first time at 0.5 s, then holds its last sample.
+    #[test]
+    fn a_joint_file_is_replayed_after_the_approach() {
+        let bytes = patch_bank();
+        let bank = Bank::parse(bytes.as_slice()).unwrap();
+        let text = "# recorded by hand\nt_s,pitch_rad,yaw_rad,insertion_m\n\
+                    2.0,0.0,0.0,0.09\n2.5,0.1,-0.05,0.1\n3.0,0.1,-0.05,0.095\n";
+        let t = Trajectory::from_csv_text(&bank, "rec.csv", text).unwrap();
+        assert_eq!(t.script(), None);
+        assert_eq!(t.recorded_end_s(), Some(0.5 + 1.0));
+        let home = bank.device().home_joint.map(f64::from);
+        assert_eq!(t.at(0.0), home);
+        assert_eq!(t.at(0.5), [0.0, 0.0, 0.09]);
+        let mid = t.at(0.75);
+        for (got, want) in mid.iter().zip([0.05, -0.025, 0.095]) {
+            assert!((got - want).abs() < 1e-12, "{mid:?}");
+        }
+        assert_eq!(t.at(1.0), [0.1, -0.05, 0.1]);
+        assert_eq!(t.at(9.0), [0.1, -0.05, 0.095]);
+        // The approach is the scripts' smoothstep from home to the first sample.
+        let q = t.at(0.3);
+        assert!(q[2] > home[2] && q[2] < 0.09, "{q:?}");
+    }
+
+    /// Tip targets go through the inverse kinematics: the forward kinematics of the joints
+    /// replayed puts the tip back on the targets.
+    #[test]
+    fn a_tip_file_goes_through_the_inverse_kinematics() {
+        let bytes = patch_bank();
+        let bank = Bank::parse(bytes.as_slice()).unwrap();
+        let targets = [
+            [0.02, 0.02, 0.004],
+            [0.025, 0.018, 0.001],
+            [0.015, 0.022, -0.002],
+        ];
+        let mut text = String::from("t_s, x_m, y_m, z_m\n");
+        for (i, p) in targets.iter().enumerate() {
+            text.push_str(&format!("{},{},{},{}\n", 0.1 * i as f64, p[0], p[1], p[2]));
+        }
+        let t = Trajectory::from_csv_text(&bank, "tips.csv", &text).unwrap();
+        let ws = Workspace::from_device(bank.device());
+        for (i, p) in targets.iter().enumerate() {
+            let q = t.at(0.5 + 0.1 * i as f64);
+            let tip = ws.tip(q[0], q[1], q[2]);
+            for k in 0..3 {
+                assert!((tip[k] - p[k]).abs() < 1e-12, "{tip:?} vs {p:?}");
+            }
+        }
+    }
+
+    /// Every bad file names its line (comment lines counted) and what is wrong.
+    #[test]
+    fn a_bad_trajectory_file_names_its_line() {
+        let bytes = patch_bank();
+        let bank = Bank::parse(bytes.as_slice()).unwrap();
+        let err = |text: &str| {
+            Trajectory::from_csv_text(&bank, "bad.csv", text)
+                .unwrap_err()
+                .to_string()
+        };
+        let head = "# comment\nt_s,pitch_rad,yaw_rad,insertion_m\n";
+        let e = err("# comment\ntime,x,y\n0,0,0\n");
+        assert!(
+            e.starts_with("bad.csv:2: expected the columns t_s,x_m,y_m,z_m"),
+            "{e}"
+        );
+        assert!(e.contains("time,x,y"), "{e}");
+        let e = err(&format!("{head}0,0,0,0.09\n0.1,0,zero,0.09\n"));
+        assert!(e.starts_with("bad.csv:4: column \"yaw_rad\""), "{e}");
+        let e = err(&format!("{head}0,0,0,0.09\n0.1,0,0,0.09\n0.1,0,0,0.09\n"));
+        assert!(
+            e.starts_with("bad.csv:5: column \"t_s\" must increase"),
+            "{e}"
+        );
+        let e = err(&format!("{head}0,0,0,0.09\n0.1,0,0,0.9\n"));
+        assert!(
+            e.starts_with("bad.csv:4: insertion 0.900000 outside"),
+            "{e}"
+        );
+        let e = err("t_s,x_m,y_m,z_m\n0,0.02,0.02,-0.5\n1,0.02,0.02,0\n");
+        assert!(
+            e.starts_with("bad.csv:2: the tip target needs insertion"),
+            "{e}"
+        );
+        let e = err(&format!("{head}0,0,0,0.09\n"));
+        assert!(e.contains("1 data rows, need at least 2"), "{e}");
+        let e = err(&format!("{head}0,0,0,0.09\n1,0,0\n"));
+        assert!(e.starts_with("bad.csv:4: bad record"), "{e}");
     }
 }

@@ -5,7 +5,7 @@
 use super::harness;
 use crate::source::{Absorber, LoopStats, Mailbox, Sample, Source};
 use anyhow::{Result, anyhow};
-use bank_format::{DeviceToHost, TissueLaw};
+use bank_format::DeviceToHost;
 use std::sync::{Arc, Mutex};
 use std::thread::JoinHandle;
 use std::time::Duration;
@@ -20,16 +20,10 @@ pub struct SilSource {
 }
 
 impl SilSource {
-    /// Starts `session` (made real-time and observed here) on `setup`; `law` and
-    /// `max_force_n` come from the bank QEMU loads.
-    pub fn start(
-        setup: harness::Setup,
-        mut session: harness::Session,
-        law: TissueLaw,
-        max_force_n: f32,
-    ) -> Result<SilSource> {
+    /// Starts `session` (made real-time and observed here) on `setup`.
+    pub fn start(setup: harness::Setup, mut session: harness::Session) -> Result<SilSource> {
         let mailbox = Arc::new(Mailbox::default());
-        let absorber = Mutex::new(Absorber::new(law, max_force_n));
+        let absorber = Mutex::new(Absorber::default());
         let m = Arc::clone(&mailbox);
         session.real_time = true;
         session.observer = Some(harness::LinkObserver(Arc::new(
