@@ -169,7 +169,7 @@ impl<'b> HapticLoop<'b> {
             bank,
             device: Device::new(bank.device()),
             supervisor: Supervisor::new(config),
-            tracker: ContactTracker::new(bank),
+            tracker: ContactTracker::new(),
             mode: Mode::Render,
             encoder_offset: [0; 3],
             last_raw_counts: None,
