@@ -21,9 +21,9 @@
 //!    radius; the first tick of a contact, which also ran the detection, solves on the contact
 //!    triangle alone (the displacement, hence the force, is still tiny then). A rebuild is
 //!    spread over six ticks ([`PatchBuild`]: start, [`POINTS_PER_TICK`] quadrature points a
-//!    tick, choosing the nodes, factoring) while the held patch keeps rendering, so no tick
-//!    pays for a whole patch; the patch in use lags the anchor by at most [`REPATCH_FRACTION`]
-//!    of the tip radius plus five ticks of sliding. The node forces `f_S` (on the tissue, linear model)
+//!    tick, merging and choosing the nodes, factoring) while the held patch keeps rendering, so
+//!    no tick pays for a whole patch; the patch in use lags the anchor by at most
+//!    [`REPATCH_FRACTION`] of the tip radius plus five ticks of sliding. The node forces `f_S` (on the tissue, linear model)
 //!    are what telemetry reports, so the host's `u = C f_S` displays the surface under the tip;
 //! 4. the tissue law Q on the tool force ([`apply_tissue_law`], bank's law), except in
 //!    [`Mode::LinearLaw`]; the force on the tool is the *opposite* of the force on the tissue
@@ -125,7 +125,7 @@ pub struct HapticLoop<'b> {
     counters: Counters,
     last: Last,
     held: Option<Held>,
-    pending: Option<Pending>,
+    pending: Pending,
 }
 
 /// A sliding contact keeps its patch (weights and factored solve) until the anchor has moved
@@ -144,13 +144,18 @@ struct Held {
 
 /// Quadrature points of a patch being rebuilt that one tick locates on the surface
 /// ([`PatchBuild::locate`]): the 12 take three ticks, so a rebuild spreads over six (start,
-/// three of locating, choosing the nodes, factoring) and no tick pays for a whole patch.
+/// three of locating, merging and choosing the nodes, factoring) and no tick pays for a whole
+/// patch. More ticks would make each cheaper but let the patch lag further behind a fast
+/// slide: at 58 mm/s (`tests/tests/loop_trajectories.rs`) ten ticks made the tangential
+/// force drop by 0.027 N in a tick at a swap, against the 0.02 N that test allows.
 pub const POINTS_PER_TICK: usize = 4;
 
-/// A patch being rebuilt over several ticks, while the held one renders.
+/// A patch being rebuilt over several ticks, while the held one renders (`origin` is `None`
+/// when no rebuild is in progress). Kept in place: the build is large, and moving it costs
+/// more than a step of it.
 #[derive(Clone, Debug)]
 struct Pending {
-    origin: PatchOrigin,
+    origin: Option<PatchOrigin>,
     build: PatchBuild,
     stage: Stage,
 }
@@ -160,7 +165,7 @@ struct Pending {
 enum Stage {
     /// Quadrature points still to locate.
     Locating,
-    /// All located: next, choose the nodes.
+    /// All located: next, merge the loads and choose the nodes.
     Located,
     /// Nodes chosen: next, factor the solve.
     Chosen(Patch),
@@ -210,7 +215,11 @@ impl<'b> HapticLoop<'b> {
                 currents_a: [0.0; 3],
             },
             held: None,
-            pending: None,
+            pending: Pending {
+                origin: None,
+                build: PatchBuild::new(),
+                stage: Stage::Locating,
+            },
         }
     }
 
@@ -383,7 +392,7 @@ impl<'b> HapticLoop<'b> {
         } = *contact
         else {
             self.held = None;
-            self.pending = None;
+            self.pending.origin = None;
             return Ok((Contacts::new(), [0.0; 3]));
         };
         let tip_radius = self.bank.device().tip_radius_m;
@@ -400,7 +409,7 @@ impl<'b> HapticLoop<'b> {
             // triangle alone (the tip's displacement is still tiny, so is the force); the
             // tip's patch is built over the next ticks.
             None => {
-                self.pending = None;
+                self.pending.origin = None;
                 let patch = tool_patch(self.bank, triangle, nodes, bary, anchor, 0.0);
                 let solve = WeightedSolve::new(self.bank, patch.nodes(), patch.weights())?;
                 self.held = Some(Held {
@@ -436,8 +445,8 @@ impl<'b> HapticLoop<'b> {
 impl HapticLoop<'_> {
     /// One step of keeping the patch under the tip: start a rebuild when the held patch is the
     /// first tick's (radius 0) or its anchor has slid [`REPATCH_FRACTION`] of the tip radius,
-    /// else advance the rebuild in progress by one step ([`POINTS_PER_TICK`] points, choosing
-    /// the nodes, or factoring), swapping it in when done. A rebuild that needs no points (zero
+    /// else advance the rebuild in progress by one step ([`POINTS_PER_TICK`] points, merging
+    /// and choosing the nodes, or factoring), swapping it in when done. A rebuild that needs no points (zero
     /// radius, or a mesh that resolves the tip) finishes in the tick it starts. Returns the
     /// solve to render with this tick.
     fn maintain_patch(
@@ -446,7 +455,8 @@ impl HapticLoop<'_> {
         origin: PatchOrigin,
         repatch: f32,
     ) -> Result<WeightedSolve, SolveError> {
-        if self.pending.is_none() {
+        let p = &mut self.pending;
+        let Some(building) = p.origin else {
             let h = held.origin;
             let stale = h.radius_m != origin.radius_m
                 || (h.anchor != origin.anchor
@@ -455,21 +465,15 @@ impl HapticLoop<'_> {
                 return Ok(held.solve);
             }
             let o = origin;
-            let mut build =
-                PatchBuild::start(self.bank, o.triangle, o.nodes, o.bary, o.anchor, o.radius_m);
+            let build = &mut p.build;
+            build.start(self.bank, o.triangle, o.nodes, o.bary, o.anchor, o.radius_m);
             if build.locate(self.bank, 0) {
                 // Nothing to locate (zero radius, or a mesh that resolves the tip): finish now.
                 let patch = build.finish(self.bank);
                 return self.swap_in(origin, &patch);
             }
-            self.pending = Some(Pending {
-                origin,
-                build,
-                stage: Stage::Locating,
-            });
-            return Ok(held.solve);
-        }
-        let Some(p) = self.pending.as_mut() else {
+            p.origin = Some(origin);
+            p.stage = Stage::Locating;
             return Ok(held.solve);
         };
         match p.stage {
@@ -484,9 +488,8 @@ impl HapticLoop<'_> {
                 Ok(held.solve)
             }
             Stage::Chosen(patch) => {
-                let origin = p.origin;
-                self.pending = None;
-                self.swap_in(origin, &patch)
+                p.origin = None;
+                self.swap_in(building, &patch)
             }
         }
     }
