@@ -33,8 +33,10 @@ pub struct BankBuilder {
     /// Couplings `(k, l, C_kl)`, `k != l`, m/N. Each unordered pair once or in both directions
     /// (then `C_lk` must equal `C_kl^T`); the bank stores both directions.
     pub couplings: Vec<(u32, u32, [[f64; 3]; 3])>,
-    /// Edge of the collision grid's cubic cells, m (e.g. the mean surface edge length or the
-    /// tool tip diameter, whichever is larger). Flash cost: 4 bytes per cell of the bounding box.
+    /// Edge of the collision grid's cubic cells, m (e.g. the mean surface edge length). Any size
+    /// finds every contact (the cell certificates are structural); flash cost: 9 bytes per cell
+    /// of the bounding box plus 2 per candidate entry, which grow as cells shrink, while larger
+    /// cells give longer candidate lists to test per tick.
     pub grid_cell_size_m: f64,
     /// Truncation radius, m: every pair of nodes closer than this must be in `couplings`.
     pub truncation_radius_m: f64,

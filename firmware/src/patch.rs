@@ -219,7 +219,7 @@ impl PatchBuild {
 
     /// Locates up to `points` more quadrature points; `true` once all are located. The points
     /// lie in the contact triangle's plane, where the barycentric coordinates are affine: a
-    /// point inside the contact triangle costs six multiply-adds ([`contact_frame`]); only the
+    /// point inside the contact triangle costs six multiply-adds (its affine frame); only the
     /// points outside it walk the surface ([`closest_surface_point`]).
     pub fn locate(&mut self, bank: &Bank, points: usize) -> bool {
         let Some((e1, e2)) = self.basis else {
