@@ -230,6 +230,23 @@ pub enum BankError {
         /// Which item (index into the items).
         entry: u32,
     },
+    /// More than [`crate::MAX_TRIANGLES`] triangles.
+    TriangleCount {
+        /// Triangles found.
+        count: u32,
+    },
+    /// A cell's candidate triangles are not exactly the triangles whose widened bounding box
+    /// meets the cell (missing, extra or not strictly ascending).
+    CellCandidates {
+        /// Linear cell index.
+        cell: u32,
+    },
+    /// A cell's clearance is not a valid lower bound: non-zero in a cell a triangle occupies,
+    /// or more than one above a neighbouring cell's.
+    CellClearance {
+        /// Linear cell index.
+        cell: u32,
+    },
     /// A bucket's items are not strictly ascending.
     GridItemsNotSorted {
         /// Which cell.
@@ -354,6 +371,9 @@ impl BankError {
             BankError::LawDomain => 38,
             BankError::LawNotMonotone { .. } => 39,
             BankError::Device { .. } => 40,
+            BankError::TriangleCount { .. } => 41,
+            BankError::CellCandidates { .. } => 42,
+            BankError::CellClearance { .. } => 43,
         }
     }
 }
@@ -411,6 +431,17 @@ impl fmt::Display for BankError {
                 write!(f, "grid item {entry} is not in cell {cell}")
             }
             E::GridItemsNotSorted { cell } => write!(f, "grid cell {cell} items not ascending"),
+            E::TriangleCount { count } => {
+                write!(f, "{count} triangles, at most {}", crate::MAX_TRIANGLES)
+            }
+            E::CellCandidates { cell } => write!(
+                f,
+                "grid cell {cell}: candidate triangles are not those whose widened box meets it"
+            ),
+            E::CellClearance { cell } => write!(
+                f,
+                "grid cell {cell}: clearance is not a lower bound of the distance to the surface"
+            ),
             E::CkkNotSpd { node } => write!(f, "C_kk of node {node} is not SPD"),
             E::NeighbourSelf { node } => write!(f, "node {node} lists itself as neighbour"),
             E::NeighbourNotSorted { node } => {

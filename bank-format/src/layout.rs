@@ -9,8 +9,9 @@ use bytemuck::{Pod, Zeroable};
 /// The eight bytes a bank starts with.
 pub const MAGIC: [u8; 8] = *b"HAPTBANK";
 /// Major version this crate reads and writes. A reader rejects any other major version. 2: the
-/// device record gained the speed thresholds (`SPEC.md`, "Versioning").
-pub const VERSION_MAJOR: u16 = 2;
+/// device record gained the speed thresholds; 3: the per-cell contact certificates (clearance
+/// and candidate triangles) became required sections (`SPEC.md`, "Versioning").
+pub const VERSION_MAJOR: u16 = 3;
 /// Minor version this crate writes. Readers accept any minor version of their major version
 /// (minor versions only add optional sections, which older readers skip).
 pub const VERSION_MINOR: u16 = 0;
@@ -29,6 +30,18 @@ pub const BANK_ALIGN: usize = 4;
 pub const CRC_OFFSET: usize = 20;
 /// Largest number of nodes in the reachable region R (node indices are `u16`).
 pub const MAX_NODES: usize = u16::MAX as usize;
+/// Largest number of triangles (the cells' candidate lists hold `u16` triangle indices).
+pub const MAX_TRIANGLES: usize = u16::MAX as usize;
+/// A cell's candidate triangles are those whose bounding box, widened by this many cells on
+/// every side, meets the cell (`SPEC.md`, "cell candidates"): a path piece of Chebyshev length
+/// at most [`PIECE_CELLS`] cells can only cross them.
+pub const CANDIDATE_WIDEN_CELLS: f32 = 33.0 / 64.0;
+/// A triangle occupies the cells its bounding box, widened by this many cells on every side,
+/// meets (the margin absorbs the rounding of the cell rule; `SPEC.md`, "cell clearance").
+pub const OCCUPIED_WIDEN_CELLS: f32 = 1.0 / 64.0;
+/// Longest path piece, Chebyshev norm, in cells, that the candidate lists cover (with margin
+/// for rounding and the clipping pad: [`CANDIDATE_WIDEN_CELLS`] is 0.516).
+pub const PIECE_CELLS: f32 = 0.45;
 /// Most coefficients a tissue law may have (Chebyshev degree <= 15).
 pub const MAX_LAW_COEFFS: usize = 16;
 
@@ -101,6 +114,13 @@ pub enum SectionKind {
     GridStarts,
     /// CSR bucket items (`u16` node indices) of the collision grid.
     GridItems,
+    /// Per grid cell (`u8`, cells): a lower bound, in cells (Chebyshev), of the distance from
+    /// the cell to every cell a triangle occupies.
+    CellClearance,
+    /// CSR starts (`u32`, cells + 1) of the cells' candidate triangles.
+    CellTriStarts,
+    /// CSR items (`u16` triangle indices, ascending per cell) of the cells' candidate triangles.
+    CellTriItems,
     /// Self-compliance `C_kk` per node, `[f32; 6]` = xx, xy, xz, yy, yz, zz, in m/N.
     Ckk,
     /// CSR row starts (`u32`, n + 1) of the neighbour lists.
@@ -120,7 +140,7 @@ pub enum SectionKind {
 impl SectionKind {
     /// The sections a valid bank of this major version must contain, in the order the writer
     /// lays them out.
-    pub const REQUIRED: [SectionKind; 15] = [
+    pub const REQUIRED: [SectionKind; 18] = [
         SectionKind::Meta,
         SectionKind::Positions,
         SectionKind::MeshIds,
@@ -130,6 +150,9 @@ impl SectionKind {
         SectionKind::Grid,
         SectionKind::GridStarts,
         SectionKind::GridItems,
+        SectionKind::CellClearance,
+        SectionKind::CellTriStarts,
+        SectionKind::CellTriItems,
         SectionKind::Ckk,
         SectionKind::NeighbourStarts,
         SectionKind::NeighbourIndex,
@@ -157,6 +180,9 @@ impl SectionKind {
             13 => SectionKind::NeighbourCkl,
             14 => SectionKind::TissueLaw,
             15 => SectionKind::Device,
+            16 => SectionKind::CellClearance,
+            17 => SectionKind::CellTriStarts,
+            18 => SectionKind::CellTriItems,
             other => SectionKind::Unknown(other),
         }
     }
@@ -180,6 +206,9 @@ impl SectionKind {
             SectionKind::NeighbourCkl => 13,
             SectionKind::TissueLaw => 14,
             SectionKind::Device => 15,
+            SectionKind::CellClearance => 16,
+            SectionKind::CellTriStarts => 17,
+            SectionKind::CellTriItems => 18,
             SectionKind::Unknown(code) => code,
         }
     }
@@ -198,6 +227,9 @@ impl SectionKind {
             SectionKind::Grid => core::mem::size_of::<GridHeader>(),
             SectionKind::GridStarts => 4,
             SectionKind::GridItems => 2,
+            SectionKind::CellClearance => 1,
+            SectionKind::CellTriStarts => 4,
+            SectionKind::CellTriItems => 2,
             SectionKind::Ckk => 24,
             SectionKind::NeighbourStarts => 4,
             SectionKind::NeighbourIndex => 2,
@@ -220,6 +252,9 @@ impl SectionKind {
             SectionKind::Grid => "grid",
             SectionKind::GridStarts => "grid starts",
             SectionKind::GridItems => "grid items",
+            SectionKind::CellClearance => "cell clearance",
+            SectionKind::CellTriStarts => "cell candidate starts",
+            SectionKind::CellTriItems => "cell candidate items",
             SectionKind::Ckk => "C_kk",
             SectionKind::NeighbourStarts => "neighbour starts",
             SectionKind::NeighbourIndex => "neighbour index",

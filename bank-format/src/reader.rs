@@ -4,9 +4,9 @@
 use crate::error::{BankError, DeviceField};
 use crate::law::TissueLaw;
 use crate::layout::{
-    BANK_ALIGN, BankHeader, BankMeta, DeviceCalibration, GridHeader, HEADER_LEN, MAGIC, MAX_NODES,
-    MAX_SECTIONS, SECTION_ALIGN, SECTION_ENTRY_LEN, SectionEntry, SectionKind, VERSION_MAJOR,
-    bank_crc,
+    BANK_ALIGN, BankHeader, BankMeta, CANDIDATE_WIDEN_CELLS, DeviceCalibration, GridHeader,
+    HEADER_LEN, MAGIC, MAX_NODES, MAX_SECTIONS, MAX_TRIANGLES, OCCUPIED_WIDEN_CELLS, SECTION_ALIGN,
+    SECTION_ENTRY_LEN, SectionEntry, SectionKind, VERSION_MAJOR, bank_crc,
 };
 use bytemuck::Pod;
 use core::ops::Range;
@@ -43,12 +43,18 @@ pub struct Bank<'a> {
 }
 
 /// The collision grid: buckets of node indices over R (CSR: the nodes of cell `c` are
-/// `items[starts[c]..starts[c + 1]]`, ascending).
+/// `items[starts[c]..starts[c + 1]]`, ascending), and per cell the contact certificates: a
+/// clearance (lower bound, in cells, of the distance to the surface) and the candidate
+/// triangles a short path piece starting in the cell can cross (`SPEC.md`, "cell clearance"
+/// and "cell candidates").
 #[derive(Clone, Copy, Debug)]
 pub struct Grid<'a> {
     header: &'a GridHeader,
     starts: &'a [u32],
     items: &'a [u16],
+    clearance: &'a [u8],
+    tri_starts: &'a [u32],
+    tri_items: &'a [u16],
 }
 
 impl<'a> Grid<'a> {
@@ -105,6 +111,65 @@ impl<'a> Grid<'a> {
             .and_then(|r| self.items.get(r))
             .unwrap_or(&[])
     }
+
+    /// Clearance of the cell with linear index `index`: every cell a triangle occupies is at
+    /// least this many cells away (Chebyshev distance of cell coordinates); 0 out of range.
+    pub fn clearance(&self, index: usize) -> u8 {
+        self.clearance.get(index).copied().unwrap_or(0)
+    }
+
+    /// Candidate triangles of the cell with linear index `index`, ascending: every triangle
+    /// whose bounding box widened by [`CANDIDATE_WIDEN_CELLS`] cells meets the cell (empty if
+    /// out of range).
+    pub fn cell_triangles(&self, index: usize) -> &'a [u16] {
+        csr_row(self.tri_starts, index)
+            .and_then(|r| self.tri_items.get(r))
+            .unwrap_or(&[])
+    }
+
+    /// The cell containing `p` with each coordinate clamped to `0..dims` (the cell of `p`
+    /// moved into the grid box), or `None` for NaN.
+    pub fn clamped_cell(&self, p: [f32; 3]) -> Option<[u16; 3]> {
+        let g = self.header;
+        let mut out = [0u16; 3];
+        for axis in 0..3 {
+            if !p[axis].is_finite() {
+                return None;
+            }
+            let top = i64::from(g.dims[axis]) - 1;
+            out[axis] = signed_cell(p[axis], g.origin_m[axis], g.cell_size_m).clamp(0, top) as u16;
+        }
+        Some(out)
+    }
+}
+
+/// The cells `lo..=hi` (per axis, clamped to the grid) that the bounding box of `tri`, widened
+/// by `widen` cells on every side, meets (`SPEC.md`, "cell clearance"): per axis
+/// `floor((min - widen h - origin) / h)` to `floor((max + widen h - origin) / h)` in f32.
+/// `None` if a vertex is out of range.
+pub fn triangle_cells(
+    g: &GridHeader,
+    positions: &[[f32; 3]],
+    tri: [u16; 3],
+    widen: f32,
+) -> Option<([u16; 3], [u16; 3])> {
+    let [a, b, c] = [
+        positions.get(usize::from(tri[0]))?,
+        positions.get(usize::from(tri[1]))?,
+        positions.get(usize::from(tri[2]))?,
+    ];
+    let h = g.cell_size_m;
+    let e = widen * h;
+    let mut lo = [0u16; 3];
+    let mut hi = [0u16; 3];
+    for axis in 0..3 {
+        let min = a[axis].min(b[axis]).min(c[axis]);
+        let max = a[axis].max(b[axis]).max(c[axis]);
+        let top = i64::from(g.dims[axis]) - 1;
+        lo[axis] = signed_cell(min - e, g.origin_m[axis], h).clamp(0, top) as u16;
+        hi[axis] = signed_cell(max + e, g.origin_m[axis], h).clamp(0, top) as u16;
+    }
+    Some((lo, hi))
 }
 
 /// `floor((p - origin) / cell_size)` per axis in f32, if inside `0..dims`.
@@ -298,9 +363,14 @@ fn parse_mesh_ids<'a>(sections: &Sections<'a>, n: usize) -> Result<&'a [u32], Ba
     Ok(mesh_ids)
 }
 
-/// `SPEC.md` "Validation" rule 9, triangles: vertices < n and three distinct.
+/// `SPEC.md` "Validation" rule 9, triangles: at most 65535, vertices < n and three distinct.
 fn parse_triangles<'a>(sections: &Sections<'a>, n: usize) -> Result<&'a [[u16; 3]], BankError> {
     let triangles: &[[u16; 3]] = sections.slice(SectionKind::Triangles)?;
+    if triangles.len() > MAX_TRIANGLES {
+        return Err(BankError::TriangleCount {
+            count: u32::try_from(triangles.len()).unwrap_or(u32::MAX),
+        });
+    }
     for (t, tri) in triangles.iter().enumerate() {
         if tri.iter().any(|&v| usize::from(v) >= n) {
             return Err(BankError::IndexOutOfRange {
@@ -361,7 +431,11 @@ fn parse_node_triangles<'a>(
 /// `SPEC.md` "Validation" rule 10, the collision grid: the geometry
 /// ([`check_grid_geometry`]), cells + 1 starts and n items, CSR starts, then the buckets
 /// ([`check_grid_buckets`]).
-fn parse_grid<'a>(sections: &Sections<'a>, positions: &[[f32; 3]]) -> Result<Grid<'a>, BankError> {
+fn parse_grid<'a>(
+    sections: &Sections<'a>,
+    positions: &[[f32; 3]],
+    triangles: &[[u16; 3]],
+) -> Result<Grid<'a>, BankError> {
     let header: &GridHeader = sections.single(SectionKind::Grid)?;
     let cells = check_grid_geometry(header)?;
     let starts: &[u32] = sections.slice(SectionKind::GridStarts)?;
@@ -369,13 +443,152 @@ fn parse_grid<'a>(sections: &Sections<'a>, positions: &[[f32; 3]]) -> Result<Gri
     expect_count(starts.len(), cells + 1, SectionKind::GridStarts)?;
     expect_count(items.len(), positions.len(), SectionKind::GridItems)?;
     check_starts(starts, items.len(), SectionKind::GridStarts)?;
+    let clearance: &[u8] = sections.slice(SectionKind::CellClearance)?;
+    let tri_starts: &[u32] = sections.slice(SectionKind::CellTriStarts)?;
+    let tri_items: &[u16] = sections.slice(SectionKind::CellTriItems)?;
+    expect_count(clearance.len(), cells, SectionKind::CellClearance)?;
+    expect_count(tri_starts.len(), cells + 1, SectionKind::CellTriStarts)?;
+    check_starts(tri_starts, tri_items.len(), SectionKind::CellTriStarts)?;
     let grid = Grid {
         header,
         starts,
         items,
+        clearance,
+        tri_starts,
+        tri_items,
     };
     check_grid_buckets(&grid, positions, cells)?;
+    check_cell_candidates(&grid, positions, triangles, cells)?;
+    check_cell_clearance(&grid, positions, triangles)?;
     Ok(grid)
+}
+
+/// `SPEC.md` "Validation" rule 10, candidates: per cell, items < t and strictly ascending,
+/// each naming a triangle whose widened box meets the cell; and every such (triangle, cell)
+/// present. Together: each list is exactly the rule's set.
+fn check_cell_candidates(
+    grid: &Grid<'_>,
+    positions: &[[f32; 3]],
+    triangles: &[[u16; 3]],
+    cells: usize,
+) -> Result<(), BankError> {
+    let g = grid.header;
+    for c in 0..cells {
+        let Some(range) = csr_row(grid.tri_starts, c) else {
+            return Err(BankError::BadCsrStarts {
+                section: SectionKind::CellTriStarts,
+                entry: c as u32,
+            });
+        };
+        let cell = cell_coords(g, c);
+        let mut prev: Option<u16> = None;
+        for e in range {
+            let t = grid.tri_items.get(e).copied().unwrap_or(u16::MAX);
+            let Some(&tri) = triangles.get(usize::from(t)) else {
+                return Err(BankError::IndexOutOfRange {
+                    section: SectionKind::CellTriItems,
+                    entry: e as u32,
+                });
+            };
+            let meets = triangle_cells(g, positions, tri, CANDIDATE_WIDEN_CELLS)
+                .is_some_and(|(lo, hi)| (0..3).all(|a| lo[a] <= cell[a] && cell[a] <= hi[a]));
+            if prev.is_some_and(|q| t <= q) || !meets {
+                return Err(BankError::CellCandidates { cell: c as u32 });
+            }
+            prev = Some(t);
+        }
+    }
+    for (t, &tri) in triangles.iter().enumerate() {
+        let Some((lo, hi)) = triangle_cells(g, positions, tri, CANDIDATE_WIDEN_CELLS) else {
+            continue;
+        };
+        for_cells(grid, lo, hi, |c| {
+            if grid.cell_triangles(c).binary_search(&(t as u16)).is_ok() {
+                Ok(())
+            } else {
+                Err(BankError::CellCandidates { cell: c as u32 })
+            }
+        })?;
+    }
+    Ok(())
+}
+
+/// `SPEC.md` "Validation" rule 10, clearance: zero in every cell a triangle occupies, and at
+/// most one more than each of the (up to 26) neighbouring cells', so that it never exceeds the
+/// Chebyshev cell distance to an occupied cell.
+fn check_cell_clearance(
+    grid: &Grid<'_>,
+    positions: &[[f32; 3]],
+    triangles: &[[u16; 3]],
+) -> Result<(), BankError> {
+    let g = grid.header;
+    for &tri in triangles {
+        let Some((lo, hi)) = triangle_cells(g, positions, tri, OCCUPIED_WIDEN_CELLS) else {
+            continue;
+        };
+        for_cells(grid, lo, hi, |c| {
+            if grid.clearance(c) == 0 {
+                Ok(())
+            } else {
+                Err(BankError::CellClearance { cell: c as u32 })
+            }
+        })?;
+    }
+    let [nx, ny, nz] = g.dims;
+    for cz in 0..nz {
+        for cy in 0..ny {
+            for cx in 0..nx {
+                let Some(c) = grid.cell_index([cx, cy, cz]) else {
+                    continue;
+                };
+                let here = u16::from(grid.clearance(c));
+                let lo = [cx, cy, cz].map(|v| v.saturating_sub(1));
+                let hi = [
+                    cx.saturating_add(1).min(nx - 1),
+                    cy.saturating_add(1).min(ny - 1),
+                    cz.saturating_add(1).min(nz - 1),
+                ];
+                for_cells(grid, lo, hi, |n| {
+                    if here <= u16::from(grid.clearance(n)) + 1 {
+                        Ok(())
+                    } else {
+                        Err(BankError::CellClearance { cell: c as u32 })
+                    }
+                })?;
+            }
+        }
+    }
+    Ok(())
+}
+
+/// Calls `f` with the linear index of every cell in `lo..=hi`, stopping at the first error.
+fn for_cells(
+    grid: &Grid<'_>,
+    lo: [u16; 3],
+    hi: [u16; 3],
+    mut f: impl FnMut(usize) -> Result<(), BankError>,
+) -> Result<(), BankError> {
+    for cz in lo[2]..=hi[2] {
+        for cy in lo[1]..=hi[1] {
+            for cx in lo[0]..=hi[0] {
+                if let Some(c) = grid.cell_index([cx, cy, cz]) {
+                    f(c)?;
+                }
+            }
+        }
+    }
+    Ok(())
+}
+
+/// The coordinates of the cell with linear index `c` (`c < cells`).
+fn cell_coords(g: &GridHeader, c: usize) -> [u16; 3] {
+    let [nx, ny, _] = g.dims.map(usize::from);
+    let (nx, ny) = (nx.max(1), ny.max(1));
+    [
+        (c % nx) as u16,
+        ((c / nx) % ny) as u16,
+        (c / (nx * ny)) as u16,
+    ]
 }
 
 /// `SPEC.md` "Validation" rule 10, grid geometry: finite, reserved zero, cell size > 0,
@@ -520,7 +733,7 @@ impl<'a> Bank<'a> {
         let mesh_ids = parse_mesh_ids(&sections, n)?;
         let triangles = parse_triangles(&sections, n)?;
         let (node_tri_starts, node_tri_items) = parse_node_triangles(&sections, triangles, n)?;
-        let grid = parse_grid(&sections, positions)?;
+        let grid = parse_grid(&sections, positions, triangles)?;
         let ckk = parse_ckk(&sections, n)?;
         let (nb_starts, nb_index, nb_ckl) = parse_neighbours(&sections, n)?;
         let bank = Bank {

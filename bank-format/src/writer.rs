@@ -4,11 +4,11 @@
 use crate::error::BankError;
 use crate::law::TissueLaw;
 use crate::layout::{
-    BankHeader, BankMeta, DeviceCalibration, GridHeader, HEADER_LEN, MAGIC, MAX_NODES,
-    SECTION_ALIGN, SECTION_ENTRY_LEN, SectionEntry, SectionKind, VERSION_MAJOR, VERSION_MINOR,
-    reseal,
+    BankHeader, BankMeta, CANDIDATE_WIDEN_CELLS, DeviceCalibration, GridHeader, HEADER_LEN, MAGIC,
+    MAX_NODES, MAX_TRIANGLES, OCCUPIED_WIDEN_CELLS, SECTION_ALIGN, SECTION_ENTRY_LEN, SectionEntry,
+    SectionKind, VERSION_MAJOR, VERSION_MINOR, reseal,
 };
-use crate::reader::{Bank, cell_of};
+use crate::reader::{Bank, cell_of, triangle_cells};
 use alloc::collections::BTreeMap;
 use alloc::vec;
 use alloc::vec::Vec;
@@ -33,8 +33,10 @@ pub struct BankBuilder {
     /// Couplings `(k, l, C_kl)`, `k != l`, m/N. Each unordered pair once or in both directions
     /// (then `C_lk` must equal `C_kl^T`); the bank stores both directions.
     pub couplings: Vec<(u32, u32, [[f64; 3]; 3])>,
-    /// Edge of the collision grid's cubic cells, m (e.g. the mean surface edge length or the
-    /// tool tip diameter, whichever is larger). Flash cost: 4 bytes per cell of the bounding box.
+    /// Edge of the collision grid's cubic cells, m (e.g. the mean surface edge length). Any size
+    /// finds every contact (the cell certificates are structural); flash cost: 9 bytes per cell
+    /// of the bounding box plus 2 per candidate entry, which grow as cells shrink, while larger
+    /// cells give longer candidate lists to test per tick.
     pub grid_cell_size_m: f64,
     /// Truncation radius, m: every pair of nodes closer than this must be in `couplings`.
     pub truncation_radius_m: f64,
@@ -268,6 +270,14 @@ impl BankBuilder {
             buckets.get_mut(c).ok_or(BuildError::Grid)?.push(k as u16);
         }
         let (grid_starts, grid_items) = csr(&buckets)?;
+        if triangles.len() > MAX_TRIANGLES {
+            return Err(BankError::TriangleCount {
+                count: u32::try_from(triangles.len()).unwrap_or(u32::MAX),
+            }
+            .into());
+        }
+        let (clearance, cell_tri_starts, cell_tri_items) =
+            cell_certificates(&grid, &positions, &triangles, cells as usize)?;
 
         // Self-compliance, symmetrised.
         let mut ckk = Vec::with_capacity(n);
@@ -351,6 +361,9 @@ impl BankBuilder {
         body.push(SectionKind::Grid, bytemuck::bytes_of(&grid), 1)?;
         body.push_slice(SectionKind::GridStarts, &grid_starts)?;
         body.push_slice(SectionKind::GridItems, &grid_items)?;
+        body.push_slice(SectionKind::CellClearance, &clearance)?;
+        body.push_slice(SectionKind::CellTriStarts, &cell_tri_starts)?;
+        body.push_slice(SectionKind::CellTriItems, &cell_tri_items)?;
         body.push_slice(SectionKind::Ckk, &ckk)?;
         body.push_slice(SectionKind::NeighbourStarts, &nb_starts)?;
         body.push_slice(SectionKind::NeighbourIndex, &nb_index)?;
@@ -393,6 +406,82 @@ impl BankBuilder {
         Bank::parse(&aligned)?;
         Ok(out)
     }
+}
+
+/// Clearance per cell, and the CSR (starts, items) of the candidate triangles.
+type CellCertificates = (Vec<u8>, Vec<u32>, Vec<u16>);
+
+/// The per-cell contact certificates (`SPEC.md`, "cell clearance" and "cell candidates"): the
+/// clearance (the exact Chebyshev distance, in cells, to the nearest occupied cell, by a
+/// two-pass chamfer transform, capped at 255) and the CSR candidate lists.
+fn cell_certificates(
+    grid: &GridHeader,
+    positions: &[[f32; 3]],
+    triangles: &[[u16; 3]],
+    cells: usize,
+) -> Result<CellCertificates, BuildError> {
+    let [nx, ny, nz] = grid.dims.map(usize::from);
+    let index = |x: usize, y: usize, z: usize| x + nx * (y + ny * z);
+    let mut lists: Vec<Vec<u16>> = vec![Vec::new(); cells];
+    let mut dist: Vec<u16> = vec![u16::MAX; cells];
+    for (t, &tri) in triangles.iter().enumerate() {
+        let (lo, hi) = triangle_cells(grid, positions, tri, CANDIDATE_WIDEN_CELLS).ok_or(
+            BuildError::IndexOutOfRange {
+                field: "triangles",
+                entry: t,
+            },
+        )?;
+        for z in lo[2]..=hi[2] {
+            for y in lo[1]..=hi[1] {
+                for x in lo[0]..=hi[0] {
+                    let c = index(usize::from(x), usize::from(y), usize::from(z));
+                    lists.get_mut(c).ok_or(BuildError::Grid)?.push(t as u16);
+                }
+            }
+        }
+        let (lo, hi) =
+            triangle_cells(grid, positions, tri, OCCUPIED_WIDEN_CELLS).ok_or(BuildError::Grid)?;
+        for z in lo[2]..=hi[2] {
+            for y in lo[1]..=hi[1] {
+                for x in lo[0]..=hi[0] {
+                    let c = index(usize::from(x), usize::from(y), usize::from(z));
+                    *dist.get_mut(c).ok_or(BuildError::Grid)? = 0;
+                }
+            }
+        }
+    }
+    // Chamfer transform for the Chebyshev distance: a forward pass over the 13 neighbours that
+    // precede a cell, a backward pass over the 13 that follow it.
+    for pass in 0..2 {
+        for i in 0..cells {
+            let c = if pass == 0 { i } else { cells - 1 - i };
+            let (x, y, z) = (c % nx, (c / nx) % ny, c / (nx * ny));
+            let mut best = dist[c];
+            for dz in -1i64..=1 {
+                for dy in -1i64..=1 {
+                    for dx in -1i64..=1 {
+                        let d = dx + 3 * (dy + 3 * dz);
+                        if (pass == 0 && d >= 0) || (pass == 1 && d <= 0) {
+                            continue;
+                        }
+                        let (qx, qy, qz) = (x as i64 + dx, y as i64 + dy, z as i64 + dz);
+                        if qx < 0 || qy < 0 || qz < 0 {
+                            continue;
+                        }
+                        let (qx, qy, qz) = (qx as usize, qy as usize, qz as usize);
+                        if qx >= nx || qy >= ny || qz >= nz {
+                            continue;
+                        }
+                        best = best.min(dist[index(qx, qy, qz)].saturating_add(1));
+                    }
+                }
+            }
+            dist[c] = best;
+        }
+    }
+    let clearance = dist.iter().map(|&d| d.min(255) as u8).collect();
+    let (starts, items) = csr(&lists)?;
+    Ok((clearance, starts, items))
 }
 
 /// CSR (starts, items) of per-row lists.

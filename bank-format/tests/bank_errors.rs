@@ -103,9 +103,9 @@ cases! {
         Bank::parse(&aligned[1..]).map(|_| ())
     };
     bad_magic: E::BadMagic => corrupt(|b| b[0] = b'X');
-    // A bank of the previous major version (its device record is 16 bytes shorter).
-    unsupported_version: E::UnsupportedVersion { major: 1, minor: 0 } => corrupt(|b| put_u16(b, 8, 1));
-    unsupported_later_version: E::UnsupportedVersion { major: 3, minor: 0 } => corrupt(|b| put_u16(b, 8, 3));
+    // A bank of the previous major version (it lacks the cell certificates).
+    unsupported_version: E::UnsupportedVersion { major: 2, minor: 0 } => corrupt(|b| put_u16(b, 8, 2));
+    unsupported_later_version: E::UnsupportedVersion { major: 4, minor: 0 } => corrupt(|b| put_u16(b, 8, 4));
     bad_header_length: E::BadHeaderLength { header_len: 24 } => corrupt(|b| put_u16(b, 12, 24));
     too_many_sections: E::TooManySections { count: 33 } => corrupt(|b| put_u16(b, 14, 33));
     bad_total_length_unaligned: E::BadTotalLength { .. } => {
@@ -202,6 +202,35 @@ cases! {
         put_u32(b, st + 8, 2);
         put_u16(b, it + 2, 0);
     });
+    triangle_count: E::TriangleCount { count: 65536 } => {
+        let mut b = builder();
+        b.triangles = vec![[0, 1, 2]; 65536];
+        match b.build() {
+            Err(BuildError::Rejected(e)) => Err(e),
+            other => panic!("{other:?}"),
+        }
+    };
+    // The first cell's list [0, 1] made [1, 1]: not ascending, and triangle 0 missing.
+    cell_candidates: E::CellCandidates { cell: 0 } =>
+        corrupt_section(K::CellTriItems, |s| put_u16(s, 0, 1));
+    cell_candidate_out_of_range: E::IndexOutOfRange { section: K::CellTriItems, entry: 0 } =>
+        corrupt_section(K::CellTriItems, |s| put_u16(s, 0, 7));
+    // Every cell claims clearance 1, the occupied ones too.
+    cell_clearance_occupied: E::CellClearance { .. } =>
+        corrupt_section(K::CellClearance, |s| s.fill(1));
+    // A free cell claiming more than one above a neighbour (node 3 moved 5 cm away and out of
+    // the triangles, so the grid has free cells).
+    cell_clearance_not_lipschitz: E::CellClearance { .. } => {
+        let mut b = builder();
+        b.positions_m[3] = [0.0, 0.05, 0.0];
+        b.triangles = vec![[0, 1, 2]];
+        let mut bytes = b.build().expect("valid with small cells");
+        let (_, off, len, _) = section(&bytes, K::CellClearance);
+        let free = bytes[off..off + len].iter().position(|&c| c > 0).expect("a free cell");
+        bytes[off + free] += 2;
+        assert!(bank_format::reseal(&mut bytes));
+        parse(&bytes)
+    };
     ckk_not_spd: E::CkkNotSpd { node: 2 } => corrupt_section(K::Ckk, |s| put_f32(s, 2 * 24, -1.0e-3));
     neighbour_self: E::NeighbourSelf { node: 0 } => corrupt_section(K::NeighbourIndex, |s| put_u16(s, 0, 0));
     neighbour_not_sorted: E::NeighbourNotSorted { node: 0 } => corrupt_section(K::NeighbourIndex, |s| {
@@ -276,5 +305,6 @@ cases! {
 #[test]
 fn error_codes_are_distinct_and_stable() {
     assert_eq!(E::TooShort { needed: 0, got: 0 }.code(), 1);
-    assert_eq!(E::Device { field: F::MaxForce }.code(), variant_count());
+    assert_eq!(E::Device { field: F::MaxForce }.code(), 40);
+    assert_eq!(E::CellClearance { cell: 0 }.code(), variant_count());
 }

@@ -33,7 +33,7 @@
 
 use bank_format::Bank;
 
-use crate::contact::closest_surface_point;
+use crate::contact::{BARY_TOL, closest_surface_point, normalise, plane_bary, vertices};
 use crate::solve::MAX_CONTACT_NODES;
 use crate::vec3::{add, cross, dist2, dot, scale, sqrt, sub, unit};
 
@@ -106,7 +106,7 @@ const DIRECTIONS: [(f32, f32); 12] = {
 /// The weighted patch under a tip of radius `radius_m` (m) touching `triangle` (index into
 /// `bank.triangles()`, nodes `nodes`) at the rest-surface point `anchor` with barycentric
 /// coordinates `bary`. A zero, negative or non-finite radius, or a degenerate triangle, gives
-/// the barycentric weights.
+/// the barycentric weights. The same as a [`PatchBuild`] run to its end in one go.
 pub fn tool_patch(
     bank: &Bank,
     triangle: u32,
@@ -115,34 +115,193 @@ pub fn tool_patch(
     anchor: [f32; 3],
     radius_m: f32,
 ) -> Patch {
-    let basis = tangent_basis(bank, nodes).filter(|_| radius_m > 0.0 && radius_m.is_finite());
-    let Some((e1, e2)) = basis else {
-        let mut acc = Accumulator::default();
-        acc.add_bary(nodes, bary, 1.0);
-        return acc.finish(bank);
-    };
-    // The nodal pressures first: they say how far the mesh resolves the tip, and the costly
-    // parts (lumped areas, locating the 12 points) are skipped when their share is zero.
-    let (mut nodal, n_eff) = nodal_pressures(bank, nodes, bary, anchor, radius_m);
-    let theta = resolution(n_eff);
-    let mut acc = Accumulator::default();
-    if theta > 0.0 {
-        nodal.weight_by_lumped_area(bank);
-        acc.merge_scaled(&nodal, theta);
+    let mut build = PatchBuild::new();
+    build.start(bank, triangle, nodes, bary, anchor, radius_m);
+    while !build.locate(bank, QUADRATURE.len()) {}
+    build.finish(bank)
+}
+
+/// [`tool_patch`] in steps, so that the loop can spread it over several ticks: [`start`]
+/// (tangent basis, nodal pressures, the contact triangle's frame), [`locate`] (some of the 12
+/// quadrature points onto the surface), [`finish`] (merge, choose the heaviest mutually
+/// coupled nodes). The arithmetic is the same in whatever steps it is run, so the result is
+/// bit for bit [`tool_patch`]'s.
+///
+/// [`start`]: PatchBuild::start
+/// [`locate`]: PatchBuild::locate
+/// [`finish`]: PatchBuild::finish
+#[derive(Clone, Debug)]
+pub struct PatchBuild {
+    triangle: u32,
+    nodes: [u16; 3],
+    bary: [f32; 3],
+    anchor: [f32; 3],
+    radius_m: f32,
+    /// Tangent basis of the contact triangle; `None`: barycentric weights only.
+    basis: Option<([f32; 3], [f32; 3])>,
+    /// See [`contact_frame`].
+    frame: Option<[[f32; 3]; 3]>,
+    theta: f32,
+    acc: Accumulator,
+    quad: Accumulator,
+    /// Quadrature weight landed in the contact triangle, per vertex (added to `quad` at the
+    /// end: one merge instead of three per point).
+    in_contact: [f32; 3],
+    next: usize,
+}
+
+impl Default for PatchBuild {
+    fn default() -> PatchBuild {
+        PatchBuild::new()
     }
-    if theta < 1.0 {
-        let mut quad = Accumulator::default();
-        for (&(s, w, _), &(c, sn)) in QUADRATURE.iter().zip(&DIRECTIONS) {
-            let (x, y) = (radius_m * s * c, radius_m * s * sn);
-            let q = add(add(anchor, scale(e1, x)), scale(e2, y));
-            match closest_surface_point(bank, triangle, nodes, q) {
-                Some(sp) => quad.add_bary(sp.nodes, sp.bary, w),
-                None => quad.add_bary(nodes, bary, w),
+}
+
+impl PatchBuild {
+    /// The first step: the tangent basis, the nodal pressures (they say how far the mesh
+    /// resolves the tip; the costly parts are skipped when their share is zero) and the
+    /// contact triangle's frame.
+    /// An idle build (barycentric weights of node 0 until [`PatchBuild::start`]).
+    pub fn new() -> PatchBuild {
+        PatchBuild {
+            triangle: 0,
+            nodes: [0; 3],
+            bary: [1.0, 0.0, 0.0],
+            anchor: [0.0; 3],
+            radius_m: 0.0,
+            basis: None,
+            frame: None,
+            theta: 1.0,
+            acc: Accumulator::default(),
+            quad: Accumulator::default(),
+            in_contact: [0.0; 3],
+            next: QUADRATURE.len(),
+        }
+    }
+
+    /// (Re)starts the build in place for a new contact point.
+    pub fn start(
+        &mut self,
+        bank: &Bank,
+        triangle: u32,
+        nodes: [u16; 3],
+        bary: [f32; 3],
+        anchor: [f32; 3],
+        radius_m: f32,
+    ) {
+        let basis = tangent_basis(bank, nodes).filter(|_| radius_m > 0.0 && radius_m.is_finite());
+        self.triangle = triangle;
+        self.nodes = nodes;
+        self.bary = bary;
+        self.anchor = anchor;
+        self.radius_m = radius_m;
+        self.basis = basis;
+        self.frame = None;
+        self.theta = 1.0;
+        self.acc.clear();
+        self.quad.clear();
+        self.in_contact = [0.0; 3];
+        self.next = QUADRATURE.len();
+        let Some((e1, e2)) = basis else {
+            self.acc.add_bary(nodes, bary, 1.0);
+            return;
+        };
+        let (mut nodal, n_eff) = nodal_pressures(bank, nodes, bary, anchor, radius_m);
+        self.theta = resolution(n_eff);
+        if self.theta > 0.0 {
+            nodal.weight_by_lumped_area(bank);
+            self.acc.merge_scaled(&nodal, self.theta);
+        }
+        if self.theta < 1.0 {
+            self.frame = contact_frame(bank, nodes, anchor, e1, e2, radius_m);
+            self.next = 0;
+        }
+    }
+
+    /// Locates up to `points` more quadrature points; `true` once all are located. The points
+    /// lie in the contact triangle's plane, where the barycentric coordinates are affine: a
+    /// point inside the contact triangle costs six multiply-adds (its affine frame); only the
+    /// points outside it walk the surface ([`closest_surface_point`]).
+    pub fn locate(&mut self, bank: &Bank, points: usize) -> bool {
+        let Some((e1, e2)) = self.basis else {
+            return true;
+        };
+        let end = (self.next + points).min(QUADRATURE.len());
+        let todo = QUADRATURE.iter().zip(&DIRECTIONS).take(end).skip(self.next);
+        for (&(s, w, _), &(c, sn)) in todo {
+            let (u, v) = (s * c, s * sn);
+            let inside = self.frame.and_then(|[k0, g1, g2]| {
+                let k = [
+                    k0[0] + u * g1[0] + v * g2[0],
+                    k0[1] + u * g1[1] + v * g2[1],
+                    k0[2] + u * g1[2] + v * g2[2],
+                ];
+                k.iter()
+                    .all(|&x| x >= -BARY_TOL)
+                    .then(|| normalise(k))
+                    .flatten()
+            });
+            if let Some(k) = inside {
+                for (acc, kv) in self.in_contact.iter_mut().zip(k) {
+                    *acc += w * kv;
+                }
+                continue;
+            }
+            let r = self.radius_m;
+            let q = add(add(self.anchor, scale(e1, r * u)), scale(e2, r * v));
+            match closest_surface_point(bank, self.triangle, self.nodes, q) {
+                Some(sp) => self.quad.add_bary(sp.nodes, sp.bary, w),
+                None => self.quad.add_bary(self.nodes, self.bary, w),
             }
         }
-        acc.merge_scaled(&quad, 1.0 - theta);
+        self.next = end;
+        self.next >= QUADRATURE.len()
     }
-    acc.finish(bank)
+
+    /// The last step: merge the quadrature's loads with the nodal ones, then choose the heaviest
+    /// mutually coupled nodes, normalised (call after
+    /// [`PatchBuild::locate`] returned `true`; points not yet located are missing from the
+    /// load). Works in place (the build is large); call it once.
+    pub fn finish(&mut self, bank: &Bank) -> Patch {
+        self.merge();
+        self.choose(bank)
+    }
+
+    /// The quadrature's loads merged with the nodal ones (once, after the last point).
+    fn merge(&mut self) {
+        if self.basis.is_some() && self.theta < 1.0 {
+            self.quad.add_bary(self.nodes, self.in_contact, 1.0);
+            self.acc.merge_scaled(&self.quad, 1.0 - self.theta);
+        }
+    }
+
+    /// The heaviest mutually coupled nodes of the merged loads, normalised (once, after
+    /// [`PatchBuild::merge`]).
+    fn choose(&mut self, bank: &Bank) -> Patch {
+        self.acc.finish(bank)
+    }
+}
+
+/// The contact triangle's barycentric coordinates at `anchor` and their change per tip radius
+/// along `e1` and `e2` (both in the triangle's plane): `k(anchor + r (u e1 + v e2)) = k0 + u g1
+/// + v g2`. `None` for a degenerate triangle.
+fn contact_frame(
+    bank: &Bank,
+    nodes: [u16; 3],
+    anchor: [f32; 3],
+    e1: [f32; 3],
+    e2: [f32; 3],
+    radius_m: f32,
+) -> Option<[[f32; 3]; 3]> {
+    let [a, b, c] = vertices(bank.positions(), nodes)?;
+    let n = cross(sub(b, a), sub(c, a));
+    let nn = dot(n, n);
+    if nn.is_nan() || nn <= 0.0 {
+        return None;
+    }
+    let k0 = plane_bary(a, b, c, n, nn, anchor);
+    let k1 = plane_bary(a, b, c, n, nn, add(anchor, scale(e1, radius_m)));
+    let k2 = plane_bary(a, b, c, n, nn, add(anchor, scale(e2, radius_m)));
+    Some([k0, sub(k1, k0), sub(k2, k0)])
 }
 
 /// How well the mesh resolves the tip, from `n_eff = sum_k (1 - rho_k^2 / r^2)` over the nodes
@@ -231,6 +390,7 @@ fn tangent_basis(bank: &Bank, nodes: [u16; 3]) -> Option<([f32; 3], [f32; 3])> {
 }
 
 /// Node loads gathered before selection: merges repeated nodes.
+#[derive(Clone, Debug)]
 struct Accumulator {
     nodes: [u16; CANDIDATES],
     loads: [f32; CANDIDATES],
@@ -238,8 +398,10 @@ struct Accumulator {
     overflow: f32,
 }
 
-/// Candidates kept before choosing the heaviest [`MAX_CONTACT_NODES`].
-const CANDIDATES: usize = 64;
+/// Candidates kept before choosing the heaviest [`MAX_CONTACT_NODES`] (loads beyond them are
+/// counted in [`Patch::dropped`]; the shipped liver's patches have at most 7, the 100k liver's
+/// 5 mm patches 39).
+const CANDIDATES: usize = 48;
 
 impl Default for Accumulator {
     fn default() -> Accumulator {
@@ -253,6 +415,12 @@ impl Default for Accumulator {
 }
 
 impl Accumulator {
+    /// Empties it (only the used entries are ever read).
+    fn clear(&mut self) {
+        self.len = 0;
+        self.overflow = 0.0;
+    }
+
     /// Nodal pressures to the nodal quadrature's loads `a_k p_k`.
     fn weight_by_lumped_area(&mut self, bank: &Bank) {
         for (&k, q) in self.nodes.iter().zip(self.loads.iter_mut()).take(self.len) {
@@ -296,8 +464,8 @@ impl Accumulator {
         }
     }
 
-    /// The heaviest nodes, mutually coupled, normalised.
-    fn finish(mut self, bank: &Bank) -> Patch {
+    /// The heaviest nodes, mutually coupled, normalised (consumes the loads).
+    fn finish(&mut self, bank: &Bank) -> Patch {
         let total = self.loads.iter().take(self.len).sum::<f32>() + self.overflow;
         let mut patch = Patch {
             nodes: [0; MAX_CONTACT_NODES],
@@ -325,10 +493,11 @@ impl Accumulator {
             if let Some(l) = self.loads.get_mut(i) {
                 *l = 0.0;
             }
+            // Membership in the neighbour index is enough (kept nodes differ from k).
             let coupled = patch
                 .nodes()
                 .iter()
-                .all(|&n| bank.coupling(usize::from(n), usize::from(k)).is_some());
+                .all(|&n| bank.neighbours(usize::from(n)).0.binary_search(&k).is_ok());
             if !coupled {
                 continue;
             }

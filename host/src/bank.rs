@@ -231,7 +231,7 @@ impl Prepared {
             .scene
             .bank
             .grid_cell_m
-            .unwrap_or_else(|| radius.max(2.0 * self.mean_edge()).max(1e-3));
+            .unwrap_or_else(|| self.mean_edge().max(1e-3));
         let pairs = couplings.len();
         let builder = BankBuilder {
             positions_m: self.positions.clone(),

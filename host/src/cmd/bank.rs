@@ -77,6 +77,29 @@ pub fn run(cmd: BankCmd) -> Result<()> {
 }
 
 /// `(kind name, offset, len, count)` of each entry of the bank's section table.
+/// The largest candidate list of the grid's cells, and the mean over the cells of clearance
+/// at most 1 (those where detection tests candidates).
+fn candidate_stats(bank: &bank_format::Bank) -> (usize, f64) {
+    let g = bank.grid();
+    let (mut max, mut sum, mut near) = (0, 0usize, 0usize);
+    for c in 0..g.cell_count() {
+        let k = g.cell_triangles(c).len();
+        max = max.max(k);
+        if g.clearance(c) <= 1 {
+            sum += k;
+            near += 1;
+        }
+    }
+    (
+        max,
+        if near > 0 {
+            sum as f64 / near as f64
+        } else {
+            0.0
+        },
+    )
+}
+
 fn section_table(bank: &Bank) -> Vec<(&'static str, u32, u32, u32)> {
     bank.sections()
         .iter()
@@ -223,6 +246,7 @@ fn inspect(args: InspectArgs) -> Result<()> {
         .sum::<usize>()
         / 2;
     let sections = section_table(&bank);
+    let cand = candidate_stats(&bank);
     if args.json {
         let v = serde_json::json!({
             "file": args.bank.display().to_string(),
@@ -234,7 +258,10 @@ fn inspect(args: InspectArgs) -> Result<()> {
             "triangles": bank.triangles().len(),
             "coupled_pairs": pairs,
             "truncation_radius_m": bank.truncation_radius_m(),
-            "grid": { "cell_size_m": bank.grid().cell_size_m(), "dims": bank.grid().dims() },
+            "grid": {
+                "cell_size_m": bank.grid().cell_size_m(), "dims": bank.grid().dims(),
+                "max_candidates": cand.0, "mean_candidates_near_surface": cand.1,
+            },
             "law": { "kind": law_kind, "coeffs": law.coeffs(), "domain_n": law.domain() },
             "device": {
                 "fulcrum_m": d.fulcrum_m, "shaft_axis": d.shaft_axis,
@@ -269,9 +296,12 @@ fn inspect(args: InspectArgs) -> Result<()> {
         bank.truncation_radius_m()
     );
     println!(
-        "grid      cell {} m, {:?} cells",
+        "grid      cell {} m, {:?} cells; candidate triangles per cell: max {}, mean {:.1} \
+         where the surface is near (clearance <= 1)",
         bank.grid().cell_size_m(),
-        bank.grid().dims()
+        bank.grid().dims(),
+        cand.0,
+        cand.1
     );
     println!(
         "law       {law_kind}, coefficients {:?}, domain {:?} N",
