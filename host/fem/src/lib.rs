@@ -14,7 +14,7 @@
 //!    `C_nk = (K_ff^-1)_nk` (the paper's "elementary deformations", section 4-1, in compliance
 //!    form) for the nodes a scene needs, and the imposed-displacement solve of eq. 2 /
 //!    appendix A (`f_S = C_SS^-1 u*_S`);
-//! 5. [`reference`]: the reference problems of the locking study (a flat punch on the liver,
+//! 5. [`reference`](mod@reference): the reference problems of the locking study (a flat punch on the liver,
 //!    uniform refinement), solved with any element or the 10-node
 //!    [`elasticity::quadratic::QuadraticBody`].
 //!
