@@ -57,7 +57,9 @@ pub fn run(args: Args) -> Result<()> {
             .to_string(),
         "firmware instructions per tick by phase from the QEMU image".to_string(),
         "f32 on the MCU against f64 on the host across the reachable region".to_string(),
-        "bank size and display latency against mesh size; Pareto front of combined knobs"
+        "bank size and display latency against mesh size; the 100k liver's precompute (ANP needs \
+         about 12 GiB there: `host bench compliance --element anp`); Pareto front of combined \
+         knobs"
             .to_string(),
         "hard cases of the loop: grazing, edge and vertex hits, a 5 cm strike, contact nodes \
          1 um apart, the reachable region's edge; condition numbers of K_ff and C_SS"
@@ -95,11 +97,6 @@ pub fn run(args: Args) -> Result<()> {
             ));
         }
         sizes.push(("liver-10k".into(), fine));
-    }
-    if !args.quick
-        && let Some(p) = shipped("generated/liver-100k.msh")
-    {
-        sizes.push(("liver-100k".into(), fem::mesh::load(&p)?));
     }
     sizes.sort_by_key(|(_, m)| m.nodes.len());
     let mut costs = Vec::new();
