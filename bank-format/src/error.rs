@@ -307,6 +307,11 @@ pub enum BankError {
         /// Which value.
         field: DeviceField,
     },
+    /// A gravity coefficient's magnitude exceeds [`crate::GRAVITY_COEFF_MAX`].
+    GravityOutOfRange {
+        /// Index of the coefficient (0..8, the order of `GravityCompensation::coeffs`).
+        coefficient: u32,
+    },
 }
 
 impl BankError {
@@ -354,6 +359,7 @@ impl BankError {
             BankError::LawDomain => 38,
             BankError::LawNotMonotone { .. } => 39,
             BankError::Device { .. } => 40,
+            BankError::GravityOutOfRange { .. } => 41,
         }
     }
 }
@@ -443,6 +449,11 @@ impl fmt::Display for BankError {
                 write!(f, "tissue law not increasing at sample {sample}")
             }
             E::Device { field } => write!(f, "device calibration: {field}"),
+            E::GravityOutOfRange { coefficient } => write!(
+                f,
+                "gravity coefficient {coefficient} beyond +-{} (N m or N)",
+                crate::GRAVITY_COEFF_MAX
+            ),
         }
     }
 }

@@ -80,10 +80,10 @@ pub use frame::{
 pub use heapless;
 pub use law::{LAW_SAMPLES, LawKind, TissueLaw};
 pub use layout::{
-    BANK_ALIGN, BankHeader, BankMeta, CRC_OFFSET, CRC32, DeviceCalibration, GridHeader, HEADER_LEN,
-    LAW_CHEBYSHEV, LAW_LINEAR, LawRecord, MAGIC, MAX_LAW_COEFFS, MAX_NODES, MAX_SECTIONS,
-    SECTION_ALIGN, SECTION_ENTRY_LEN, SectionEntry, SectionKind, VERSION_MAJOR, VERSION_MINOR,
-    bank_crc, reseal,
+    BANK_ALIGN, BankHeader, BankMeta, CRC_OFFSET, CRC32, DeviceCalibration, GRAVITY_COEFF_MAX,
+    GRAVITY_COEFFS, GravityCompensation, GridHeader, HEADER_LEN, LAW_CHEBYSHEV, LAW_LINEAR,
+    LawRecord, MAGIC, MAX_LAW_COEFFS, MAX_NODES, MAX_SECTIONS, SECTION_ALIGN, SECTION_ENTRY_LEN,
+    SectionEntry, SectionKind, VERSION_MAJOR, VERSION_MINOR, bank_crc, reseal,
 };
 pub use reader::{Bank, Grid, SPD_PIVOT_REL, SYMMETRY_REL, TRUNCATION_SLACK, validate_device};
 #[cfg(feature = "alloc")]

@@ -243,6 +243,7 @@ impl Prepared {
             truncation_radius_m: radius,
             scene_id: self.scene_id,
             law: self.scene.law,
+            gravity: None,
             device: self.scene.device,
         };
         let bytes = builder
