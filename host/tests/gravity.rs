@@ -93,6 +93,21 @@ fn cli_fits_held_poses_into_the_scene() {
         text.contains("# fitted by `host calibrate gravity`"),
         "{text}"
     );
+    // The scene's bank carries the coefficients (f32) in its gravity section.
+    let bytes = bank_format::AlignedBytes::new(&host::bank::scene_bank(&scene_path).unwrap());
+    let bank = bank_format::Bank::parse(bytes.as_slice()).unwrap();
+    let carried = bank.gravity().unwrap().coeffs;
+    for (c, w) in carried.iter().zip(got) {
+        assert_eq!(*c, w as f32);
+    }
+    let plain = host::bank::scene_bank(&manifest("scenes/liver.toml")).unwrap();
+    let plain = bank_format::AlignedBytes::new(&plain);
+    assert_eq!(
+        bank_format::Bank::parse(plain.as_slice())
+            .unwrap()
+            .gravity(),
+        None
+    );
 
     // --out leaves the input alone and writes the calibrated copy.
     let orig = std::fs::read_to_string(manifest("scenes/liver.toml")).unwrap();
