@@ -324,6 +324,11 @@ pub enum BankError {
         /// Which value.
         field: DeviceField,
     },
+    /// A gravity coefficient's magnitude exceeds [`crate::GRAVITY_COEFF_MAX`].
+    GravityOutOfRange {
+        /// Index of the coefficient (0..8, the order of `GravityCompensation::coeffs`).
+        coefficient: u32,
+    },
 }
 
 impl BankError {
@@ -374,6 +379,7 @@ impl BankError {
             BankError::TriangleCount { .. } => 41,
             BankError::CellCandidates { .. } => 42,
             BankError::CellClearance { .. } => 43,
+            BankError::GravityOutOfRange { .. } => 44,
         }
     }
 }
@@ -474,6 +480,11 @@ impl fmt::Display for BankError {
                 write!(f, "tissue law not increasing at sample {sample}")
             }
             E::Device { field } => write!(f, "device calibration: {field}"),
+            E::GravityOutOfRange { coefficient } => write!(
+                f,
+                "gravity coefficient {coefficient} beyond +-{} (N m or N)",
+                crate::GRAVITY_COEFF_MAX
+            ),
         }
     }
 }

@@ -13,8 +13,9 @@ pub const MAGIC: [u8; 8] = *b"HAPTBANK";
 /// and candidate triangles) became required sections (`SPEC.md`, "Versioning").
 pub const VERSION_MAJOR: u16 = 3;
 /// Minor version this crate writes. Readers accept any minor version of their major version
-/// (minor versions only add optional sections, which older readers skip).
-pub const VERSION_MINOR: u16 = 0;
+/// (minor versions only add optional sections, which older readers skip). 1: the optional
+/// gravity section ([`SectionKind::Gravity`]).
+pub const VERSION_MINOR: u16 = 1;
 /// Size of [`BankHeader`] in bytes; the section table follows it.
 pub const HEADER_LEN: usize = 32;
 /// Size of one [`SectionEntry`] in bytes.
@@ -133,6 +134,8 @@ pub enum SectionKind {
     TissueLaw,
     /// [`DeviceCalibration`], one element.
     Device,
+    /// [`GravityCompensation`], one element; optional (2.1): absent means no compensation.
+    Gravity,
     /// A section of a later minor version that this reader does not know; skipped.
     Unknown(u32),
 }
@@ -183,6 +186,7 @@ impl SectionKind {
             16 => SectionKind::CellClearance,
             17 => SectionKind::CellTriStarts,
             18 => SectionKind::CellTriItems,
+            24 => SectionKind::Gravity,
             other => SectionKind::Unknown(other),
         }
     }
@@ -209,6 +213,7 @@ impl SectionKind {
             SectionKind::CellClearance => 16,
             SectionKind::CellTriStarts => 17,
             SectionKind::CellTriItems => 18,
+            SectionKind::Gravity => 24,
             SectionKind::Unknown(code) => code,
         }
     }
@@ -236,6 +241,7 @@ impl SectionKind {
             SectionKind::NeighbourCkl => 36,
             SectionKind::TissueLaw => core::mem::size_of::<LawRecord>(),
             SectionKind::Device => core::mem::size_of::<DeviceCalibration>(),
+            SectionKind::Gravity => core::mem::size_of::<GravityCompensation>(),
         })
     }
 
@@ -261,6 +267,7 @@ impl SectionKind {
             SectionKind::NeighbourCkl => "C_kl",
             SectionKind::TissueLaw => "tissue law",
             SectionKind::Device => "device",
+            SectionKind::Gravity => "gravity",
             SectionKind::Unknown(_) => "unknown",
         }
     }
@@ -391,6 +398,45 @@ pub struct DeviceCalibration {
     pub max_joint_speed: [f32; 3],
 }
 
+/// Number of coefficients of [`GravityCompensation`].
+pub const GRAVITY_COEFFS: usize = 8;
+/// Largest magnitude of a gravity coefficient, N m or N (`SPEC.md`, "gravity").
+pub const GRAVITY_COEFF_MAX: f32 = 100.0;
+
+/// Feed-forward for the instrument's own weight (section [`SectionKind::Gravity`], optional).
+///
+/// The effort that holds the instrument still is the gradient of its potential energy
+/// `tau_g(q) = dV/dq` with (`cp, sp, cy, sy`: cosine and sine of pitch and yaw, `s` the
+/// insertion in m)
+///
+/// `V = -(a_c + s b_c) cp cy - (a_s + s b_s) cp sy - (a_p + s b_p) sp - d_c cy - d_s sy`
+///
+/// `b` is the sliding shaft's weight vector in the device frame (N), `a` its moment about the
+/// fulcrum at zero insertion plus parts that pitch without sliding (N m), `d` the parts that
+/// only yaw (N m). See `SPEC.md` ("gravity") for the derivation and the three efforts.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, PartialEq, Pod, Zeroable)]
+pub struct GravityCompensation {
+    /// `[a_c, a_s, a_p, b_c, b_s, b_p, d_c, d_s]`: N m, N m, N m, N, N, N, N m, N m; each
+    /// finite with magnitude at most [`GRAVITY_COEFF_MAX`].
+    pub coeffs: [f32; GRAVITY_COEFFS],
+}
+
+impl GravityCompensation {
+    /// The efforts `tau_g` (pitch N m, yaw N m, insertion N) given `(sin, cos)` of pitch and
+    /// yaw and the insertion `s` in m: the gradient of `V` above (`SPEC.md`, "gravity").
+    pub fn efforts(&self, pitch: (f32, f32), yaw: (f32, f32), s: f32) -> [f32; 3] {
+        let [a_c, a_s, a_p, b_c, b_s, b_p, d_c, d_s] = self.coeffs;
+        let ((sp, cp), (sy, cy)) = (pitch, yaw);
+        let (mc, ms, mp) = (a_c + s * b_c, a_s + s * b_s, a_p + s * b_p);
+        [
+            mc * sp * cy + ms * sp * sy - mp * cp,
+            mc * cp * sy - ms * cp * cy + d_c * sy - d_s * cy,
+            -(b_c * cp * cy + b_s * cp * sy + b_p * sp),
+        ]
+    }
+}
+
 /// The CRC-32 of `bank` as the header's `crc32` field defines it: over all of `bank` with the
 /// four bytes at [`CRC_OFFSET`] taken as zero. `bank` must be exactly the bank (`total_len`
 /// bytes); a slice shorter than the header gives the CRC of what there is.
@@ -440,4 +486,5 @@ const _: () = {
     assert!(core::mem::size_of::<LawRecord>() == 80);
     assert!(core::mem::size_of::<DeviceCalibration>() == 156);
     assert!(core::mem::align_of::<DeviceCalibration>() == BANK_ALIGN);
+    assert!(core::mem::size_of::<GravityCompensation>() == 32);
 };

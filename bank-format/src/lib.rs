@@ -81,9 +81,10 @@ pub use heapless;
 pub use law::{LAW_SAMPLES, LawKind, TissueLaw};
 pub use layout::{
     BANK_ALIGN, BankHeader, BankMeta, CANDIDATE_WIDEN_CELLS, CRC_OFFSET, CRC32, DeviceCalibration,
-    GridHeader, HEADER_LEN, LAW_CHEBYSHEV, LAW_LINEAR, LawRecord, MAGIC, MAX_LAW_COEFFS, MAX_NODES,
-    MAX_SECTIONS, MAX_TRIANGLES, OCCUPIED_WIDEN_CELLS, PIECE_CELLS, SECTION_ALIGN,
-    SECTION_ENTRY_LEN, SectionEntry, SectionKind, VERSION_MAJOR, VERSION_MINOR, bank_crc, reseal,
+    GRAVITY_COEFF_MAX, GRAVITY_COEFFS, GravityCompensation, GridHeader, HEADER_LEN, LAW_CHEBYSHEV,
+    LAW_LINEAR, LawRecord, MAGIC, MAX_LAW_COEFFS, MAX_NODES, MAX_SECTIONS, MAX_TRIANGLES,
+    OCCUPIED_WIDEN_CELLS, PIECE_CELLS, SECTION_ALIGN, SECTION_ENTRY_LEN, SectionEntry, SectionKind,
+    VERSION_MAJOR, VERSION_MINOR, bank_crc, reseal,
 };
 pub use reader::{Bank, Grid, SPD_PIVOT_REL, SYMMETRY_REL, TRUNCATION_SLACK, validate_device};
 #[cfg(feature = "alloc")]

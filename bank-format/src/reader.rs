@@ -4,9 +4,10 @@
 use crate::error::{BankError, DeviceField};
 use crate::law::TissueLaw;
 use crate::layout::{
-    BANK_ALIGN, BankHeader, BankMeta, CANDIDATE_WIDEN_CELLS, DeviceCalibration, GridHeader,
-    HEADER_LEN, MAGIC, MAX_NODES, MAX_SECTIONS, MAX_TRIANGLES, OCCUPIED_WIDEN_CELLS, SECTION_ALIGN,
-    SECTION_ENTRY_LEN, SectionEntry, SectionKind, VERSION_MAJOR, bank_crc,
+    BANK_ALIGN, BankHeader, BankMeta, CANDIDATE_WIDEN_CELLS, DeviceCalibration, GRAVITY_COEFF_MAX,
+    GravityCompensation, GridHeader, HEADER_LEN, MAGIC, MAX_NODES, MAX_SECTIONS, MAX_TRIANGLES,
+    OCCUPIED_WIDEN_CELLS, SECTION_ALIGN, SECTION_ENTRY_LEN, SectionEntry, SectionKind,
+    VERSION_MAJOR, bank_crc,
 };
 use bytemuck::Pod;
 use core::ops::Range;
@@ -40,6 +41,7 @@ pub struct Bank<'a> {
     nb_ckl: &'a [[f32; 9]],
     law: TissueLaw,
     device: &'a DeviceCalibration,
+    gravity: Option<&'a GravityCompensation>,
 }
 
 /// The collision grid: buckets of node indices over R (CSR: the nodes of cell `c` are
@@ -338,6 +340,31 @@ fn parse_device<'a>(sections: &Sections<'a>) -> Result<&'a DeviceCalibration, Ba
     let device: &DeviceCalibration = sections.single(SectionKind::Device)?;
     check_device(device)?;
     Ok(device)
+}
+
+/// `SPEC.md` "Validation" rule 7, gravity (optional section): absent is `None`; else one
+/// element, all finite, each coefficient within [`GRAVITY_COEFF_MAX`].
+fn parse_gravity<'a>(
+    sections: &Sections<'a>,
+) -> Result<Option<&'a GravityCompensation>, BankError> {
+    let section = SectionKind::Gravity;
+    if !sections.table.iter().any(|e| e.kind == section.code()) {
+        return Ok(None);
+    }
+    let gravity: &GravityCompensation = sections.single(section)?;
+    if !all_finite(&gravity.coeffs) {
+        return Err(BankError::NonFinite { section, entry: 0 });
+    }
+    if let Some(i) = gravity
+        .coeffs
+        .iter()
+        .position(|c| !(c.abs() <= GRAVITY_COEFF_MAX))
+    {
+        return Err(BankError::GravityOutOfRange {
+            coefficient: i as u32,
+        });
+    }
+    Ok(Some(gravity))
 }
 
 /// `SPEC.md` "Validation" rule 8, positions: 1 <= n <= 65535 nodes, all finite.
@@ -728,6 +755,7 @@ impl<'a> Bank<'a> {
         let meta = parse_meta(&sections)?;
         let law = parse_law(&sections)?;
         let device = parse_device(&sections)?;
+        let gravity = parse_gravity(&sections)?;
         let positions = parse_positions(&sections)?;
         let n = positions.len();
         let mesh_ids = parse_mesh_ids(&sections, n)?;
@@ -753,6 +781,7 @@ impl<'a> Bank<'a> {
             nb_ckl,
             law,
             device,
+            gravity,
         };
         bank.check_couplings()?;
         bank.check_coverage()?;
@@ -994,6 +1023,12 @@ impl<'a> Bank<'a> {
     /// The device calibration.
     pub fn device(&self) -> &'a DeviceCalibration {
         self.device
+    }
+
+    /// The gravity compensation, `None` when the bank has no gravity section (then nothing is
+    /// compensated).
+    pub fn gravity(&self) -> Option<&'a GravityCompensation> {
+        self.gravity
     }
 
     /// The node nearest to `p` among the 27 buckets around `p`'s cell (clipped to the grid),

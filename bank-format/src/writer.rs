@@ -4,9 +4,9 @@
 use crate::error::BankError;
 use crate::law::TissueLaw;
 use crate::layout::{
-    BankHeader, BankMeta, CANDIDATE_WIDEN_CELLS, DeviceCalibration, GridHeader, HEADER_LEN, MAGIC,
-    MAX_NODES, MAX_TRIANGLES, OCCUPIED_WIDEN_CELLS, SECTION_ALIGN, SECTION_ENTRY_LEN, SectionEntry,
-    SectionKind, VERSION_MAJOR, VERSION_MINOR, reseal,
+    BankHeader, BankMeta, CANDIDATE_WIDEN_CELLS, DeviceCalibration, GravityCompensation,
+    GridHeader, HEADER_LEN, MAGIC, MAX_NODES, MAX_TRIANGLES, OCCUPIED_WIDEN_CELLS, SECTION_ALIGN,
+    SECTION_ENTRY_LEN, SectionEntry, SectionKind, VERSION_MAJOR, VERSION_MINOR, reseal,
 };
 use crate::reader::{Bank, cell_of, triangle_cells};
 use alloc::collections::BTreeMap;
@@ -46,6 +46,9 @@ pub struct BankBuilder {
     pub law: TissueLaw,
     /// Device calibration.
     pub device: DeviceCalibration,
+    /// Gravity compensation of the instrument's weight; `None` writes no gravity section (no
+    /// compensation).
+    pub gravity: Option<GravityCompensation>,
 }
 
 /// Why [`BankBuilder::build`] refused its input.
@@ -370,6 +373,9 @@ impl BankBuilder {
         body.push_slice(SectionKind::NeighbourCkl, &nb_ckl)?;
         body.push(SectionKind::TissueLaw, bytemuck::bytes_of(&law), 1)?;
         body.push(SectionKind::Device, bytemuck::bytes_of(&self.device), 1)?;
+        if let Some(gravity) = &self.gravity {
+            body.push(SectionKind::Gravity, bytemuck::bytes_of(gravity), 1)?;
+        }
 
         let table_len = SECTION_ENTRY_LEN * body.table.len();
         let data_start = HEADER_LEN + table_len;

@@ -104,8 +104,8 @@ cases! {
     };
     bad_magic: E::BadMagic => corrupt(|b| b[0] = b'X');
     // A bank of the previous major version (it lacks the cell certificates).
-    unsupported_version: E::UnsupportedVersion { major: 2, minor: 0 } => corrupt(|b| put_u16(b, 8, 2));
-    unsupported_later_version: E::UnsupportedVersion { major: 4, minor: 0 } => corrupt(|b| put_u16(b, 8, 4));
+    unsupported_version: E::UnsupportedVersion { major: 2, .. } => corrupt(|b| put_u16(b, 8, 2));
+    unsupported_later_version: E::UnsupportedVersion { major: 4, .. } => corrupt(|b| put_u16(b, 8, 4));
     bad_header_length: E::BadHeaderLength { header_len: 24 } => corrupt(|b| put_u16(b, 12, 24));
     too_many_sections: E::TooManySections { count: 33 } => corrupt(|b| put_u16(b, 14, 33));
     bad_total_length_unaligned: E::BadTotalLength { .. } => {
@@ -300,11 +300,24 @@ cases! {
         device_f32(DEV_JOINT_SPEED + 4, -3.0);
     device_max_joint_speed_insertion: E::Device { field: F::MaxJointSpeed { axis: 2 } } =>
         device_f32(DEV_JOINT_SPEED + 8, -0.0);
+    gravity_out_of_range: E::GravityOutOfRange { coefficient: 3 } => {
+        let mut b = builder();
+        b.gravity = Some(bank_format::GravityCompensation { coeffs: [0.0; 8] });
+        let mut bytes = b.build().unwrap();
+        let (_, off, ..) = section(&bytes, K::Gravity);
+        put_f32(&mut bytes, off + 12, 150.0);
+        assert!(bank_format::reseal(&mut bytes));
+        parse(&bytes)
+    };
 }
 
 #[test]
 fn error_codes_are_distinct_and_stable() {
     assert_eq!(E::TooShort { needed: 0, got: 0 }.code(), 1);
     assert_eq!(E::Device { field: F::MaxForce }.code(), 40);
-    assert_eq!(E::CellClearance { cell: 0 }.code(), variant_count());
+    assert_eq!(E::CellClearance { cell: 0 }.code(), 43);
+    assert_eq!(
+        E::GravityOutOfRange { coefficient: 0 }.code(),
+        variant_count()
+    );
 }

@@ -5,7 +5,7 @@ mod common;
 
 use bank_format::{
     AlignedBytes, Bank, BankBuilder, BankError, BuildError, HEADER_LEN, LawKind, MAGIC,
-    SECTION_ENTRY_LEN, SectionKind, TissueLaw, VERSION_MAJOR, bank_crc, reseal,
+    SECTION_ENTRY_LEN, SectionKind, TissueLaw, VERSION_MAJOR, VERSION_MINOR, bank_crc, reseal,
 };
 use common::*;
 
@@ -20,7 +20,7 @@ fn every_accessor_returns_what_was_written() {
     let bank = Bank::parse(&aligned).unwrap();
 
     assert_eq!(&bytes[..8], &MAGIC);
-    assert_eq!(bank.version(), (VERSION_MAJOR, 0));
+    assert_eq!(bank.version(), (VERSION_MAJOR, VERSION_MINOR));
     assert_eq!(bank.bytes().len(), bytes.len());
     assert_eq!(bank.crc(), bank_crc(&bytes));
     assert_eq!(bank.scene_id(), 0x0123_4567_89ab_cdef);

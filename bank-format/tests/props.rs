@@ -216,6 +216,7 @@ fn random_builder(
         truncation_radius_m: radius,
         scene_id: n as u64,
         law: law(),
+        gravity: None,
         device: device(),
     })
 }

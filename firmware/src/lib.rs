@@ -4,7 +4,8 @@
 //! One tick ([`tick::HapticLoop::tick`]), following the paper's pipeline: encoder counts ->
 //! gimbal forward kinematics ([`device`]) -> contact detection and tracking on the bank's
 //! reachable surface ([`contact`], paper section 5) -> contact solve in compliance form and the
-//! tissue law Q ([`solve`], eqs. 3-8) -> `J^T F` -> motor currents -> limits and the safety
+//! tissue law Q ([`solve`], eqs. 3-8) -> `J^T F`, plus the bank's feed-forward for the
+//! instrument's weight ([`tick::gravity_efforts`]) -> motor currents -> limits and the safety
 //! supervisor ([`safety`]). `no_std`, no heap, f32.
 //!
 //! Around the loop, [`app`] is the device application (link commands, faults, telemetry) and

@@ -191,7 +191,7 @@ pub struct TickInput {
     /// Motor currents requested before clamping, A.
     pub requested_a: [f32; 3],
     /// Whether `requested_a` is a host's `ConstantCurrent` command rather than the loop's
-    /// `J^T F`: then a current that is not finite or over its limit is a `BadCommand` fault
+    /// `J^T F + tau_g(q)`: then a current that is not finite or over its limit is a `BadCommand` fault
     /// (never clamped), checked in every state.
     pub host_currents: bool,
     /// Whether the previous tick overran its period.

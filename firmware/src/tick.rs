@@ -28,7 +28,11 @@
 //! 4. the tissue law Q on the tool force ([`apply_tissue_law`], bank's law), except in
 //!    [`Mode::LinearLaw`]; the force on the tool is the *opposite* of the force on the tissue
 //!    (sign convention of [`crate::device`]); it is capped by [`Device::limit_force`];
-//! 5. `tau = J^T F`, requested currents ([`Device::requested_currents`]);
+//! 5. `tau = J^T F + tau_g(q)`, requested currents ([`Device::requested_currents`]); `tau_g`
+//!    is the feed-forward for the instrument's own weight from the bank's optional gravity
+//!    section ([`gravity_efforts`]; zero without it), added in every mode but
+//!    `ConstantCurrent`, with or without contact, so the supervisor clamps and faults on the
+//!    sum as on any request;
 //! 6. [`Supervisor::tick`]: the hardware interlocks (e-stop, amplifier faults), NaN, encoder
 //!    jumps, overspeed (the tip's and the joints' change since the previous tick against the
 //!    bank's thresholds), joint and current limits, link silence, overruns and a failed solve
@@ -47,7 +51,7 @@
 use bank_format::{Bank, Contact, Counters, MAX_CONTACTS, Mode, Telemetry, heapless};
 
 use crate::contact::{ContactState, ContactTracker};
-use crate::device::{Device, transpose_mul};
+use crate::device::{Device, Joints, sin_cos, transpose_mul};
 use crate::hal::Interlocks;
 use crate::patch::{Patch, PatchBuild, tool_patch};
 use crate::safety::{ArmRefused, Fault, SafetyConfig, State, Supervisor, TickInput};
@@ -363,9 +367,11 @@ impl<'b> HapticLoop<'b> {
         let requested_a = match self.mode {
             Mode::ConstantCurrent { currents_a } => currents_a,
             _ if solve_error.is_some() => [0.0; 3],
-            _ => self
-                .device
-                .requested_currents(transpose_mul(&jac, force_on_tool)),
+            _ => {
+                let [fp, fy, fi] = transpose_mul(&jac, force_on_tool);
+                let [gp, gy, gi] = gravity_efforts(self.bank, &q);
+                self.device.requested_currents([fp + gp, fy + gy, fi + gi])
+            }
         };
         let out = self.supervisor.tick(&TickInput {
             bank_error: None,
@@ -551,6 +557,17 @@ impl HapticLoop<'_> {
 }
 
 /// `a - b` per joint, wrapping (encoder counters wrap).
+/// The joint efforts that hold the instrument still against its own weight at `q` (pitch N m,
+/// yaw N m, insertion N): `tau_g(q) = dV/dq` of the bank's gravity section
+/// ([`GravityCompensation::efforts`](bank_format::GravityCompensation::efforts), `SPEC.md`
+/// "gravity"), zero when the bank has none.
+pub fn gravity_efforts(bank: &Bank<'_>, q: &Joints) -> [f32; 3] {
+    match bank.gravity() {
+        Some(g) => g.efforts(sin_cos(q.pitch), sin_cos(q.yaw), q.insertion),
+        None => [0.0; 3],
+    }
+}
+
 fn sub_wrapping(a: [i32; 3], b: [i32; 3]) -> [i32; 3] {
     let mut out = a;
     for (o, &x) in out.iter_mut().zip(&b) {
@@ -1117,6 +1134,7 @@ mod tests {
             truncation_radius_m: 0.005,
             scene_id: 1,
             law: TissueLaw::chebyshev(&[2.6, 2.5, -0.1], [0.0, 5.0]).unwrap(),
+            gravity: None,
             device: DeviceCalibration {
                 fulcrum_m: [0.01 / 3.0, 0.01 / 3.0, 0.1],
                 ..patch_device()
@@ -1152,5 +1170,85 @@ mod tests {
             "{e:?}"
         );
         assert_eq!(lp.telemetry().fault, Some(FaultReason::SolveFailed));
+    }
+
+    /// A 3-node bank far below the tool (no contact ever), with or without gravity.
+    fn gravity_bank(gravity: Option<bank_format::GravityCompensation>) -> AlignedBytes {
+        let c = 1.0e-3;
+        let diag = |v: f64| {
+            core::array::from_fn(|i| core::array::from_fn(|j| if i == j { v } else { 0.0 }))
+        };
+        let b = BankBuilder {
+            c_kk: std::vec![diag(c); 3],
+            couplings: std::vec![
+                (0, 1, diag(0.1 * c)),
+                (0, 2, diag(0.1 * c)),
+                (1, 2, diag(0.1 * c))
+            ],
+            mesh_ids: std::vec![0, 1, 2],
+            triangles: std::vec![[0, 1, 2]],
+            positions_m: std::vec![[0.0, 0.0, 0.0], [0.01, 0.0, 0.0], [0.0, 0.01, 0.0]],
+            grid_cell_size_m: 0.005,
+            truncation_radius_m: 0.005,
+            scene_id: 3,
+            law: TissueLaw::linear(0.0, 1.0, [0.0, 5.0]).unwrap(),
+            gravity,
+            device: crate::fixtures::bench_device([0.0, 0.0, 0.3]),
+        };
+        AlignedBytes::new(&b.build().unwrap())
+    }
+
+    /// The tick adds exactly `tau_g(q)` (`SPEC.md` "gravity"), written out here in f64 from
+    /// the potential's gradient, before the current mapping `i = tau / (transmission Kt)`:
+    /// armed, no contact, in `Render` and `Transparent`; not in `ConstantCurrent`; and a bank
+    /// without the section gives zero current away from the tissue.
+    #[test]
+    fn the_tick_adds_the_gravity_feed_forward() {
+        let coeffs = [0.05f32, -0.02, 0.03, 0.4, 0.1, -0.3, 0.02, -0.01];
+        let g = bank_format::GravityCompensation { coeffs };
+        let with = gravity_bank(Some(g));
+        let without = gravity_bank(None);
+        let bank = Bank::parse(with.as_slice()).unwrap();
+        let plain = Bank::parse(without.as_slice()).unwrap();
+        assert_eq!(bank.gravity(), Some(&g));
+        assert_eq!(plain.gravity(), None);
+        let cal = *bank.device();
+        let counts = [2000, -1500, 300];
+        for mode in [Mode::Render, Mode::Transparent] {
+            let mut lp = HapticLoop::new(&bank);
+            lp.set_mode(mode).unwrap();
+            lp.arm().unwrap();
+            let q = lp.device().joints(counts);
+            let out = lp.tick(input(counts));
+            assert_eq!((out.state, out.contact), (State::Armed, ContactState::Free));
+            // Hand-written tau_g = dV/dq in f64.
+            let c = coeffs.map(f64::from);
+            let (p, y, s) = (f64::from(q.pitch), f64::from(q.yaw), f64::from(q.insertion));
+            let (sp, cp, sy, cy) = (p.sin(), p.cos(), y.sin(), y.cos());
+            let (mc, ms, mp) = (c[0] + s * c[3], c[1] + s * c[4], c[2] + s * c[5]);
+            let tau = [
+                mc * sp * cy + ms * sp * sy - mp * cp,
+                mc * cp * sy - ms * cp * cy + c[6] * sy - c[7] * cy,
+                -(c[3] * cp * cy + c[4] * cp * sy + c[5] * sp),
+            ];
+            for j in 0..3 {
+                let want = tau[j]
+                    / (f64::from(cal.transmission[j]) * f64::from(cal.torque_constant_nm_per_a[j]));
+                assert!(want.abs() > 0.01 && want.abs() < f64::from(cal.current_limit_a[j]));
+                let got = f64::from(out.currents_a[j]);
+                assert!(
+                    (got - want).abs() <= 1e-5 * want.abs().max(1.0),
+                    "{mode:?} {j}: {got} vs {want}"
+                );
+            }
+        }
+        let mut lp = HapticLoop::new(&bank);
+        let currents_a = [0.1, -0.2, 0.3];
+        lp.set_mode(Mode::ConstantCurrent { currents_a }).unwrap();
+        lp.arm().unwrap();
+        assert_eq!(lp.tick(input(counts)).currents_a, currents_a);
+        let mut lp = HapticLoop::new(&plain);
+        lp.arm().unwrap();
+        assert_eq!(lp.tick(input(counts)).currents_a, [0.0; 3]);
     }
 }

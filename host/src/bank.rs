@@ -243,6 +243,12 @@ impl Prepared {
             truncation_radius_m: radius,
             scene_id: self.scene_id,
             law: self.scene.law,
+            gravity: self
+                .scene
+                .gravity
+                .map(|c| bank_format::GravityCompensation {
+                    coeffs: c.map(|v| v as f32),
+                }),
             device: self.scene.device,
         };
         let bytes = builder

@@ -73,7 +73,17 @@ struct RawScene {
     law: RawLaw,
     #[serde(default)]
     display_law: Option<RawDisplayLaw>,
+    #[serde(default)]
+    gravity: Option<RawGravity>,
     bank: RawBank,
+}
+
+/// `[gravity]`: the coefficients of the instrument's weight feed-forward (`bank-format`
+/// `SPEC.md`, "gravity"), written by `host calibrate gravity`.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawGravity {
+    coeffs: Spanned<[f64; bank_format::GRAVITY_COEFFS]>,
 }
 
 #[derive(Debug, Deserialize)]
@@ -253,6 +263,10 @@ pub struct Scene {
     /// Friction offsets measured by `host calibrate motor` (pitch, yaw: N m; insertion: N);
     /// recorded for the operator, default 0.
     pub friction_offset: [f64; 3],
+    /// Gravity compensation of the instrument's weight from the optional `[gravity]` table:
+    /// `[a_c, a_s, a_p, b_c, b_s, b_p, d_c, d_s]` (N m, N m, N m, N, N, N, N m, N m; `bank-format`
+    /// `SPEC.md`, "gravity"). `None`: no compensation (the bank has no gravity section).
+    pub gravity: Option<[f64; bank_format::GRAVITY_COEFFS]>,
     /// Bank options.
     pub bank: BankOptions,
     /// Identity of the scene: FNV-1a 64 of the scene file's bytes (the mesh is hashed in when
@@ -410,6 +424,11 @@ impl Scene {
             .map(|p| parse_display_law(&ctx, p))
             .transpose()?;
         let friction_offset = parse_friction_offset(&ctx, &raw.device)?;
+        let gravity = raw
+            .gravity
+            .as_ref()
+            .map(|g| parse_gravity(&ctx, g))
+            .transpose()?;
         let bank = parse_bank(&ctx, &raw.bank)?;
         Ok(Scene {
             path: path.to_path_buf(),
@@ -425,6 +444,7 @@ impl Scene {
             law_spec,
             display_law,
             friction_offset,
+            gravity,
             bank,
             text_hash: fnv1a(FNV_OFFSET, text.as_bytes()),
         })
@@ -1013,6 +1033,28 @@ fn parse_friction_offset(ctx: &Ctx, d: &RawDevice) -> Result<[f64; 3], SceneErro
         }
         None => Ok([0.0; 3]),
     }
+}
+
+/// `[gravity]`: eight finite coefficients, each within the bank's
+/// [`bank_format::GRAVITY_COEFF_MAX`] (N m or N).
+fn parse_gravity(
+    ctx: &Ctx,
+    g: &RawGravity,
+) -> Result<[f64; bank_format::GRAVITY_COEFFS], SceneError> {
+    finite(ctx, &g.coeffs, "gravity.coeffs")?;
+    let c = *g.coeffs.get_ref();
+    let max = f64::from(bank_format::GRAVITY_COEFF_MAX);
+    if let Some(i) = c.iter().position(|v| v.abs() > max) {
+        return Err(ctx.err(
+            g.coeffs.span(),
+            "gravity.coeffs",
+            format!(
+                "coefficient {i} is {}: beyond +-{max} (N m or N), a unit or sign error",
+                c[i]
+            ),
+        ));
+    }
+    Ok(c)
 }
 
 /// `[bank]`: `truncation_radius_m` finite and >= 0; `precision` "f32" (default);

@@ -110,6 +110,7 @@ pub fn builder() -> BankBuilder {
         truncation_radius_m: 0.012,
         scene_id: 0x0123_4567_89ab_cdef,
         law: law(),
+        gravity: None,
         device: device(),
     }
 }

@@ -8,12 +8,14 @@
 //! torque-constant fit, [`scene_edit`] writes results into a scene file without disturbing its
 //! comments, [`specimen`] computes the linear model's prediction for a compression specimen, and
 //! [`plot`] draws data, fit and residuals (PNG and SVG); [`cost`] estimates what evaluating a law
-//! costs on the MCU.
+//! costs on the MCU; [`gravity`] fits the feed-forward for the instrument's own weight to the
+//! currents that hold it at a few poses.
 
 pub mod cheb;
 pub mod cost;
 pub mod csv;
 pub mod fit;
+pub mod gravity;
 pub mod motor;
 pub mod plot;
 pub mod scene_edit;

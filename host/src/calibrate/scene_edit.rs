@@ -189,3 +189,26 @@ pub fn set_motor(
     }
     validated(path, &doc)
 }
+
+/// The scene text with `[gravity] coeffs` set to a gravity fit (`bank-format` `SPEC.md`,
+/// "gravity"); `source` (the CSV and its residual) goes into a comment.
+pub fn set_gravity(
+    path: &Path,
+    text: &str,
+    coeffs: &[f64; bank_format::GRAVITY_COEFFS],
+    source: &str,
+) -> Result<String, EditError> {
+    let mut doc = parse(path, text)?;
+    let new_table = "\n# Gravity compensation of the instrument's weight: tau_g(q) = dV/dq with\n\
+                     # V = -(a_c + s b_c) cp cy - (a_s + s b_s) cp sy - (a_p + s b_p) sp - d_c cy - d_s sy,\n\
+                     # coeffs = [a_c, a_s, a_p, b_c, b_s, b_p, d_c, d_s] (N m, N m, N m, N, N, N, N m, N m).\n\
+                     # The bank carries it and the firmware adds it in every armed mode. Written by\n\
+                     # `host calibrate gravity`; delete the table to switch compensation off.\n";
+    let t = table(path, &mut doc, "gravity", Some(new_table))?;
+    set(t, "coeffs", array(coeffs.iter().copied()));
+    if let Some(mut key) = t.key_mut("coeffs") {
+        key.leaf_decor_mut()
+            .set_prefix(format!("# fitted by `host calibrate gravity`: {source}\n"));
+    }
+    validated(path, &doc)
+}

@@ -1,6 +1,7 @@
 //! `host calibrate …`: bench calibration (issue 8). `tissue` fits the tissue law Q or the
 //! display law P to a compression curve, `motor` the torque constants to load-cell
-//! measurements, `specimen` computes the linear FEM prediction for a compression specimen
+//! measurements, `gravity` the feed-forward for the instrument's weight to held poses,
+//! `specimen` computes the linear FEM prediction for a compression specimen
 //! (the x of Q and P). Results go into a scene file (comments kept, written atomically) and
 //! plots (SVG and PNG).
 
@@ -10,7 +11,7 @@ use host::calibrate::fit::{self, ChebFit, DegreeRow};
 use host::calibrate::motor::{self, AXES, AxisFit};
 use host::calibrate::plot::{self, PlotSpec};
 use host::calibrate::scene_edit::{self, Law};
-use host::calibrate::{csv, specimen};
+use host::calibrate::{csv, gravity, specimen};
 use host::fsio::write_atomic;
 use host::scene::Scene;
 use std::path::{Path, PathBuf};
@@ -24,6 +25,9 @@ pub enum Calibrate {
     /// Fit transmission x torque constant and a friction offset per axis to commanded current
     /// vs load-cell force at known poses.
     Motor(MotorArgs),
+    /// Fit the gravity compensation of the instrument's own weight to the currents that hold
+    /// it still at several poses (device in constant-current mode) and write it into the scene.
+    Gravity(GravityArgs),
     /// The linear FEM prediction for a cylindrical compression specimen: force and radial
     /// displacement per metre of compression, as JSON.
     Specimen(SpecimenArgs),
@@ -102,6 +106,26 @@ pub struct MotorArgs {
     json: bool,
 }
 
+/// Arguments of `host calibrate gravity`.
+#[derive(clap::Args, Debug)]
+pub struct GravityArgs {
+    /// CSV with columns pitch_rad, yaw_rad, insertion_m, current_pitch_a, current_yaw_a,
+    /// current_insertion_a: one held pose per row, `#` lines are comments.
+    #[arg(long)]
+    csv: PathBuf,
+    /// Scene file: its motor calibration (gear_ratio, torque constants) turns the currents into
+    /// joint efforts; the coefficients are written into its [gravity] table (comments kept,
+    /// written atomically) unless --out is given.
+    #[arg(long)]
+    scene: PathBuf,
+    /// Write the calibrated scene here instead of editing --scene in place.
+    #[arg(long)]
+    out: Option<PathBuf>,
+    /// Print one JSON object instead of the table.
+    #[arg(long)]
+    json: bool,
+}
+
 /// Arguments of `host calibrate specimen`.
 #[derive(clap::Args, Debug)]
 pub struct SpecimenArgs {
@@ -121,6 +145,7 @@ pub fn run(cmd: Calibrate) -> Result<()> {
     match cmd {
         Calibrate::Tissue(a) => tissue(a),
         Calibrate::Motor(a) => motor_cmd(a),
+        Calibrate::Gravity(a) => gravity_cmd(a),
         Calibrate::Specimen(a) => specimen_cmd(a),
     }
 }
@@ -497,6 +522,53 @@ fn motor_cmd(a: MotorArgs) -> Result<()> {
     for p in &plots {
         println!("plot: {}", p.display());
     }
+    Ok(())
+}
+
+fn gravity_cmd(a: GravityArgs) -> Result<()> {
+    let scene = Scene::load(&a.scene)?;
+    let table = csv::read(&a.csv, &gravity::COLUMNS)?;
+    let poses = gravity::poses(&table, &scene.device)?;
+    let f = gravity::fit(&poses).with_context(|| a.csv.display().to_string())?;
+    let source = format!(
+        "{}, {} poses, residual RMS {:.3e} N m (worst {:.3e}), insertion {:.3e} N (worst {:.3e})",
+        a.csv.display(),
+        f.poses,
+        f.rms_nm,
+        f.worst_nm.0.abs(),
+        f.rms_n,
+        f.worst_n.0.abs()
+    );
+    let text = std::fs::read_to_string(&a.scene)
+        .with_context(|| format!("{}: cannot read the scene", a.scene.display()))?;
+    let out = a.out.as_deref().unwrap_or(&a.scene);
+    let new = scene_edit::set_gravity(out, &text, &f.coeffs, &source)?;
+    write_atomic(out, new.as_bytes(), &[]).with_context(|| format!("writing {}", out.display()))?;
+    if a.json {
+        println!(
+            "{}",
+            serde_json::json!({ "fit": f, "names": gravity::NAMES, "scene": out })
+        );
+        return Ok(());
+    }
+    println!("{:>6} {:>14}", "coeff", "value");
+    for (name, c) in gravity::NAMES.iter().zip(&f.coeffs) {
+        let unit = if name.starts_with('b') { "N" } else { "N m" };
+        println!("{name:>6} {c:>14.6e} {unit}");
+    }
+    println!(
+        "residual over {} poses: pitch/yaw RMS {:.3e} N m, worst {:.3e} N m (line {}); \
+         insertion RMS {:.3e} N, worst {:.3e} N (line {}); conditioning {:.2e}",
+        f.poses,
+        f.rms_nm,
+        f.worst_nm.0.abs(),
+        f.worst_nm.1,
+        f.rms_n,
+        f.worst_n.0.abs(),
+        f.worst_n.1,
+        f.conditioning
+    );
+    println!("wrote [gravity] coeffs of {}", out.display());
     Ok(())
 }
 

@@ -8,8 +8,10 @@
 //! `m_j q''_j = k_j (q_hand_j - q_j) + d_j (q'_hand_j - q'_j) - b_j q'_j + i_j g_j Kt_j`,
 //! where `g_j` is the transmission (motor rad per joint rad or per m) and `Kt_j` the torque
 //! constant, so `i g Kt` is exactly the joint effort the firmware asked for with
-//! `i = tau / (g Kt)` (see `firmware::device`). Integrated with semi-implicit Euler in
-//! [`SUBSTEPS`] steps per 1 ms tick (f64).
+//! `i = tau / (g Kt)` (see `firmware::device`). With a gravity load
+//! ([`PlantParams::gravity`]) the instrument's weight adds `-tau_g(q)`, the generalised force
+//! of the potential `V` of `bank-format`'s `SPEC.md` ("gravity"), to the right-hand side.
+//! Integrated with semi-implicit Euler in [`SUBSTEPS`] steps per 1 ms tick (f64).
 
 use crate::kinematics::counts_for;
 use bank_format::DeviceCalibration;
@@ -30,6 +32,9 @@ pub struct PlantParams {
     pub hand_stiffness: [f64; 3],
     /// Damping of the grip: N m s/rad, N m s/rad, N s/m.
     pub hand_damping: [f64; 3],
+    /// The instrument's weight as the coefficients of its potential (`SPEC.md`, "gravity";
+    /// [`crate::calibrate::gravity::efforts`]); `None`: weightless, as the SIL runs by default.
+    pub gravity: Option<[f64; bank_format::GRAVITY_COEFFS]>,
 }
 
 impl Default for PlantParams {
@@ -41,6 +46,7 @@ impl Default for PlantParams {
             friction: [1.0e-3, 1.0e-3, 0.5],
             hand_stiffness: [20.0, 20.0, 2000.0],
             hand_damping: [0.2, 0.2, 20.0],
+            gravity: None,
         }
     }
 }
@@ -60,14 +66,19 @@ pub struct Gimbal {
 impl Gimbal {
     /// At rest in the calibration's home pose (encoders at zero).
     pub fn new(cal: &DeviceCalibration, params: PlantParams) -> Gimbal {
-        let home = cal.home_joint.map(f64::from);
+        Gimbal::at_rest(cal, params, cal.home_joint.map(f64::from))
+    }
+
+    /// At rest at joint values `q` (pitch rad, yaw rad, insertion m); the encoders read
+    /// [`counts_for`] them.
+    pub fn at_rest(cal: &DeviceCalibration, params: PlantParams, q: [f64; 3]) -> Gimbal {
         Gimbal {
             params,
             effort_per_amp: std::array::from_fn(|j| {
                 f64::from(cal.transmission[j]) * f64::from(cal.torque_constant_nm_per_a[j])
             }),
             cal: *cal,
-            q: home,
+            q,
             qd: [0.0; 3],
         }
     }
@@ -94,6 +105,9 @@ impl Gimbal {
         let h = TICK_S / SUBSTEPS as f64;
         for s in 1..=SUBSTEPS {
             let a = s as f64 / SUBSTEPS as f64;
+            let weight = p
+                .gravity
+                .map(|c| crate::calibrate::gravity::efforts(&c, self.q));
             for j in 0..3 {
                 let target = hand_from[j] + a * (hand_to[j] - hand_from[j]);
                 let target_speed = (hand_to[j] - hand_from[j]) / TICK_S;
@@ -103,10 +117,13 @@ impl Gimbal {
                 } else {
                     0.0
                 };
-                let force = p.hand_stiffness[j] * (target - self.q[j])
+                let mut force = p.hand_stiffness[j] * (target - self.q[j])
                     + p.hand_damping[j] * (target_speed - self.qd[j])
                     - p.friction[j] * self.qd[j]
                     + motor;
+                if let Some(tau_g) = weight {
+                    force -= tau_g[j];
+                }
                 self.qd[j] += h * force / p.inertia[j];
                 self.q[j] += h * self.qd[j];
             }
