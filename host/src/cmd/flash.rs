@@ -9,7 +9,6 @@ use flash::{Layout, Part, Phase, Plan, Progress, What};
 use host::progress::Bar;
 use host::source::{await_identity, check_identity, open_device_port};
 use std::path::{Path, PathBuf};
-use std::process::Command;
 use std::time::Duration;
 
 /// Arguments of `host flash`.
@@ -155,28 +154,9 @@ fn bank_bytes(args: &Args) -> Result<(Vec<u8>, String)> {
 /// `cargo build --release` in firmware/board (its own workspace; a no-op when up to date) and
 /// the path of its release image.
 fn build_board_image() -> Result<PathBuf> {
-    let cargo = std::env::var_os("CARGO").unwrap_or_else(|| "cargo".into());
     let dir = host::sil::harness::repo_root().join("firmware/board");
     eprintln!("building the board image in {} ...", dir.display());
-    let out = Command::new(&cargo)
-        .args(["build", "--release", "--quiet"])
-        .current_dir(&dir)
-        .env_remove("CARGO_TARGET_DIR")
-        .output()
-        .with_context(|| {
-            format!(
-                "cannot run {} in {}",
-                cargo.to_string_lossy(),
-                dir.display()
-            )
-        })?;
-    if !out.status.success() {
-        bail!(
-            "building the board image in {} failed (or pass --elf F):\n{}",
-            dir.display(),
-            String::from_utf8_lossy(&out.stderr)
-        );
-    }
+    host::sil::harness::cargo_build_release(&dir, "the board image", " (or pass --elf F)")?;
     Ok(board_image(&dir))
 }
 

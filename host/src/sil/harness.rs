@@ -264,11 +264,17 @@ pub fn repo_root() -> PathBuf {
 /// Build the QEMU image (`cargo build --release` in `firmware/qemu`; a no-op when it is up to
 /// date) and return its path. Needs the `thumbv7em-none-eabihf` target.
 pub fn build_image() -> Result<PathBuf> {
+    cargo_build_release(&repo_root().join("firmware/qemu"), "the QEMU image", "")?;
+    Ok(image_path())
+}
+
+/// `cargo build --release --quiet` in `dir` (a firmware image's own workspace, with its own
+/// target dir), failing with its stderr; `what` names the image, `hint` follows "failed".
+pub fn cargo_build_release(dir: &Path, what: &str, hint: &str) -> Result<()> {
     let cargo = std::env::var_os("CARGO").unwrap_or_else(|| "cargo".into());
-    let dir = repo_root().join("firmware/qemu");
     let out = Command::new(&cargo)
         .args(["build", "--release", "--quiet"])
-        .current_dir(&dir)
+        .current_dir(dir)
         .env_remove("CARGO_TARGET_DIR")
         .output()
         .with_context(|| {
@@ -280,12 +286,12 @@ pub fn build_image() -> Result<PathBuf> {
         })?;
     if !out.status.success() {
         bail!(
-            "building the QEMU image in {} failed:\n{}",
+            "building {what} in {} failed{hint}:\n{}",
             dir.display(),
             String::from_utf8_lossy(&out.stderr)
         );
     }
-    Ok(image_path())
+    Ok(())
 }
 
 /// Run `session` on the image under QEMU. Errors are set-up failures (QEMU missing, pipes,
