@@ -280,6 +280,12 @@ fn wait_for(what: &str, mut ok: impl FnMut() -> bool) {
     }
 }
 
+/// How many pixels differ from the background (the top-left pixel's colour).
+fn covered(image: &image::Rgb) -> usize {
+    let background = image.pixels[0];
+    image.pixels.iter().filter(|p| **p != background).count()
+}
+
 /// Screenshot of `url` (1000 x 700) by headless Chromium with software WebGL.
 fn screenshot(url: &str, out: &Path) -> image::Rgb {
     let profile = tempfile::tempdir().unwrap();
@@ -377,7 +383,9 @@ fn viewer_renders_the_liver_and_the_press_deforms_it_under_the_tool() {
     // takes the screenshot when its virtual-time budget ends, which a busy machine can reach
     // before the WebSocket delivered frames: the page's own report (tagged per attempt) says
     // what it had, and the shot is retaken until it had frames (and, after the press, the
-    // contact).
+    // contact). A shot whose canvas is blank is retaken too: headless Chromium can capture the
+    // page in the instant after a viewport change cleared the canvas and before the next draw
+    // (a blank organ in one shot of a fresh machine's run); six blank shots in a row still fail.
     let shot = |name: &str, contact: bool| {
         for attempt in 0..6 {
             let tag = format!("{name}-{attempt}");
@@ -385,6 +393,7 @@ fn viewer_renders_the_liver_and_the_press_deforms_it_under_the_tool() {
             let image = screenshot(&format!("{url}?tool=0&tag={tag}"), &png);
             let report = status(&addr)["report"].clone();
             if report["tag"] == tag.as_str()
+                && covered(&image) * 20 > image.pixels.len()
                 && report["frames"].as_u64() >= Some(3)
                 && (!contact || report["contacts"].as_u64() > Some(0))
             {
@@ -395,13 +404,8 @@ fn viewer_renders_the_liver_and_the_press_deforms_it_under_the_tool() {
     };
     let (before, _) = shot("before", false);
 
-    // Not a blank canvas: the organ covers a good part of the view, shaded in many tones.
-    let background = before.pixels[0];
-    let covered = before.pixels.iter().filter(|p| **p != background).count();
-    assert!(
-        covered * 20 > before.pixels.len(),
-        "{covered} non-background pixels"
-    );
+    // Not a blank canvas (`shot` checked that the organ covers a good part of the view): the
+    // organ is shaded in many tones.
     let mut tones: Vec<[u8; 3]> = before.pixels.clone();
     tones.sort_unstable();
     tones.dedup();
@@ -432,19 +436,34 @@ fn viewer_renders_the_liver_and_the_press_deforms_it_under_the_tool() {
     let tip = &report["tip_px"];
     let (tx, ty) = (tip[0].as_f64().unwrap(), tip[1].as_f64().unwrap());
 
-    // The rendered mesh changed, and where it changed is around the tool tip.
+    // The rendered mesh changed, and where it changed most is around the tool tip. The organ is
+    // tinted by displacement, so an 8 mm press shifts the tone of the whole lobe a little (by how
+    // much depends on the settled contact): the test looks at the pixels that changed by at least
+    // half the largest change, the indented, most displaced surface.
     assert_eq!((after.width, after.height), (before.width, before.height));
-    let mut changed = Vec::new();
-    for (i, (a, b)) in before.pixels.iter().zip(&after.pixels).enumerate() {
-        if (0..3).any(|c| a[c].abs_diff(b[c]) > 24) {
-            changed.push(((i % before.width) as f64, (i / before.width) as f64));
-        }
-    }
+    let change = |a: &[u8; 3], b: &[u8; 3]| (0..3).map(|c| a[c].abs_diff(b[c])).max().unwrap_or(0);
     // The HUD text (force, tick rate) changes too: only count the pixels below it.
-    changed.retain(|&(x, y)| x > 460.0 || y > 170.0);
+    let below_hud = |i: usize| i % before.width > 460 || i / before.width > 170;
+    let pairs = || {
+        before
+            .pixels
+            .iter()
+            .zip(&after.pixels)
+            .enumerate()
+            .filter(|(i, _)| below_hud(*i))
+    };
+    let largest = pairs().map(|(_, (a, b))| change(a, b)).max().unwrap_or(0);
+    assert!(
+        largest > 48,
+        "the largest change is {largest}; force {force}"
+    );
+    let changed: Vec<(f64, f64)> = pairs()
+        .filter(|(_, (a, b))| 2 * change(a, b) >= largest)
+        .map(|(i, _)| ((i % before.width) as f64, (i / before.width) as f64))
+        .collect();
     assert!(
         changed.len() > 100,
-        "only {} pixels changed; force {force}",
+        "only {} pixels changed by half the largest change ({largest}); force {force}",
         changed.len()
     );
     let n = changed.len() as f64;

@@ -184,11 +184,15 @@
   const radius = 0.5 * len(sub(hi, lo));
   const cam = { az: -1.25, el: 0.42, dist: 2.4 * radius };
   let vp = null, eye = null;
+  // Returns whether the canvas was resized: resizing clears the drawing buffer, so the caller
+  // must draw again even when no new frame arrived.
   function camera() {
     const w = canvas.clientWidth, h = canvas.clientHeight;
-    if (canvas.width !== w || canvas.height !== h) { canvas.width = w; canvas.height = h; }
+    const resized = canvas.width !== w || canvas.height !== h;
+    if (resized) { canvas.width = w; canvas.height = h; }
     eye = add(centre, scale([Math.cos(cam.el) * Math.cos(cam.az), Math.cos(cam.el) * Math.sin(cam.az), Math.sin(cam.el)], cam.dist));
     vp = mul(perspective(0.8, w / Math.max(h, 1), 0.01 * radius, 20 * radius), lookAt(eye, centre, [0, 0, 1]));
+    return resized;
   }
   function project(p) {
     const x = vp[0] * p[0] + vp[4] * p[1] + vp[8] * p[2] + vp[12];
@@ -290,7 +294,7 @@
   let rendered = 0;
   function render() {
     requestAnimationFrame(render);
-    camera();
+    if (camera()) dirty = true;
     if (!dirty) return;
     dirty = false;
     computeNormals();
