@@ -108,9 +108,15 @@ fn compliance_element_anp_matches_the_library_and_unknown_elements_are_refused()
     };
     let anp = block(fem::elasticity::Element::Anp);
     let p1 = block(fem::elasticity::Element::P1);
+    // The same solve in another process: equal up to rounding (the factorisation's parallel sums
+    // may add in another order; a 1e-15 bound failed once), far tighter than P1's 20 % gap.
     for i in 0..9 {
         let got = v["blocks"][0][0][i].as_f64().unwrap();
-        assert!((got - anp[i / 3][i % 3]).abs() <= 1e-15 * anp[0][0].abs());
+        assert!(
+            (got - anp[i / 3][i % 3]).abs() <= 1e-12 * anp[0][0].abs(),
+            "block entry {i}: {got} from the CLI, {} from the library",
+            anp[i / 3][i % 3]
+        );
     }
     // P1 locks at nu = 0.499: its compliance is smaller.
     assert!(anp[2][2] > 1.2 * p1[2][2], "{anp:?} vs {p1:?}");
