@@ -42,7 +42,8 @@ pub struct Args {
 #[derive(clap::Args, Debug)]
 pub struct SetupArgs {
     /// Bank file to load at the bank region; default: built from --scene into
-    /// target/sil/<scene>.bank when missing or older than the scene file.
+    /// target/sil/<scene>-<key>.bank, rebuilt when the scene, the bank format or the host
+    /// changes.
     #[arg(long)]
     pub bank: Option<PathBuf>,
     /// Scene the default bank is built from.
@@ -80,25 +81,49 @@ impl SetupArgs {
     }
 }
 
-/// `target/sil/<scene stem>.bank`, rebuilt when missing or older than the scene file.
+/// `target/sil/<scene stem>-<key>.bank`, built when missing. The key hashes what the bank is made
+/// from: the scene file's bytes, the bank format version and the building executable (its path
+/// and modification time), so an edited scene, a new format or a rebuilt host never reuses a
+/// stale bank. Older cached banks of the same scene are removed.
 fn cached_bank(scene: &Path) -> Result<PathBuf> {
+    use std::hash::{Hash, Hasher};
     let stem = scene
         .file_stem()
+        .and_then(|s| s.to_str())
         .with_context(|| format!("{}: not a scene file path", scene.display()))?;
-    let out = harness::repo_root()
-        .join("target/sil")
-        .join(stem)
-        .with_extension("bank");
-    let modified = |p: &Path| std::fs::metadata(p).and_then(|m| m.modified()).ok();
-    let scene_time =
-        modified(scene).with_context(|| format!("cannot read the scene {}", scene.display()))?;
-    if modified(&out).is_none_or(|t| t < scene_time) {
+    let text = std::fs::read(scene)
+        .with_context(|| format!("cannot read the scene {}", scene.display()))?;
+    let mut key = std::collections::hash_map::DefaultHasher::new();
+    text.hash(&mut key);
+    (bank_format::VERSION_MAJOR, bank_format::VERSION_MINOR).hash(&mut key);
+    if let Ok(exe) = std::env::current_exe() {
+        exe.hash(&mut key);
+        std::fs::metadata(&exe)
+            .and_then(|m| m.modified())
+            .ok()
+            .hash(&mut key);
+    }
+    let dir = harness::repo_root().join("target/sil");
+    let name = format!("{stem}-{:016x}.bank", key.finish());
+    let out = dir.join(&name);
+    if !out.exists() {
         let bytes = scene_bank(scene)?;
-        if let Some(dir) = out.parent() {
-            std::fs::create_dir_all(dir)
-                .with_context(|| format!("cannot create {}", dir.display()))?;
-        }
+        std::fs::create_dir_all(&dir)
+            .with_context(|| format!("cannot create {}", dir.display()))?;
         write_atomic(&out, &bytes, &[scene])?;
+        // Best effort: a stale bank left behind costs disk, not correctness.
+        let stale = |n: &str| {
+            n != name
+                && n.strip_prefix(stem)
+                    .and_then(|r| r.strip_prefix('-'))
+                    .and_then(|r| r.strip_suffix(".bank"))
+                    .is_some_and(|k| k.len() == 16 && k.bytes().all(|b| b.is_ascii_hexdigit()))
+        };
+        for entry in std::fs::read_dir(&dir).into_iter().flatten().flatten() {
+            if entry.file_name().to_str().is_some_and(stale) {
+                let _ = std::fs::remove_file(entry.path());
+            }
+        }
     }
     Ok(out)
 }
