@@ -38,7 +38,8 @@ enum Command {
     /// Write the board image and a bank to the STM32F405 through a debug probe (probe-rs),
     /// checked before and after; --dry-run prints the plan without a probe.
     Flash(cmd::flash::Args),
-    /// A device on a serial port: `check` prints its live joints, tip and state (bring-up).
+    /// A device on a serial port at bring-up: `check` prints its live joints, tip and state;
+    /// `arm` arms it in a mode (constant currents for the load cell) and disarms it after.
     #[command(subcommand)]
     Device(cmd::device::DeviceCmd),
     /// Speed against error for every knob, and the hard cases, on one generated page.

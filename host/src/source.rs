@@ -9,8 +9,8 @@
 
 use anyhow::{Context, Result, anyhow, bail};
 use bank_format::{
-    DeviceToHost, FaultReason, FrameDecoder, HostToDevice, MAX_FRAME, PROTOCOL_VERSION, State,
-    encode_frame,
+    DeviceToHost, FaultReason, FrameDecoder, HostToDevice, MAX_FRAME, Mode, PROTOCOL_VERSION,
+    State, encode_frame,
 };
 use firmware::tick::Contacts;
 use std::io::{ErrorKind, Read};
@@ -34,6 +34,10 @@ pub struct Sample {
     pub contacts: Contacts,
     /// Force rendered on the tool, N.
     pub tool_force_n: [f32; 3],
+    /// Rendering mode.
+    pub mode: Mode,
+    /// Motor currents commanded, A.
+    pub currents_a: [f32; 3],
 }
 
 /// Loop timing as measured by the source, when it can measure it.
@@ -154,11 +158,12 @@ impl std::str::FromStr for SourceSpec {
     }
 }
 
-/// A device on a serial port: a reader thread decodes `DeviceToHost::Telemetry` frames and
+/// A device on a serial port: a reader thread decodes `DeviceToHost::Telemetry` frames,
 /// sends a heartbeat every 2 ms (the firmware's link-silence watchdog expects one within 10
-/// ticks).
+/// ticks) and the commands given to [`SerialSource::command`].
 pub struct SerialSource {
     mailbox: Arc<Mailbox>,
+    commands: std::sync::mpsc::Sender<HostToDevice>,
     stop: Arc<AtomicBool>,
     thread: Option<JoinHandle<()>>,
     last_tick: Option<u32>,
@@ -178,10 +183,12 @@ impl SerialSource {
         check_identity(&hello, bank_crc, scene)?;
         let mailbox = Arc::new(Mailbox::default());
         let stop = Arc::new(AtomicBool::new(false));
+        let (commands, pending) = std::sync::mpsc::channel();
         let link = Link {
             port: handle,
             decoder: FrameDecoder::new(),
             absorber: Absorber::default(),
+            pending,
         };
         let (m, st) = (Arc::clone(&mailbox), Arc::clone(&stop));
         let thread = std::thread::Builder::new()
@@ -189,10 +196,19 @@ impl SerialSource {
             .spawn(move || link.run(&m, &st))?;
         Ok(SerialSource {
             mailbox,
+            commands,
             stop,
             thread: Some(thread),
             last_tick: None,
         })
+    }
+
+    /// Sends `msg` to the device (from the link thread, before its next heartbeat); an error
+    /// when the link has stopped (the port closed or failed).
+    pub fn command(&self, msg: HostToDevice) -> Result<()> {
+        self.commands
+            .send(msg)
+            .map_err(|e| anyhow!("the serial link has stopped; {:?} not sent", e.0))
     }
 }
 
@@ -378,6 +394,8 @@ struct Link {
     port: Box<dyn serialport::SerialPort>,
     decoder: FrameDecoder<DeviceToHost>,
     absorber: Absorber,
+    /// Commands waiting to be sent.
+    pending: std::sync::mpsc::Receiver<HostToDevice>,
 }
 
 /// Turns a device's link messages into samples and stats (serial and SIL sources). The tool
@@ -393,6 +411,11 @@ impl Link {
         let mut buf = [0u8; 512];
         let mut last_heartbeat = Instant::now();
         while !stop.load(Ordering::Relaxed) {
+            while let Ok(msg) = self.pending.try_recv() {
+                if send(&mut *self.port, &msg).is_err() {
+                    return;
+                }
+            }
             if last_heartbeat.elapsed() >= Duration::from_millis(2) {
                 if send(&mut *self.port, &HostToDevice::Heartbeat).is_err() {
                     return;
@@ -437,6 +460,8 @@ impl Absorber {
                     tip_m: t.tip_m,
                     contacts: t.contacts,
                     tool_force_n,
+                    mode: t.mode,
+                    currents_a: t.currents_a,
                 };
                 mailbox.publish(sample, self.stats);
             }

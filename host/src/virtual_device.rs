@@ -199,6 +199,8 @@ fn run(bytes: &AlignedBytes, shared: &Shared, home: [f64; 3]) {
             tip_m: out.tip_m,
             contacts: out.contacts,
             tool_force_n: out.tool_force_n,
+            mode: haptic.mode(),
+            currents_a: out.currents_a,
         };
         shared.mailbox.publish(sample, stats);
         next += PERIOD;

@@ -5,16 +5,17 @@
 #![cfg(target_os = "linux")]
 
 use bank_format::{
-    Bank, Counters, DeviceToHost, FrameDecoder, HostToDevice, MAX_FRAME, Mode, PROTOCOL_VERSION,
-    State, Telemetry, encode_frame,
+    AlignedBytes, Bank, Counters, DeviceToHost, FaultReason, FrameDecoder, HostToDevice, MAX_FRAME,
+    Mode, PROTOCOL_VERSION, State, Telemetry, encode_frame,
 };
 use host::kinematics::{Workspace, counts_for};
 use std::fs::File;
 use std::io::{Read, Write};
 use std::os::fd::FromRawFd;
-use std::process::{Command, Output};
-use std::sync::Arc;
+use std::path::Path;
+use std::process::{Command, Output, Stdio};
 use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, Mutex};
 
 /// A pseudo-terminal: (master, slave path, slave). The test plays the device on the master.
 fn pty() -> (File, String, File) {
@@ -53,47 +54,87 @@ fn pty() -> (File, String, File) {
     unsafe { (File::from_raw_fd(m), name, File::from_raw_fd(s)) }
 }
 
-/// The fake device: waits for the host's Hello, answers with `bank_crc`, then sends
-/// telemetry with `tip` every 10 ms, until `stop` is set.
-fn device(
-    mut master: File,
+/// How the fake device behaves.
+#[derive(Clone, Copy)]
+struct Fake {
     bank_crc: u32,
     tip: [f32; 3],
+    /// State at power-up (`Fault` with `LinkSilent` latched, as after a host that died).
+    start: State,
+    /// Fault (`Overspeed`) after this many armed ticks.
+    fault_after: Option<u32>,
+    /// The tip after `ZeroEncoders`.
+    home_tip: [f32; 3],
+}
+
+/// The fake device: waits for the host's Hello, answers with `bank_crc`, then sends telemetry
+/// with `tip` every 10 ms, until `stop` is set. It follows the firmware's state machine for the
+/// host's commands (SetMode only while disarmed, Arm only from Disarmed, Disarm, ClearFault,
+/// ZeroEncoders unless armed) and records every command but heartbeats.
+fn device(
+    mut master: File,
+    fake: Fake,
     stop: Arc<AtomicBool>,
-) -> std::thread::JoinHandle<()> {
-    std::thread::spawn(move || {
+) -> (std::thread::JoinHandle<()>, Arc<Mutex<Vec<HostToDevice>>>) {
+    let log = Arc::new(Mutex::new(Vec::new()));
+    let seen = Arc::clone(&log);
+    let thread = std::thread::spawn(move || {
         let mut rx: FrameDecoder<HostToDevice> = FrameDecoder::new();
         let mut bytes = [0u8; 256];
         let mut buf = [0u8; MAX_FRAME];
         let mut greeted = false;
-        let mut tick = 0;
+        let mut tip = fake.tip;
+        let (mut tick, mut armed_ticks) = (0, 0);
+        let (mut state, mut mode) = (fake.start, Mode::Render);
+        let mut fault = (state == State::Fault).then_some(FaultReason::LinkSilent);
         while !stop.load(Ordering::Relaxed) {
             // Non-blocking: nothing to read (or no host yet) is an error to skip.
             if let Ok(n) = master.read(&mut bytes) {
-                let hello = rx
-                    .feed_slice(&bytes[..n])
-                    .any(|r| r == Ok(HostToDevice::Hello));
-                if hello && !greeted {
-                    let hello = DeviceToHost::Hello {
-                        protocol: PROTOCOL_VERSION,
-                        bank_crc: Some(bank_crc),
-                        scene_id: 7,
-                        node_count: 25,
-                    };
-                    let _ = master.write_all(encode_frame(&hello, &mut buf).unwrap());
-                    greeted = true;
+                for msg in rx.feed_slice(&bytes[..n]).flatten() {
+                    match msg {
+                        HostToDevice::Heartbeat => continue,
+                        HostToDevice::Hello if !greeted => {
+                            let hello = DeviceToHost::Hello {
+                                protocol: PROTOCOL_VERSION,
+                                bank_crc: Some(fake.bank_crc),
+                                scene_id: 7,
+                                node_count: 25,
+                            };
+                            let _ = master.write_all(encode_frame(&hello, &mut buf).unwrap());
+                            greeted = true;
+                        }
+                        HostToDevice::SetMode(m) if state == State::Disarmed => mode = m,
+                        HostToDevice::Arm if state == State::Disarmed => state = State::Armed,
+                        HostToDevice::Disarm if state == State::Armed => state = State::Disarmed,
+                        HostToDevice::ZeroEncoders if state != State::Armed => tip = fake.home_tip,
+                        HostToDevice::ClearFault if state == State::Fault => {
+                            (state, fault) = (State::Disarmed, None);
+                        }
+                        _ => {}
+                    }
+                    seen.lock().unwrap().push(msg);
                 }
             }
             if greeted {
                 tick += 1;
+                if state == State::Armed {
+                    armed_ticks += 1;
+                    if fake.fault_after.is_some_and(|n| armed_ticks > n) {
+                        (state, fault) = (State::Fault, Some(FaultReason::Overspeed));
+                    }
+                }
+                let currents_a = match (state, mode) {
+                    (State::Armed, Mode::ConstantCurrent { currents_a }) => currents_a,
+                    _ => [0.0; 3],
+                };
                 let t = Telemetry {
                     tick,
-                    state: State::Disarmed,
-                    mode: Mode::Render,
-                    fault: None,
+                    state,
+                    mode,
+                    fault,
                     tip_m: tip,
                     contacts: Default::default(),
-                    currents_a: [0.0; 3],
+                    currents_a,
                     tool_force_n: [0.0; 3],
                     dropped_load: 0.0,
                     counters: Counters::default(),
@@ -103,7 +144,27 @@ fn device(
             }
             std::thread::sleep(std::time::Duration::from_millis(10));
         }
-    })
+    });
+    (thread, log)
+}
+
+/// A disarmed fake device running `bank_crc`'s bank with its tip at `tip`.
+fn fake(bank_crc: u32, tip: [f32; 3]) -> Fake {
+    Fake {
+        bank_crc,
+        tip,
+        start: State::Disarmed,
+        fault_after: None,
+        home_tip: tip,
+    }
+}
+
+/// The flat-patch fixture bank, written to `dir`: (its bytes, its path).
+fn patch_bank(dir: &Path) -> (AlignedBytes, String) {
+    let bytes = firmware::fixtures::flat_patch();
+    let path = dir.join("patch.bank");
+    std::fs::write(&path, bytes.as_slice()).unwrap();
+    (bytes, path.to_str().unwrap().to_string())
 }
 
 fn run(args: &[&str]) -> Output {
@@ -115,12 +176,10 @@ fn run(args: &[&str]) -> Output {
 
 #[test]
 fn device_check_prints_the_joints_of_the_telemetry_tip() {
-    let bank_bytes = firmware::fixtures::flat_patch();
+    let dir = tempfile::tempdir().unwrap();
+    let (bank_bytes, bank_path) = patch_bank(dir.path());
     let bank = Bank::parse(&bank_bytes).unwrap();
     let cal = *bank.device();
-    let dir = tempfile::tempdir().unwrap();
-    let bank_path = dir.path().join("patch.bank");
-    std::fs::write(&bank_path, bank_bytes.as_slice()).unwrap();
     // Known joints inside the calibration's ranges: a quarter of the way in from each bound.
     let q: [f64; 3] = std::array::from_fn(|i| {
         let (lo, hi) = (f64::from(cal.joint_min[i]), f64::from(cal.joint_max[i]));
@@ -130,14 +189,14 @@ fn device_check_prints_the_joints_of_the_telemetry_tip() {
     let tip = w.tip(q[0], q[1], q[2]).map(|x| x as f32);
     let (master, name, _slave) = pty();
     let stop = Arc::new(AtomicBool::new(false));
-    let dev = device(master, bank.crc(), tip, Arc::clone(&stop));
+    let (dev, _) = device(master, fake(bank.crc(), tip), Arc::clone(&stop));
     let out = run(&[
         "device",
         "check",
         "--port",
         &name,
         "--bank",
-        bank_path.to_str().unwrap(),
+        &bank_path,
         "--seconds",
         "1.0",
         "--rate",
@@ -181,21 +240,19 @@ fn device_check_prints_the_joints_of_the_telemetry_tip() {
 
 #[test]
 fn device_check_refuses_a_device_running_another_bank() {
-    let bank_bytes = firmware::fixtures::flat_patch();
-    let bank = Bank::parse(&bank_bytes).unwrap();
     let dir = tempfile::tempdir().unwrap();
-    let bank_path = dir.path().join("patch.bank");
-    std::fs::write(&bank_path, bank_bytes.as_slice()).unwrap();
+    let (bank_bytes, bank_path) = patch_bank(dir.path());
+    let bank = Bank::parse(&bank_bytes).unwrap();
     let (master, name, slave) = pty();
     let stop = Arc::new(AtomicBool::new(false));
-    let dev = device(master, bank.crc() ^ 1, [0.0; 3], Arc::clone(&stop));
+    let (dev, _) = device(master, fake(bank.crc() ^ 1, [0.0; 3]), Arc::clone(&stop));
     let out = run(&[
         "device",
         "check",
         "--port",
         &name,
         "--bank",
-        bank_path.to_str().unwrap(),
+        &bank_path,
         "--seconds",
         "1",
     ]);
@@ -206,4 +263,235 @@ fn device_check_refuses_a_device_running_another_bank() {
     assert!(err.contains("reflash the bank"), "{err}");
     assert!(err.contains(&format!("{:#010x}", bank.crc())), "{err}");
     dev.join().unwrap();
+}
+
+/// `host device arm` on `fake`: its output and the commands the device received.
+fn arm(fake: Fake, bank: &str, extra: &[&str]) -> (Output, Vec<HostToDevice>) {
+    let (master, name, slave) = pty();
+    let stop = Arc::new(AtomicBool::new(false));
+    let (dev, log) = device(master, fake, Arc::clone(&stop));
+    let mut args = vec!["device", "arm", "--port", &name, "--bank", bank, "--json"];
+    args.extend_from_slice(extra);
+    let out = run(&args);
+    stop.store(true, Ordering::Relaxed);
+    drop(slave);
+    dev.join().unwrap();
+    let log = log.lock().unwrap().clone();
+    (out, log)
+}
+
+#[test]
+fn device_arm_sets_constant_currents_and_disarms_at_the_end() {
+    let dir = tempfile::tempdir().unwrap();
+    let (bytes, bank) = patch_bank(dir.path());
+    let crc = Bank::parse(&bytes).unwrap().crc();
+    let (out, log) = arm(
+        fake(crc, [0.0; 3]),
+        &bank,
+        &[
+            "--mode",
+            "current",
+            "--currents",
+            "0.25,0,-0.5",
+            "--seconds",
+            "0.5",
+        ],
+    );
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{err}");
+    let currents_a = [0.25, 0.0, -0.5];
+    assert_eq!(
+        log,
+        [
+            HostToDevice::Hello,
+            HostToDevice::SetMode(Mode::ConstantCurrent { currents_a }),
+            HostToDevice::Arm,
+            HostToDevice::Disarm,
+        ]
+    );
+    let lines: Vec<serde_json::Value> = String::from_utf8_lossy(&out.stdout)
+        .lines()
+        .map(|l| serde_json::from_str(l).expect("one JSON object per line"))
+        .collect();
+    assert!(lines.len() >= 2, "{lines:?}");
+    for l in &lines {
+        assert_eq!(l["state"], "Armed");
+        assert_eq!(l["currents_a"], serde_json::json!(currents_a));
+    }
+}
+
+#[test]
+fn device_arm_refuses_currents_over_the_bank_limit_before_opening_the_port() {
+    let dir = tempfile::tempdir().unwrap();
+    let (bytes, bank) = patch_bank(dir.path());
+    let limit = Bank::parse(&bytes).unwrap().device().current_limit_a;
+    let over = format!("0,{},0", limit[1] + 0.5);
+    for currents in [over.as_str(), "0,NaN,0"] {
+        // The port does not exist: the refusal must come first.
+        let out = run(&[
+            "device",
+            "arm",
+            "--port",
+            "/nonexistent/tty",
+            "--bank",
+            &bank,
+            "--mode",
+            "current",
+            "--currents",
+            currents,
+        ]);
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(1), "{err}");
+        assert!(
+            err.contains("motor 1 (yaw)") && err.contains("limit"),
+            "{err}"
+        );
+    }
+    let out = run(&[
+        "device",
+        "arm",
+        "--port",
+        "/dev/null",
+        "--bank",
+        &bank,
+        "--mode",
+        "current",
+    ]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("needs --currents"), "{err}");
+}
+
+#[test]
+fn device_arm_clears_a_latched_fault_only_when_asked() {
+    let dir = tempfile::tempdir().unwrap();
+    let (bytes, bank) = patch_bank(dir.path());
+    let crc = Bank::parse(&bytes).unwrap().crc();
+    let faulted = Fake {
+        start: State::Fault,
+        ..fake(crc, [0.0; 3])
+    };
+    let (out, log) = arm(faulted, &bank, &["--seconds", "0.3"]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(
+        err.contains("LinkSilent") && err.contains("--clear-fault"),
+        "{err}"
+    );
+    assert_eq!(log, [HostToDevice::Hello], "nothing but Hello was sent");
+
+    let (out, log) = arm(
+        faulted,
+        &bank,
+        &["--seconds", "0.3", "--clear-fault", "--mode", "transparent"],
+    );
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{err}");
+    assert_eq!(
+        log,
+        [
+            HostToDevice::Hello,
+            HostToDevice::ClearFault,
+            HostToDevice::SetMode(Mode::Transparent),
+            HostToDevice::Arm,
+            HostToDevice::Disarm,
+        ]
+    );
+}
+
+#[test]
+fn device_arm_reports_a_fault_during_the_run_and_fails() {
+    let dir = tempfile::tempdir().unwrap();
+    let (bytes, bank) = patch_bank(dir.path());
+    let crc = Bank::parse(&bytes).unwrap().crc();
+    let faulting = Fake {
+        fault_after: Some(20),
+        ..fake(crc, [0.0; 3])
+    };
+    let (out, log) = arm(faulting, &bank, &["--seconds", "5"]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(
+        err.contains("left the armed state") && err.contains("Overspeed"),
+        "{err}"
+    );
+    assert_eq!(log.last(), Some(&HostToDevice::Disarm));
+}
+
+#[test]
+fn device_arm_disarms_on_ctrl_c() {
+    let dir = tempfile::tempdir().unwrap();
+    let (bytes, bank) = patch_bank(dir.path());
+    let crc = Bank::parse(&bytes).unwrap().crc();
+    let (master, name, slave) = pty();
+    let stop = Arc::new(AtomicBool::new(false));
+    let (dev, log) = device(master, fake(crc, [0.0; 3]), Arc::clone(&stop));
+    let mut child = Command::new(env!("CARGO_BIN_EXE_host"))
+        .args(["device", "arm", "--port", &name, "--bank", &bank, "--json"])
+        .args(["--seconds", "60"])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    // Armed once it prints a line.
+    let mut first = String::new();
+    std::io::BufRead::read_line(
+        &mut std::io::BufReader::new(child.stdout.take().unwrap()),
+        &mut first,
+    )
+    .unwrap();
+    assert!(first.contains("Armed"), "{first}");
+    // SAFETY: kill(2) on the child's pid, which has not been reaped (no wait yet).
+    assert_eq!(unsafe { libc::kill(child.id() as i32, libc::SIGINT) }, 0);
+    let out = child.wait_with_output().unwrap();
+    stop.store(true, Ordering::Relaxed);
+    drop(slave);
+    dev.join().unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{err}");
+    assert_eq!(log.lock().unwrap().last(), Some(&HostToDevice::Disarm));
+}
+
+#[test]
+fn device_zero_sends_zero_encoders_and_checks_the_tip_is_home() {
+    let dir = tempfile::tempdir().unwrap();
+    let (bytes, bank) = patch_bank(dir.path());
+    let parsed = Bank::parse(&bytes).unwrap();
+    let cal = *parsed.device();
+    let q = cal.home_joint.map(f64::from);
+    let home = Workspace::from_device(&cal)
+        .tip(q[0], q[1], q[2])
+        .map(|x| x as f32);
+    let zero = |fake: Fake| {
+        let (master, name, slave) = pty();
+        let stop = Arc::new(AtomicBool::new(false));
+        let (dev, log) = device(master, fake, Arc::clone(&stop));
+        let out = run(&["device", "zero", "--port", &name, "--bank", &bank]);
+        stop.store(true, Ordering::Relaxed);
+        drop(slave);
+        dev.join().unwrap();
+        let log = log.lock().unwrap().clone();
+        (out, log)
+    };
+    // Away from home, then zeroed: the tip moves home.
+    let away = Fake {
+        home_tip: home,
+        ..fake(parsed.crc(), [0.01, 0.02, -0.03])
+    };
+    let (out, log) = zero(away);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(String::from_utf8_lossy(&out.stdout).contains("home pose"));
+    assert_eq!(log, [HostToDevice::Hello, HostToDevice::ZeroEncoders]);
+    // A device that ignores the command (here: whose home pose is elsewhere) is an error.
+    let wrong = Fake {
+        home_tip: [0.5, 0.5, 0.5],
+        ..away
+    };
+    let (out, _) = zero(wrong);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(err.contains("did not move to the home pose"), "{err}");
 }

@@ -1,11 +1,16 @@
-//! `host device check`: live joint angles, tip and state of a device on a serial port, from its
-//! telemetry, so that encoder directions and zeroing can be checked by hand at bring-up.
+//! `host device`: a device on a serial port at bring-up. `check` prints its live joint angles,
+//! tip and state from its telemetry, so that encoder directions and zeroing can be checked by
+//! hand; `arm` selects a mode (the tissue law, the linear law, transparent, or constant motor
+//! currents for the load-cell calibration), arms it, prints what it does and disarms it at the
+//! end or on Ctrl-C.
 
 use anyhow::{Context, Result, bail};
-use bank_format::{AlignedBytes, Bank};
+use bank_format::{AlignedBytes, Bank, DeviceCalibration, HostToDevice, Mode, State};
 use host::kinematics::{Workspace, counts_for};
-use host::source::{SerialSource, Source};
+use host::source::{Sample, SerialSource, Source};
 use std::path::PathBuf;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
 /// Device subcommands.
@@ -16,11 +21,20 @@ pub enum DeviceCmd {
     /// joints are the inverse kinematics of the telemetry's tip with the bank's calibration
     /// (`host::kinematics`), so the device must run that bank (checked from its Hello).
     Check(CheckArgs),
+    /// Select a mode, arm the device and print its state, currents and rendered force about
+    /// ten times a second; disarm after --seconds or on Ctrl-C. If this host dies instead, the
+    /// device faults `LinkSilent` within 10 ms (zero current). Refuses a device that is armed
+    /// already or in a fault (unless --clear-fault), and currents over the bank's limits.
+    Arm(ArmArgs),
+    /// Declare the device's current pose its calibration's home pose (the instrument held in
+    /// the home fixture, device disarmed); confirmed when the telemetry's tip is the home
+    /// pose's.
+    Zero(DeviceArgs),
 }
 
-/// Arguments of `host device check`.
+/// Which device and bank (`host device check` and `arm`).
 #[derive(clap::Args, Debug)]
-pub struct CheckArgs {
+pub struct DeviceArgs {
     /// The device's serial port (e.g. /dev/ttyACM0).
     #[arg(long)]
     port: String,
@@ -33,8 +47,54 @@ pub struct CheckArgs {
     /// Baud rate (ignored by USB CDC ports).
     #[arg(long, default_value_t = 115_200)]
     baud: u32,
+}
+
+/// Arguments of `host device check`.
+#[derive(clap::Args, Debug)]
+pub struct CheckArgs {
+    #[command(flatten)]
+    device: DeviceArgs,
     /// Stop after this many seconds.
     #[arg(long, default_value_t = 600.0)]
+    seconds: f64,
+    /// Print lines per second.
+    #[arg(long, default_value_t = 10.0)]
+    rate: f64,
+    /// One JSON object per line instead of text.
+    #[arg(long)]
+    json: bool,
+}
+
+/// The modes of `host device arm` (the link's [`Mode`]).
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+enum ModeArg {
+    /// Tissue forces through the law Q (normal operation).
+    Render,
+    /// Tissue forces from the linear model, Q bypassed (fitting Q on a bench).
+    LinearLaw,
+    /// Contact tracking only, zero current.
+    Transparent,
+    /// Constant motor currents (--currents), for the load-cell calibration.
+    Current,
+}
+
+/// Arguments of `host device arm`.
+#[derive(clap::Args, Debug)]
+pub struct ArmArgs {
+    #[command(flatten)]
+    device: DeviceArgs,
+    /// What the armed device renders.
+    #[arg(long, value_enum, default_value_t = ModeArg::Render)]
+    mode: ModeArg,
+    /// Motor currents for --mode current, A, per motor (pitch, yaw, insertion): e.g. 0.2,0,0.
+    /// Each must be within the bank's `current_limit_a`.
+    #[arg(long, value_delimiter = ',', value_name = "A,B,C")]
+    currents: Option<Vec<f32>>,
+    /// Clear a latched fault first (the device refuses if its cause remains).
+    #[arg(long)]
+    clear_fault: bool,
+    /// Disarm after this many seconds.
+    #[arg(long, default_value_t = 10.0)]
     seconds: f64,
     /// Print lines per second.
     #[arg(long, default_value_t = 10.0)]
@@ -48,10 +108,13 @@ pub struct CheckArgs {
 pub fn run(cmd: DeviceCmd) -> Result<()> {
     match cmd {
         DeviceCmd::Check(a) => check(a),
+        DeviceCmd::Arm(a) => arm(a),
+        DeviceCmd::Zero(a) => zero(a),
     }
 }
 
-fn check(args: CheckArgs) -> Result<()> {
+/// The bank the device should run: its calibration, its CRC and a name for messages.
+fn bank(args: &DeviceArgs) -> Result<(DeviceCalibration, u32, String)> {
     let (bytes, name) = match (&args.scene, &args.bank) {
         (Some(scene), None) => (
             host::bank::scene_bank(scene)?,
@@ -66,14 +129,23 @@ fn check(args: CheckArgs) -> Result<()> {
     };
     let aligned = AlignedBytes::new(&bytes);
     let bank = Bank::parse(&aligned).map_err(|e| anyhow::anyhow!("{name}: invalid bank: {e}"))?;
-    let cal = *bank.device();
+    Ok((*bank.device(), bank.crc(), name))
+}
+
+/// Opens the link to the device, its identity checked against the bank ([`bank`]).
+fn open(args: &DeviceArgs, crc: u32, name: &str) -> Result<SerialSource> {
+    SerialSource::open(&args.port, args.baud, crc, name)
+}
+
+fn check(args: CheckArgs) -> Result<()> {
+    let (cal, crc, name) = bank(&args.device)?;
+    let mut source = open(&args.device, crc, &name)?;
     let workspace = Workspace::from_device(&cal);
-    let mut source = SerialSource::open(&args.port, args.baud, bank.crc(), &name)?;
     if !args.json {
         eprintln!(
             "device on {}: {name}; move each joint by hand: pitch and yaw in degrees, insertion \
              in mm, counts from the home pose (Ctrl-C ends)",
-            args.port
+            args.device.port
         );
     }
     let period = Duration::from_secs_f64(1.0 / args.rate.clamp(0.1, 1000.0));
@@ -126,4 +198,226 @@ fn check(args: CheckArgs) -> Result<()> {
         }
     }
     Ok(())
+}
+
+/// The link [`Mode`] of the arguments; currents are refused unless finite and within `limit`
+/// (the device would fault `BadCommand` on them).
+fn mode(mode: ModeArg, currents: Option<&[f32]>, limit: [f32; 3]) -> Result<Mode> {
+    match (mode, currents) {
+        (ModeArg::Current, None) => bail!("--mode current needs --currents A,B,C (amperes)"),
+        (ModeArg::Current, Some(c)) => {
+            let currents_a: [f32; 3] = c
+                .try_into()
+                .map_err(|_| anyhow::anyhow!("--currents takes 3 values, got {}", c.len()))?;
+            for (k, (i, max)) in currents_a.iter().zip(limit).enumerate() {
+                if !i.is_finite() || i.abs() > max {
+                    bail!(
+                        "--currents: motor {k} ({}) {i} A is outside the bank's current limit \
+                         of {max} A",
+                        ["pitch", "yaw", "insertion"][k]
+                    );
+                }
+            }
+            Ok(Mode::ConstantCurrent { currents_a })
+        }
+        (_, Some(_)) => bail!("--currents is only for --mode current"),
+        (ModeArg::Render, None) => Ok(Mode::Render),
+        (ModeArg::LinearLaw, None) => Ok(Mode::LinearLaw),
+        (ModeArg::Transparent, None) => Ok(Mode::Transparent),
+    }
+}
+
+/// How long `arm` waits for the device to confirm a command.
+const CONFIRM: Duration = Duration::from_secs(1);
+
+/// Waits up to [`CONFIRM`] for a sample satisfying `ok`, returning it, or the newest sample seen
+/// (`None` if none came).
+fn await_sample(
+    source: &mut SerialSource,
+    ok: impl Fn(&Sample) -> bool,
+) -> Result<std::result::Result<Sample, Option<Sample>>> {
+    let end = Instant::now() + CONFIRM;
+    let mut newest = None;
+    while Instant::now() < end {
+        if let Some(s) = source.latest(Duration::from_millis(20))? {
+            if ok(&s) {
+                return Ok(Ok(s));
+            }
+            newest = Some(s);
+        }
+    }
+    Ok(Err(newest))
+}
+
+/// What a sample says of the device's state, for messages.
+fn describe(s: &Option<Sample>) -> String {
+    match s {
+        None => "no telemetry".into(),
+        Some(s) => match s.fault {
+            Some(f) => format!("{:?} ({f:?}), mode {:?}", s.state, s.mode),
+            None => format!("{:?}, mode {:?}", s.state, s.mode),
+        },
+    }
+}
+
+fn arm(args: ArmArgs) -> Result<()> {
+    // Bad currents are refused before the port is opened.
+    let (cal, crc, name) = bank(&args.device)?;
+    let mode = mode(args.mode, args.currents.as_deref(), cal.current_limit_a)?;
+    let mut source = open(&args.device, crc, &name)?;
+    let port = &args.device.port;
+    let first = await_sample(&mut source, |_| true)?
+        .map_err(|_| anyhow::anyhow!("{port}: no telemetry from the device within 1 s"))?;
+    match first.state {
+        State::Armed => bail!(
+            "{port}: the device is armed already (another host, or a previous run still \
+             holding it): disarm it first"
+        ),
+        State::Fault if !args.clear_fault => bail!(
+            "{port}: the device is in a fault ({:?}): fix its cause and rerun with --clear-fault",
+            first.fault
+        ),
+        State::Fault => {
+            source.command(HostToDevice::ClearFault)?;
+            await_sample(&mut source, |s| s.state == State::Disarmed)?.map_err(|seen| {
+                anyhow::anyhow!(
+                    "{port}: the fault did not clear (its cause remains?): {}",
+                    describe(&seen)
+                )
+            })?;
+        }
+        State::Disarmed => {}
+    }
+    let stop = Arc::new(AtomicBool::new(false));
+    let flag = Arc::clone(&stop);
+    ctrlc::set_handler(move || flag.store(true, Ordering::Relaxed))
+        .context("cannot install the Ctrl-C handler")?;
+    source.command(HostToDevice::SetMode(mode))?;
+    source.command(HostToDevice::Arm)?;
+    // The first telemetry after Arm that is not Disarmed: armed in the mode, or why not.
+    let seen = match await_sample(&mut source, |s| s.state != State::Disarmed)? {
+        Ok(s) if s.state == State::Armed && s.mode == mode => None,
+        Ok(s) => Some(Some(s)),
+        Err(seen) => Some(seen),
+    };
+    if let Some(seen) = seen {
+        let _ = source.command(HostToDevice::Disarm);
+        bail!(
+            "{port}: the device did not arm in mode {mode:?}: {}",
+            describe(&seen)
+        );
+    }
+    if !args.json {
+        eprintln!(
+            "device on {port}: {name}; armed in mode {mode:?} for {} s (Ctrl-C disarms)",
+            args.seconds
+        );
+    }
+    let period = Duration::from_secs_f64(1.0 / args.rate.clamp(0.1, 1000.0));
+    let end = Instant::now() + Duration::from_secs_f64(args.seconds.max(0.0));
+    let mut next = Instant::now();
+    let mut fault = None;
+    while Instant::now() < end && !stop.load(Ordering::Relaxed) {
+        let Some(s) = source.latest(Duration::from_millis(20))? else {
+            continue;
+        };
+        if s.state != State::Armed {
+            fault = Some(describe(&Some(s)));
+            break;
+        }
+        if Instant::now() < next {
+            continue;
+        }
+        next += period;
+        print_armed(&s, args.json);
+    }
+    source.command(HostToDevice::Disarm)?;
+    let disarmed = await_sample(&mut source, |s| s.state != State::Armed)?;
+    if let Some(f) = fault {
+        bail!("{port}: the device left the armed state: {f}");
+    }
+    match disarmed {
+        Ok(s) if s.state == State::Disarmed => {
+            if !args.json {
+                eprintln!("disarmed");
+            }
+            Ok(())
+        }
+        Ok(s) => bail!("{port}: after Disarm the device is {}", describe(&Some(s))),
+        Err(seen) => bail!(
+            "{port}: the device did not confirm Disarm within 1 s ({}); it faults LinkSilent \
+             once this host stops",
+            describe(&seen)
+        ),
+    }
+}
+
+/// One line of `host device arm`'s output.
+fn print_armed(s: &Sample, json: bool) {
+    let f = s.tool_force_n;
+    let force = f.iter().map(|x| x * x).sum::<f32>().sqrt();
+    if json {
+        println!(
+            "{}",
+            serde_json::json!({
+                "tick": s.tick,
+                "state": format!("{:?}", s.state),
+                "mode": format!("{:?}", s.mode),
+                "currents_a": s.currents_a,
+                "tool_force_n": f,
+                "contacts": s.contacts.len(),
+            })
+        );
+    } else {
+        println!(
+            "tick {:>9}  {:?}  currents [{:+6.3}, {:+6.3}, {:+6.3}] A  force {force:6.3} N  \
+             contacts {}",
+            s.tick,
+            s.state,
+            s.currents_a[0],
+            s.currents_a[1],
+            s.currents_a[2],
+            s.contacts.len()
+        );
+    }
+}
+
+fn zero(args: DeviceArgs) -> Result<()> {
+    let (cal, crc, name) = bank(&args)?;
+    let mut source = open(&args, crc, &name)?;
+    let port = &args.port;
+    let first = await_sample(&mut source, |_| true)?
+        .map_err(|_| anyhow::anyhow!("{port}: no telemetry from the device within 1 s"))?;
+    if first.state == State::Armed {
+        bail!("{port}: the device is armed; zeroing would make the tip jump: disarm it first");
+    }
+    let home = Workspace::from_device(&cal).tip(
+        f64::from(cal.home_joint[0]),
+        f64::from(cal.home_joint[1]),
+        f64::from(cal.home_joint[2]),
+    );
+    // The tip goes through f32 (a ~0.1 m vector): 10 um is far below any pose change.
+    let at_home = |s: &Sample| {
+        s.tip_m
+            .iter()
+            .zip(home)
+            .all(|(&x, h)| (f64::from(x) - h).abs() < 1e-5)
+    };
+    source.command(HostToDevice::ZeroEncoders)?;
+    match await_sample(&mut source, at_home)? {
+        Ok(_) => {
+            println!(
+                "zeroed: the tip is at the home pose [{:+.2}, {:+.2}, {:+.2}] mm",
+                home[0] * 1e3,
+                home[1] * 1e3,
+                home[2] * 1e3
+            );
+            Ok(())
+        }
+        Err(seen) => bail!(
+            "{port}: the tip did not move to the home pose within 1 s ({}; tip {:?} m)",
+            describe(&seen),
+            seen.map(|s| s.tip_m)
+        ),
+    }
 }
