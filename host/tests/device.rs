@@ -1,14 +1,18 @@
-//! `host device check` against a fake device on a pseudo-terminal: it answers the host's
-//! `Hello` and streams telemetry whose tip is the forward kinematics of known joint values;
-//! the command must print those joints back (and the encoder counts they mean), and refuse a
-//! device that runs another bank.
+//! The serial link and `host device` against a fake device on a pseudo-terminal: the serial
+//! source decodes telemetry, keeps the link alive and refuses a device that is not the scene
+//! displayed; `check` prints the joints of the telemetry's tip (the forward kinematics of known
+//! joint values) and the encoder counts they mean; `arm` and `zero` send the commands a person
+//! at bring-up needs, following the firmware's state machine.
 #![cfg(target_os = "linux")]
 
+use bank_format::Contact;
 use bank_format::{
     AlignedBytes, Bank, Counters, DeviceToHost, FaultReason, FrameDecoder, HostToDevice, MAX_FRAME,
     Mode, PROTOCOL_VERSION, State, Telemetry, encode_frame,
 };
+use firmware::tick::Contacts;
 use host::kinematics::{Workspace, counts_for};
+use host::source::{Identity, SerialSource, Source, await_identity};
 use std::fs::File;
 use std::io::{Read, Write};
 use std::os::fd::FromRawFd;
@@ -16,6 +20,7 @@ use std::path::Path;
 use std::process::{Command, Output, Stdio};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
 
 /// A pseudo-terminal: (master, slave path, slave). The test plays the device on the master.
 fn pty() -> (File, String, File) {
@@ -165,6 +170,177 @@ fn patch_bank(dir: &Path) -> (AlignedBytes, String) {
     let path = dir.join("patch.bank");
     std::fs::write(&path, bytes.as_slice()).unwrap();
     (bytes, path.to_str().unwrap().to_string())
+}
+
+/// Reads what the host sent to the non-blocking master `device`, waiting up to 5 s for a byte.
+fn read_some(device: &mut File, bytes: &mut [u8]) -> usize {
+    let end = Instant::now() + Duration::from_secs(5);
+    loop {
+        match device.read(bytes) {
+            Ok(n) if n > 0 => return n,
+            Err(e) if e.kind() != std::io::ErrorKind::WouldBlock => panic!("pty read: {e}"),
+            _ => {
+                assert!(Instant::now() < end, "nothing from the host within 5 s");
+                std::thread::sleep(Duration::from_millis(1));
+            }
+        }
+    }
+}
+
+/// Plays the device on the pty master `device` in a thread: waits for the host's `Hello`,
+/// answers `hello`, and hands the master back when joined.
+fn answer_hello(mut device: File, hello: DeviceToHost) -> std::thread::JoinHandle<File> {
+    std::thread::spawn(move || {
+        let mut rx: FrameDecoder<HostToDevice> = FrameDecoder::new();
+        let mut bytes = [0u8; 256];
+        loop {
+            let n = read_some(&mut device, &mut bytes);
+            if rx
+                .feed_slice(&bytes[..n])
+                .any(|r| r == Ok(HostToDevice::Hello))
+            {
+                break;
+            }
+        }
+        let mut buf = [0u8; MAX_FRAME];
+        device
+            .write_all(encode_frame(&hello, &mut buf).unwrap())
+            .unwrap();
+        device
+    })
+}
+
+fn hello(protocol: u16, bank_crc: Option<u32>) -> DeviceToHost {
+    DeviceToHost::Hello {
+        protocol,
+        bank_crc,
+        scene_id: 0x5ce9e,
+        node_count: 321,
+    }
+}
+
+#[test]
+fn serial_source_decodes_telemetry_and_sends_heartbeats() {
+    let (device, name, _slave) = pty();
+    let answered = answer_hello(device, hello(PROTOCOL_VERSION, Some(0xC0FFEE)));
+    let mut src = SerialSource::open(&name, 115_200, 0xC0FFEE, "the bank").unwrap();
+    let mut device = answered.join().unwrap();
+    assert!(src.steering().is_none());
+    let mut contacts = Contacts::new();
+    contacts
+        .push(Contact {
+            node: 4,
+            force_n: [0.0, 0.1, -0.3],
+        })
+        .unwrap();
+    let t = Telemetry {
+        tick: 500,
+        state: State::Armed,
+        mode: Mode::Render,
+        fault: None,
+        tip_m: [0.01, 0.02, 0.05],
+        contacts: contacts.clone(),
+        currents_a: [0.1, 0.0, -0.2],
+        // Not what the contacts would give under any law: the sample must take it as sent.
+        tool_force_n: [0.05, -0.1, 0.7],
+        dropped_load: 0.0,
+        counters: Counters::default(),
+    };
+    let mut buf = [0u8; MAX_FRAME];
+    let frame = encode_frame(&DeviceToHost::Telemetry(t), &mut buf).unwrap();
+    // Line noise first: the decoder resynchronises on the frame delimiter.
+    device.write_all(&[0x13, 0x37, 0x00]).unwrap();
+    device.write_all(frame).unwrap();
+    let s = src
+        .latest(Duration::from_secs(5))
+        .unwrap()
+        .expect("a sample");
+    assert_eq!(
+        (s.tick, s.state, s.tip_m),
+        (500, State::Armed, [0.01, 0.02, 0.05])
+    );
+    assert_eq!(s.contacts, contacts);
+    assert_eq!(s.tool_force_n, [0.05, -0.1, 0.7]);
+    // The host keeps the link alive.
+    let mut rx: FrameDecoder<HostToDevice> = FrameDecoder::new();
+    let mut got = Vec::new();
+    let end = Instant::now() + Duration::from_secs(5);
+    let mut bytes = [0u8; 256];
+    while !got.contains(&HostToDevice::Heartbeat) {
+        assert!(Instant::now() < end, "got {got:?}");
+        let n = read_some(&mut device, &mut bytes);
+        got.extend(rx.feed_slice(&bytes[..n]).filter_map(|r| r.ok()));
+    }
+}
+
+/// Over a pty: a device answering with another bank, another protocol or no bank is
+/// refused at open, the error saying what to reflash.
+#[test]
+fn serial_source_refuses_a_device_that_is_not_the_scene_displayed() {
+    let cases = [
+        (
+            hello(PROTOCOL_VERSION, Some(0x1234_5678)),
+            vec![
+                "0x12345678",
+                "0xabcdef01",
+                "reflash the bank",
+                "scene id 0x5ce9e",
+            ],
+        ),
+        (
+            hello(PROTOCOL_VERSION + 1, Some(0xABCD_EF01)),
+            vec!["protocol", "reflash the firmware"],
+        ),
+        (hello(PROTOCOL_VERSION, None), vec!["no valid bank"]),
+    ];
+    for (answer, want) in cases {
+        let (device, name, _slave) = pty();
+        let answered = answer_hello(device, answer.clone());
+        let err = SerialSource::open(&name, 115_200, 0xABCD_EF01, "the liver bank")
+            .err()
+            .unwrap_or_else(|| panic!("{answer:?} accepted"));
+        let msg = format!("{err:#}");
+        for w in want {
+            assert!(msg.contains(w), "{answer:?}: {msg:?} lacks {w:?}");
+        }
+        answered.join().unwrap();
+    }
+}
+
+/// Over a pty: the Hello is found among other frames and line noise.
+#[test]
+fn await_identity_skips_other_frames() {
+    let (mut device, name, _slave) = pty();
+    let mut port = serialport::new(&name, 115_200)
+        .timeout(Duration::from_millis(2))
+        .open()
+        .unwrap();
+    let mut buf = [0u8; MAX_FRAME];
+    let fault = DeviceToHost::Fault {
+        tick: 3,
+        reason: FaultReason::LinkSilent,
+        detail: 0,
+    };
+    device
+        .write_all(encode_frame(&fault, &mut buf).unwrap())
+        .unwrap();
+    device.write_all(&[0x55, 0xAA, 0x00]).unwrap();
+    device
+        .write_all(encode_frame(&hello(7, Some(42)), &mut buf).unwrap())
+        .unwrap();
+    let id = await_identity(&mut *port, &name, Duration::from_secs(5)).unwrap();
+    assert_eq!(
+        id,
+        Identity {
+            protocol: 7,
+            bank_crc: Some(42),
+            scene_id: 0x5ce9e,
+            node_count: 321
+        }
+    );
+    // Silence: a timeout naming the port.
+    let err = await_identity(&mut *port, &name, Duration::from_millis(50)).unwrap_err();
+    assert!(format!("{err}").contains(&name), "{err}");
 }
 
 fn run(args: &[&str]) -> Output {
