@@ -375,17 +375,11 @@ fn run(args: &[&str]) -> (bool, String, String) {
 
 /// `--scene` through a symbolic link: the real scene is updated, the link stays a link, and
 /// the scene keeps its mode.
-#[test]
-fn calibrating_a_linked_private_scene_keeps_the_link_and_the_mode() {
-    use std::os::unix::fs::PermissionsExt;
-    let dir = tempfile::tempdir().unwrap();
-    let real = dir.path().join("real.toml");
-    std::fs::copy(manifest("scenes/liver.toml"), &real).unwrap();
-    std::fs::set_permissions(&real, std::fs::Permissions::from_mode(0o600)).unwrap();
-    let link = dir.path().join("scene.toml");
-    std::os::unix::fs::symlink("real.toml", &link).unwrap();
+/// `host calibrate tissue` on the shipped brain curve (Q: the linear model's force against the
+/// measured one) into `scene`, plots at `plot`, with `extra` arguments.
+fn fit_brain_q(scene: &Path, plot: &Path, extra: &[&str]) -> (bool, String, String) {
     let brain = manifest(BRAIN);
-    let (ok, _, err) = run(&[
+    let mut args = vec![
         "calibrate",
         "tissue",
         "--csv",
@@ -395,10 +389,24 @@ fn calibrating_a_linked_private_scene_keeps_the_link_and_the_mode() {
         "--y",
         "force_n",
         "--scene",
-        link.to_str().unwrap(),
+        scene.to_str().unwrap(),
         "--plot",
-        dir.path().join("q").to_str().unwrap(),
-    ]);
+        plot.to_str().unwrap(),
+    ];
+    args.extend_from_slice(extra);
+    run(&args)
+}
+
+#[test]
+fn calibrating_a_linked_private_scene_keeps_the_link_and_the_mode() {
+    use std::os::unix::fs::PermissionsExt;
+    let dir = tempfile::tempdir().unwrap();
+    let real = dir.path().join("real.toml");
+    std::fs::copy(manifest("scenes/liver.toml"), &real).unwrap();
+    std::fs::set_permissions(&real, std::fs::Permissions::from_mode(0o600)).unwrap();
+    let link = dir.path().join("scene.toml");
+    std::os::unix::fs::symlink("real.toml", &link).unwrap();
+    let (ok, _, err) = fit_brain_q(&link, &dir.path().join("q"), &[]);
     assert!(ok, "{err}");
     assert!(
         std::fs::symlink_metadata(&link)
@@ -423,24 +431,7 @@ fn cli_fits_writes_scene_json_and_plots() {
     let original = std::fs::read_to_string(manifest("scenes/liver.toml")).unwrap();
     std::fs::write(&scene, &original).unwrap();
     let stem = dir.path().join("q");
-    let brain = manifest(BRAIN);
-    let (ok, out, err) = run(&[
-        "calibrate",
-        "tissue",
-        "--csv",
-        brain.to_str().unwrap(),
-        "--x",
-        "linear_force_n",
-        "--y",
-        "force_n",
-        "--degree",
-        "auto",
-        "--scene",
-        scene.to_str().unwrap(),
-        "--plot",
-        stem.to_str().unwrap(),
-        "--json",
-    ]);
+    let (ok, out, err) = fit_brain_q(&scene, &stem, &["--degree", "auto", "--json"]);
     assert!(ok, "{err}");
     let v: serde_json::Value = serde_json::from_str(&out).unwrap();
     let degree = v["degree"].as_u64().unwrap() as usize;
@@ -669,30 +660,14 @@ fn bad_csvs_name_the_line_and_leave_the_scene_alone() {
         assert!(!err.contains("panicked"), "{name}: {err}");
     }
     // A degree that gives a decreasing law is refused, and says why.
-    let brain = manifest(BRAIN);
-    let (ok, _, err) = run(&[
-        "calibrate",
-        "tissue",
-        "--csv",
-        brain.to_str().unwrap(),
-        "--x",
-        "linear_force_n",
-        "--y",
-        "force_n",
-        "--degree",
-        "2",
-        "--scene",
-        scene.to_str().unwrap(),
-        "--plot",
-        dir.path().join("p").to_str().unwrap(),
-    ]);
+    let (ok, _, err) = fit_brain_q(&scene, &dir.path().join("p"), &["--degree", "2"]);
     assert!(!ok);
     assert!(err.contains("not increasing near"), "{err}");
     let (ok, _, err) = run(&[
         "calibrate",
         "motor",
         "--csv",
-        brain.to_str().unwrap(),
+        manifest(BRAIN).to_str().unwrap(),
         "--scene",
         scene.to_str().unwrap(),
     ]);

@@ -4,7 +4,7 @@
 
 use host::calibrate::gravity;
 use host::scene::Scene;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::process::Command;
 
 fn manifest(rel: &str) -> PathBuf {
@@ -58,6 +58,20 @@ fn grid() -> Vec<[f64; 3]> {
     q
 }
 
+/// `host calibrate gravity --csv csv --scene scene` with `extra` arguments.
+fn calibrate_gravity(csv: &Path, scene: &Path, extra: &[&str]) -> (bool, String, String) {
+    let mut args = vec![
+        "calibrate",
+        "gravity",
+        "--csv",
+        csv.to_str().unwrap(),
+        "--scene",
+        scene.to_str().unwrap(),
+    ];
+    args.extend_from_slice(extra);
+    run(&args)
+}
+
 #[test]
 fn cli_fits_held_poses_into_the_scene() {
     let dir = tempfile::tempdir().unwrap();
@@ -71,15 +85,7 @@ fn cli_fits_held_poses_into_the_scene() {
         format!("# held poses\n{HEADER}{}", rows(&scene, &TRUE, &grid())),
     )
     .unwrap();
-    let (ok, out, err) = run(&[
-        "calibrate",
-        "gravity",
-        "--csv",
-        csv.to_str().unwrap(),
-        "--scene",
-        scene_path.to_str().unwrap(),
-        "--json",
-    ]);
+    let (ok, out, err) = calibrate_gravity(&csv, &scene_path, &["--json"]);
     assert!(ok, "{err}");
     let v: serde_json::Value = serde_json::from_str(&out).unwrap();
     assert!(v["fit"]["rms_nm"].as_f64().unwrap() < 1e-9, "{v}");
@@ -114,16 +120,7 @@ fn cli_fits_held_poses_into_the_scene() {
     let src = dir.path().join("src.toml");
     std::fs::write(&src, &orig).unwrap();
     let out_path = dir.path().join("out.toml");
-    let (ok, out, err) = run(&[
-        "calibrate",
-        "gravity",
-        "--csv",
-        csv.to_str().unwrap(),
-        "--scene",
-        src.to_str().unwrap(),
-        "--out",
-        out_path.to_str().unwrap(),
-    ]);
+    let (ok, out, err) = calibrate_gravity(&csv, &src, &["--out", out_path.to_str().unwrap()]);
     assert!(ok, "{err}");
     assert!(out.contains("residual over 18 poses"), "{out}");
     assert_eq!(std::fs::read_to_string(&src).unwrap(), orig);
@@ -168,14 +165,7 @@ fn bad_or_degenerate_csvs_are_refused_and_leave_the_scene_alone() {
     ] {
         let csv = dir.path().join("g.csv");
         std::fs::write(&csv, body).unwrap();
-        let (ok, _, err) = run(&[
-            "calibrate",
-            "gravity",
-            "--csv",
-            csv.to_str().unwrap(),
-            "--scene",
-            scene_path.to_str().unwrap(),
-        ]);
+        let (ok, _, err) = calibrate_gravity(&csv, &scene_path, &[]);
         assert!(!ok, "{name} accepted");
         assert!(err.contains(want), "{name}: {err}");
         assert!(!err.contains("panicked"), "{name}: {err}");
