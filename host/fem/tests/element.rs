@@ -6,7 +6,7 @@
 use fem::compliance::{Compliance, solve_prescribed};
 use fem::elasticity::{ANP_STABILISATION, DofMap, Elasticity, Element, FixedSet, Material};
 use fem::mesh::TetMesh;
-use fem::mesh::structured::box_mesh;
+use fem::mesh::structured::{box_mesh, distorted_box_mesh};
 
 const A: [[f64; 3]; 3] = [
     [1.0e-3, 2.0e-4, -3.0e-4],
@@ -28,24 +28,7 @@ fn linear_field(mesh: &TetMesh, a: [[f64; 3]; 3], b: [f64; 3]) -> Vec<f64> {
 
 /// A structured box with its interior nodes moved randomly (deterministic).
 fn distorted_box(size: [f64; 3], cells: [usize; 3], amount: f64) -> TetMesh {
-    let mut mesh = box_mesh(size, cells);
-    let h = [0, 1, 2].map(|a| size[a] / cells[a] as f64);
-    let mut state = 0x2545_f491_4f6c_dd1du64;
-    let mut rand = || {
-        state ^= state << 13;
-        state ^= state >> 7;
-        state ^= state << 17;
-        (state >> 11) as f64 / (1u64 << 53) as f64 - 0.5
-    };
-    for p in &mut mesh.nodes {
-        if (0..3).all(|a| p[a] > 1e-12 && p[a] < size[a] - 1e-12) {
-            for a in 0..3 {
-                p[a] += amount * h[a] * rand();
-            }
-        }
-    }
-    assert!((0..mesh.tets.len()).all(|t| mesh.signed_volume(t) > 0.0));
-    mesh
+    distorted_box_mesh(size, cells, amount, 0x2545_f491_4f6c_dd1d).expect("no inverted element")
 }
 
 fn on_boundary(p: &[f64; 3], size: [f64; 3]) -> bool {

@@ -4,7 +4,7 @@
 use fem::compliance::solve_prescribed;
 use fem::elasticity::{Elasticity, Element, FixedSet, Material};
 use fem::mesh::TetMesh;
-use fem::mesh::structured::box_mesh;
+use fem::mesh::structured::{box_mesh, distorted_box_mesh};
 use fem::reference::box_compression;
 
 /// A linear field `u(x) = A x + b`.
@@ -106,24 +106,8 @@ const BOX: [f64; 3] = [0.04, 0.03, 0.02];
 /// A structured box with its interior nodes moved randomly (deterministic), so elements are
 /// irregular as in a patch test.
 fn distorted_box(size: [f64; 3], cells: [usize; 3], amount: f64) -> TetMesh {
-    let mut mesh = box_mesh(size, cells);
-    let h = [0, 1, 2].map(|a| size[a] / cells[a] as f64);
-    let mut state = 0x2545_f491_4f6c_dd1du64;
-    let mut rand = || {
-        state ^= state << 13;
-        state ^= state >> 7;
-        state ^= state << 17;
-        (state >> 11) as f64 / (1u64 << 53) as f64 - 0.5
-    };
-    for p in &mut mesh.nodes {
-        let interior = (0..3).all(|a| p[a] > 1e-12 && p[a] < size[a] - 1e-12);
-        if interior {
-            for a in 0..3 {
-                p[a] += amount * h[a] * rand();
-            }
-        }
-    }
-    assert!((0..mesh.tets.len()).all(|t| mesh.signed_volume(t) > 0.0));
+    let mesh = distorted_box_mesh(size, cells, amount, 0x2545_f491_4f6c_dd1d)
+        .expect("no inverted element");
     let worst = (0..mesh.tets.len())
         .map(|t| mesh.quality(t))
         .fold(1.0, f64::min);

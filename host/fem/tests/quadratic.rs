@@ -8,26 +8,12 @@ use fem::compliance::{Compliance, solve_prescribed};
 use fem::elasticity::quadratic::QuadraticBody;
 use fem::elasticity::{Elasticity, Element, FixedSet, Material, Stiffness};
 use fem::mesh::TetMesh;
-use fem::mesh::structured::box_mesh;
+use fem::mesh::structured::{box_mesh, distorted_box_mesh};
 use fem::reference::Punch;
 
 /// A box whose interior vertices are moved by up to `amount` of a cell (deterministic).
 fn distorted_box(size: [f64; 3], cells: [usize; 3], amount: f64) -> TetMesh {
-    let mut mesh = box_mesh(size, cells);
-    let h = [0, 1, 2].map(|a| size[a] / cells[a] as f64);
-    let mut state = 0x9e37_79b9_7f4a_7c15u64;
-    for p in &mut mesh.nodes {
-        if (0..3).all(|a| p[a] > 1e-12 && p[a] < size[a] - 1e-12) {
-            for (a, x) in p.iter_mut().enumerate() {
-                state ^= state << 13;
-                state ^= state >> 7;
-                state ^= state << 17;
-                *x += amount * h[a] * ((state >> 11) as f64 / (1u64 << 53) as f64 - 0.5);
-            }
-        }
-    }
-    assert!((0..mesh.tets.len()).all(|t| mesh.signed_volume(t) > 0.0));
-    mesh
+    distorted_box_mesh(size, cells, amount, 0x9e37_79b9_7f4a_7c15).expect("no inverted element")
 }
 
 fn on_boundary(p: &[f64; 3], size: [f64; 3]) -> bool {
