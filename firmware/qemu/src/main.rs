@@ -154,8 +154,9 @@ const RX_POLLS_AFTER_A_BYTE: u32 = 200;
 /// garbage after 10 + 20 ticks without a valid frame.
 const LINK_GRACE_TICKS: u32 = 20;
 
-/// The link: received bytes into the tick's queue, queued frames out, at most `budget` bytes
-/// sent per tick period. Busy while there is traffic, asleep until the next period otherwise.
+/// The link: received bytes into the tick's queue, queued messages out (encoded as frames
+/// here, by [`DriverEnd::take_tx`], not in the tick), at most `budget` bytes sent per tick
+/// period. Busy while there is traffic, asleep until the next period otherwise.
 #[embassy_executor::task]
 async fn link(mut end: DriverEnd<'static>, mut uart: Usart1, budget: u32) {
     let (mut period, mut left) = (systick::period(), budget);
