@@ -2,8 +2,10 @@
 //! encoders and the interlocks, applies the host's link commands, runs [`HapticLoop::tick`],
 //! drives the motors (or puts them in their safe state) and queues faults and decimated
 //! telemetry. The hardware comes in through [`crate::hal`]; the host link through the tick's
-//! end of [`crate::link`]'s queues, so a tick never waits on I/O: a frame that finds the queue
-//! full is dropped whole and counted (telemetry's `tx_dropped`).
+//! end of [`crate::link`]'s queues, so a tick never waits on I/O and never encodes: it queues
+//! the message (a telemetry snapshot, a fault), the link driver encodes it outside the tick,
+//! and a message that finds the queue full is dropped whole and counted (telemetry's
+//! `tx_dropped`).
 //!
 //! A bank that fails validation leaves no loop to run: the application then keeps the motors at
 //! zero current, reports [`FaultReason::InvalidBank`] with the [`BankError::code`] as detail at
@@ -15,8 +17,8 @@
 //! arm command is refused (the latched fault re-sent) while one is active.
 
 use bank_format::{
-    Bank, BankError, Counters, DeviceToHost, FaultReason, FrameDecoder, HostToDevice, MAX_FRAME,
-    Mode, PROTOCOL_VERSION, State, Telemetry, encode_frame, heapless,
+    Bank, BankError, Counters, DeviceToHost, FaultReason, FrameDecoder, HostToDevice, Mode,
+    PROTOCOL_VERSION, State, Telemetry, heapless,
 };
 
 use crate::hal::{CycleCounter, Plant};
@@ -64,7 +66,7 @@ enum Core<'b> {
     },
 }
 
-/// The application state (no heap: frame buffers are fixed-size).
+/// The application state (no heap: the link's queues are fixed-size).
 pub struct App<'b, 'q> {
     core: Core<'b>,
     link: TickEnd<'q>,
@@ -73,7 +75,6 @@ pub struct App<'b, 'q> {
     ticks_since_host_byte: u32,
     link_grace_ticks: u32,
     last_tick_cycles: u32,
-    tx_dropped: u32,
 }
 
 impl<'b, 'q> App<'b, 'q> {
@@ -108,9 +109,8 @@ impl<'b, 'q> App<'b, 'q> {
             ticks_since_host_byte: 0,
             link_grace_ticks,
             last_tick_cycles: 0,
-            tx_dropped: 0,
         };
-        app.queue(&app.hello());
+        app.queue(app.hello());
         app
     }
 
@@ -214,14 +214,14 @@ impl<'b, 'q> App<'b, 'q> {
             return Err(e);
         }
         if let Some(f) = new_fault {
-            self.queue(&DeviceToHost::Fault {
+            self.queue(DeviceToHost::Fault {
                 tick: out.tick,
                 reason: f.reason,
                 detail: f.detail,
             });
         }
         if out.tick.is_multiple_of(TELEMETRY_EVERY_TICKS) {
-            self.queue(&DeviceToHost::Telemetry(self.telemetry()));
+            self.queue(DeviceToHost::Telemetry(self.telemetry()));
         }
         Ok(out)
     }
@@ -247,7 +247,7 @@ impl<'b, 'q> App<'b, 'q> {
     /// The telemetry of the last tick.
     pub fn telemetry(&self) -> Telemetry {
         let mut t = self.core_telemetry();
-        t.counters.tx_dropped = self.tx_dropped;
+        t.counters.tx_dropped = self.link.tx_dropped();
         t.counters.rx_dropped = self.link.rx_dropped();
         t
     }
@@ -330,7 +330,7 @@ impl<'b, 'q> App<'b, 'q> {
 
     fn command(&mut self, cmd: HostToDevice) {
         match cmd {
-            HostToDevice::Hello => self.queue(&self.hello()),
+            HostToDevice::Hello => self.queue(self.hello()),
             HostToDevice::Arm => self.arm(),
             HostToDevice::Disarm => {
                 if let Core::Loop(lp) = &mut self.core {
@@ -342,7 +342,7 @@ impl<'b, 'q> App<'b, 'q> {
                     && let Err(f) = lp.set_mode(mode)
                 {
                     let tick = lp.tick_count();
-                    self.queue(&DeviceToHost::Fault {
+                    self.queue(DeviceToHost::Fault {
                         tick,
                         reason: f.reason,
                         detail: f.detail,
@@ -389,7 +389,7 @@ impl<'b, 'q> App<'b, 'q> {
             }
         };
         if let Some(f) = refused {
-            self.queue(&DeviceToHost::Fault {
+            self.queue(DeviceToHost::Fault {
                 tick,
                 reason: f.reason,
                 detail: f.detail,
@@ -397,17 +397,11 @@ impl<'b, 'q> App<'b, 'q> {
         }
     }
 
-    /// Encode `msg` and queue it for the link; dropped whole and counted when the queue is
-    /// full.
-    fn queue(&mut self, msg: &DeviceToHost) {
-        let mut buf = [0u8; MAX_FRAME];
-        let sent = match encode_frame(msg, &mut buf) {
-            Ok(frame) => self.link.send(frame),
-            Err(_) => false,
-        };
-        if !sent {
-            self.tx_dropped = self.tx_dropped.wrapping_add(1);
-        }
+    /// Queue `msg` for the link driver, which encodes it outside the tick; dropped whole and
+    /// counted ([`TickEnd::tx_dropped`]) when the queue is full.
+    fn queue(&mut self, msg: DeviceToHost) {
+        // A refusal is counted by the queue itself.
+        let _ = self.link.send(msg);
     }
 }
 
@@ -435,7 +429,7 @@ mod tests {
     use crate::fixtures::flat_patch;
     use crate::hal::Interlocks;
     use crate::link::{DriverEnd, Link};
-    use bank_format::{FrameDecoder, State as WireState};
+    use bank_format::{FrameDecoder, MAX_FRAME, State as WireState, encode_frame};
     use std::vec::Vec;
 
     /// Encoders and interlocks held (set them between ticks), what was driven recorded.

@@ -1,39 +1,43 @@
 //! The host link between the tick and the link driver: two bounded single-producer,
-//! single-consumer queues, so the tick never waits on I/O.
+//! single-consumer queues, so the tick never waits on I/O and never encodes a frame.
 //!
 //! The tick ([`crate::app::App::tick`], high priority) owns a [`TickEnd`]: it pushes whole
-//! encoded frames (telemetry, faults, `Hello`) and pops the bytes the host sent. A lower-priority
-//! driver (a UART or USB CDC task) owns the [`DriverEnd`]: it takes outgoing bytes as fast as the
-//! wire accepts them and pushes what it received. Neither end ever blocks:
+//! messages (telemetry snapshots, faults, `Hello`), not yet encoded, and pops the bytes the
+//! host sent. A lower-priority driver (a UART or USB CDC task, in thread mode) owns the
+//! [`DriverEnd`]: it takes each message, encodes it as a link frame (postcard, CRC, COBS:
+//! [`encode_frame`]) and hands out its bytes as fast as the wire accepts them, and pushes what
+//! it received. Neither end ever blocks:
 //!
-//! - a frame that finds the outgoing queue full is dropped whole and counted
-//!   ([`TickEnd::send`] returns `false`, the application counts it in telemetry's
-//!   `tx_dropped`); a frame once queued goes out whole, so the host never sees a torn frame;
+//! - a message that finds the outgoing queue full is dropped whole and counted
+//!   ([`TickEnd::send`] returns `false`; [`TickEnd::tx_dropped`], telemetry's `tx_dropped`); a
+//!   message once queued goes out as one whole frame, so the host never sees a torn frame (a
+//!   message that would not encode, which the bounded message set cannot produce, is dropped
+//!   and counted the same way);
 //! - received bytes that find the incoming queue full are dropped and counted
 //!   ([`DriverEnd::rx_dropped`]); the frame they belonged to then fails its CRC on the device
 //!   and is counted there as an `rx_error`.
 //!
 //! The queues are lock-free (heapless `spsc`), so the two ends may live at different interrupt
-//! priorities on one core.
+//! priorities on one core. Encoding in the driver keeps postcard, the CRC, COBS and the
+//! frame buffers out of the tick: the tick only moves the message (a few hundred bytes) into
+//! its queue slot.
 
-use bank_format::MAX_FRAME;
+use bank_format::{DeviceToHost, MAX_FRAME, encode_frame};
 use core::sync::atomic::{AtomicU32, Ordering};
 use heapless::spsc::{Consumer, Producer, Queue};
 
-/// One encoded link frame (COBS, CRC, 0x00 delimiter).
-pub type Frame = heapless::Vec<u8, MAX_FRAME>;
-
-/// Outgoing frames the queue holds (minus one: heapless keeps a slot free). At 100 Hz
-/// telemetry this is 70 ms of frames for a host that stopped reading.
+/// Outgoing messages the queue holds (minus one: heapless keeps a slot free). At 100 Hz
+/// telemetry this is 70 ms of messages for a host that stopped reading.
 pub const TX_FRAMES: usize = 8;
 /// Incoming bytes the queue holds (minus one).
 pub const RX_BYTES: usize = 512;
 
 /// The link's queues; [`Link::split`] hands out the two ends.
 pub struct Link {
-    tx: Queue<Frame, TX_FRAMES>,
+    tx: Queue<DeviceToHost, TX_FRAMES>,
     rx: Queue<u8, RX_BYTES>,
     rx_dropped: AtomicU32,
+    tx_dropped: AtomicU32,
 }
 
 impl Default for Link {
@@ -49,6 +53,7 @@ impl Link {
             tx: Queue::new(),
             rx: Queue::new(),
             rx_dropped: AtomicU32::new(0),
+            tx_dropped: AtomicU32::new(0),
         }
     }
 
@@ -56,37 +61,44 @@ impl Link {
     pub fn split(&mut self) -> (TickEnd<'_>, DriverEnd<'_>) {
         let (tx_in, tx_out) = self.tx.split();
         let (rx_in, rx_out) = self.rx.split();
-        let dropped = &self.rx_dropped;
+        let (rx_dropped, tx_dropped) = (&self.rx_dropped, &self.tx_dropped);
         (
             TickEnd {
                 tx: tx_in,
                 rx: rx_out,
-                rx_dropped: dropped,
+                rx_dropped,
+                tx_dropped,
             },
             DriverEnd {
                 tx: tx_out,
                 rx: rx_in,
-                rx_dropped: dropped,
-                sending: None,
+                rx_dropped,
+                tx_dropped,
+                frame: [0; MAX_FRAME],
+                len: 0,
+                sent: 0,
             },
         )
     }
 }
 
-/// The tick's end: queue frames, take received bytes. Every method returns at once.
+/// The tick's end: queue messages, take received bytes. Every method returns at once.
 pub struct TickEnd<'q> {
-    tx: Producer<'q, Frame>,
+    tx: Producer<'q, DeviceToHost>,
     rx: Consumer<'q, u8>,
     rx_dropped: &'q AtomicU32,
+    tx_dropped: &'q AtomicU32,
 }
 
 impl TickEnd<'_> {
-    /// Queue `frame` whole; `false` (the frame dropped) when the queue is full.
-    pub fn send(&mut self, frame: &[u8]) -> bool {
-        let Ok(frame) = Frame::from_slice(frame) else {
-            return false;
-        };
-        self.tx.enqueue(frame).is_ok()
+    /// Queue `msg` whole; `false` (the message dropped and counted in
+    /// [`TickEnd::tx_dropped`]) when the queue is full.
+    pub fn send(&mut self, msg: DeviceToHost) -> bool {
+        let queued = self.tx.enqueue(msg).is_ok();
+        if !queued {
+            self.tx_dropped.fetch_add(1, Ordering::Relaxed);
+        }
+        queued
     }
 
     /// The next received byte, if any.
@@ -98,49 +110,69 @@ impl TickEnd<'_> {
     pub fn rx_dropped(&self) -> u32 {
         self.rx_dropped.load(Ordering::Relaxed)
     }
+
+    /// Outgoing messages dropped whole, the queue being full (or, at the driver, the message
+    /// not encoding) (wrapping).
+    pub fn tx_dropped(&self) -> u32 {
+        self.tx_dropped.load(Ordering::Relaxed)
+    }
 }
 
-/// The driver's end: outgoing bytes in frame order, received bytes in.
+/// The driver's end: outgoing frames' bytes in message order, received bytes in.
 pub struct DriverEnd<'q> {
-    tx: Consumer<'q, Frame>,
+    tx: Consumer<'q, DeviceToHost>,
     rx: Producer<'q, u8>,
     rx_dropped: &'q AtomicU32,
-    /// The frame being sent and how much of it is out.
-    sending: Option<(Frame, usize)>,
+    tx_dropped: &'q AtomicU32,
+    /// The frame being sent (`frame[..len]`) and how much of it is out (`sent`; none is being
+    /// sent when `sent == len`).
+    frame: [u8; MAX_FRAME],
+    len: usize,
+    sent: usize,
 }
 
 impl DriverEnd<'_> {
-    /// Copy the next outgoing bytes into `out` (at most `out.len()`, frames back to back);
-    /// returns how many. The caller must send all of them: a frame is never taken back.
+    /// Copy the next outgoing bytes into `out` (at most `out.len()`, frames back to back),
+    /// encoding each queued message when its turn comes; returns how many. The caller must
+    /// send all of them: a frame is never taken back.
     pub fn take_tx(&mut self, out: &mut [u8]) -> usize {
         let mut n = 0;
         while n < out.len() {
-            if self.sending.is_none() {
-                match self.tx.dequeue() {
-                    Some(f) => self.sending = Some((f, 0)),
-                    None => break,
-                }
-            }
-            let Some((frame, sent)) = &mut self.sending else {
+            if self.sent >= self.len && !self.next_frame() {
                 break;
-            };
-            let rest = frame.get(*sent..).unwrap_or(&[]);
+            }
+            let rest = self.frame.get(self.sent..self.len).unwrap_or(&[]);
             let k = rest.len().min(out.len() - n);
             if let (Some(dst), Some(src)) = (out.get_mut(n..n + k), rest.get(..k)) {
                 dst.copy_from_slice(src);
             }
             n += k;
-            *sent += k;
-            if *sent >= frame.len() {
-                self.sending = None;
-            }
+            self.sent += k;
         }
         n
     }
 
+    /// Encode the next queued message into the frame buffer; `false` when there is none. A
+    /// message that does not encode is dropped and counted.
+    fn next_frame(&mut self) -> bool {
+        while let Some(msg) = self.tx.dequeue() {
+            match encode_frame(&msg, &mut self.frame) {
+                Ok(frame) => {
+                    (self.len, self.sent) = (frame.len(), 0);
+                    return true;
+                }
+                Err(_) => {
+                    self.tx_dropped.fetch_add(1, Ordering::Relaxed);
+                }
+            }
+        }
+        (self.len, self.sent) = (0, 0);
+        false
+    }
+
     /// Whether there is anything to send.
     pub fn has_tx(&self) -> bool {
-        self.sending.is_some() || self.tx.ready()
+        self.sent < self.len || self.tx.ready()
     }
 
     /// Push received `bytes`; those that do not fit are dropped and counted.
@@ -159,28 +191,40 @@ impl DriverEnd<'_> {
 }
 
 #[cfg(test)]
+#[allow(clippy::unwrap_used)]
 mod tests {
     extern crate std;
     use super::*;
     use std::vec::Vec;
 
     #[test]
-    fn frames_go_out_whole_in_order_and_overflow_is_refused() {
+    fn messages_go_out_as_whole_frames_in_order_and_overflow_is_refused() {
         let mut link = Link::new();
         let (mut tick, mut driver) = link.split();
-        let frames: Vec<Vec<u8>> = (0..TX_FRAMES as u8)
-            .map(|i| (0..=i * 30).map(|b| b.wrapping_add(i)).collect())
+        let msgs: Vec<DeviceToHost> = (0..TX_FRAMES as u32)
+            .map(|i| DeviceToHost::Fault {
+                tick: i * 1000,
+                reason: bank_format::FaultReason::Overrun,
+                detail: i,
+            })
             .collect();
         let mut queued = Vec::new();
-        for f in &frames {
-            if tick.send(f) {
-                queued.push(f.clone());
+        for m in &msgs {
+            if tick.send(m.clone()) {
+                queued.push(m.clone());
             }
         }
-        // heapless keeps one slot free: the last frame was refused, not torn.
+        // heapless keeps one slot free: the last message was refused whole and counted.
         assert_eq!(queued.len(), TX_FRAMES - 1);
+        assert_eq!(tick.tx_dropped(), 1);
         assert!(driver.has_tx());
-        // A driver that takes 7 bytes at a time gets exactly the queued frames back to back.
+        // A driver that takes 7 bytes at a time gets exactly the queued messages' frames
+        // (encoded here independently) back to back.
+        let mut want = Vec::new();
+        for m in &queued {
+            let mut buf = [0u8; MAX_FRAME];
+            want.extend_from_slice(encode_frame(m, &mut buf).unwrap());
+        }
         let mut got = Vec::new();
         let mut buf = [0u8; 7];
         loop {
@@ -190,10 +234,9 @@ mod tests {
             }
             got.extend_from_slice(&buf[..n]);
         }
-        assert_eq!(got, queued.concat());
+        assert_eq!(got, want);
         assert!(!driver.has_tx());
-        // Oversize frames are refused too.
-        assert!(!tick.send(&[0u8; MAX_FRAME + 1]));
+        assert_eq!(tick.tx_dropped(), 1);
     }
 
     #[test]

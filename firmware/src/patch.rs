@@ -188,7 +188,12 @@ impl PatchBuild {
         anchor: [f32; 3],
         radius_m: f32,
     ) {
-        let basis = tangent_basis(bank, nodes).filter(|_| radius_m > 0.0 && radius_m.is_finite());
+        // The basis (two square roots) only for a tip with a radius.
+        let basis = if radius_m > 0.0 && radius_m.is_finite() {
+            tangent_basis(bank, nodes)
+        } else {
+            None
+        };
         self.triangle = triangle;
         self.nodes = nodes;
         self.bary = bary;

@@ -415,31 +415,30 @@ impl WeightedSolve {
             });
         }
         check_weights(weights)?;
+        // M = sum_ab w_a w_b C_ab, symmetric: blocks (a, b) and (b, a) are transposes, so
+        // visit b >= a and add w_a w_b (C_ab + C_ab^T) (half of it on the diagonal blocks),
+        // upper triangle only, mirrored at the end.
         let mut m = [[0.0f32; 3]; 3];
         for (a, (&k, &wa)) in nodes.iter().zip(weights).enumerate() {
-            // Blocks (a, b) and (b, a) are transposes: visit b >= a and add both.
             for (&l, &wb) in nodes.iter().zip(weights).skip(a) {
                 let c = bank
                     .coupling(usize::from(k), usize::from(l))
                     .ok_or(SolveError::MissingCoupling { k, l })?;
-                let w = wa * wb;
-                for (i, row) in c.iter().enumerate() {
-                    for (j, &v) in row.iter().enumerate() {
-                        if !v.is_finite() {
-                            return Err(SolveError::NonFinite);
-                        }
-                        // Symmetric by construction (C_lk = C_kl^T); the diagonal block
-                        // is symmetrised by the same sum.
-                        let scaled = if k == l { 0.5 * w * v } else { w * v };
-                        if let Some(e) = m.get_mut(i).and_then(|r| r.get_mut(j)) {
-                            *e += scaled;
-                        }
-                        if let Some(e) = m.get_mut(j).and_then(|r| r.get_mut(i)) {
-                            *e += scaled;
-                        }
-                    }
-                }
+                let w = if k == l { 0.5 * wa * wb } else { wa * wb };
+                let [[c00, c01, c02], [c10, c11, c12], [c20, c21, c22]] = c;
+                m[0][0] += w * (c00 + c00);
+                m[0][1] += w * (c01 + c10);
+                m[0][2] += w * (c02 + c20);
+                m[1][1] += w * (c11 + c11);
+                m[1][2] += w * (c12 + c21);
+                m[2][2] += w * (c22 + c22);
             }
+        }
+        (m[1][0], m[2][0], m[2][1]) = (m[0][1], m[0][2], m[1][2]);
+        // A NaN or infinite compliance entry reaches M (a zero weight turns an infinity
+        // into NaN): one check on the sum.
+        if !m.iter().flatten().all(|v| v.is_finite()) {
+            return Err(SolveError::NonFinite);
         }
         let factor = Factor::new(m, 3)?;
         factor.check()?;

@@ -8,7 +8,7 @@
 //! 2. contact update on the segment `[previous tip, tip]` ([`ContactTracker::update`]; the
 //!    first tick, and the first after zeroing the encoders, use a zero-length segment, so a
 //!    pose jump is never swept for contacts);
-//! 3. when touching: the weighted patch under the tool tip ([`tool_patch`], radius from the
+//! 3. when touching: the weighted patch under the tool tip ([`tool_patch`](crate::patch::tool_patch), radius from the
 //!    bank's device calibration; the contact triangle's barycentric coordinates when the radius
 //!    is zero or smaller than the triangles) and the **energy-minimal** solve on it
 //!    ([`WeightedSolve`]): `f_tool = (B C_SS B^T)^-1 d` with `B = [w_1 I, ..., w_n I]`,
@@ -53,7 +53,7 @@ use bank_format::{Bank, Contact, Counters, MAX_CONTACTS, Mode, Telemetry, heaple
 use crate::contact::{ContactState, ContactTracker};
 use crate::device::{Device, Joints, sin_cos, transpose_mul};
 use crate::hal::Interlocks;
-use crate::patch::{Patch, PatchBuild, tool_patch};
+use crate::patch::{Patch, PatchBuild};
 use crate::safety::{ArmRefused, Fault, SafetyConfig, State, Supervisor, TickInput};
 use crate::solve::{SolveError, WeightedSolve, apply_tissue_law};
 use crate::vec3::dist2;
@@ -459,7 +459,10 @@ impl<'b> HapticLoop<'b> {
             // tip's patch is built over the next ticks.
             None => {
                 self.pending.origin = None;
-                let patch = tool_patch(self.bank, triangle, nodes, bary, anchor, 0.0);
+                // `tool_patch(.., 0.0)` in the idle rebuild's place (no large temporary).
+                let build = &mut self.pending.build;
+                build.start(self.bank, triangle, nodes, bary, anchor, 0.0);
+                let patch = build.finish(self.bank);
                 let solve = WeightedSolve::new(self.bank, patch.nodes(), patch.weights())?;
                 self.held = Some(Held {
                     origin: PatchOrigin {

@@ -1,9 +1,9 @@
 //! The host link on USB full-speed CDC-ACM (a virtual serial port on the host: `/dev/ttyACM*`,
 //! `host demo --source serial:/dev/ttyACM0`), in the thread-mode executor below the tick. It
-//! only moves bytes between the USB endpoints and the link's [`DriverEnd`]: outgoing frames in
-//! 64-byte packets as the host takes them, received packets into the incoming queue. The tick
-//! never waits on it: when the host is slow or absent, whole frames are dropped on the tick's
-//! side and counted (`tx_dropped`).
+//! only moves bytes between the USB endpoints and the link's [`DriverEnd`]: outgoing frames
+//! (encoded by [`DriverEnd::take_tx`] here, in thread mode) in 64-byte packets as the host takes
+//! them, received packets into the incoming queue. The tick never waits on it: when the host is
+//! slow or absent, whole messages are dropped on the tick's side and counted (`tx_dropped`).
 
 use core::cell::RefCell;
 

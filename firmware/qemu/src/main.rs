@@ -146,6 +146,9 @@ async fn haptic(mut app: App<'static, 'static>, mut plant: PlantChannel) {
 /// (about 10 instructions each: some 2,000 of the tick period's 125,000).
 const RX_POLLS_AFTER_A_BYTE: u32 = 200;
 
+/// Outgoing bytes the link task takes from the link per call.
+const TX_CHUNK: usize = 16;
+
 /// The link grace of the application ([`App::new`]): QEMU's USART holds one byte at a time and
 /// carries a few a tick, so a 20-byte command spans several ticks, during which the bytes alone
 /// keep the link alive. 20 ticks (twice the supervisor's timeout) is a choice, not a
@@ -154,11 +157,15 @@ const RX_POLLS_AFTER_A_BYTE: u32 = 200;
 /// garbage after 10 + 20 ticks without a valid frame.
 const LINK_GRACE_TICKS: u32 = 20;
 
-/// The link: received bytes into the tick's queue, queued frames out, at most `budget` bytes
-/// sent per tick period. Busy while there is traffic, asleep until the next period otherwise.
+/// The link: received bytes into the tick's queue, queued messages out (encoded as frames
+/// here, by [`DriverEnd::take_tx`], not in the tick), at most `budget` bytes sent per tick
+/// period. Busy while there is traffic, asleep until the next period otherwise.
 #[embassy_executor::task]
 async fn link(mut end: DriverEnd<'static>, mut uart: Usart1, budget: u32) {
     let (mut period, mut left) = (systick::period(), budget);
+    // Bytes taken from the link but not yet written (taken in chunks: one `take_tx` call per
+    // byte cost about 40 instructions a byte of thread-mode time).
+    let (mut chunk, mut pos, mut len) = ([0u8; TX_CHUNK], 0usize, 0usize);
     loop {
         let mut busy = false;
         // QEMU's USART holds one received byte; the next one is delivered by QEMU's I/O thread
@@ -180,12 +187,21 @@ async fn link(mut end: DriverEnd<'static>, mut uart: Usart1, budget: u32) {
         if now != period {
             (period, left) = (now, budget);
         }
-        let mut byte = [0u8];
-        while left > 0 && end.has_tx() {
-            // QEMU's transmit register is always free; a full one would wait for the next pass.
-            if end.take_tx(&mut byte) == 0 || !uart.try_write(byte[0]) {
+        while left > 0 {
+            if pos >= len {
+                let want = TX_CHUNK.min(usize::try_from(left).unwrap_or(TX_CHUNK));
+                (pos, len) = (0, end.take_tx(chunk.get_mut(..want).unwrap_or(&mut [])));
+                if len == 0 {
+                    break;
+                }
+            }
+            // QEMU's transmit register is always free; a full one waits for the next pass (the
+            // byte stays in `chunk`, so a frame is never torn).
+            let Some(&byte) = chunk.get(pos) else { break };
+            if !uart.try_write(byte) {
                 break;
             }
+            pos += 1;
             left -= 1;
             busy = true;
         }
