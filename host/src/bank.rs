@@ -6,12 +6,14 @@
 //! writes the scene's bank. `host bank`, `host demo`, `host sil` and the tests all go through
 //! here.
 
+pub mod sweep;
+
 use crate::kinematics::Workspace;
 use crate::reach::reachable;
-use crate::scene::Scene;
+use crate::scene::{Couplings, Scene};
 use anyhow::{Context, Result, bail};
-use bank_format::BankBuilder;
 use bank_format::region::BANK_LEN;
+use bank_format::{AlignedBytes, Bank, BankBuilder};
 use fem::compliance::{Block3, Compliance};
 use fem::elasticity::{Elasticity, FixedSet};
 use fem::mesh::{Surface, TetMesh};
@@ -194,26 +196,53 @@ impl Prepared {
         e.iter().map(|&(a, b)| self.dist(a, b)).sum::<f64>() / e.len() as f64
     }
 
+    /// Length of R's longest triangle edge, m (0 without triangles).
+    pub fn longest_edge(&self) -> f64 {
+        self.edges()
+            .iter()
+            .map(|&(a, b)| self.dist(a, b))
+            .fold(0.0, f64::max)
+    }
+
     /// Blocks of R within `radius`, and at least along every triangle edge; the progress, if
     /// any, counts supernodes.
     pub fn blocks(&self, radius: f64, progress: Option<&dyn Progress>) -> Result<BlockRows> {
-        let longest = self
-            .edges()
-            .iter()
-            .map(|&(a, b)| self.dist(a, b))
-            .fold(0.0, f64::max);
         Ok(self.compliance.blocks_within(
             &self.region,
             &self.positions,
-            radius.max(longest),
+            radius.max(self.longest_edge()),
             progress,
         )?)
+    }
+
+    /// A radius within which every pair of nodes one tool patch can load lies: a patch node
+    /// is within the tip radius of the anchor (nodal quadrature) or a vertex of a triangle
+    /// holding a quadrature point within the tip radius, so two of them are at most
+    /// `2 (r + longest edge)` apart (checked by [`Prepared::tool_pairs`]).
+    pub fn probe_radius(&self) -> f64 {
+        2.0 * (self.scene.tip_radius_m.max(0.0) + self.longest_edge()) * (1.0 + 1e-3)
     }
 
     /// The bank for truncation radius `radius` from `rows` (computed for at least that
     /// radius by [`Prepared::blocks`]).
     pub fn bank(&self, rows: &[Vec<(usize, Block3)>], radius: f64) -> Result<BuiltBank> {
-        let edges = self.edges();
+        self.bank_keeping(rows, radius, None)
+    }
+
+    /// The bank that couples every pair within `radius`, every triangle edge and, if given,
+    /// every pair of `extra` (`(a, b)`, `a < b`, indices into R; `rows` must hold them). With
+    /// `extra` the bank's truncation radius (its coverage guarantee, `SPEC.md` check 14) is the
+    /// distance of the closest pair left uncoupled, if that exceeds `radius`.
+    pub fn bank_keeping(
+        &self,
+        rows: &[Vec<(usize, Block3)>],
+        radius: f64,
+        extra: Option<&BTreeSet<(usize, usize)>>,
+    ) -> Result<BuiltBank> {
+        let mut edges = self.edges();
+        if let Some(extra) = extra {
+            edges.extend(extra.iter().copied());
+        }
         let mut c_kk = Vec::with_capacity(rows.len());
         let mut couplings = Vec::new();
         for (a, row) in rows.iter().enumerate() {
@@ -226,6 +255,29 @@ impl Prepared {
                 }
             }
             c_kk.push(diag.context("internal: a node's own block is missing")?);
+        }
+        let mut coverage = radius;
+        if let Some(extra) = extra {
+            let kept: BTreeSet<(usize, usize)> = couplings
+                .iter()
+                .map(|c| (c.0 as usize, c.1 as usize))
+                .collect();
+            if let Some(&p) = extra.iter().find(|p| !kept.contains(p)) {
+                bail!(
+                    "internal: the blocks of the tool's pair {p:?} were not computed (they lie \
+                     beyond the rows' radius)"
+                );
+            }
+            // The closest pair left out bounds the radius within which every pair is kept.
+            let n = self.positions.len();
+            let closest = (0..n)
+                .flat_map(|a| (a + 1..n).map(move |b| (a, b)))
+                .filter(|p| !kept.contains(p))
+                .map(|(a, b)| self.dist(a, b))
+                .fold(f64::INFINITY, f64::min);
+            if closest.is_finite() {
+                coverage = coverage.max(closest * (1.0 - 1e-3));
+            }
         }
         let grid = self
             .scene
@@ -240,7 +292,7 @@ impl Prepared {
             c_kk,
             couplings,
             grid_cell_size_m: grid,
-            truncation_radius_m: radius,
+            truncation_radius_m: coverage,
             scene_id: self.scene_id,
             law: self.scene.law,
             gravity: self
@@ -258,12 +310,124 @@ impl Prepared {
     }
 }
 
+/// Anchors per triangle side of the lattice [`Prepared::tool_pairs`] samples: the anchors are
+/// the points of barycentric coordinates `(i, j, k) / TOOL_DIVISIONS`, `i + j + k =
+/// TOOL_DIVISIONS`, of every triangle of R (91 per triangle).
+pub const TOOL_DIVISIONS: usize = 12;
+
+/// A patch with fewer than [`firmware::solve::MAX_CONTACT_NODES`] nodes that dropped more than
+/// this share of its load left a node out for want of a coupling (below it: f32 rounding of
+/// `1 - kept / total`).
+pub const UNCOUPLED_TOL: f32 = 1e-5;
+
+/// The pairs of R the scene's tool can put into one contact set, and what the sampling saw.
+#[derive(Debug, Clone)]
+pub struct ToolPairs {
+    /// Pairs `(a, b)`, `a < b`, indices into R: nodes of one tool patch, and the node the
+    /// firmware's nodal quadrature starts from with every node within the tip radius.
+    pub pairs: BTreeSet<(usize, usize)>,
+    /// Anchors sampled.
+    pub anchors: usize,
+    /// Most nodes in one patch.
+    pub max_nodes: usize,
+    /// Largest share of a patch's load the firmware dropped (more than
+    /// [`firmware::solve::MAX_CONTACT_NODES`] nodes).
+    pub max_dropped: f32,
+}
+
 impl Prepared {
-    /// The scene's bank at its truncation radius (`bank.truncation_radius_m`).
+    /// The pairs the scene's tool can put into one contact set: the firmware's own patch rule
+    /// ([`firmware::patch::tool_patch`], f32, on `probe`, a bank of this scene that couples
+    /// every pair within [`Prepared::probe_radius`]) at the anchors of a lattice with
+    /// `divisions` steps per side on every triangle of R (the reachable surface). Besides
+    /// the patch's nodes, the nodal quadrature's start (the contact triangle's vertex of
+    /// largest barycentric coordinate) is paired with every node within the tip radius, so
+    /// that the firmware finds the same nodal pressures on the smaller bank. Fails if the
+    /// probe left a patch node uncoupled.
+    pub fn tool_pairs(&self, probe: &Bank, divisions: usize) -> Result<ToolPairs> {
+        let radius = self.scene.tip_radius_m as f32;
+        let r2 = radius * radius;
+        let n = divisions.max(1);
+        let positions = probe.positions();
+        let mut out = ToolPairs {
+            pairs: BTreeSet::new(),
+            anchors: 0,
+            max_nodes: 0,
+            max_dropped: 0.0,
+        };
+        for (t, tri) in probe.triangles().iter().enumerate() {
+            let v = tri.map(|k| positions[usize::from(k)]);
+            for i in 0..=n {
+                for j in 0..=n - i {
+                    let bary = [i, j, n - i - j].map(|m| m as f32 / n as f32);
+                    let anchor: [f32; 3] = std::array::from_fn(|c| {
+                        bary[0] * v[0][c] + bary[1] * v[1][c] + bary[2] * v[2][c]
+                    });
+                    let patch =
+                        firmware::patch::tool_patch(probe, t as u32, *tri, bary, anchor, radius);
+                    let nodes = patch.nodes();
+                    if patch.dropped > UNCOUPLED_TOL
+                        && nodes.len() < firmware::solve::MAX_CONTACT_NODES
+                    {
+                        bail!(
+                            "internal: the probe bank (pairs within {:.4} m) left a node of the \
+                             tool patch at triangle {t} uncoupled",
+                            self.probe_radius()
+                        );
+                    }
+                    out.anchors += 1;
+                    out.max_nodes = out.max_nodes.max(nodes.len());
+                    out.max_dropped = out.max_dropped.max(patch.dropped);
+                    for (x, &a) in nodes.iter().enumerate() {
+                        for &b in &nodes[x + 1..] {
+                            let (a, b) = (usize::from(a), usize::from(b));
+                            out.pairs.insert((a.min(b), a.max(b)));
+                        }
+                    }
+                    // The firmware's nodal pressures: the nearest vertex (first largest
+                    // coordinate) and its neighbours within the tip radius.
+                    let nearest =
+                        (0..3).fold(0, |best, c| if bary[c] > bary[best] { c } else { best });
+                    let a = tri[nearest];
+                    for &b in probe.neighbours(usize::from(a)).0 {
+                        let p = positions[usize::from(b)];
+                        let d2: f32 = (0..3).map(|c| (p[c] - anchor[c]).powi(2)).sum();
+                        if d2 < r2 {
+                            let (a, b) = (usize::from(a), usize::from(b));
+                            out.pairs.insert((a.min(b), a.max(b)));
+                        }
+                    }
+                }
+            }
+        }
+        Ok(out)
+    }
+
+    /// The scene's bank by its coupling rule (`bank.couplings`): the pairs within
+    /// `bank.truncation_radius_m`, and with "tool" also [`Prepared::tool_pairs`].
     pub fn build_bank(&self, progress: Option<&dyn Progress>) -> Result<BuiltBank> {
         let radius = self.scene.bank.truncation_radius_m;
-        let rows = self.blocks(radius, progress)?;
-        self.bank(&rows, radius)
+        match self.scene.bank.couplings {
+            Couplings::Radius => {
+                let rows = self.blocks(radius, progress)?;
+                self.bank(&rows, radius)
+            }
+            Couplings::Tool => {
+                let rows = self.blocks(radius.max(self.probe_radius()), progress)?;
+                let pairs = self.tool_pairs_from(&rows)?.pairs;
+                self.bank_keeping(&rows, radius, Some(&pairs))
+            }
+        }
+    }
+
+    /// [`Prepared::tool_pairs`] on the probe bank built from `rows` (computed for at least
+    /// [`Prepared::probe_radius`]).
+    pub fn tool_pairs_from(&self, rows: &[Vec<(usize, Block3)>]) -> Result<ToolPairs> {
+        let probe = self.bank(rows, self.probe_radius())?;
+        let aligned = AlignedBytes::new(&probe.bytes);
+        let bank = Bank::parse(&aligned)
+            .map_err(|e| anyhow::anyhow!("internal: the probe bank is invalid: {e}"))?;
+        self.tool_pairs(&bank, TOOL_DIVISIONS)
     }
 }
 

@@ -169,7 +169,10 @@ struct RawDisplayLaw {
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
 struct RawBank {
-    truncation_radius_m: Spanned<f64>,
+    #[serde(default)]
+    couplings: Option<Spanned<String>>,
+    #[serde(default)]
+    truncation_radius_m: Option<Spanned<f64>>,
     #[serde(default)]
     precision: Option<Spanned<String>>,
     #[serde(default)]
@@ -220,9 +223,22 @@ pub enum LawSpec {
     },
 }
 
+/// Which pairs of R the bank couples (besides every triangle edge).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Couplings {
+    /// Every pair closer than `truncation_radius_m`.
+    Radius,
+    /// Every pair the scene's tool can put into one contact set (found by sampling R with the
+    /// firmware's patch rule, see [`crate::bank::ToolPairs`]), and every pair closer than
+    /// `truncation_radius_m` (default 0).
+    Tool,
+}
+
 /// Bank options.
 #[derive(Debug, Clone, PartialEq)]
 pub struct BankOptions {
+    /// The coupling rule.
+    pub couplings: Couplings,
     /// Every pair of R closer than this is coupled, m.
     pub truncation_radius_m: f64,
     /// Largest contact set the firmware solves (informative; checked against the link's limit).
@@ -1057,19 +1073,48 @@ fn parse_gravity(
     Ok(c)
 }
 
-/// `[bank]`: `truncation_radius_m` finite and >= 0; `precision` "f32" (default);
+/// `[bank]`: `couplings` "radius" (default) or "tool"; `truncation_radius_m` finite and >= 0
+/// (required with "radius", default 0 with "tool"); `precision` "f32" (default);
 /// `max_contact_nodes` in 1..=[`bank_format::MAX_CONTACTS`] (default the maximum);
 /// `grid_cell_m` > 0 (default `None`, the builder's choice); `reach_margin_m` >= 0 (default
 /// 0.002 m).
 fn parse_bank(ctx: &Ctx, b: &RawBank) -> Result<BankOptions, SceneError> {
-    let r = *b.truncation_radius_m.get_ref();
-    if !(r.is_finite() && r >= 0.0) {
-        return Err(ctx.err(
-            b.truncation_radius_m.span(),
-            "bank.truncation_radius_m",
-            format!("must be >= 0 m, got {r}"),
-        ));
-    }
+    let couplings = match &b.couplings {
+        None => Couplings::Radius,
+        Some(c) => match c.get_ref().as_str() {
+            "radius" => Couplings::Radius,
+            "tool" => Couplings::Tool,
+            other => {
+                return Err(ctx.err(
+                    c.span(),
+                    "bank.couplings",
+                    format!("must be \"radius\" or \"tool\", got {other:?}"),
+                ));
+            }
+        },
+    };
+    let r = match (&b.truncation_radius_m, couplings) {
+        (Some(r), _) => {
+            let v = *r.get_ref();
+            if !(v.is_finite() && v >= 0.0) {
+                return Err(ctx.err(
+                    r.span(),
+                    "bank.truncation_radius_m",
+                    format!("must be >= 0 m, got {v}"),
+                ));
+            }
+            v
+        }
+        (None, Couplings::Tool) => 0.0,
+        (None, Couplings::Radius) => {
+            let at = ctx.text.find("[bank]").unwrap_or(0);
+            return Err(ctx.err(
+                at..at,
+                "bank.truncation_radius_m",
+                "missing: required unless bank.couplings = \"tool\"".to_string(),
+            ));
+        }
+    };
     if let Some(p) = &b.precision
         && p.get_ref() != "f32"
     {
@@ -1132,6 +1177,7 @@ fn parse_bank(ctx: &Ctx, b: &RawBank) -> Result<BankOptions, SceneError> {
         None => 0.002,
     };
     Ok(BankOptions {
+        couplings,
         truncation_radius_m: r,
         max_contact_nodes,
         grid_cell_m,
@@ -1249,6 +1295,11 @@ mod tests {
                 "truncation_radius_m",
                 "truncation_radius_m = -1.0",
                 "bank.truncation_radius_m",
+            ),
+            (
+                "truncation_radius_m",
+                "couplings = \"knn\"",
+                "bank.couplings",
             ),
         ] {
             let (text, line) = with_line(&t, key, bad);

@@ -337,25 +337,38 @@ fn the_locking_free_element_builds_a_bank() {
 }
 
 #[test]
-fn sweep_prints_a_row_per_radius() {
-    let o = host(&[
+fn sweep_prints_a_row_per_rule_and_radius() {
+    let sc = scene();
+    let args = [
         "bank",
         "sweep",
-        s(&scene()),
+        "--scene",
+        s(&sc),
         "--radii",
         "0,0.03",
         "--sites",
-        "5",
-    ]);
+        "20",
+    ];
+    let o = host(&args);
     assert!(o.status.success(), "{}", stderr(&o));
     let table = String::from_utf8_lossy(&o.stdout);
     let rows: Vec<&str> = table
         .lines()
-        .filter(|l| l.starts_with("| 0.0") || l.starts_with("| 30.0"))
+        .filter(|l| l.starts_with("| radius |") || l.starts_with("| tool |"))
         .collect();
-    assert_eq!(rows.len(), 2, "{table}");
-    // With every pair within 30 mm the contact sets are complete: exact forces.
-    assert!(rows[1].matches("0.0%").count() >= 6, "{table}");
+    assert_eq!(rows.len(), 3, "{table}");
+    let o = host(&[args.as_slice(), &["--json"]].concat());
+    assert!(o.status.success(), "{}", stderr(&o));
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    let rows = v["rows"].as_array().unwrap();
+    assert_eq!(rows.len(), 3, "{v}");
+    let (zero, tool) = (&rows[0], &rows[2]);
+    assert_eq!(tool["rule"], "tool");
+    // Edges only: the tool patch loses couplings; the tool's pairs: exact forces.
+    assert!(zero["patch_max"].as_f64().unwrap() > 1e-3, "{v}");
+    assert!(tool["patch_max"].as_f64().unwrap() <= 1e-4, "{v}");
+    assert!(tool["point_max"].as_f64().unwrap() <= 1e-4, "{v}");
+    assert!(tool["fits_region"].as_bool().unwrap(), "{v}");
 }
 
 #[test]

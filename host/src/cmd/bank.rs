@@ -3,16 +3,12 @@
 use anyhow::{Context, Result, bail};
 use bank_format::region::BANK_LEN;
 use bank_format::{AlignedBytes, Bank, LawKind, SectionKind};
-use fem::compliance::{Block3, contact_forces};
-use fem::mesh::{Surface, TetMesh};
 use firmware::patch::tool_patch;
-use firmware::solve::WeightedSolve;
+use host::bank::sweep::{self, SweepConfig};
 use host::bank::{BuiltBank, Prepared};
-use host::contact::{ContactSurface, SurfaceHit, patch_force};
 use host::fsio::write_atomic;
 use host::progress::Bar;
-use host::scene::MeshSource;
-use std::collections::HashMap;
+use host::scene::{Couplings, MeshSource};
 use std::path::PathBuf;
 use std::time::Instant;
 
@@ -23,8 +19,9 @@ pub enum BankCmd {
     Build(BuildArgs),
     /// Validate a bank file and print what it holds; exits non-zero when it is invalid.
     Inspect(InspectArgs),
-    /// Truncation radius -> couplings kept -> bank bytes -> force error against the full
-    /// compliance, for presses spread over the reachable region.
+    /// Coupling rule (truncation radius, or the tool's pairs) -> pairs kept -> bank bytes ->
+    /// the firmware's force error against the f64 solve on untruncated compliance, over contact
+    /// sites spread over the reachable region (point contact and tool patch).
     Sweep(SweepArgs),
 }
 
@@ -55,16 +52,28 @@ pub struct InspectArgs {
 #[derive(clap::Args, Debug)]
 pub struct SweepArgs {
     /// Scene file.
-    scene: PathBuf,
-    /// Truncation radii, m, comma separated.
-    #[arg(long, default_value = "0,0.004,0.008,0.012,0.016,0.02,0.03")]
+    scene: Option<PathBuf>,
+    /// Scene file (the same as the positional argument).
+    #[arg(long = "scene")]
+    scene_flag: Option<PathBuf>,
+    /// Truncation radii of the "radius" rule, m, comma separated.
+    #[arg(long, default_value = "0,0.008,0.012,0.016,0.02,0.03")]
     radii: String,
-    /// Number of press sites spread over the reachable region.
-    #[arg(long, default_value_t = 20)]
+    /// Leave out the "tool" rule's row (the pairs the scene's tool can put in one contact set).
+    #[arg(long)]
+    no_tool: bool,
+    /// Number of contact sites spread over the reachable region (area-uniform).
+    #[arg(long, default_value_t = 1000)]
     sites: usize,
+    /// Seed of the sites' placement.
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
     /// Press depth along the inward normal, m.
     #[arg(long, default_value_t = 0.005)]
     depth: f64,
+    /// Print one JSON object instead of the table.
+    #[arg(long)]
+    json: bool,
 }
 
 /// Runs a bank subcommand.
@@ -165,9 +174,19 @@ fn build(args: BuildArgs) -> Result<()> {
         prep.scene.tip_radius_m,
         prep.scene.bank.reach_margin_m
     );
+    let rule = match prep.scene.bank.couplings {
+        Couplings::Radius => format!("truncation radius {radius} m, plus every triangle edge"),
+        Couplings::Tool => format!(
+            "every pair the {} m tool can put into one contact set (firmware patch rule at {} \
+             anchors per triangle), every triangle edge, pairs within {radius} m; all pairs \
+             within {:.4} m are kept",
+            prep.scene.tip_radius_m,
+            (host::bank::TOOL_DIVISIONS + 1) * (host::bank::TOOL_DIVISIONS + 2) / 2,
+            bank.truncation_radius_m()
+        ),
+    };
     println!(
-        "couplings {pairs} pairs kept (truncation radius {radius} m, plus every triangle edge), \
-         {} neighbour entries",
+        "couplings {pairs} pairs kept ({rule}), {} neighbour entries",
         2 * pairs
     );
     let (mut most, mut dropped) = (0, 0.0f32);
@@ -341,285 +360,79 @@ fn inspect(args: InspectArgs) -> Result<()> {
     Ok(())
 }
 
-/// Press sites spread over R: farthest-point sampling from the node nearest R's centroid.
-fn spread_sites(positions: &[[f64; 3]], count: usize) -> Vec<usize> {
-    let n = positions.len();
-    if n == 0 || count == 0 {
-        return Vec::new();
-    }
-    let mut c = [0.0; 3];
-    for p in positions {
-        for i in 0..3 {
-            c[i] += p[i] / n as f64;
-        }
-    }
-    let d2 = |a: [f64; 3], b: [f64; 3]| (0..3).map(|i| (a[i] - b[i]).powi(2)).sum::<f64>();
-    let first = (0..n)
-        .min_by(|&a, &b| d2(positions[a], c).total_cmp(&d2(positions[b], c)))
-        .unwrap_or(0);
-    let mut sites = vec![first];
-    let mut near: Vec<f64> = positions.iter().map(|p| d2(*p, positions[first])).collect();
-    while sites.len() < count.min(n) {
-        let next = (0..n)
-            .max_by(|&a, &b| near[a].total_cmp(&near[b]))
-            .unwrap_or(0);
-        if near[next] == 0.0 {
-            break;
-        }
-        sites.push(next);
-        for (k, p) in positions.iter().enumerate() {
-            near[k] = near[k].min(d2(*p, positions[next]));
-        }
-    }
-    sites
-}
-
-/// Outward unit vertex normals (area-weighted) of the mesh's boundary, indexed by mesh node.
-fn vertex_normals(mesh: &TetMesh, surface: &Surface) -> Vec<[f64; 3]> {
-    let mut n = vec![[0.0; 3]; mesh.nodes.len()];
-    for t in &surface.triangles {
-        let [a, b, c] = t.map(|i| mesh.nodes[i]);
-        let u = [b[0] - a[0], b[1] - a[1], b[2] - a[2]];
-        let v = [c[0] - a[0], c[1] - a[1], c[2] - a[2]];
-        let w = [
-            u[1] * v[2] - u[2] * v[1],
-            u[2] * v[0] - u[0] * v[2],
-            u[0] * v[1] - u[1] * v[0],
-        ];
-        for &i in t {
-            for j in 0..3 {
-                n[i][j] += w[j];
-            }
-        }
-    }
-    for v in &mut n {
-        let l = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
-        if l > 0.0 {
-            *v = v.map(|x| x / l);
-        }
-    }
-    n
-}
-
-/// Relative error of the total tool force with a truncated `C_SS` (`keep(a, b)` says whether
-/// the pair of contact nodes `a`, `b` is stored) against the full one; `None` when the truncated
-/// `C_SS` is not positive definite.
-fn force_error(
-    full: &[Vec<Block3>],
-    keep: impl Fn(usize, usize) -> bool,
-    press: [f64; 3],
-) -> Result<Option<f64>> {
-    let m = full.len();
-    let total = |c: &[Vec<Block3>]| -> Result<Option<[f64; 3]>> {
-        match contact_forces(c, &vec![press; m]) {
-            Ok(s) => Ok(Some(s.forces.iter().fold([0.0; 3], |acc, f| {
-                [acc[0] + f[0], acc[1] + f[1], acc[2] + f[2]]
-            }))),
-            Err(_) => Ok(None),
-        }
-    };
-    let exact = total(full)?.context("the full C_SS is not positive definite")?;
-    let cut: Vec<Vec<Block3>> = (0..m)
-        .map(|a| {
-            (0..m)
-                .map(|b| {
-                    if a == b || keep(a, b) {
-                        full[a][b]
-                    } else {
-                        [[0.0; 3]; 3]
-                    }
-                })
-                .collect()
-        })
-        .collect();
-    let norm = |v: [f64; 3]| (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
-    Ok(total(&cut)?
-        .map(|t| norm([t[0] - exact[0], t[1] - exact[1], t[2] - exact[2]]) / norm(exact)))
-}
-
-#[derive(Default)]
-struct Stat {
-    max: f64,
-    sum: f64,
-    count: usize,
-    not_spd: usize,
-}
-
-impl Stat {
-    fn add(&mut self, e: Option<f64>) {
-        match e {
-            Some(e) => {
-                self.max = self.max.max(e);
-                self.sum += e;
-                self.count += 1;
-            }
-            None => self.not_spd += 1,
-        }
-    }
-    fn show(&self) -> String {
-        let mean = if self.count > 0 {
-            self.sum / self.count as f64
-        } else {
-            f64::NAN
-        };
-        let mut s = format!("{:>7.1}% {:>7.1}%", 100.0 * self.max, 100.0 * mean);
-        if self.not_spd > 0 {
-            s.push_str(&format!(" ({} not SPD)", self.not_spd));
-        }
-        s
-    }
-}
-
-/// The tool patch on a bank against the host's f64 patch on R's surface with untruncated
-/// compliance, at a press site: the firmware's `tool_patch` + `WeightedSolve` (couplings as
-/// truncated in `bank`) and `host::contact` on the same anchor.
-struct PatchCheck<'p> {
-    prep: &'p Prepared,
-    surface: ContactSurface,
-}
-
-/// One tool-patch comparison: relative tool-force error and the weight share the firmware
-/// dropped (uncoupled or beyond the contact-set cap).
-struct PatchError {
-    error: f64,
-    dropped: f64,
-}
-
-impl<'p> PatchCheck<'p> {
-    fn new(prep: &'p Prepared) -> PatchCheck<'p> {
-        let region = Surface {
-            triangles: prep
-                .triangles
-                .iter()
-                .map(|t| t.map(|k| prep.region[k as usize]))
-                .collect(),
-            nodes: prep.region.clone(),
-        };
-        PatchCheck {
-            prep,
-            surface: ContactSurface::new(&prep.mesh, &region),
-        }
-    }
-
-    /// Presses triangle `t` (index into R's triangles) at its centroid by `press` (m).
-    fn press(&self, bank: &Bank, t: usize, press: [f64; 3]) -> Result<PatchError> {
-        let prep = self.prep;
-        let tri = prep.triangles[t];
-        let v = tri.map(|k| prep.positions[k as usize]);
-        let centroid: [f64; 3] = std::array::from_fn(|i| (v[0][i] + v[1][i] + v[2][i]) / 3.0);
-        let hit = SurfaceHit {
-            triangle: t,
-            nodes: tri.map(|k| prep.region[k as usize]),
-            bary: [1.0 / 3.0; 3],
-            point: centroid,
-        };
-        let radius = prep.scene.tip_radius_m;
-        let full = self.surface.tool_patch(&hit, radius, |_| true);
-        let exact = patch_force(&prep.compliance, &full, press)?;
-        let patch = tool_patch(
-            bank,
-            t as u32,
-            tri.map(|k| k as u16),
-            [1.0 / 3.0; 3],
-            centroid.map(|x| x as f32),
-            radius as f32,
-        );
-        let got = WeightedSolve::new(bank, patch.nodes(), patch.weights())
-            .and_then(|s| s.forces(press.map(|x| x as f32)))
-            .map_err(|e| anyhow::anyhow!("firmware solve at triangle {t}: {e}"))?;
-        let norm = |v: [f64; 3]| (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
-        let diff: [f64; 3] = std::array::from_fn(|i| f64::from(got.tool_force_n[i]) - exact[i]);
-        Ok(PatchError {
-            error: norm(diff) / norm(exact),
-            dropped: f64::from(patch.dropped),
-        })
-    }
-}
-
 fn sweep(args: SweepArgs) -> Result<()> {
-    if args.sites == 0 {
-        bail!("--sites must be at least 1");
-    }
+    let scene = match (&args.scene, &args.scene_flag) {
+        (Some(s), None) | (None, Some(s)) => s.clone(),
+        (Some(_), Some(_)) => bail!("give the scene once (positional or --scene)"),
+        (None, None) => bail!("no scene: give a scene file (e.g. host/scenes/liver.toml)"),
+    };
     let radii = super::fixing::parse_list::<f64>(&args.radii).context("--radii")?;
     if radii.iter().any(|r| !(r.is_finite() && *r >= 0.0)) {
         bail!("--radii: every radius must be a number >= 0");
     }
-    let rmax = radii.iter().copied().fold(0.0, f64::max);
-    let prep = Prepared::load(&args.scene)?;
-    let progress = Bar::new("supernodes");
-    let rows = prep.blocks(rmax, Some(&progress))?;
-    progress.finish();
-    let normals = vertex_normals(&prep.mesh, &prep.surface);
-
-    // Contact sets per site: one node; one triangle; the tool patch at the triangle's
-    // centroid (firmware on the bank, against the host's f64 patch).
-    let sites = spread_sites(&prep.positions, args.sites);
-    let mut presses: Vec<([f64; 3], Vec<usize>, usize)> = Vec::new();
-    for &k in &sites {
-        let nrm = normals[prep.region[k]];
-        let press = nrm.map(|x| -args.depth * x);
-        let Some(t) = prep.triangles.iter().position(|t| t.contains(&(k as u32))) else {
-            continue;
-        };
-        let tri: Vec<usize> = prep.triangles[t].iter().map(|&v| v as usize).collect();
-        presses.push((press, tri, t));
+    if args.sites == 0 {
+        bail!("--sites must be at least 1");
     }
-    let check = PatchCheck::new(&prep);
-    // Full (untruncated) blocks among every contact node.
-    let mut union: Vec<usize> = presses
-        .iter()
-        .flat_map(|(_, t, _)| t.iter().copied())
-        .collect();
-    union.sort_unstable();
-    union.dedup();
-    let mesh_ids: Vec<usize> = union.iter().map(|&a| prep.region[a]).collect();
-    let full = prep.compliance.blocks(&mesh_ids, None)?;
-    let at: HashMap<usize, usize> = union.iter().enumerate().map(|(i, &a)| (a, i)).collect();
-    let sub = |set: &[usize]| -> Vec<Vec<Block3>> {
-        set.iter()
-            .map(|a| set.iter().map(|b| full[at[a]][at[b]]).collect())
-            .collect()
+    if !(args.depth.is_finite() && args.depth > 0.0) {
+        bail!("--depth must be > 0 m, got {}", args.depth);
+    }
+    let prep = Prepared::load(&scene)?;
+    prep.warnings.iter().for_each(|w| eprintln!("{w}"));
+    let config = SweepConfig {
+        radii,
+        tool: !args.no_tool,
+        sites: args.sites,
+        depth_m: args.depth,
+        seed: args.seed,
     };
-
+    let progress = Bar::new("supernodes, then banks");
+    let rows = sweep::run(&prep, &config, Some(&progress))?;
+    progress.finish();
+    if args.json {
+        let v = serde_json::json!({
+            "scene": scene.display().to_string(),
+            "region_nodes": prep.region.len(),
+            "tip_radius_m": prep.scene.tip_radius_m,
+            "depth_m": args.depth,
+            "rows": rows,
+        });
+        println!("{v}");
+        return Ok(());
+    }
     println!(
-        "scene {}: |R| = {}, {} press sites, {:.1} mm along the inward normal; relative error \
-         of the total tool force against the full C_SS (max, mean)",
-        args.scene.display(),
+        "scene {}: |R| = {}, {} contact sites (area-uniform on R, seed {}), {:.1} mm along the \
+         inward normal; relative error of the firmware's tool force (f32, on the bank) against \
+         the f64 solve on untruncated compliance (max / mean)",
+        scene.display(),
         prep.region.len(),
-        presses.len(),
+        args.sites,
+        args.seed,
         args.depth * 1e3
     );
     println!(
-        "| radius (mm) | pairs kept | bank bytes | fits 768 KiB | 1 node | triangle, pairs <= r only | tool patch r = {:.1} mm, firmware on the bank | patch weight dropped (max) |",
+        "| rule | radius (mm) | precision | pairs kept | bank bytes | fits 768 KiB | point contact | tool patch r = {:.1} mm | patch load dropped (max) |",
         prep.scene.tip_radius_m * 1e3
     );
-    println!("| ---: | ---: | ---: | :---: | --- | --- | --- | ---: |");
-    for &r in &radii {
-        let BuiltBank { bytes, pairs } = prep.bank(&rows, r)?;
-        let aligned = AlignedBytes::new(&bytes);
-        let bank = Bank::parse(&aligned).map_err(|e| anyhow::anyhow!("swept bank: {e}"))?;
-        let (mut one, mut tri, mut patch) = (Stat::default(), Stat::default(), Stat::default());
-        let mut dropped: f64 = 0.0;
-        for (press, t, ti) in &presses {
-            one.add(force_error(&sub(&t[..1]), |_, _| false, *press)?);
-            tri.add(force_error(
-                &sub(t),
-                |a, b| prep.dist(t[a], t[b]) <= r,
-                *press,
-            )?);
-            let e = check.press(&bank, *ti, *press)?;
-            patch.add(Some(e.error));
-            dropped = dropped.max(e.dropped);
-        }
+    println!("| --- | ---: | --- | ---: | ---: | :---: | --- | --- | ---: |");
+    for r in &rows {
         println!(
-            "| {:.1} | {pairs} | {} | {} | {} | {} | {} | {:.1}% |",
-            r * 1e3,
-            bytes.len(),
-            if bytes.len() <= BANK_LEN { "yes" } else { "no" },
-            one.show(),
-            tri.show(),
-            patch.show(),
-            100.0 * dropped
+            "| {} | {:.1} | {} | {} | {} | {} | {:.1e} / {:.1e} | {:.1e} / {:.1e} | {:.1}%{} |",
+            r.rule,
+            r.radius_m * 1e3,
+            r.precision,
+            r.pairs,
+            r.bank_bytes,
+            if r.fits_region { "yes" } else { "no" },
+            r.point_max,
+            r.point_mean,
+            r.patch_max,
+            r.patch_mean,
+            100.0 * r.dropped_max,
+            if r.failed > 0 {
+                format!(" ({} solves failed)", r.failed)
+            } else {
+                String::new()
+            }
         );
     }
     Ok(())
