@@ -123,9 +123,10 @@ pub fn section(sil: &SilRuns) -> (Vec<Knob>, HardCase) {
         series: histogram,
         chosen: None,
         finding: format!(
-            "{ticks} ticks of press, slide and strike: the body takes {lo}-{hi} instructions, \
-             worst {worst_body} ({:.1} % of the {INSTRUCTIONS_PER_TICK} per 1 ms period at 125 \
-             MIPS); the whole tick at worst {worst_tick} ({:.1} %); {} overruns, {} faults",
+            "{ticks} ticks of press, slide and strike: the body takes {lo}-{hi} instructions \
+             over all ticks (armed or not); armed, at worst {worst_body} ({:.1} % of the \
+             {INSTRUCTIONS_PER_TICK} per 1 ms period at 125 MIPS) and the whole tick at worst \
+             {worst_tick} ({:.1} %); {} overruns, {} faults",
             share(worst_body),
             share(worst_tick),
             sil.overruns,
