@@ -91,6 +91,79 @@ fn quick_report_renders_every_plot_and_agrees_with_the_references() {
     assert_eq!(find("contact at the fixed boundary")["verdict"], "refused");
     assert_eq!(find("sliver")["verdict"], "refused");
 
+    // The new knobs are all there (the test command installs QEMU, so the firmware's too).
+    let knob = |id: &str| {
+        knobs
+            .iter()
+            .find(|k| k["id"] == id)
+            .unwrap_or_else(|| panic!("no knob {id}"))
+    };
+    let ys = |id: &str| -> Vec<f64> {
+        knob(id)["series"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .flat_map(|s| s["points"].as_array().unwrap().iter())
+            .map(|p| p["y"].as_f64().unwrap())
+            .collect()
+    };
+    for id in [
+        "firmware-histogram",
+        "firmware-phases",
+        "f32-vs-f64",
+        "contact-refinement",
+        "mesh-bank",
+        "mesh-display",
+        "pareto",
+    ] {
+        assert!(!ys(id).is_empty(), "{id}");
+    }
+    // f32 against f64 over the reachable region: the bound host/tests/loop_vs_host.rs and
+    // tests/tests/solve_vs_host.rs hold the firmware's solves to, on the untruncated
+    // compliance.
+    let worst = ys("f32-vs-f64").into_iter().fold(0.0, f64::max);
+    assert!(worst <= 1e-4, "f32 vs f64: {worst:e}");
+    assert_eq!(
+        find("nu = 0.45: f32 force error")["verdict"],
+        "matches_reference"
+    );
+    assert_eq!(find("edge and vertex hits")["verdict"], "matches_reference");
+    // The supervisor's overspeed rule (firmware/src/safety.rs) refuses a 50 m/s tip.
+    assert_eq!(find("a 5 cm strike in one tick")["verdict"], "refused");
+    // Every histogram series is a distribution of the script's ticks: its shares sum to 100 %.
+    for s in knob("firmware-histogram")["series"].as_array().unwrap() {
+        let total: f64 = s["points"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|p| p["y"].as_f64().unwrap())
+            .sum();
+        assert!((total - 100.0).abs() < 1e-6, "{}: {total}", s["name"]);
+    }
+    // The worst tick fits its 1 ms period (125,000 instructions at 125 MIPS), as the SIL tests
+    // require (no overrun).
+    let worst_tick = find("worst-case tick on the MCU")["value"]
+        .as_f64()
+        .unwrap();
+    assert!(worst_tick > 0.0 && worst_tick < 125_000.0, "{worst_tick}");
+    // The scene's bank on the plot is the one `host bank build` writes.
+    let scene = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/liver.toml");
+    let bank = dir.path().join("liver.bank");
+    let built = Command::new(env!("CARGO_BIN_EXE_host"))
+        .args(["bank", "build"])
+        .arg(&scene)
+        .arg("-o")
+        .arg(&bank)
+        .output()
+        .unwrap();
+    assert!(
+        built.status.success(),
+        "{}",
+        String::from_utf8_lossy(&built.stderr)
+    );
+    let chosen = knob("mesh-bank")["chosen"]["y"].as_f64().unwrap();
+    assert_eq!(chosen, std::fs::metadata(&bank).unwrap().len() as f64);
+
     let png = std::fs::read(out.join("headline.png")).unwrap();
     assert_eq!(&png[..8], b"\x89PNG\r\n\x1a\n");
 

@@ -2,10 +2,14 @@
 //! the headline figure.
 
 use anyhow::{Context, Result, bail};
+use host::bank::Prepared;
 use host::calibrate::{csv, fit};
 use host::fsio::write_atomic;
-use host::report::{self, Report, hard, law, locking, mesh};
-use host::scene::Scene;
+use host::report::{
+    self, Report, firmware, hard, law, locking, loops, mesh, pareto, precision, scale,
+};
+use host::scene::{MeshSource, Scene};
+use host::sil::harness::{self, Setup};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
@@ -51,18 +55,15 @@ pub fn run(args: Args) -> Result<()> {
     let mut cases = Vec::new();
     let mut not_measured = vec![
         "bank truncation rule and storage precision against force error, bytes and MCU \
-         instructions"
+         instructions (the bank-sweep knob, `host bank sweep`, is to be wired in); the Pareto \
+         front has no bank knob until then"
             .to_string(),
-        "contact model (point, alpha weights, energy-minimal, tool radius) under refinement"
+        "the split of the firmware's loop body into kinematics, detection, patch, solve, law \
+         and supervisor: the image counts the body and the whole tick only, so the page shows \
+         cost by contact-set size and the link/executor share"
             .to_string(),
-        "firmware instructions per tick by phase from the QEMU image".to_string(),
-        "f32 on the MCU against f64 on the host across the reachable region".to_string(),
-        "bank size and display latency against mesh size; the 100k liver's precompute (ANP needs \
-         about 12 GiB there: `host bench compliance --element anp`); Pareto front of combined \
-         knobs"
-            .to_string(),
-        "hard cases of the loop: grazing, edge and vertex hits, a 5 cm strike, contact nodes \
-         1 um apart, the reachable region's edge; condition numbers of K_ff and C_SS"
+        "the 100k liver's precompute (ANP needs about 12 GiB there: `host bench compliance \
+         --element anp`)"
             .to_string(),
     ];
 
@@ -121,6 +122,98 @@ pub fn run(args: Args) -> Result<()> {
 
     step("hard cases: exact references and refusals");
     cases.extend(hard::elastic_cases()?);
+
+    // The scene's bank: f32 against f64, the loop's hard cases, the firmware under QEMU.
+    step("the scene's bank");
+    let prepared = Prepared::from_scene(scene.clone())?;
+    let built = prepared.build_bank(None)?;
+    let bytes = bank_format::AlignedBytes::new(&built.bytes);
+    let bank = bank_format::Bank::parse(&bytes)
+        .map_err(|e| anyhow::anyhow!("the scene's bank does not parse: {e}"))?;
+    step("f32 against f64 across the reachable region");
+    let errors = precision::region_errors(&prepared, &bank, args.quick)?;
+    knobs.push(precision::section(
+        &errors,
+        prepared.scene.bank.truncation_radius_m,
+    ));
+    cases.extend(precision::nu_cases(&precision::nu_rows(
+        &prepared,
+        &locking::POISSON,
+        &step,
+    )?));
+    step("hard cases of the loop (firmware code, natively)");
+    cases.extend(loops::cases(&prepared, &bank)?);
+
+    let groups = match qemu_setup(&built.bytes)? {
+        Ok((setup, _dir)) => {
+            let seconds = if args.quick { 1.5 } else { 3.0 };
+            let sil = firmware::measure(&setup, &bank, seconds, &step)?;
+            let (sil_knobs, row) = firmware::section(&sil);
+            knobs.extend(sil_knobs);
+            cases.push(row);
+            Some(sil.by_contact_nodes())
+        }
+        Err(why) => {
+            step(&format!("firmware knobs skipped: {why}"));
+            not_measured.push(format!(
+                "firmware instructions per tick (QEMU image) and the MCU cost of the contact \
+                 models and of the Pareto front: {why}"
+            ));
+            None
+        }
+    };
+    let instructions = |nodes: usize| groups.as_ref().and_then(|g| firmware::body_worst(g, nodes));
+
+    // Mesh size: contact models, bank size, display.
+    let ray = scale::press_ray(&prepared);
+    let liver = match &scene.mesh {
+        MeshSource::BuiltinLiver => true,
+        MeshSource::File(p) => p.ends_with("liver-1k4.msh"),
+    };
+    let split = fem::reference::split_1_to_8(&organ);
+    let mut meshes = vec![(organ_name.clone(), organ.clone())];
+    match shipped("liver-10k.msh").filter(|_| liver) {
+        Some(p) => {
+            meshes.push((format!("{organ_name} split 1:8"), split));
+            let fine = fem::mesh::load(&p)?;
+            if !args.quick {
+                meshes.push((
+                    "liver-10k split 1:8".into(),
+                    fem::reference::split_1_to_8(&fine),
+                ));
+                if let Some(p) = shipped("generated/liver-100k.msh") {
+                    meshes.push(("liver-100k".into(), fem::mesh::load(&p)?));
+                }
+            }
+            meshes.push(("liver-10k".into(), fine));
+        }
+        None => {
+            meshes.push((
+                format!("{organ_name} split 1:8 twice"),
+                fem::reference::split_1_to_8(&split),
+            ));
+            meshes.push((format!("{organ_name} split 1:8"), split));
+        }
+    }
+    meshes.sort_by_key(|(_, m)| m.nodes.len());
+    let mut runs = Vec::new();
+    for (name, m) in &meshes {
+        step(&format!(
+            "contact models, bank and display: {name} ({} nodes)",
+            m.nodes.len()
+        ));
+        runs.push(scale::measure(&scene, name, m, ray)?);
+    }
+    knobs.extend(scale::section(&runs, &instructions));
+    cases.extend(scale::refinement_cases(&runs));
+    match pareto::section(&runs, &instructions) {
+        Some(k) => knobs.push(k),
+        None => not_measured.push(
+            "the Pareto front (it needs the firmware's instruction counts and a tool-patch \
+             reference)"
+                .into(),
+        ),
+    }
     if args.quick {
         not_measured.push(
             "liver-10k rows of the element knob (full run only: 10-node tetrahedra on it take \
@@ -147,6 +240,37 @@ pub fn run(args: Args) -> Result<()> {
         started.elapsed().as_secs_f64()
     );
     Ok(())
+}
+
+/// The QEMU set-up for the scene's bank (written to a temporary directory, returned to keep it
+/// alive), or why the firmware cannot be run: QEMU not installed, or the image does not build.
+fn qemu_setup(bank: &[u8]) -> Result<std::result::Result<(Setup, tempfile::TempDir), String>> {
+    let qemu = PathBuf::from("qemu-system-arm");
+    let found = std::process::Command::new(&qemu)
+        .arg("--version")
+        .output()
+        .is_ok_and(|o| o.status.success());
+    if !found {
+        return Ok(Err(
+            "qemu-system-arm is not installed (Debian: apt-get install qemu-system-arm)".into(),
+        ));
+    }
+    eprintln!("building the QEMU image (firmware/qemu, cargo build --release) ...");
+    let image = match harness::build_image() {
+        Ok(p) => p,
+        Err(e) => return Ok(Err(format!("the QEMU image does not build: {e:#}"))),
+    };
+    let dir = tempfile::tempdir().context("a temporary directory for the bank")?;
+    let path = dir.path().join("scene.bank");
+    std::fs::write(&path, bank).with_context(|| format!("writing {}", path.display()))?;
+    Ok(Ok((
+        Setup {
+            qemu,
+            image,
+            bank: path,
+        },
+        dir,
+    )))
 }
 
 /// Writes the three files, each atomically.

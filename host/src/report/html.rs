@@ -202,8 +202,24 @@ pub fn page(report: &Report) -> Result<String> {
             svg = svg(knob)?
         );
     }
+    h.push_str("<section id=\"hard-cases\"><h2>Hard cases</h2>\n");
+    let weak: Vec<String> = report
+        .hard_cases
+        .iter()
+        .filter(|c| c.verdict == Verdict::Weakness)
+        .map(|c| esc(&c.case))
+        .collect();
+    if !weak.is_empty() {
+        let _ = writeln!(
+            h,
+            "<p class=\"weaknesses\"><strong>Weaknesses ({}):</strong> {}. These rows are \
+             shaded red below: the method, not the measurement, falls short there.</p>",
+            weak.len(),
+            weak.join("; ")
+        );
+    }
     h.push_str(
-        "<section id=\"hard-cases\"><h2>Hard cases</h2>\n<table><thead><tr><th>case</th>\
+        "<table><thead><tr><th>case</th>\
          <th>measurement</th><th>reference</th><th>verdict</th></tr></thead><tbody>\n",
     );
     for c in &report.hard_cases {

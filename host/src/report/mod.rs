@@ -11,13 +11,24 @@
 //! - [`mesh`]: precompute time and factor size against mesh size, per element;
 //! - [`law`]: the tissue law's degree, held-out fit error against MCU instructions per
 //!   evaluation;
-//! - [`hard`]: the hard cases that are a refusal or an exact reference.
+//! - [`hard`]: the hard cases that are a refusal or an exact reference;
+//! - [`precision`]: f32 on the MCU against f64 on the host, and the near-incompressible
+//!   condition numbers;
+//! - [`firmware`]: instructions per tick of the QEMU image over the SIL scripts;
+//! - [`scale`]: contact models under refinement, bank size and display cost per mesh;
+//! - [`loops`]: the force loop's hard cases, through the firmware's own code;
+//! - [`pareto`]: the combinations no other beats on error, bytes and instructions.
 
+pub mod firmware;
 pub mod hard;
 pub mod html;
 pub mod law;
 pub mod locking;
+pub mod loops;
 pub mod mesh;
+pub mod pareto;
+pub mod precision;
+pub mod scale;
 
 use serde::Serialize;
 

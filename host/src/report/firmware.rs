@@ -1,0 +1,229 @@
+//! The firmware's instructions per tick, from the QEMU image (`firmware/qemu`) over the SIL
+//! scripts (press, slide, strike), through [`crate::sil::harness`] as `host bench sil` runs
+//! it: a histogram of the loop body's instructions per tick, and the mean, 99th percentile and
+//! worst case by contact-set size, with the whole tick's (executor, link task and plant I/O
+//! included).
+//!
+//! The image reports two counts per tick (`TickRecord`): the loop body and the whole tick. The
+//! split of the body into kinematics, detection, patch, solve, law and supervisor needs
+//! per-phase counters inside `firmware::app`'s tick, which this report does not add (that code
+//! belongs to the firmware's work on instruction counts); what it shows per phase is what the
+//! two counts and the contact-set size separate: free motion (kinematics, detection,
+//! supervisor), each added contact node (patch, solve, law), and the link and executor (whole
+//! tick less body).
+
+use super::{HardCase, Knob, Point, Series, Verdict};
+use crate::sil::cost::{CostStats, PhaseMax, Phases};
+use crate::sil::harness::{self, INSTRUCTIONS_PER_TICK, Session, Setup, TickRecord};
+use crate::sil::script::Script;
+use anyhow::{Result, bail};
+use bank_format::Bank;
+use std::collections::BTreeMap;
+
+/// Histogram bins.
+const BINS: usize = 12;
+
+/// The ticks of each script.
+pub struct SilRuns {
+    /// `(script, its ticks)`.
+    pub runs: Vec<(Script, Vec<TickRecord>)>,
+    /// Faults the image reported over all runs.
+    pub faults: usize,
+    /// Overruns over all runs.
+    pub overruns: u32,
+}
+
+impl SilRuns {
+    /// Every tick of every run, grouped by contact-set size.
+    pub fn by_contact_nodes(&self) -> BTreeMap<u8, CostStats> {
+        let mut all = BTreeMap::<u8, Vec<(&TickRecord, u32)>>::new();
+        for (_, ticks) in &self.runs {
+            for w in ticks.windows(2) {
+                if w[0].state == bank_format::State::Armed {
+                    all.entry(w[0].contact_nodes)
+                        .or_default()
+                        .push((&w[0], w[1].tick_instructions));
+                }
+            }
+        }
+        all.into_iter()
+            .map(|(k, v)| (k, CostStats::of(v.into_iter())))
+            .collect()
+    }
+}
+
+/// Runs the three scripts for `seconds` each on the image.
+pub fn measure(setup: &Setup, bank: &Bank, seconds: f64, step: &dyn Fn(&str)) -> Result<SilRuns> {
+    let mut out = SilRuns {
+        runs: Vec::new(),
+        faults: 0,
+        overruns: 0,
+    };
+    for script in [Script::Press, Script::Slide, Script::Strike] {
+        step(&format!(
+            "firmware: {script:?} for {seconds} s on the QEMU image"
+        ));
+        let run = harness::run(setup, &Session::new(bank, script, seconds)?)?;
+        if let Some(why) = &run.stopped {
+            bail!("{script:?}: the image stopped early: {why}\n{}", run.stderr);
+        }
+        out.faults += run.faults().len();
+        out.overruns += run.overruns();
+        out.runs.push((script, run.ticks));
+    }
+    Ok(out)
+}
+
+/// The two knobs (histogram; by contact-set size) and the worst-case row.
+pub fn section(sil: &SilRuns) -> (Vec<Knob>, HardCase) {
+    let bodies = || {
+        sil.runs
+            .iter()
+            .flat_map(|(_, t)| t.iter().map(|r| r.body_instructions))
+    };
+    let lo = bodies().min().unwrap_or(0);
+    let hi = bodies().max().unwrap_or(1).max(lo + 1);
+    let width = f64::from(hi - lo) / BINS as f64;
+    let histogram = sil
+        .runs
+        .iter()
+        .map(|(script, ticks)| {
+            let mut counts = [0usize; BINS];
+            for r in ticks {
+                let b = ((f64::from(r.body_instructions - lo) / width) as usize).min(BINS - 1);
+                counts[b] += 1;
+            }
+            let total = ticks.len().max(1) as f64;
+            Series {
+                name: format!("{script:?}").to_lowercase(),
+                points: counts
+                    .iter()
+                    .enumerate()
+                    .map(|(b, &n)| Point {
+                        x: f64::from(lo) + width * (b as f64 + 0.5),
+                        y: 100.0 * n as f64 / total,
+                        label: format!("{n} ticks"),
+                    })
+                    .collect(),
+            }
+        })
+        .collect();
+    let groups = sil.by_contact_nodes();
+    let worst_body = groups.values().map(|g| g.body_max).max().unwrap_or(0);
+    let worst_tick = groups.values().map(|g| g.tick_max).max().unwrap_or(0);
+    let share = |n: u32| 100.0 * f64::from(n) / f64::from(INSTRUCTIONS_PER_TICK);
+    let ticks: usize = sil.runs.iter().map(|r| r.1.len()).sum();
+    let hist = Knob {
+        id: "firmware-histogram".into(),
+        title: "Firmware: loop-body instructions per tick (QEMU image, SIL scripts)".into(),
+        x_label: "instructions in the loop body".into(),
+        y_label: "share of the script's ticks, %".into(),
+        log_x: false,
+        log_y: false,
+        series: histogram,
+        chosen: None,
+        finding: format!(
+            "{ticks} ticks of press, slide and strike: the body takes {lo}-{hi} instructions \
+             over all ticks (armed or not); armed, at worst {worst_body} ({:.1} % of the \
+             {INSTRUCTIONS_PER_TICK} per 1 ms period at 125 MIPS) and the whole tick at worst \
+             {worst_tick} ({:.1} %); {} overruns, {} faults",
+            share(worst_body),
+            share(worst_tick),
+            sil.overruns,
+            sil.faults
+        ),
+    };
+    // Per phase of a contact (cost::Phases, per run, worst over the runs).
+    let mut phases = [PhaseMax::default(); 4];
+    for (_, ticks) in &sil.runs {
+        let p = Phases::of(ticks);
+        for (acc, m) in phases
+            .iter_mut()
+            .zip([p.free, p.first_contact, p.contact, p.release])
+        {
+            acc.ticks += m.ticks;
+            acc.max_body_instructions = acc.max_body_instructions.max(m.max_body_instructions);
+            acc.max_tick_instructions = acc.max_tick_instructions.max(m.max_tick_instructions);
+        }
+    }
+    let names = [
+        "free motion",
+        "first contact tick",
+        "held contact",
+        "release tick",
+    ];
+    let phase_series = |name: &str, f: fn(&PhaseMax) -> u32| Series {
+        name: name.into(),
+        points: phases
+            .iter()
+            .zip(names)
+            .enumerate()
+            .map(|(i, (m, n))| Point {
+                x: i as f64,
+                y: f64::from(f(m)),
+                label: format!("{n} ({} ticks)", m.ticks),
+            })
+            .collect(),
+    };
+    let series = vec![
+        phase_series("loop body, worst", |m| m.max_body_instructions),
+        phase_series("whole tick (executor, link, plant I/O), worst", |m| {
+            m.max_tick_instructions
+        }),
+    ];
+    let by_nodes: Vec<String> = groups
+        .iter()
+        .map(|(k, g)| {
+            format!(
+                "{k} nodes: body mean {:.0}, p99 {}, worst {}",
+                g.body_mean, g.body_p99, g.body_max
+            )
+        })
+        .collect();
+    let idle = groups.get(&0).copied().unwrap_or_default();
+    let by = Knob {
+        id: "firmware-phases".into(),
+        title: "Firmware: worst instructions per tick by phase of a contact (QEMU image)".into(),
+        x_label: "phase: 0 free, 1 first contact, 2 held contact, 3 release".into(),
+        y_label: "instructions per tick".into(),
+        log_x: false,
+        log_y: false,
+        series,
+        chosen: None,
+        finding: format!(
+            "free motion (kinematics, detection, supervisor) takes {:.0} instructions on \
+             average, the link, executor and plant I/O {:.0} more per tick; by contact-set \
+             size: {}. The split of the body into kinematics, detection, patch, solve, law and \
+             supervisor is not measured: the image counts the body and the whole tick only",
+            idle.body_mean,
+            idle.tick_mean - idle.body_mean,
+            by_nodes.join("; ")
+        ),
+    };
+    let row = HardCase {
+        case: "worst-case tick on the MCU (QEMU)".into(),
+        measurement: format!(
+            "worst loop body {worst_body}, whole tick {worst_tick} instructions over {ticks} \
+             ticks; {} overruns",
+            sil.overruns
+        ),
+        reference: format!("the {INSTRUCTIONS_PER_TICK} instructions of a 1 ms period"),
+        verdict: if worst_tick < INSTRUCTIONS_PER_TICK && sil.overruns == 0 {
+            Verdict::Bounded
+        } else {
+            Verdict::Weakness
+        },
+        value: Some(f64::from(worst_tick)),
+        reference_value: Some(f64::from(INSTRUCTIONS_PER_TICK)),
+    };
+    (vec![hist, by], row)
+}
+
+/// The worst body instructions of a tick with `nodes` contact nodes (the largest measured
+/// group at most that size), for the contact-model and Pareto knobs.
+pub fn body_worst(groups: &BTreeMap<u8, CostStats>, nodes: usize) -> Option<f64> {
+    groups
+        .iter()
+        .rfind(|(k, _)| usize::from(**k) <= nodes)
+        .map(|(_, g)| f64::from(g.body_max))
+}
