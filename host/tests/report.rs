@@ -115,9 +115,35 @@ fn quick_report_renders_every_plot_and_agrees_with_the_references() {
         "mesh-bank",
         "mesh-display",
         "pareto",
+        "bank-couplings",
     ] {
         assert!(!ys(id).is_empty(), "{id}");
     }
+    // The bank's couplings: the tool rule is exact (host/tests/exact_contacts.rs holds it to
+    // 1e-4 on 1,200 sites), a bank without couplings (radius 0) is not, and the row says so.
+    assert_eq!(
+        find("every contact the tool can make (tool rule)")["verdict"],
+        "matches_reference"
+    );
+    let series = |name: &str| -> Vec<f64> {
+        knob("bank-couplings")["series"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|s| s["name"] == name)
+            .unwrap_or_else(|| panic!("no series {name}"))["points"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|p| p["y"].as_f64().unwrap())
+            .collect()
+    };
+    assert!(
+        series("tool rule (+ radius), tool patch")
+            .iter()
+            .all(|&e| e <= 1e-4)
+    );
+    assert!(series("radius rule, tool patch")[0] > 1e-3);
     // f32 against f64 over the reachable region: the bound host/tests/loop_vs_host.rs and
     // tests/tests/solve_vs_host.rs hold the firmware's solves to, on the untruncated
     // compliance.

@@ -102,8 +102,9 @@ pub struct SweepRow {
 pub struct SweepConfig {
     /// Truncation radii of the "radius" rule, m.
     pub radii: Vec<f64>,
-    /// Add the "tool" rule's row.
-    pub tool: bool,
+    /// Rows of the "tool" rule, one per radius whose pairs are added to the tool's (m; `[0.0]`
+    /// for the tool's pairs alone, empty for none).
+    pub tool_radii: Vec<f64>,
     /// Contact sites.
     pub sites: usize,
     /// Press depth, m.
@@ -270,8 +271,8 @@ pub fn probe_bytes(prep: &Prepared, rows: &BlockRows) -> Result<AlignedBytes> {
     ))
 }
 
-/// The sweep: one row per radius (rule "radius") and, with `config.tool`, one for the tool's
-/// pairs (rule "tool", radius 0). `progress` counts the compliance's supernodes, then the rows.
+/// The sweep: one row per radius (rule "radius") and one per `config.tool_radii` for the
+/// tool's pairs plus those within that radius (rule "tool"). `progress` counts the compliance's supernodes, then the rows.
 pub fn run(
     prep: &Prepared,
     config: &SweepConfig,
@@ -280,13 +281,23 @@ pub fn run(
     if config.sites == 0 {
         bail!("at least one contact site is needed");
     }
-    if let Some(r) = config.radii.iter().find(|r| !(r.is_finite() && **r >= 0.0)) {
+    if let Some(r) = config
+        .radii
+        .iter()
+        .chain(&config.tool_radii)
+        .find(|r| !(r.is_finite() && **r >= 0.0))
+    {
         bail!("every radius must be a number >= 0 m, got {r}");
     }
     if !(config.depth_m.is_finite() && config.depth_m > 0.0) {
         bail!("the press depth must be > 0 m, got {}", config.depth_m);
     }
-    let rmax = config.radii.iter().copied().fold(0.0, f64::max);
+    let rmax = config
+        .radii
+        .iter()
+        .chain(&config.tool_radii)
+        .copied()
+        .fold(0.0, f64::max);
     let rows = prep.blocks(rmax.max(prep.probe_radius()), progress)?;
     let probe_bytes = probe_bytes(prep, &rows)?;
     let probe = Bank::parse(&probe_bytes)
@@ -294,17 +305,19 @@ pub fn run(
     let sites = sites(&probe, config.sites, config.depth_m, config.seed);
     let refs = references(prep, &probe, &sites)?;
     let mut plan: Vec<(&'static str, f64)> = config.radii.iter().map(|&r| ("radius", r)).collect();
-    if config.tool {
-        plan.push(("tool", 0.0));
-    }
+    plan.extend(config.tool_radii.iter().map(|&r| ("tool", r)));
     if let Some(p) = progress {
         p.start(plan.len() as u64);
     }
     let mut out = Vec::with_capacity(plan.len());
+    let mut tool_pairs = None;
     for (rule, radius) in plan {
         let built = if rule == "tool" {
-            let pairs = prep.tool_pairs(&probe, super::TOOL_DIVISIONS)?.pairs;
-            prep.bank_keeping(&rows, radius, Some(&pairs))?
+            let pairs = match &tool_pairs {
+                Some(p) => p,
+                None => tool_pairs.insert(prep.tool_pairs(&probe, super::TOOL_DIVISIONS)?.pairs),
+            };
+            prep.bank_keeping(&rows, radius, Some(pairs))?
         } else {
             prep.bank(&rows, radius)?
         };

@@ -380,7 +380,7 @@ fn sweep(args: SweepArgs) -> Result<()> {
     prep.warnings.iter().for_each(|w| eprintln!("{w}"));
     let config = SweepConfig {
         radii,
-        tool: !args.no_tool,
+        tool_radii: if args.no_tool { vec![] } else { vec![0.0] },
         sites: args.sites,
         depth_m: args.depth,
         seed: args.seed,

@@ -6,6 +6,8 @@
 //! against cost, one series per variant) and [`HardCase`] rows (a measurement with a
 //! verdict). [`html`] renders them. Sections:
 //!
+//! - [`bank`]: the bank's couplings (truncation rule and radius) against force error and
+//!   bytes;
 //! - [`locking`]: the element (P1, ANP) under near-incompressibility, against 10-node
 //!   tetrahedra on the same mesh (the punch of `fem::reference`);
 //! - [`mesh`]: precompute time and factor size against mesh size, per element;
@@ -19,6 +21,7 @@
 //! - [`loops`]: the force loop's hard cases, through the firmware's own code;
 //! - [`pareto`]: the combinations no other beats on error, bytes and instructions.
 
+pub mod bank;
 pub mod firmware;
 pub mod hard;
 pub mod html;

@@ -95,8 +95,8 @@ pub fn section(runs: &[MeshRun], instructions: &dyn Fn(usize) -> Option<f64>) ->
         chosen: chosen.map(point),
         finding: format!(
             "{} combinations; the front (no other is better in error, bytes and instructions \
-             at once): {}. The scene's choice ({}) is {}on the front. Bank truncation and \
-             storage precision are not among the knobs yet",
+             at once): {}. The scene's choice ({}) is {}on the front. The bank's couplings \
+             (their own plot) are not combined here, and only f32 storage exists",
             combos.len(),
             front_text.join(", "),
             chosen.map_or("not measured".into(), |c| c.label.clone()),

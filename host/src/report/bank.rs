@@ -1,0 +1,139 @@
+//! The bank's couplings: which compliance blocks `C_ij` it keeps (the superposition of
+//! elementary deformations, paper section 3.2, and the mutual-influence solve of several
+//! contact nodes, eq. 2, need the block of every pair in one contact set) against the force
+//! error and the bank's bytes. Measured by [`crate::bank::sweep`] (the same code as `host bank
+//! sweep`): contact sites spread over the reachable region by area, each pressed along the
+//! normal, the firmware's own point and tool-patch solves on each bank against the f64 solve on
+//! the untruncated compliance.
+
+use super::{HardCase, Knob, Point, Series, Verdict};
+use crate::bank::Prepared;
+use crate::bank::sweep::{self, SweepConfig, SweepRow};
+use crate::scene::Couplings;
+use anyhow::Result;
+
+/// The sweep the report runs: radius rule over a few radii, and the tool rule alone and with
+/// two radii's pairs added (three points per series).
+pub fn measure(prep: &Prepared, quick: bool) -> Result<Vec<SweepRow>> {
+    let config = SweepConfig {
+        radii: if quick {
+            vec![0.0, 0.006, 0.012, 0.02]
+        } else {
+            vec![0.0, 0.004, 0.008, 0.012, 0.02, 0.03]
+        },
+        tool_radii: vec![0.0, 0.006, 0.012],
+        sites: if quick { 300 } else { 1000 },
+        depth_m: 0.005,
+        seed: 1,
+    };
+    sweep::run(prep, &config, None)
+}
+
+/// Error below this is drawn at it (log axis).
+const FLOOR: f64 = 1e-12;
+
+/// The knob (error against bytes) and the hard-case rows (the tool rule against 1e-4, the
+/// scene's own bank as it is).
+pub fn section(rows: &[SweepRow], prep: &Prepared) -> (Knob, Vec<HardCase>) {
+    let point = |r: &SweepRow, y: f64| Point {
+        x: r.bank_bytes as f64,
+        y: y.max(FLOOR),
+        label: format!("{} {:.0} mm", r.rule, r.radius_m * 1e3),
+    };
+    let series = |rule: &str, name: &str, y: fn(&SweepRow) -> f64| Series {
+        name: name.into(),
+        points: rows
+            .iter()
+            .filter(|r| r.rule == rule)
+            .map(|r| point(r, y(r)))
+            .collect(),
+    };
+    let bank = &prep.scene.bank;
+    let (rule, radius) = match bank.couplings {
+        Couplings::Radius => ("radius", bank.truncation_radius_m),
+        Couplings::Tool => ("tool", bank.truncation_radius_m),
+    };
+    let own = rows
+        .iter()
+        .find(|r| r.rule == rule && (r.radius_m - radius).abs() < 1e-9);
+    let tool = rows.iter().find(|r| r.rule == "tool");
+    let sites = rows.first().map_or(0, |r| r.sites);
+    let finding = match (own, tool) {
+        (Some(o), Some(t)) => format!(
+            "the scene's bank ({} rule, {:.0} mm): {} B, worst tool-patch error {:.1e} over {} \
+             sites; the tool rule keeps the pairs one tool patch can load together: {} B, \
+             worst {:.1e}{}",
+            o.rule,
+            o.radius_m * 1e3,
+            o.bank_bytes,
+            o.patch_max,
+            sites,
+            t.bank_bytes,
+            t.patch_max,
+            if t.bank_bytes > DEMO_BUDGET {
+                " (over the demo's 128 KiB budget)"
+            } else {
+                ""
+            }
+        ),
+        _ => "the scene's own bank is not among the swept rows".into(),
+    };
+    let knob = Knob {
+        id: "bank-couplings".into(),
+        title: "Bank couplings: truncation rule against force error and bytes".into(),
+        x_label: "bank bytes".into(),
+        y_label: "worst relative force error over the reachable region".into(),
+        log_x: true,
+        log_y: true,
+        series: vec![
+            series("radius", "radius rule, tool patch", |r| r.patch_max),
+            series("radius", "radius rule, point contact", |r| r.point_max),
+            series("tool", "tool rule (+ radius), tool patch", |r| r.patch_max),
+        ],
+        chosen: own.map(|o| point(o, o.patch_max)),
+        finding,
+    };
+    let mut cases = Vec::new();
+    if let Some(t) = tool {
+        cases.push(HardCase {
+            case: "every contact the tool can make (tool rule)".into(),
+            measurement: format!(
+                "firmware f32 tool-patch force on a {} B bank, worst over {} sites",
+                t.bank_bytes, t.sites
+            ),
+            reference: "f64 solve on the untruncated compliance, bound 1e-4".into(),
+            verdict: if t.patch_max <= 1e-4 {
+                Verdict::MatchesReference
+            } else {
+                Verdict::Weakness
+            },
+            value: Some(t.patch_max),
+            reference_value: Some(1e-4),
+        });
+    }
+    if let Some(o) = own {
+        cases.push(HardCase {
+            case: format!(
+                "the scene's bank ({} rule, {:.0} mm)",
+                o.rule,
+                o.radius_m * 1e3
+            ),
+            measurement: format!(
+                "worst tool-patch force error over {} sites ({} B)",
+                o.sites, o.bank_bytes
+            ),
+            reference: "f64 solve on the untruncated compliance".into(),
+            verdict: if o.patch_max <= 1e-4 {
+                Verdict::MatchesReference
+            } else {
+                Verdict::Weakness
+            },
+            value: Some(o.patch_max),
+            reference_value: Some(1e-4),
+        });
+    }
+    (knob, cases)
+}
+
+/// The demo bank's size budget (issue 15): 128 KiB.
+const DEMO_BUDGET: usize = 128 * 1024;
