@@ -93,44 +93,35 @@ pub fn section(rows: &[SweepRow], prep: &Prepared) -> (Knob, Vec<HardCase>) {
         chosen: own.map(|o| point(o, o.patch_max)),
         finding,
     };
+    // Each row: the firmware's worst tool-patch force on that bank against the 1e-4 bound.
+    let row = |case: String, r: &SweepRow| HardCase {
+        case,
+        measurement: format!(
+            "firmware f32 tool-patch force on a {} B bank, worst over {} sites",
+            r.bank_bytes, r.sites
+        ),
+        reference: "f64 solve on the untruncated compliance, bound 1e-4".into(),
+        verdict: if r.patch_max <= 1e-4 {
+            Verdict::MatchesReference
+        } else {
+            Verdict::Weakness
+        },
+        value: Some(r.patch_max),
+        reference_value: Some(1e-4),
+    };
     let mut cases = Vec::new();
     if let Some(t) = tool {
-        cases.push(HardCase {
-            case: "every contact the tool can make (tool rule)".into(),
-            measurement: format!(
-                "firmware f32 tool-patch force on a {} B bank, worst over {} sites",
-                t.bank_bytes, t.sites
-            ),
-            reference: "f64 solve on the untruncated compliance, bound 1e-4".into(),
-            verdict: if t.patch_max <= 1e-4 {
-                Verdict::MatchesReference
-            } else {
-                Verdict::Weakness
-            },
-            value: Some(t.patch_max),
-            reference_value: Some(1e-4),
-        });
+        cases.push(row("every contact the tool can make (tool rule)".into(), t));
     }
     if let Some(o) = own {
-        cases.push(HardCase {
-            case: format!(
+        cases.push(row(
+            format!(
                 "the scene's bank ({} rule, {:.0} mm)",
                 o.rule,
                 o.radius_m * 1e3
             ),
-            measurement: format!(
-                "worst tool-patch force error over {} sites ({} B)",
-                o.sites, o.bank_bytes
-            ),
-            reference: "f64 solve on the untruncated compliance".into(),
-            verdict: if o.patch_max <= 1e-4 {
-                Verdict::MatchesReference
-            } else {
-                Verdict::Weakness
-            },
-            value: Some(o.patch_max),
-            reference_value: Some(1e-4),
-        });
+            o,
+        ));
     }
     (knob, cases)
 }
