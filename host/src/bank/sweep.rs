@@ -49,7 +49,7 @@ pub struct Reference {
 }
 
 /// Relative tool-force errors of the firmware on one bank over a set of sites.
-#[derive(Debug, Clone, Copy, Default, PartialEq)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, serde::Serialize)]
 pub struct Errors {
     /// Point contact: largest and mean relative error.
     pub point_max: f64,
@@ -83,18 +83,9 @@ pub struct SweepRow {
     pub fits_region: bool,
     /// Contact sites.
     pub sites: usize,
-    /// Point contact, largest relative force error.
-    pub point_max: f64,
-    /// Point contact, mean.
-    pub point_mean: f64,
-    /// Tool patch, largest relative force error.
-    pub patch_max: f64,
-    /// Tool patch, mean.
-    pub patch_mean: f64,
-    /// Largest share of a patch's load dropped.
-    pub dropped_max: f64,
-    /// Sites where the firmware's solve failed.
-    pub failed: usize,
+    /// The firmware's errors on this bank (flattened into the row's JSON).
+    #[serde(flatten)]
+    pub errors: Errors,
 }
 
 /// What to sweep.
@@ -325,7 +316,6 @@ pub fn run(
         let bank = Bank::parse(&aligned)
             .map_err(|e| anyhow::anyhow!("the swept bank ({rule}, {radius} m): {e}"))
             .context("internal")?;
-        let e = errors(prep, &bank, &refs);
         out.push(SweepRow {
             rule,
             radius_m: radius,
@@ -334,12 +324,7 @@ pub fn run(
             bank_bytes: built.bytes.len(),
             fits_region: built.bytes.len() <= BANK_LEN,
             sites: refs.len(),
-            point_max: e.point_max,
-            point_mean: e.point_mean,
-            patch_max: e.patch_max,
-            patch_mean: e.patch_mean,
-            dropped_max: e.dropped_max,
-            failed: e.failed,
+            errors: errors(prep, &bank, &refs),
         });
         if let Some(p) = progress {
             p.advance(1);

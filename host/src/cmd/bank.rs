@@ -423,13 +423,13 @@ fn sweep(args: SweepArgs) -> Result<()> {
             r.pairs,
             r.bank_bytes,
             if r.fits_region { "yes" } else { "no" },
-            r.point_max,
-            r.point_mean,
-            r.patch_max,
-            r.patch_mean,
-            100.0 * r.dropped_max,
-            if r.failed > 0 {
-                format!(" ({} solves failed)", r.failed)
+            r.errors.point_max,
+            r.errors.point_mean,
+            r.errors.patch_max,
+            r.errors.patch_mean,
+            100.0 * r.errors.dropped_max,
+            if r.errors.failed > 0 {
+                format!(" ({} solves failed)", r.errors.failed)
             } else {
                 String::new()
             }

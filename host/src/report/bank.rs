@@ -66,10 +66,10 @@ pub fn section(rows: &[SweepRow], prep: &Prepared) -> (Knob, Vec<HardCase>) {
             o.rule,
             o.radius_m * 1e3,
             o.bank_bytes,
-            o.patch_max,
+            o.errors.patch_max,
             sites,
             t.bank_bytes,
-            t.patch_max,
+            t.errors.patch_max,
             if t.bank_bytes > DEMO_BUDGET {
                 " (over the demo's 128 KiB budget)"
             } else {
@@ -86,11 +86,15 @@ pub fn section(rows: &[SweepRow], prep: &Prepared) -> (Knob, Vec<HardCase>) {
         log_x: true,
         log_y: true,
         series: vec![
-            series("radius", "radius rule, tool patch", |r| r.patch_max),
-            series("radius", "radius rule, point contact", |r| r.point_max),
-            series("tool", "tool rule (+ radius), tool patch", |r| r.patch_max),
+            series("radius", "radius rule, tool patch", |r| r.errors.patch_max),
+            series("radius", "radius rule, point contact", |r| {
+                r.errors.point_max
+            }),
+            series("tool", "tool rule (+ radius), tool patch", |r| {
+                r.errors.patch_max
+            }),
         ],
-        chosen: own.map(|o| point(o, o.patch_max)),
+        chosen: own.map(|o| point(o, o.errors.patch_max)),
         finding,
     };
     // Each row: the firmware's worst tool-patch force on that bank against the 1e-4 bound.
@@ -101,12 +105,12 @@ pub fn section(rows: &[SweepRow], prep: &Prepared) -> (Knob, Vec<HardCase>) {
             r.bank_bytes, r.sites
         ),
         reference: "f64 solve on the untruncated compliance, bound 1e-4".into(),
-        verdict: if r.patch_max <= 1e-4 {
+        verdict: if r.errors.patch_max <= 1e-4 {
             Verdict::MatchesReference
         } else {
             Verdict::Weakness
         },
-        value: Some(r.patch_max),
+        value: Some(r.errors.patch_max),
         reference_value: Some(1e-4),
     };
     let mut cases = Vec::new();
