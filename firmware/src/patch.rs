@@ -157,9 +157,6 @@ impl Default for PatchBuild {
 }
 
 impl PatchBuild {
-    /// The first step: the tangent basis, the nodal pressures (they say how far the mesh
-    /// resolves the tip; the costly parts are skipped when their share is zero) and the
-    /// contact triangle's frame.
     /// An idle build (barycentric weights of node 0 until [`PatchBuild::start`]).
     pub fn new() -> PatchBuild {
         PatchBuild {
@@ -178,7 +175,9 @@ impl PatchBuild {
         }
     }
 
-    /// (Re)starts the build in place for a new contact point.
+    /// (Re)starts the build in place for a new contact point: the first step, the tangent
+    /// basis, the nodal pressures (they say how far the mesh resolves the tip; the costly parts
+    /// are skipped when their share is zero) and the contact triangle's frame.
     pub fn start(
         &mut self,
         bank: &Bank,
