@@ -266,9 +266,11 @@ fn close_nodes(p: &Prepared, bank: &Bank) -> Result<HardCase> {
     })
 }
 
-/// The tool pressed 3 mm at the reachable region's edge (R's boundary node farthest from its
-/// centre): the firmware's patch loses the load on nodes outside R; the rendered force against
-/// the host's f64 patch on the whole surface.
+/// The tool pressed 3 mm at the reachable region's edge (of R's boundary nodes the shaft meets
+/// within 45 degrees of the surface's normal, the one farthest from R's centre; a node the
+/// shaft only grazes would make a shallow press, which is the grazing row's case): the
+/// firmware's patch loses the load on nodes outside R; the rendered force against the host's
+/// f64 patch on the whole surface.
 fn region_edge(p: &Prepared, bank: &Bank) -> Result<HardCase> {
     let mut count = std::collections::HashMap::<(usize, usize), usize>::new();
     for t in &p.triangles {
@@ -291,6 +293,22 @@ fn region_edge(p: &Prepared, bank: &Bank) -> Result<HardCase> {
         let unit = fem::vec3::scale(dir, 1.0 / fem::vec3::norm(dir));
         ws.joints_for_tip(fem::vec3::add(target, fem::vec3::scale(unit, s)))
     };
+    // Area-weighted outward normals of R's nodes (R's triangles are counter-clockwise seen
+    // from outside).
+    let mut normal = vec![[0.0f64; 3]; p.positions.len()];
+    for t in &p.triangles {
+        let v = t.map(|k| p.positions[k as usize]);
+        let n = fem::vec3::cross(fem::vec3::sub(v[1], v[0]), fem::vec3::sub(v[2], v[0]));
+        for &k in t {
+            normal[k as usize] = fem::vec3::add(normal[k as usize], n);
+        }
+    }
+    let head_on = |a: usize| {
+        let shaft = fem::vec3::sub(p.positions[a], ws.fulcrum);
+        let cos = -fem::vec3::dot(shaft, normal[a])
+            / (fem::vec3::norm(shaft) * fem::vec3::norm(normal[a]));
+        cos >= std::f64::consts::FRAC_1_SQRT_2
+    };
     let in_range = |q: [f64; 3]| {
         (0..3).all(|i| q[i] >= f64::from(cal.joint_min[i]) && q[i] <= f64::from(cal.joint_max[i]))
     };
@@ -300,10 +318,13 @@ fn region_edge(p: &Prepared, bank: &Bank) -> Result<HardCase> {
         .iter()
         .filter(|e| *e.1 == 1)
         .flat_map(|((a, b), _)| [*a, *b])
-        .filter(|&a| in_range(along(a, -0.01)) && in_range(along(a, depth)))
+        .filter(|&a| head_on(a) && in_range(along(a, -0.01)) && in_range(along(a, depth)))
         .max_by(|&a, &b| dist(a).total_cmp(&dist(b)))
         .ok_or_else(|| {
-            anyhow!("no node on the reachable region's edge is within the joints' ranges")
+            anyhow!(
+                "no node on the reachable region's edge is within the joints' ranges and faces \
+                 the shaft"
+            )
         })?;
     let along = |s: f64| along(edge_node, s);
     let mut lp = armed_loop(bank, along(-0.01))?;
@@ -338,9 +359,10 @@ fn region_edge(p: &Prepared, bank: &Bank) -> Result<HardCase> {
             })) / full_n;
             (
                 format!(
-                    "{} contact nodes kept, {:.0} % of the patch's load dropped (nodes outside \
-                     R or uncoupled), rendered {:.3} N against {full_n:.3} N for the whole \
-                     patch: {:.1} % off",
+                    "pressed {:.2} mm into the surface: {} contact nodes kept, {:.1} % of the \
+                     patch's load dropped (nodes outside R or uncoupled), rendered {:.3} N \
+                     against {full_n:.3} N for the whole patch: {:.1} % off",
+                    1e3 * norm(*displacement),
                     out.contacts.len(),
                     100.0 * f64::from(out.dropped_load),
                     norm(out.tool_force_n),
