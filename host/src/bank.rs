@@ -406,8 +406,19 @@ impl Prepared {
     /// The scene's bank by its coupling rule (`bank.couplings`): the pairs within
     /// `bank.truncation_radius_m`, and with "tool" also [`Prepared::tool_pairs`].
     pub fn build_bank(&self, progress: Option<&dyn Progress>) -> Result<BuiltBank> {
-        let radius = self.scene.bank.truncation_radius_m;
-        match self.scene.bank.couplings {
+        let b = &self.scene.bank;
+        self.build_bank_as(b.couplings, b.truncation_radius_m, progress)
+    }
+
+    /// The bank the scene would have with coupling rule `couplings` and truncation radius
+    /// `radius` (m) instead of its own; everything else as [`Prepared::build_bank`].
+    pub fn build_bank_as(
+        &self,
+        couplings: Couplings,
+        radius: f64,
+        progress: Option<&dyn Progress>,
+    ) -> Result<BuiltBank> {
+        match couplings {
             Couplings::Radius => {
                 let rows = self.blocks(radius, progress)?;
                 self.bank(&rows, radius)

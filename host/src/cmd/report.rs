@@ -8,7 +8,7 @@ use host::fsio::write_atomic;
 use host::report::{
     self, Report, bank, firmware, hard, law, locking, loops, mesh, pareto, precision, scale,
 };
-use host::scene::{MeshSource, Scene};
+use host::scene::{Couplings, MeshSource, Scene};
 use host::sil::harness::{self, Setup};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -54,9 +54,7 @@ pub fn run(args: Args) -> Result<()> {
     let mut knobs = Vec::new();
     let mut cases = Vec::new();
     let mut not_measured = vec![
-        "bank storage precision: only f32 blocks exist (f16 is not built), and the Pareto front \
-         does not combine the bank's couplings with the mesh and contact model"
-            .to_string(),
+        "bank storage precision: only f32 blocks exist (f16 is not built)".to_string(),
         "the split of the firmware's loop body into kinematics, detection, patch, solve, law \
          and supervisor: the image counts the body and the whole tick only, so the page shows \
          cost by contact-set size and the link/executor share"
@@ -141,20 +139,47 @@ pub fn run(args: Args) -> Result<()> {
         &step,
     )?));
     step("bank couplings: truncation rules against the untruncated solve");
-    let (knob, rows) = bank::section(&bank::measure(&prepared, args.quick)?, &prepared);
+    let swept = bank::measure(&prepared, args.quick)?;
+    let (knob, rows) = bank::section(&swept, &prepared);
     knobs.push(knob);
     cases.extend(rows);
     step("hard cases of the loop (firmware code, natively)");
     cases.extend(loops::cases(&prepared, &bank)?);
 
-    let groups = match qemu_setup(&built.bytes)? {
-        Ok((setup, _dir)) => {
-            let seconds = if args.quick { 1.5 } else { 3.0 };
+    let seconds = if args.quick { 1.5 } else { 3.0 };
+    let image = qemu_image()?;
+    let (groups, run_banks) = match &image {
+        Ok(image) => {
+            let (setup, _dir) = image.with_bank(&built.bytes)?;
             let sil = firmware::measure(&setup, &bank, seconds, &step)?;
             let (sil_knobs, row) = firmware::section(&sil);
             knobs.extend(sil_knobs);
             cases.push(row);
-            Some(sil.by_contact_nodes())
+            // Every swept bank that fits, on the image too (the Pareto front's cost axis).
+            let mut run_banks = Vec::new();
+            for row in swept.iter().filter(|r| r.fits_region) {
+                step(&format!(
+                    "firmware on the {} {:.0} mm bank",
+                    row.rule,
+                    row.radius_m * 1e3
+                ));
+                let couplings = match row.rule {
+                    "tool" => Couplings::Tool,
+                    _ => Couplings::Radius,
+                };
+                let variant = prepared.build_bank_as(couplings, row.radius_m, None)?;
+                let aligned = bank_format::AlignedBytes::new(&variant.bytes);
+                let parsed = bank_format::Bank::parse(&aligned)
+                    .map_err(|e| anyhow::anyhow!("internal: a swept bank does not parse: {e}"))?;
+                let (setup, _dir) = image.with_bank(&variant.bytes)?;
+                let quiet = |_: &str| {};
+                let sil = firmware::measure(&setup, &parsed, seconds, &quiet)?;
+                run_banks.push(pareto::RunBank {
+                    row: row.clone(),
+                    costs: sil.by_contact_nodes(),
+                });
+            }
+            (Some(sil.by_contact_nodes()), run_banks)
         }
         Err(why) => {
             step(&format!("firmware knobs skipped: {why}"));
@@ -162,7 +187,7 @@ pub fn run(args: Args) -> Result<()> {
                 "firmware instructions per tick (QEMU image) and the MCU cost of the contact \
                  models and of the Pareto front: {why}"
             ));
-            None
+            (None, Vec::new())
         }
     };
     let instructions = |nodes: usize| groups.as_ref().and_then(|g| firmware::body_worst(g, nodes));
@@ -209,7 +234,12 @@ pub fn run(args: Args) -> Result<()> {
     }
     knobs.extend(scale::section(&runs, &instructions));
     cases.extend(scale::refinement_cases(&runs));
-    match pareto::section(&runs, &instructions) {
+    let own = &prepared.scene.bank;
+    let own_rule = match own.couplings {
+        Couplings::Radius => "radius",
+        Couplings::Tool => "tool",
+    };
+    match pareto::section(&runs, &run_banks, (own_rule, own.truncation_radius_m)) {
         Some(k) => knobs.push(k),
         None => not_measured.push(
             "the Pareto front (it needs the firmware's instruction counts and a tool-patch \
@@ -245,9 +275,30 @@ pub fn run(args: Args) -> Result<()> {
     Ok(())
 }
 
-/// The QEMU set-up for the scene's bank (written to a temporary directory, returned to keep it
-/// alive), or why the firmware cannot be run: QEMU not installed, or the image does not build.
-fn qemu_setup(bank: &[u8]) -> Result<std::result::Result<(Setup, tempfile::TempDir), String>> {
+/// QEMU and the SIL image, found and built.
+struct Image {
+    qemu: PathBuf,
+    image: PathBuf,
+}
+
+impl Image {
+    /// The set-up for `bank` (written to a temporary directory, returned to keep it alive).
+    fn with_bank(&self, bank: &[u8]) -> Result<(Setup, tempfile::TempDir)> {
+        let dir = tempfile::tempdir().context("a temporary directory for the bank")?;
+        let path = dir.path().join("scene.bank");
+        std::fs::write(&path, bank).with_context(|| format!("writing {}", path.display()))?;
+        let setup = Setup {
+            qemu: self.qemu.clone(),
+            image: self.image.clone(),
+            bank: path,
+        };
+        Ok((setup, dir))
+    }
+}
+
+/// QEMU and the image, or why the firmware cannot be run: QEMU not installed, or the image
+/// does not build.
+fn qemu_image() -> Result<std::result::Result<Image, String>> {
     let qemu = PathBuf::from("qemu-system-arm");
     let found = std::process::Command::new(&qemu)
         .arg("--version")
@@ -263,17 +314,7 @@ fn qemu_setup(bank: &[u8]) -> Result<std::result::Result<(Setup, tempfile::TempD
         Ok(p) => p,
         Err(e) => return Ok(Err(format!("the QEMU image does not build: {e:#}"))),
     };
-    let dir = tempfile::tempdir().context("a temporary directory for the bank")?;
-    let path = dir.path().join("scene.bank");
-    std::fs::write(&path, bank).with_context(|| format!("writing {}", path.display()))?;
-    Ok(Ok((
-        Setup {
-            qemu,
-            image,
-            bank: path,
-        },
-        dir,
-    )))
+    Ok(Ok(Image { qemu, image }))
 }
 
 /// Writes the three files, each atomically.
