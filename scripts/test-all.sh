@@ -70,12 +70,16 @@ step "no_std crates cross-compile for the MCU; the QEMU image links against memo
 cargo build --release -p bank-format -p firmware --target thumbv7em-none-eabihf
 (cd firmware/qemu && cargo build --release)
 
-step "the board image (STM32F405RG, embassy-stm32): format, lints, build, size against memory.x"
+step "the board image (STM32F405RG, embassy-stm32): format, lints, build, size against memory.x, stack in CCM"
 # Its own workspace too; built only (no board here). The linker enforces memory.x's regions.
 # Lints also cover the bring-up builds' fault injection (features bringup-*).
 (cd firmware/board && cargo fmt --check && cargo clippy --release -- -D warnings &&
     cargo clippy --release --all-features -- -D warnings && cargo build --release)
-cargo run --profile checked -q -p host -- bench image firmware/board/target/thumbv7em-none-eabihf/release/firmware-board
+board_size=$(cargo run --profile checked -q -p host -- bench image firmware/board/target/thumbv7em-none-eabihf/release/firmware-board)
+echo "$board_size"
+# The stack guard: the board's stack starts at the top of CCM (firmware/board/stack.x).
+grep -q '^initial stack pointer 0x10010000$' <<<"$board_size" ||
+    { echo "the board image's stack is not at the top of CCM (firmware/board/stack.x)"; exit 1; }
 
 step "tests (profile checked: release speed, overflow checks and debug assertions on)"
 log=$(mktemp)

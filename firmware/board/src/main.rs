@@ -128,6 +128,20 @@ fn bringup_fault(tick: u32) {
         cortex_m::asm::udf();
     } else if cfg!(feature = "bringup-panic") {
         bringup_panic();
+    } else if cfg!(feature = "bringup-overflow") {
+        bringup_overflow(0);
+    }
+}
+
+/// Recurses with 256-byte frames until the stack runs off the bottom of CCM (stack.x): the
+/// guard's test, a bus fault rather than a write into SRAM's static data.
+#[inline(never)]
+fn bringup_overflow(depth: u32) -> u32 {
+    let frame = core::hint::black_box([depth; 64]);
+    if core::hint::black_box(true) {
+        frame[63].wrapping_add(bringup_overflow(depth.wrapping_add(1)))
+    } else {
+        frame[0]
     }
 }
 

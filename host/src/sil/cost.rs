@@ -170,6 +170,40 @@ pub fn image_size(path: &Path, ram_start: u32, ram_len: u32) -> Result<ImageSize
     Ok(size)
 }
 
+/// The initial stack pointer of the ELF32 image at `path`: the first word of the vector
+/// table, the loaded section that starts at `flash_origin` (where the core reads it at reset).
+pub fn initial_stack_pointer(path: &Path, flash_origin: u32) -> Result<u32> {
+    let b = std::fs::read(path).with_context(|| format!("cannot read {}", path.display()))?;
+    let u16_at = |o: usize| b.get(o..o + 2).map(|s| u16::from_le_bytes([s[0], s[1]]));
+    let u32_at = |o: usize| {
+        b.get(o..o + 4)
+            .map(|s| u32::from_le_bytes([s[0], s[1], s[2], s[3]]))
+    };
+    if b.get(..6) != Some(&[0x7f, b'E', b'L', b'F', 1, 1][..]) {
+        bail!("{}: not a little-endian ELF32 file", path.display());
+    }
+    let bad = || anyhow::anyhow!("{}: truncated ELF section table", path.display());
+    let shoff = u32_at(0x20).ok_or_else(bad)? as usize;
+    let shentsize = usize::from(u16_at(0x2e).ok_or_else(bad)?);
+    let shnum = usize::from(u16_at(0x30).ok_or_else(bad)?);
+    for i in 0..shnum {
+        let h = shoff + i * shentsize;
+        let (kind, addr, offset) = (
+            u32_at(h + 4).ok_or_else(bad)?,
+            u32_at(h + 12).ok_or_else(bad)?,
+            u32_at(h + 16).ok_or_else(bad)?,
+        );
+        const SHT_PROGBITS: u32 = 1;
+        if kind == SHT_PROGBITS && addr == flash_origin {
+            return u32_at(offset as usize).ok_or_else(bad);
+        }
+    }
+    bail!(
+        "{}: no section at the flash origin {flash_origin:#010x} (no vector table)",
+        path.display()
+    )
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
