@@ -12,7 +12,7 @@ use serde::de::DeserializeOwned;
 use serde::{Deserialize, Serialize};
 
 /// Version of the message set below; the device reports it in [`DeviceToHost::Hello`].
-pub const PROTOCOL_VERSION: u16 = 4;
+pub const PROTOCOL_VERSION: u16 = 5;
 /// Most contact nodes one telemetry message carries.
 pub const MAX_CONTACTS: usize = 8;
 /// Upper bound on a postcard-encoded message, bytes (the largest, a full telemetry message, is
@@ -90,6 +90,11 @@ pub enum FaultReason {
     /// every tick of that mode, armed or not), or `SetMode` while armed (`detail` = 3; the
     /// mode is kept).
     BadCommand,
+    /// The chip restarted from a watchdog reset (added in protocol 5; `detail` = 0 for the
+    /// independent watchdog, 1 for the window watchdog): a tick hung, or the core locked up
+    /// (e.g. a stack overflow). Latched at boot, so a device that reset mid-session cannot be
+    /// re-armed without an explicit `ClearFault`.
+    WatchdogReset,
 }
 
 /// One contact node and the force on it.

@@ -135,8 +135,8 @@ fn every_message_variant_round_trips() {
     assert_eq!(dec.stats().errors(), 0);
 }
 
-/// The variant order is the wire protocol: the reasons added in protocols 3 and 4 come after
-/// the earlier ones, whose indices stay what a deployed host decodes.
+/// The variant order is the wire protocol: the reasons added in protocols 3, 4 and 5 come
+/// after the earlier ones, whose indices stay what a deployed host decodes.
 #[test]
 fn fault_reasons_keep_their_wire_indices() {
     let reasons = [
@@ -152,12 +152,13 @@ fn fault_reasons_keep_their_wire_indices() {
         FaultReason::AmplifierFault,
         FaultReason::Overspeed,
         FaultReason::BadCommand,
+        FaultReason::WatchdogReset,
     ];
     for (index, reason) in reasons.into_iter().enumerate() {
         let bytes = postcard::to_slice(&reason, &mut [0u8; 8]).unwrap().to_vec();
         assert_eq!(bytes, [index as u8], "{reason:?}");
     }
-    assert_eq!(PROTOCOL_VERSION, 4);
+    assert_eq!(PROTOCOL_VERSION, 5);
 }
 
 #[test]

@@ -114,6 +114,25 @@ impl<'b, 'q> App<'b, 'q> {
         app
     }
 
+    /// The chip restarted from a watchdog reset (`detail` as
+    /// [`FaultReason::WatchdogReset`]'s): latch it and report it once, before the first tick,
+    /// so a device that hung or locked up mid-session stays at zero current until the host
+    /// clears the fault explicitly. Call right after [`App::new`].
+    pub fn watchdog_reset(&mut self, detail: u32) {
+        let reason = FaultReason::WatchdogReset;
+        let latched = match &mut self.core {
+            Core::Loop(lp) => lp.raise(reason, detail),
+            Core::NoBank { supervisor, .. } => supervisor.raise(reason, detail),
+        };
+        if latched {
+            self.queue(DeviceToHost::Fault {
+                tick: self.tick_count(),
+                reason,
+                detail,
+            });
+        }
+    }
+
     /// The loop, when the bank is valid.
     pub fn haptic_loop(&self) -> Option<&HapticLoop<'b>> {
         match &self.core {
@@ -729,6 +748,48 @@ mod tests {
             }]
         );
         assert_eq!(app.telemetry().mode, Mode::Render);
+    }
+
+    /// After a watchdog reset the device boots latched in `WatchdogReset`, reported once
+    /// after the boot `Hello`: arming is refused (zero current) until `ClearFault`.
+    #[test]
+    fn a_watchdog_reset_is_latched_until_cleared() {
+        let bytes = flat_patch();
+        let bank = Bank::parse(bytes.as_slice()).unwrap();
+        let mut link = Link::new();
+        let (tick_end, driver) = link.split();
+        let mut app = App::new(Ok(&bank), tick_end, 0);
+        app.watchdog_reset(0);
+        let mut host = FakeHost::new(driver);
+        let (mut plant, clock) = (plant(), clock());
+        host.send(&HostToDevice::Arm);
+        for _ in 0..3 {
+            let r = app.tick(&mut plant, &clock, false).unwrap();
+            assert_eq!((r.state, r.currents_a), (WireState::Fault, [0.0; 3]));
+            host.pump();
+            host.send(&HostToDevice::Heartbeat);
+        }
+        assert!(plant.driven.iter().all(Option::is_none));
+        let watchdog = DeviceToHost::Fault {
+            tick: 0,
+            reason: FaultReason::WatchdogReset,
+            detail: 0,
+        };
+        assert!(matches!(host.sent[0], DeviceToHost::Hello { .. }));
+        // At boot, then as the refusal of the Arm (applied before the first tick).
+        let faults: Vec<_> = host
+            .sent
+            .iter()
+            .filter(|m| matches!(m, DeviceToHost::Fault { .. }))
+            .cloned()
+            .collect();
+        assert_eq!(host.sent[1], watchdog);
+        assert_eq!(faults, [watchdog.clone(), watchdog]);
+        assert_eq!(app.telemetry().fault, Some(FaultReason::WatchdogReset));
+        host.send(&HostToDevice::ClearFault);
+        host.send(&HostToDevice::Arm);
+        let r = app.tick(&mut plant, &clock, false).unwrap();
+        assert_eq!(r.state, WireState::Armed);
     }
 
     /// An amplifier's fault output latches `AmplifierFault` with the motor as detail, with or

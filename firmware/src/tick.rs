@@ -302,6 +302,12 @@ impl<'b> HapticLoop<'b> {
         self.supervisor.clear_fault()
     }
 
+    /// Latch a fault found outside the tick's inputs (e.g. the reset cause at boot); returns
+    /// whether it was latched (an earlier fault is kept).
+    pub fn raise(&mut self, reason: bank_format::FaultReason, detail: u32) -> bool {
+        self.supervisor.raise(reason, detail)
+    }
+
     /// Select the rendering mode (host command), effective from the next tick. Refused while
     /// armed: the mode is kept and a [`FaultReason::BadCommand`](bank_format::FaultReason)
     /// fault (detail [`BAD_COMMAND_SET_MODE_ARMED`]) is latched and returned, for the caller to

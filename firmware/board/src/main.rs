@@ -151,6 +151,22 @@ fn bringup_panic() {
     panic!("bring-up: injected panic");
 }
 
+/// Whether this boot follows a watchdog reset (RCC_CSR's IWDGRSTF: detail 0, WWDGRSTF: 1, as
+/// `FaultReason::WatchdogReset` has it); clears the reset flags (RMVF) so the next boot reads
+/// its own cause.
+fn take_watchdog_reset() -> Option<u32> {
+    let rcc = embassy_stm32::pac::RCC;
+    let csr = rcc.csr().read();
+    rcc.csr().modify(|w| w.set_rmvf(true));
+    if csr.wdgrstf() {
+        Some(0)
+    } else if csr.wwdgrstf() {
+        Some(1)
+    } else {
+        None
+    }
+}
+
 /// Status LED: slow blink disarmed, on armed, fast blink on a fault.
 #[embassy_executor::task]
 async fn led(mut led: Output<'static>) {
@@ -190,7 +206,10 @@ fn main() -> ! {
 
     let bank: &'static Result<Bank<'static>, BankError> = BANK.init(Bank::parse(bank_region()));
     let (tick_end, driver_end) = LINK.init(Link::new()).split();
-    let app = App::new(bank.as_ref().map_err(|e| *e), tick_end, LINK_GRACE_TICKS);
+    let mut app = App::new(bank.as_ref().map_err(|e| *e), tick_end, LINK_GRACE_TICKS);
+    if let Some(detail) = take_watchdog_reset() {
+        app.watchdog_reset(detail);
+    }
     let plant = BoardPlant::new(parts.hardware);
 
     let tick_spawner = board::start_tick_executor();
