@@ -10,12 +10,13 @@ use bytemuck::{Pod, Zeroable};
 pub const MAGIC: [u8; 8] = *b"HAPTBANK";
 /// Major version this crate reads and writes. A reader rejects any other major version. 2: the
 /// device record gained the speed thresholds; 3: the per-cell contact certificates (clearance
-/// and candidate triangles) became required sections (`SPEC.md`, "Versioning").
-pub const VERSION_MAJOR: u16 = 3;
+/// and candidate triangles) became required sections; 4: each coupled pair's block stored once
+/// ([`SectionKind::CouplingStarts`]) and `u16` start arrays (`SPEC.md`, "Versioning").
+pub const VERSION_MAJOR: u16 = 4;
 /// Minor version this crate writes. Readers accept any minor version of their major version
-/// (minor versions only add optional sections, which older readers skip). 1: the optional
-/// gravity section ([`SectionKind::Gravity`]).
-pub const VERSION_MINOR: u16 = 1;
+/// (minor versions only add optional sections, which older readers skip). 4.0 has the optional
+/// gravity section ([`SectionKind::Gravity`], added in 3.1).
+pub const VERSION_MINOR: u16 = 0;
 /// Size of [`BankHeader`] in bytes; the section table follows it.
 pub const HEADER_LEN: usize = 32;
 /// Size of one [`SectionEntry`] in bytes.
@@ -31,8 +32,9 @@ pub const BANK_ALIGN: usize = 4;
 pub const CRC_OFFSET: usize = 20;
 /// Largest number of nodes in the reachable region R (node indices are `u16`).
 pub const MAX_NODES: usize = u16::MAX as usize;
-/// Largest number of triangles (the cells' candidate lists hold `u16` triangle indices).
-pub const MAX_TRIANGLES: usize = u16::MAX as usize;
+/// Largest number of triangles: the `3 t` node-triangle items must fit the `u16` starts
+/// (`SPEC.md`, "Pairs stored once (4.0)": a bank with more would not fit the bank region).
+pub const MAX_TRIANGLES: usize = u16::MAX as usize / 3;
 /// A cell's candidate triangles are those whose bounding box, widened by this many cells on
 /// every side, meets the cell (`SPEC.md`, "cell candidates"): a path piece of Chebyshev length
 /// at most [`PIECE_CELLS`] cells can only cross them.
@@ -105,13 +107,13 @@ pub enum SectionKind {
     MeshIds,
     /// Triangles of R's surface, `[u16; 3]` node indices, counter-clockwise seen from outside.
     Triangles,
-    /// CSR row starts (`u32`, n + 1) of the node-to-triangle adjacency.
+    /// CSR row starts (`u16`, n + 1) of the node-to-triangle adjacency.
     NodeTriStarts,
-    /// CSR items (`u32` triangle indices) of the node-to-triangle adjacency.
+    /// CSR items (`u16` triangle indices) of the node-to-triangle adjacency.
     NodeTriItems,
     /// [`GridHeader`], one element.
     Grid,
-    /// CSR bucket starts (`u32`, cells + 1) of the collision grid.
+    /// CSR bucket starts (`u16`, cells + 1) of the collision grid.
     GridStarts,
     /// CSR bucket items (`u16` node indices) of the collision grid.
     GridItems,
@@ -124,12 +126,16 @@ pub enum SectionKind {
     CellTriItems,
     /// Self-compliance `C_kk` per node, `[f32; 6]` = xx, xy, xz, yy, yz, zz, in m/N.
     Ckk,
-    /// CSR row starts (`u32`, n + 1) of the neighbour lists.
+    /// CSR row starts (`u16`, n + 1) of the neighbour lists.
     NeighbourStarts,
-    /// Neighbour node indices (`u16`), each row strictly ascending.
+    /// Neighbour node indices (`u16`), each row strictly ascending, both directions.
     NeighbourIndex,
-    /// Coupling blocks `C_kl`, `[f32; 9]` row-major, m/N, one per neighbour entry.
+    /// Coupling blocks `C_kl`, `[f32; 9]` row-major, m/N, one per coupled pair `k < l`, in node
+    /// `k`'s row order (`C_lk = C_kl^T` is not stored).
     NeighbourCkl,
+    /// CSR starts (`u16`, n + 1) of each node's blocks in [`SectionKind::NeighbourCkl`]: those
+    /// of its row's entries `l > k` (4.0).
+    CouplingStarts,
     /// [`LawRecord`], one element: the tissue force law Q.
     TissueLaw,
     /// [`DeviceCalibration`], one element.
@@ -143,7 +149,7 @@ pub enum SectionKind {
 impl SectionKind {
     /// The sections a valid bank of this major version must contain, in the order the writer
     /// lays them out.
-    pub const REQUIRED: [SectionKind; 18] = [
+    pub const REQUIRED: [SectionKind; 19] = [
         SectionKind::Meta,
         SectionKind::Positions,
         SectionKind::MeshIds,
@@ -160,6 +166,7 @@ impl SectionKind {
         SectionKind::NeighbourStarts,
         SectionKind::NeighbourIndex,
         SectionKind::NeighbourCkl,
+        SectionKind::CouplingStarts,
         SectionKind::TissueLaw,
         SectionKind::Device,
     ];
@@ -186,6 +193,7 @@ impl SectionKind {
             16 => SectionKind::CellClearance,
             17 => SectionKind::CellTriStarts,
             18 => SectionKind::CellTriItems,
+            19 => SectionKind::CouplingStarts,
             24 => SectionKind::Gravity,
             other => SectionKind::Unknown(other),
         }
@@ -213,6 +221,7 @@ impl SectionKind {
             SectionKind::CellClearance => 16,
             SectionKind::CellTriStarts => 17,
             SectionKind::CellTriItems => 18,
+            SectionKind::CouplingStarts => 19,
             SectionKind::Gravity => 24,
             SectionKind::Unknown(code) => code,
         }
@@ -227,18 +236,19 @@ impl SectionKind {
             SectionKind::Positions => 12,
             SectionKind::MeshIds => 4,
             SectionKind::Triangles => 6,
-            SectionKind::NodeTriStarts => 4,
-            SectionKind::NodeTriItems => 4,
+            SectionKind::NodeTriStarts => 2,
+            SectionKind::NodeTriItems => 2,
             SectionKind::Grid => core::mem::size_of::<GridHeader>(),
-            SectionKind::GridStarts => 4,
+            SectionKind::GridStarts => 2,
             SectionKind::GridItems => 2,
             SectionKind::CellClearance => 1,
             SectionKind::CellTriStarts => 4,
             SectionKind::CellTriItems => 2,
             SectionKind::Ckk => 24,
-            SectionKind::NeighbourStarts => 4,
+            SectionKind::NeighbourStarts => 2,
             SectionKind::NeighbourIndex => 2,
             SectionKind::NeighbourCkl => 36,
+            SectionKind::CouplingStarts => 2,
             SectionKind::TissueLaw => core::mem::size_of::<LawRecord>(),
             SectionKind::Device => core::mem::size_of::<DeviceCalibration>(),
             SectionKind::Gravity => core::mem::size_of::<GravityCompensation>(),
@@ -265,6 +275,7 @@ impl SectionKind {
             SectionKind::NeighbourStarts => "neighbour starts",
             SectionKind::NeighbourIndex => "neighbour index",
             SectionKind::NeighbourCkl => "C_kl",
+            SectionKind::CouplingStarts => "coupling starts",
             SectionKind::TissueLaw => "tissue law",
             SectionKind::Device => "device",
             SectionKind::Gravity => "gravity",

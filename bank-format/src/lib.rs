@@ -28,7 +28,7 @@
 //! // Firmware at boot: validate the bank region once, then read it in place.
 //! fn boot(bank_region: &'static [u8]) -> Result<f32, BankError> {
 //!     let bank = Bank::parse(bank_region)?;
-//!     let (_neighbours, _c_kl) = bank.neighbours(0);
+//!     let _c_01 = bank.neighbours(0).first().and_then(|&l| bank.coupling(0, usize::from(l)));
 //!     Ok(bank.tissue_law().eval(1.0))
 //! }
 //! assert_eq!(boot(&[]), Err(BankError::TooShort { needed: 32, got: 0 }));
@@ -86,7 +86,7 @@ pub use layout::{
     OCCUPIED_WIDEN_CELLS, PIECE_CELLS, SECTION_ALIGN, SECTION_ENTRY_LEN, SectionEntry, SectionKind,
     VERSION_MAJOR, VERSION_MINOR, bank_crc, reseal,
 };
-pub use reader::{Bank, Grid, SPD_PIVOT_REL, SYMMETRY_REL, TRUNCATION_SLACK, validate_device};
+pub use reader::{Bank, Grid, SPD_PIVOT_REL, TRUNCATION_SLACK, validate_device};
 #[cfg(feature = "alloc")]
 pub use writer::{AlignedBytes, BankBuilder, BuildError, INPUT_SYMMETRY_REL};
 

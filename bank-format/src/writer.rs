@@ -31,7 +31,7 @@ pub struct BankBuilder {
     /// `C_kk` per node, m/N (symmetric; stored symmetrised).
     pub c_kk: Vec<[[f64; 3]; 3]>,
     /// Couplings `(k, l, C_kl)`, `k != l`, m/N. Each unordered pair once or in both directions
-    /// (then `C_lk` must equal `C_kl^T`); the bank stores both directions.
+    /// (then `C_lk` must equal `C_kl^T`); the bank stores one block per pair.
     pub couplings: Vec<(u32, u32, [[f64; 3]; 3])>,
     /// Edge of the collision grid's cubic cells, m (e.g. the mean surface edge length). Any size
     /// finds every contact (the cell certificates are structural); flash cost: 9 bytes per cell
@@ -86,6 +86,14 @@ pub enum BuildError {
     Grid,
     /// The bank would exceed 4 GiB.
     TooLarge,
+    /// A CSR section has more items than its `u16` starts can count (65535; `SPEC.md`,
+    /// "Pairs stored once (4.0)").
+    TooManyItems {
+        /// The section whose items overflow.
+        section: SectionKind,
+        /// Items it would hold.
+        count: usize,
+    },
     /// The output fails the reader's validation (the input breaks a format rule).
     Rejected(BankError),
 }
@@ -109,6 +117,10 @@ impl fmt::Display for BuildError {
             }
             BuildError::Grid => f.write_str("grid cell size invalid or grid too large"),
             BuildError::TooLarge => f.write_str("bank larger than 4 GiB"),
+            BuildError::TooManyItems { section, count } => write!(
+                f,
+                "{section}: {count} items, more than the 65535 its u16 starts can count"
+            ),
             BuildError::Rejected(e) => write!(f, "bank rejected by the reader: {e}"),
         }
     }
@@ -210,7 +222,13 @@ impl BankBuilder {
 
         // Triangles and node -> triangle adjacency (ascending by construction).
         let mut triangles = Vec::with_capacity(self.triangles.len());
-        let mut node_tris: Vec<Vec<u32>> = vec![Vec::new(); n];
+        if self.triangles.len() > MAX_TRIANGLES {
+            return Err(BankError::TriangleCount {
+                count: u32::try_from(self.triangles.len()).unwrap_or(u32::MAX),
+            }
+            .into());
+        }
+        let mut node_tris: Vec<Vec<u16>> = vec![Vec::new(); n];
         for (t, tri) in self.triangles.iter().enumerate() {
             let mut out = [0u16; 3];
             for (o, &v) in out.iter_mut().zip(tri) {
@@ -223,7 +241,7 @@ impl BankBuilder {
                     })?;
             }
             triangles.push(out);
-            let t = u32::try_from(t).map_err(|_| BuildError::TooLarge)?;
+            let t = u16::try_from(t).map_err(|_| BuildError::TooLarge)?;
             for v in out {
                 match node_tris.get_mut(usize::from(v)) {
                     Some(list) if list.last() != Some(&t) => list.push(t),
@@ -231,7 +249,7 @@ impl BankBuilder {
                 }
             }
         }
-        let (node_tri_starts, node_tri_items) = csr(&node_tris)?;
+        let (node_tri_starts, node_tri_items) = csr16(&node_tris, SectionKind::NodeTriItems)?;
 
         // Grid: origin half a cell below the smallest coordinate, dims from the largest.
         let h = self.grid_cell_size_m as f32;
@@ -272,13 +290,7 @@ impl BankBuilder {
             let c = usize::from(i) + nx * (usize::from(j) + ny * usize::from(l));
             buckets.get_mut(c).ok_or(BuildError::Grid)?.push(k as u16);
         }
-        let (grid_starts, grid_items) = csr(&buckets)?;
-        if triangles.len() > MAX_TRIANGLES {
-            return Err(BankError::TriangleCount {
-                count: u32::try_from(triangles.len()).unwrap_or(u32::MAX),
-            }
-            .into());
-        }
+        let (grid_starts, grid_items) = csr16(&buckets, SectionKind::GridItems)?;
         let (clearance, cell_tri_starts, cell_tri_items) =
             cell_certificates(&grid, &positions, &triangles, cells as usize)?;
 
@@ -292,7 +304,8 @@ impl BankBuilder {
             ckk.push([s(0, 0), s(0, 1), s(0, 2), s(1, 1), s(1, 2), s(2, 2)]);
         }
 
-        // Couplings: one canonical block per unordered pair, stored both ways.
+        // Couplings: one canonical block per unordered pair (k < l), stored once in k's row;
+        // the index lists both directions.
         let mut pairs: BTreeMap<(u16, u16), [[f64; 3]; 3]> = BTreeMap::new();
         for (e, (k, l, c)) in self.couplings.iter().enumerate() {
             let idx = |v: u32| {
@@ -322,29 +335,28 @@ impl BankBuilder {
                 }
             }
         }
-        let mut rows: Vec<Vec<(u16, [f32; 9])>> = vec![Vec::new(); n];
+        let mut nb_lists: Vec<Vec<u16>> = vec![Vec::new(); n];
+        let mut blocks: Vec<Vec<[f32; 9]>> = vec![Vec::new(); n];
+        // BTreeMap order: by k, then l ascending, so each row's blocks come in index order.
         for (&(a, b), c) in &pairs {
             let m: [f32; 9] = [
                 c[0][0], c[0][1], c[0][2], c[1][0], c[1][1], c[1][2], c[2][0], c[2][1], c[2][2],
             ]
             .map(|v| v as f32);
-            let mt = [m[0], m[3], m[6], m[1], m[4], m[7], m[2], m[5], m[8]];
-            if let Some(r) = rows.get_mut(usize::from(a)) {
-                r.push((b, m));
+            if let Some(r) = blocks.get_mut(usize::from(a)) {
+                r.push(m);
             }
-            if let Some(r) = rows.get_mut(usize::from(b)) {
-                r.push((a, mt));
+            for (row, other) in [(a, b), (b, a)] {
+                if let Some(r) = nb_lists.get_mut(usize::from(row)) {
+                    r.push(other);
+                }
             }
         }
-        for r in &mut rows {
-            r.sort_by_key(|(l, _)| *l);
+        for r in &mut nb_lists {
+            r.sort_unstable();
         }
-        let nb_lists: Vec<Vec<u16>> = rows
-            .iter()
-            .map(|r| r.iter().map(|(l, _)| *l).collect())
-            .collect();
-        let (nb_starts, nb_index) = csr(&nb_lists)?;
-        let nb_ckl: Vec<[f32; 9]> = rows.iter().flatten().map(|(_, c)| *c).collect();
+        let (nb_starts, nb_index) = csr16(&nb_lists, SectionKind::NeighbourIndex)?;
+        let (coupling_starts, nb_ckl) = csr16(&blocks, SectionKind::NeighbourCkl)?;
 
         let meta = BankMeta {
             scene_id: [self.scene_id as u32, (self.scene_id >> 32) as u32],
@@ -371,6 +383,7 @@ impl BankBuilder {
         body.push_slice(SectionKind::NeighbourStarts, &nb_starts)?;
         body.push_slice(SectionKind::NeighbourIndex, &nb_index)?;
         body.push_slice(SectionKind::NeighbourCkl, &nb_ckl)?;
+        body.push_slice(SectionKind::CouplingStarts, &coupling_starts)?;
         body.push(SectionKind::TissueLaw, bytemuck::bytes_of(&law), 1)?;
         body.push(SectionKind::Device, bytemuck::bytes_of(&self.device), 1)?;
         if let Some(gravity) = &self.gravity {
@@ -499,6 +512,19 @@ fn csr<T: Copy>(rows: &[Vec<T>]) -> Result<(Vec<u32>, Vec<T>), BuildError> {
         items.extend_from_slice(r);
         starts.push(u32::try_from(items.len()).map_err(|_| BuildError::TooLarge)?);
     }
+    Ok((starts, items))
+}
+
+/// CSR (starts, items) of per-row lists with `u16` starts; `section` names the items in the
+/// error when they are more than 65535.
+fn csr16<T: Copy>(rows: &[Vec<T>], section: SectionKind) -> Result<(Vec<u16>, Vec<T>), BuildError> {
+    let (starts, items) = csr(rows)?;
+    let count = items.len();
+    let starts = starts
+        .into_iter()
+        .map(u16::try_from)
+        .collect::<Result<Vec<u16>, _>>()
+        .map_err(|_| BuildError::TooManyItems { section, count })?;
     Ok((starts, items))
 }
 

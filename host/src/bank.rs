@@ -389,7 +389,7 @@ impl Prepared {
                     let nearest =
                         (0..3).fold(0, |best, c| if bary[c] > bary[best] { c } else { best });
                     let a = tri[nearest];
-                    for &b in probe.neighbours(usize::from(a)).0 {
+                    for &b in probe.neighbours(usize::from(a)) {
                         let p = positions[usize::from(b)];
                         let d2: f32 = (0..3).map(|c| (p[c] - anchor[c]).powi(2)).sum();
                         if d2 < r2 {

@@ -261,7 +261,7 @@ fn inspect(args: InspectArgs) -> Result<()> {
     };
     let d = bank.device();
     let pairs = (0..bank.node_count())
-        .map(|k| bank.neighbours(k).0.len())
+        .map(|k| bank.neighbours(k).len())
         .sum::<usize>()
         / 2;
     let sections = section_table(&bank);
