@@ -1122,7 +1122,7 @@ fn parse_bank(ctx: &Ctx, b: &RawBank) -> Result<BankOptions, SceneError> {
             p.span(),
             "bank.precision",
             format!(
-                "storage precision {:?} is not supported by bank format 3.0 (only \"f32\")",
+                "storage precision {:?} is not supported by bank format 4.0 (only \"f32\")",
                 p.get_ref()
             ),
         ));

@@ -73,7 +73,7 @@ pub struct SweepRow {
     pub rule: &'static str,
     /// Truncation radius, m.
     pub radius_m: f64,
-    /// Storage precision of `C` ("f32", the only one bank format 3 has).
+    /// Storage precision of `C` ("f32", the only one bank format 4.0 has).
     pub precision: &'static str,
     /// Coupled pairs stored.
     pub pairs: usize,
