@@ -322,6 +322,12 @@ pub enum BankError {
         /// Index of the coefficient (0..8, the order of `GravityCompensation::coeffs`).
         coefficient: u32,
     },
+    /// A 16-bit coupling block's exponent outside [`crate::CKL16_EXP_MIN`]`..=`
+    /// [`crate::CKL16_EXP_MAX`] (its values would not decode exactly to finite f32).
+    CklExponent {
+        /// Which block.
+        entry: u32,
+    },
 }
 
 impl BankError {
@@ -374,6 +380,7 @@ impl BankError {
             BankError::CellCandidates { .. } => 42,
             BankError::CellClearance { .. } => 43,
             BankError::GravityOutOfRange { .. } => 44,
+            BankError::CklExponent { .. } => 45,
         }
     }
 }
@@ -475,6 +482,12 @@ impl fmt::Display for BankError {
                 f,
                 "gravity coefficient {coefficient} beyond +-{} (N m or N)",
                 crate::GRAVITY_COEFF_MAX
+            ),
+            E::CklExponent { entry } => write!(
+                f,
+                "16-bit C_kl block {entry}: exponent outside {}..={}",
+                crate::CKL16_EXP_MIN,
+                crate::CKL16_EXP_MAX
             ),
         }
     }

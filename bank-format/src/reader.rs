@@ -4,10 +4,10 @@
 use crate::error::{BankError, DeviceField};
 use crate::law::TissueLaw;
 use crate::layout::{
-    BANK_ALIGN, BankHeader, BankMeta, CANDIDATE_WIDEN_CELLS, DeviceCalibration, GRAVITY_COEFF_MAX,
-    GravityCompensation, GridHeader, HEADER_LEN, MAGIC, MAX_NODES, MAX_SECTIONS, MAX_TRIANGLES,
-    OCCUPIED_WIDEN_CELLS, SECTION_ALIGN, SECTION_ENTRY_LEN, SectionEntry, SectionKind,
-    VERSION_MAJOR, bank_crc,
+    BANK_ALIGN, BankHeader, BankMeta, CANDIDATE_WIDEN_CELLS, CKL16_EXP_MAX, CKL16_EXP_MIN, Ckl16,
+    DeviceCalibration, GRAVITY_COEFF_MAX, GravityCompensation, GridHeader, HEADER_LEN, MAGIC,
+    MAX_NODES, MAX_SECTIONS, MAX_TRIANGLES, OCCUPIED_WIDEN_CELLS, Precision, SECTION_ALIGN,
+    SECTION_ENTRY_LEN, SectionEntry, SectionKind, VERSION_MAJOR, bank_crc,
 };
 use bytemuck::Pod;
 use core::ops::Range;
@@ -36,11 +36,37 @@ pub struct Bank<'a> {
     ckk: &'a [[f32; 6]],
     nb_starts: &'a [u16],
     nb_index: &'a [u16],
-    nb_ckl: &'a [[f32; 9]],
+    nb_ckl: Blocks<'a>,
     coupling_starts: &'a [u16],
     law: TissueLaw,
     device: &'a DeviceCalibration,
     gravity: Option<&'a GravityCompensation>,
+}
+
+/// The coupling blocks, one per pair, in the bank's storage precision.
+#[derive(Clone, Copy, Debug)]
+enum Blocks<'a> {
+    /// [`SectionKind::NeighbourCkl`].
+    F32(&'a [[f32; 9]]),
+    /// [`SectionKind::NeighbourCkl16`].
+    Bfp16(&'a [Ckl16]),
+}
+
+impl Blocks<'_> {
+    fn len(&self) -> usize {
+        match self {
+            Blocks::F32(b) => b.len(),
+            Blocks::Bfp16(b) => b.len(),
+        }
+    }
+
+    /// Block `i`, row-major f32 (16-bit blocks decoded, exactly).
+    fn get(&self, i: usize) -> Option<[f32; 9]> {
+        match self {
+            Blocks::F32(b) => b.get(i).copied(),
+            Blocks::Bfp16(b) => b.get(i).map(Ckl16::decode),
+        }
+    }
 }
 
 /// The collision grid: buckets of node indices over R (CSR: the nodes of cell `c` are
@@ -697,7 +723,7 @@ fn parse_ckk<'a>(sections: &Sections<'a>, n: usize) -> Result<&'a [[f32; 6]], Ba
 
 /// The neighbour sections `(starts, index, C_kl blocks, coupling starts)`, as
 /// [`parse_neighbours`] returns them.
-type NeighbourLists<'a> = (&'a [u16], &'a [u16], &'a [[f32; 9]], &'a [u16]);
+type NeighbourLists<'a> = (&'a [u16], &'a [u16], Blocks<'a>, &'a [u16]);
 
 /// `SPEC.md` "Validation" rule 12, neighbours: n + 1 neighbour and coupling starts, both CSR
 /// (the coupling starts over the C_kl blocks), blocks finite; per row, indices < n, != k,
@@ -709,18 +735,30 @@ fn parse_neighbours<'a>(
 ) -> Result<NeighbourLists<'a>, BankError> {
     let starts: &[u16] = sections.slice(SectionKind::NeighbourStarts)?;
     let index: &[u16] = sections.slice(SectionKind::NeighbourIndex)?;
-    let ckl: &[[f32; 9]] = sections.slice(SectionKind::NeighbourCkl)?;
+    let ckl = if sections.has(SectionKind::NeighbourCkl16) {
+        let b: &[Ckl16] = sections.slice(SectionKind::NeighbourCkl16)?;
+        if let Some(e) = b
+            .iter()
+            .position(|c| !(CKL16_EXP_MIN..=CKL16_EXP_MAX).contains(&c.exponent))
+        {
+            return Err(BankError::CklExponent { entry: e as u32 });
+        }
+        Blocks::Bfp16(b)
+    } else {
+        let b: &[[f32; 9]] = sections.slice(SectionKind::NeighbourCkl)?;
+        if let Some(e) = b.iter().position(|c| !all_finite(c)) {
+            return Err(BankError::NonFinite {
+                section: SectionKind::NeighbourCkl,
+                entry: e as u32,
+            });
+        }
+        Blocks::F32(b)
+    };
     let cstarts: &[u16] = sections.slice(SectionKind::CouplingStarts)?;
     expect_count(starts.len(), n + 1, SectionKind::NeighbourStarts)?;
     expect_count(cstarts.len(), n + 1, SectionKind::CouplingStarts)?;
     check_starts(starts, index.len(), SectionKind::NeighbourStarts)?;
     check_starts(cstarts, ckl.len(), SectionKind::CouplingStarts)?;
-    if let Some(e) = ckl.iter().position(|c| !all_finite(c)) {
-        return Err(BankError::NonFinite {
-            section: SectionKind::NeighbourCkl,
-            entry: e as u32,
-        });
-    }
     for k in 0..n {
         let range = csr_row(starts, k).unwrap_or(0..0);
         let mut prev: Option<u16> = None;
@@ -915,7 +953,7 @@ impl<'a> Bank<'a> {
         let blocks = csr_row(self.coupling_starts, a)?;
         // The row's last `blocks.len()` entries are its l > a, in block order.
         let first_upper = row.len().checked_sub(blocks.len())?;
-        let c = *self
+        let c = self
             .nb_ckl
             .get(blocks.start + i.checked_sub(first_upper)?)?;
         Some(if k < l {
@@ -1017,6 +1055,14 @@ impl<'a> Bank<'a> {
         self.nb_ckl.len()
     }
 
+    /// The storage precision of the coupling blocks.
+    pub fn precision(&self) -> Precision {
+        match self.nb_ckl {
+            Blocks::F32(_) => Precision::F32,
+            Blocks::Bfp16(_) => Precision::Bfp16,
+        }
+    }
+
     /// The 3x3 compliance block `C_kl` (m/N: displacement of `k` per unit force at `l`) for any
     /// two nodes: `C_kk` when `k == l`, the stored coupling (`C_lk^T` when `k > l`) when `l` is
     /// a neighbour of `k`, `None` otherwise (truncated or out of range). No allocation: one
@@ -1113,6 +1159,10 @@ impl<'a> Sections<'a> {
         Ok((bytes, entry.count))
     }
 
+    fn has(&self, kind: SectionKind) -> bool {
+        self.table.iter().any(|e| e.kind == kind.code())
+    }
+
     fn slice<T: Pod>(&self, kind: SectionKind) -> Result<&'a [T], BankError> {
         let (bytes, _) = self.bytes(kind)?;
         cast(bytes, kind)
@@ -1202,7 +1252,19 @@ fn check_table(table: &[SectionEntry], table_end: usize, total: usize) -> Result
             return Err(BankError::MissingSection { section });
         }
     }
-    Ok(())
+    let has = |k: SectionKind| table.iter().any(|e| e.kind == k.code());
+    match (
+        has(SectionKind::NeighbourCkl),
+        has(SectionKind::NeighbourCkl16),
+    ) {
+        (false, false) => Err(BankError::MissingSection {
+            section: SectionKind::NeighbourCkl,
+        }),
+        (true, true) => Err(BankError::DuplicateSection {
+            section: SectionKind::NeighbourCkl16,
+        }),
+        _ => Ok(()),
+    }
 }
 
 fn sym3(c: &[f32; 6]) -> [[f64; 3]; 3] {

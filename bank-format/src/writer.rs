@@ -4,9 +4,10 @@
 use crate::error::BankError;
 use crate::law::TissueLaw;
 use crate::layout::{
-    BankHeader, BankMeta, CANDIDATE_WIDEN_CELLS, DeviceCalibration, GravityCompensation,
-    GridHeader, HEADER_LEN, MAGIC, MAX_NODES, MAX_TRIANGLES, OCCUPIED_WIDEN_CELLS, SECTION_ALIGN,
-    SECTION_ENTRY_LEN, SectionEntry, SectionKind, VERSION_MAJOR, VERSION_MINOR, reseal,
+    BankHeader, BankMeta, CANDIDATE_WIDEN_CELLS, CKL16_EXP_MAX, CKL16_EXP_MIN, Ckl16,
+    DeviceCalibration, GravityCompensation, GridHeader, HEADER_LEN, MAGIC, MAX_NODES,
+    MAX_TRIANGLES, OCCUPIED_WIDEN_CELLS, Precision, SECTION_ALIGN, SECTION_ENTRY_LEN, SectionEntry,
+    SectionKind, VERSION_MAJOR, VERSION_MINOR, reseal,
 };
 use crate::reader::{Bank, cell_of, triangle_cells};
 use alloc::collections::BTreeMap;
@@ -86,6 +87,13 @@ pub enum BuildError {
     Grid,
     /// The bank would exceed 4 GiB.
     TooLarge,
+    /// A coupling block too large (or not finite) for the 16-bit storage's exponent.
+    BlockRange {
+        /// Smaller node of the pair.
+        k: u16,
+        /// Larger node.
+        l: u16,
+    },
     /// A CSR section has more items than its `u16` starts can count (65535; `SPEC.md`,
     /// "Pairs stored once (4.0)").
     TooManyItems {
@@ -117,6 +125,12 @@ impl fmt::Display for BuildError {
             }
             BuildError::Grid => f.write_str("grid cell size invalid or grid too large"),
             BuildError::TooLarge => f.write_str("bank larger than 4 GiB"),
+            BuildError::BlockRange { k, l } => {
+                write!(
+                    f,
+                    "C_kl of pair ({k}, {l}) out of the 16-bit storage's range"
+                )
+            }
             BuildError::TooManyItems { section, count } => write!(
                 f,
                 "{section}: {count} items, more than the 65535 its u16 starts can count"
@@ -202,9 +216,63 @@ fn close(a: &[[f64; 3]; 3], b: &[[f64; 3]; 3]) -> bool {
         .all(|(x, y)| (x - y).abs() <= tol)
 }
 
+/// `2^e` in f64 (`e` within the normal range).
+fn pow2(e: i32) -> f64 {
+    f64::from_bits(((e + 1023) as u64) << 52)
+}
+
+/// `x` rounded to the nearest integer, halves away from zero (`|x| < 2^52`; no libm).
+fn round_i(x: f64) -> i64 {
+    if x >= 0.0 {
+        (x + 0.5) as i64
+    } else {
+        -((-x + 0.5) as i64)
+    }
+}
+
+/// Block floating point (`SPEC.md`, "16-bit blocks"): the smallest exponent e >=
+/// [`CKL16_EXP_MIN`] with `round(max |c| / 2^e) <= 32767`, and the mantissas `round(c / 2^e)`,
+/// so each entry is off by at most `2^(e-1) <= max |c| / 32767`. `None` for a block too large
+/// for [`CKL16_EXP_MAX`] or not finite.
+pub fn encode_ckl16(c: &[[f64; 3]; 3]) -> Option<Ckl16> {
+    if !c.iter().flatten().all(|v| v.is_finite()) {
+        return None;
+    }
+    let max = max_abs(c);
+    let limit = f64::from(i16::MAX);
+    let mut e = i32::from(CKL16_EXP_MIN);
+    if max > 0.0 {
+        // max < 2^(x + 1) for its binary exponent x, so e = x - 14 gives max / 2^e < 2^15;
+        // x - 15 would give >= 2^15: e = x - 14 is the smallest unless rounding reaches 32768.
+        let x = ((max.to_bits() >> 52) & 0x7ff) as i32 - 1023;
+        e = e.max(x - 14);
+        while round_i(max / pow2(e)) > i64::from(i16::MAX) {
+            e += 1;
+        }
+    }
+    if e > i32::from(CKL16_EXP_MAX) || max / pow2(e) > limit + 0.5 {
+        return None;
+    }
+    let scale = pow2(e);
+    let mut mantissa = [0i16; 9];
+    for (m, v) in mantissa.iter_mut().zip(c.iter().flatten()) {
+        *m = i16::try_from(round_i(v / scale)).ok()?;
+    }
+    Some(Ckl16 {
+        mantissa,
+        exponent: e as i16,
+    })
+}
+
 impl BankBuilder {
-    /// Write the bank. Fails on malformed input, and on any input the reader rejects.
+    /// Write the bank with `C_kl` in f32 ([`BankBuilder::build_with_precision`]).
     pub fn build(&self) -> Result<Vec<u8>, BuildError> {
+        self.build_with_precision(Precision::F32)
+    }
+
+    /// Write the bank, its coupling blocks in `precision` (`C_kk` is always f32). Fails on
+    /// malformed input, and on any input the reader rejects.
+    pub fn build_with_precision(&self, precision: Precision) -> Result<Vec<u8>, BuildError> {
         let n = self.positions_m.len();
         if self.mesh_ids.len() != n {
             return Err(BuildError::LengthMismatch { field: "mesh_ids" });
@@ -337,14 +405,25 @@ impl BankBuilder {
         }
         let mut nb_lists: Vec<Vec<u16>> = vec![Vec::new(); n];
         let mut blocks: Vec<Vec<[f32; 9]>> = vec![Vec::new(); n];
+        let mut blocks16: Vec<Vec<Ckl16>> = vec![Vec::new(); n];
         // BTreeMap order: by k, then l ascending, so each row's blocks come in index order.
         for (&(a, b), c) in &pairs {
             let m: [f32; 9] = [
                 c[0][0], c[0][1], c[0][2], c[1][0], c[1][1], c[1][2], c[2][0], c[2][1], c[2][2],
             ]
             .map(|v| v as f32);
-            if let Some(r) = blocks.get_mut(usize::from(a)) {
-                r.push(m);
+            match precision {
+                Precision::F32 => {
+                    if let Some(r) = blocks.get_mut(usize::from(a)) {
+                        r.push(m);
+                    }
+                }
+                Precision::Bfp16 => {
+                    let q = encode_ckl16(c).ok_or(BuildError::BlockRange { k: a, l: b })?;
+                    if let Some(r) = blocks16.get_mut(usize::from(a)) {
+                        r.push(q);
+                    }
+                }
             }
             for (row, other) in [(a, b), (b, a)] {
                 if let Some(r) = nb_lists.get_mut(usize::from(row)) {
@@ -357,6 +436,7 @@ impl BankBuilder {
         }
         let (nb_starts, nb_index) = csr16(&nb_lists, SectionKind::NeighbourIndex)?;
         let (coupling_starts, nb_ckl) = csr16(&blocks, SectionKind::NeighbourCkl)?;
+        let (coupling_starts16, nb_ckl16) = csr16(&blocks16, SectionKind::NeighbourCkl16)?;
 
         let meta = BankMeta {
             scene_id: [self.scene_id as u32, (self.scene_id >> 32) as u32],
@@ -382,8 +462,16 @@ impl BankBuilder {
         body.push_slice(SectionKind::Ckk, &ckk)?;
         body.push_slice(SectionKind::NeighbourStarts, &nb_starts)?;
         body.push_slice(SectionKind::NeighbourIndex, &nb_index)?;
-        body.push_slice(SectionKind::NeighbourCkl, &nb_ckl)?;
-        body.push_slice(SectionKind::CouplingStarts, &coupling_starts)?;
+        match precision {
+            Precision::F32 => {
+                body.push_slice(SectionKind::NeighbourCkl, &nb_ckl)?;
+                body.push_slice(SectionKind::CouplingStarts, &coupling_starts)?;
+            }
+            Precision::Bfp16 => {
+                body.push_slice(SectionKind::NeighbourCkl16, &nb_ckl16)?;
+                body.push_slice(SectionKind::CouplingStarts, &coupling_starts16)?;
+            }
+        }
         body.push(SectionKind::TissueLaw, bytemuck::bytes_of(&law), 1)?;
         body.push(SectionKind::Device, bytemuck::bytes_of(&self.device), 1)?;
         if let Some(gravity) = &self.gravity {

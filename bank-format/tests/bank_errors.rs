@@ -309,6 +309,26 @@ cases! {
         device_f32(DEV_JOINT_SPEED + 4, -3.0);
     device_max_joint_speed_insertion: E::Device { field: F::MaxJointSpeed { axis: 2 } } =>
         device_f32(DEV_JOINT_SPEED + 8, -0.0);
+    ckl_exponent: E::CklExponent { entry: 1 } => {
+        let mut bytes = builder().build_with_precision(bank_format::Precision::Bfp16).unwrap();
+        let (_, off, ..) = section(&bytes, K::NeighbourCkl16);
+        put_u16(&mut bytes, off + 20 + 18, (-127i16) as u16);
+        assert!(bank_format::reseal(&mut bytes));
+        parse(&bytes)
+    };
+    ckl_missing: E::MissingSection { section: K::NeighbourCkl } => set_entry(K::NeighbourCkl, 0, 99);
+    // The optional gravity section's entry made an empty 16-bit C_kl beside the f32 one.
+    ckl_in_both_precisions: E::DuplicateSection { section: K::NeighbourCkl16 } => {
+        let mut b = builder();
+        b.gravity = Some(bank_format::GravityCompensation { coeffs: [0.0; 8] });
+        let mut bytes = b.build().unwrap();
+        let (i, ..) = section(&bytes, K::Gravity);
+        put_u32(&mut bytes, entry_field(i, 0), K::NeighbourCkl16.code());
+        put_u32(&mut bytes, entry_field(i, 2), 0);
+        put_u32(&mut bytes, entry_field(i, 3), 0);
+        assert!(bank_format::reseal(&mut bytes));
+        parse(&bytes)
+    };
     gravity_out_of_range: E::GravityOutOfRange { coefficient: 3 } => {
         let mut b = builder();
         b.gravity = Some(bank_format::GravityCompensation { coeffs: [0.0; 8] });
@@ -333,5 +353,6 @@ fn error_codes_are_distinct_and_stable() {
         .code(),
         32
     );
-    assert_eq!(E::GravityOutOfRange { coefficient: 0 }.code(), last_code());
+    assert_eq!(E::GravityOutOfRange { coefficient: 0 }.code(), 44);
+    assert_eq!(E::CklExponent { entry: 0 }.code(), last_code());
 }

@@ -348,6 +348,8 @@ fn sweep_prints_a_row_per_rule_and_radius() {
         "0,0.03",
         "--sites",
         "20",
+        "--precision",
+        "f32,bfp16",
     ];
     let o = host(&args);
     assert!(o.status.success(), "{}", stderr(&o));
@@ -356,14 +358,25 @@ fn sweep_prints_a_row_per_rule_and_radius() {
         .lines()
         .filter(|l| l.starts_with("| radius |") || l.starts_with("| tool |"))
         .collect();
-    assert_eq!(rows.len(), 3, "{table}");
+    assert_eq!(rows.len(), 6, "{table}");
     let o = host(&[args.as_slice(), &["--json"]].concat());
     assert!(o.status.success(), "{}", stderr(&o));
     let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
     let rows = v["rows"].as_array().unwrap();
-    assert_eq!(rows.len(), 3, "{v}");
-    let (zero, tool) = (&rows[0], &rows[2]);
+    assert_eq!(rows.len(), 6, "{v}");
+    // Per (rule, radius) one row per precision, f32 first.
+    let (zero, tool, tool16) = (&rows[0], &rows[4], &rows[5]);
     assert_eq!(tool["rule"], "tool");
+    assert_eq!(
+        (tool["precision"].as_str(), tool16["precision"].as_str()),
+        (Some("f32"), Some("bfp16"))
+    );
+    assert_eq!(
+        tool["bank_bytes"].as_u64().unwrap() - tool16["bank_bytes"].as_u64().unwrap(),
+        16 * tool["pairs"].as_u64().unwrap(),
+        "{v}"
+    );
+    assert!(tool16["patch_max"].as_f64().unwrap() <= 1e-4, "{v}");
     // Edges only: the tool patch loses couplings; the tool's pairs: exact forces.
     assert!(zero["patch_max"].as_f64().unwrap() > 1e-3, "{v}");
     assert!(tool["patch_max"].as_f64().unwrap() <= 1e-4, "{v}");
