@@ -11,7 +11,7 @@ pub const MAGIC: [u8; 8] = *b"HAPTBANK";
 /// Major version this crate reads and writes. A reader rejects any other major version. 2: the
 /// device record gained the speed thresholds; 3: the per-cell contact certificates (clearance
 /// and candidate triangles) became required sections; 4: each coupled pair's block stored once
-/// ([`SectionKind::CouplingStarts`]) and `u16` start arrays (`SPEC.md`, "Versioning").
+/// ([`SectionKind::CouplingStarts`]), narrower index arrays (`SPEC.md`, "Versioning").
 pub const VERSION_MAJOR: u16 = 4;
 /// Minor version this crate writes. Readers accept any minor version of their major version
 /// (minor versions only add optional sections, which older readers skip). 4.0 has the optional
@@ -32,9 +32,9 @@ pub const BANK_ALIGN: usize = 4;
 pub const CRC_OFFSET: usize = 20;
 /// Largest number of nodes in the reachable region R (node indices are `u16`).
 pub const MAX_NODES: usize = u16::MAX as usize;
-/// Largest number of triangles: the `3 t` node-triangle items must fit the `u16` starts
-/// (`SPEC.md`, "Pairs stored once (4.0)": a bank with more would not fit the bank region).
-pub const MAX_TRIANGLES: usize = u16::MAX as usize / 3;
+/// Largest number of triangles (the cells' candidate lists and the node-triangle items hold
+/// `u16` triangle indices).
+pub const MAX_TRIANGLES: usize = u16::MAX as usize;
 /// A cell's candidate triangles are those whose bounding box, widened by this many cells on
 /// every side, meets the cell (`SPEC.md`, "cell candidates"): a path piece of Chebyshev length
 /// at most [`PIECE_CELLS`] cells can only cross them.
@@ -107,7 +107,7 @@ pub enum SectionKind {
     MeshIds,
     /// Triangles of R's surface, `[u16; 3]` node indices, counter-clockwise seen from outside.
     Triangles,
-    /// CSR row starts (`u16`, n + 1) of the node-to-triangle adjacency.
+    /// CSR row starts (`u32`, n + 1) of the node-to-triangle adjacency.
     NodeTriStarts,
     /// CSR items (`u16` triangle indices) of the node-to-triangle adjacency.
     NodeTriItems,
@@ -126,14 +126,14 @@ pub enum SectionKind {
     CellTriItems,
     /// Self-compliance `C_kk` per node, `[f32; 6]` = xx, xy, xz, yy, yz, zz, in m/N.
     Ckk,
-    /// CSR row starts (`u16`, n + 1) of the neighbour lists.
+    /// CSR row starts (`u32`, n + 1) of the neighbour lists.
     NeighbourStarts,
     /// Neighbour node indices (`u16`), each row strictly ascending, both directions.
     NeighbourIndex,
     /// Coupling blocks `C_kl`, `[f32; 9]` row-major, m/N, one per coupled pair `k < l`, in node
     /// `k`'s row order (`C_lk = C_kl^T` is not stored).
     NeighbourCkl,
-    /// CSR starts (`u16`, n + 1) of each node's blocks in [`SectionKind::NeighbourCkl`] (or
+    /// CSR starts (`u32`, n + 1) of each node's blocks in [`SectionKind::NeighbourCkl`] (or
     /// [`SectionKind::NeighbourCkl16`]): those of its row's entries `l > k` (4.0).
     CouplingStarts,
     /// The same blocks as [`SectionKind::NeighbourCkl`], stored as [`Ckl16`] (16-bit mantissas
@@ -241,7 +241,7 @@ impl SectionKind {
             SectionKind::Positions => 12,
             SectionKind::MeshIds => 4,
             SectionKind::Triangles => 6,
-            SectionKind::NodeTriStarts => 2,
+            SectionKind::NodeTriStarts => 4,
             SectionKind::NodeTriItems => 2,
             SectionKind::Grid => core::mem::size_of::<GridHeader>(),
             SectionKind::GridStarts => 2,
@@ -250,10 +250,10 @@ impl SectionKind {
             SectionKind::CellTriStarts => 4,
             SectionKind::CellTriItems => 2,
             SectionKind::Ckk => 24,
-            SectionKind::NeighbourStarts => 2,
+            SectionKind::NeighbourStarts => 4,
             SectionKind::NeighbourIndex => 2,
             SectionKind::NeighbourCkl => 36,
-            SectionKind::CouplingStarts => 2,
+            SectionKind::CouplingStarts => 4,
             SectionKind::NeighbourCkl16 => core::mem::size_of::<Ckl16>(),
             SectionKind::TissueLaw => core::mem::size_of::<LawRecord>(),
             SectionKind::Device => core::mem::size_of::<DeviceCalibration>(),

@@ -30,14 +30,14 @@ pub struct Bank<'a> {
     positions: &'a [[f32; 3]],
     mesh_ids: &'a [u32],
     triangles: &'a [[u16; 3]],
-    node_tri_starts: &'a [u16],
+    node_tri_starts: &'a [u32],
     node_tri_items: &'a [u16],
     grid: Grid<'a>,
     ckk: &'a [[f32; 6]],
-    nb_starts: &'a [u16],
+    nb_starts: &'a [u32],
     nb_index: &'a [u16],
     nb_ckl: Blocks<'a>,
-    coupling_starts: &'a [u16],
+    coupling_starts: &'a [u32],
     law: TissueLaw,
     device: &'a DeviceCalibration,
     gravity: Option<&'a GravityCompensation>,
@@ -444,8 +444,8 @@ fn parse_node_triangles<'a>(
     sections: &Sections<'a>,
     triangles: &[[u16; 3]],
     n: usize,
-) -> Result<(&'a [u16], &'a [u16]), BankError> {
-    let starts: &[u16] = sections.slice(SectionKind::NodeTriStarts)?;
+) -> Result<(&'a [u32], &'a [u16]), BankError> {
+    let starts: &[u32] = sections.slice(SectionKind::NodeTriStarts)?;
     let items: &[u16] = sections.slice(SectionKind::NodeTriItems)?;
     expect_count(starts.len(), n + 1, SectionKind::NodeTriStarts)?;
     expect_count(
@@ -723,7 +723,7 @@ fn parse_ckk<'a>(sections: &Sections<'a>, n: usize) -> Result<&'a [[f32; 6]], Ba
 
 /// The neighbour sections `(starts, index, C_kl blocks, coupling starts)`, as
 /// [`parse_neighbours`] returns them.
-type NeighbourLists<'a> = (&'a [u16], &'a [u16], Blocks<'a>, &'a [u16]);
+type NeighbourLists<'a> = (&'a [u32], &'a [u16], Blocks<'a>, &'a [u32]);
 
 /// `SPEC.md` "Validation" rule 12, neighbours: n + 1 neighbour and coupling starts, both CSR
 /// (the coupling starts over the C_kl blocks), blocks finite; per row, indices < n, != k,
@@ -733,7 +733,7 @@ fn parse_neighbours<'a>(
     sections: &Sections<'a>,
     n: usize,
 ) -> Result<NeighbourLists<'a>, BankError> {
-    let starts: &[u16] = sections.slice(SectionKind::NeighbourStarts)?;
+    let starts: &[u32] = sections.slice(SectionKind::NeighbourStarts)?;
     let index: &[u16] = sections.slice(SectionKind::NeighbourIndex)?;
     let ckl = if sections.has(SectionKind::NeighbourCkl16) {
         let b: &[Ckl16] = sections.slice(SectionKind::NeighbourCkl16)?;
@@ -754,7 +754,7 @@ fn parse_neighbours<'a>(
         }
         Blocks::F32(b)
     };
-    let cstarts: &[u16] = sections.slice(SectionKind::CouplingStarts)?;
+    let cstarts: &[u32] = sections.slice(SectionKind::CouplingStarts)?;
     expect_count(starts.len(), n + 1, SectionKind::NeighbourStarts)?;
     expect_count(cstarts.len(), n + 1, SectionKind::CouplingStarts)?;
     check_starts(starts, index.len(), SectionKind::NeighbourStarts)?;

@@ -94,8 +94,8 @@ pub enum BuildError {
         /// Larger node.
         l: u16,
     },
-    /// A CSR section has more items than its `u16` starts can count (65535; `SPEC.md`,
-    /// "Pairs stored once (4.0)").
+    /// A CSR section has more items than its `u16` starts can count (65535; only the grid
+    /// starts are `u16`, and they count at most the 65535 nodes).
     TooManyItems {
         /// The section whose items overflow.
         section: SectionKind,
@@ -317,7 +317,7 @@ impl BankBuilder {
                 }
             }
         }
-        let (node_tri_starts, node_tri_items) = csr16(&node_tris, SectionKind::NodeTriItems)?;
+        let (node_tri_starts, node_tri_items) = csr(&node_tris)?;
 
         // Grid: origin half a cell below the smallest coordinate, dims from the largest.
         let h = self.grid_cell_size_m as f32;
@@ -434,9 +434,9 @@ impl BankBuilder {
         for r in &mut nb_lists {
             r.sort_unstable();
         }
-        let (nb_starts, nb_index) = csr16(&nb_lists, SectionKind::NeighbourIndex)?;
-        let (coupling_starts, nb_ckl) = csr16(&blocks, SectionKind::NeighbourCkl)?;
-        let (coupling_starts16, nb_ckl16) = csr16(&blocks16, SectionKind::NeighbourCkl16)?;
+        let (nb_starts, nb_index) = csr(&nb_lists)?;
+        let (coupling_starts, nb_ckl) = csr(&blocks)?;
+        let (coupling_starts16, nb_ckl16) = csr(&blocks16)?;
 
         let meta = BankMeta {
             scene_id: [self.scene_id as u32, (self.scene_id >> 32) as u32],

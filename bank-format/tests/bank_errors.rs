@@ -191,16 +191,16 @@ cases! {
     neighbour_index_out_of_range: E::IndexOutOfRange { section: K::NeighbourIndex, entry: 2 } =>
         corrupt_section(K::NeighbourIndex, |s| put_u16(s, 4, 4));
     bad_neighbour_starts: E::BadCsrStarts { section: K::NeighbourStarts, entry: 0 } =>
-        corrupt_section(K::NeighbourStarts, |s| put_u16(s, 0, 1));
+        corrupt_section(K::NeighbourStarts, |s| put_u32(s, 0, 1));
     bad_grid_starts_end: E::BadCsrStarts { section: K::GridStarts, entry: 4 } =>
         corrupt_section(K::GridStarts, |s| put_u16(s, 8, 3));
     bad_node_triangle_starts_decrease: E::BadCsrStarts { section: K::NodeTriStarts, entry: 2 } =>
-        corrupt_section(K::NodeTriStarts, |s| put_u16(s, 4, 1));
+        corrupt_section(K::NodeTriStarts, |s| put_u32(s, 8, 1));
     // Coupling starts [0, 3, 4, 5, 5] made [0, 2, 4, 5, 5]: node 0 has three entries l > 0.
     coupling_starts_disagree: E::BadCsrStarts { section: K::CouplingStarts, entry: 1 } =>
-        corrupt_section(K::CouplingStarts, |s| put_u16(s, 2, 2));
+        corrupt_section(K::CouplingStarts, |s| put_u32(s, 4, 2));
     coupling_starts_end: E::BadCsrStarts { section: K::CouplingStarts, entry: 4 } =>
-        corrupt_section(K::CouplingStarts, |s| put_u16(s, 8, 4));
+        corrupt_section(K::CouplingStarts, |s| put_u32(s, 16, 4));
     degenerate_triangle: E::DegenerateTriangle { triangle: 1 } =>
         corrupt_section(K::Triangles, |s| put_u16(s, 6 + 4, 0));
     node_triangle_mismatch: E::NodeTriangleMismatch { node: 1 } =>
@@ -217,7 +217,7 @@ cases! {
         put_u16(b, st + 4, 2);
         put_u16(b, it + 2, 0);
     });
-    triangle_count: E::TriangleCount { count: 21846 } => {
+    triangle_count: E::TriangleCount { count: 65536 } => {
         let mut b = builder();
         b.triangles = vec![[0, 1, 2]; bank_format::MAX_TRIANGLES + 1];
         match b.build() {
