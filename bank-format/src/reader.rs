@@ -736,29 +736,33 @@ fn parse_neighbours<'a>(
     let starts: &[u32] = sections.slice(SectionKind::NeighbourStarts)?;
     let index: &[u16] = sections.slice(SectionKind::NeighbourIndex)?;
     let ckl = if sections.has(SectionKind::NeighbourCkl16) {
-        let b: &[Ckl16] = sections.slice(SectionKind::NeighbourCkl16)?;
-        if let Some(e) = b
-            .iter()
-            .position(|c| !(CKL16_EXP_MIN..=CKL16_EXP_MAX).contains(&c.exponent))
-        {
-            return Err(BankError::CklExponent { entry: e as u32 });
-        }
-        Blocks::Bfp16(b)
+        Blocks::Bfp16(sections.slice(SectionKind::NeighbourCkl16)?)
     } else {
-        let b: &[[f32; 9]] = sections.slice(SectionKind::NeighbourCkl)?;
-        if let Some(e) = b.iter().position(|c| !all_finite(c)) {
-            return Err(BankError::NonFinite {
-                section: SectionKind::NeighbourCkl,
-                entry: e as u32,
-            });
-        }
-        Blocks::F32(b)
+        Blocks::F32(sections.slice(SectionKind::NeighbourCkl)?)
     };
     let cstarts: &[u32] = sections.slice(SectionKind::CouplingStarts)?;
     expect_count(starts.len(), n + 1, SectionKind::NeighbourStarts)?;
     expect_count(cstarts.len(), n + 1, SectionKind::CouplingStarts)?;
     check_starts(starts, index.len(), SectionKind::NeighbourStarts)?;
     check_starts(cstarts, ckl.len(), SectionKind::CouplingStarts)?;
+    match ckl {
+        Blocks::F32(b) => {
+            if let Some(e) = b.iter().position(|c| !all_finite(c)) {
+                return Err(BankError::NonFinite {
+                    section: SectionKind::NeighbourCkl,
+                    entry: e as u32,
+                });
+            }
+        }
+        Blocks::Bfp16(b) => {
+            if let Some(e) = b
+                .iter()
+                .position(|c| !(CKL16_EXP_MIN..=CKL16_EXP_MAX).contains(&c.exponent))
+            {
+                return Err(BankError::CklExponent { entry: e as u32 });
+            }
+        }
+    }
     for k in 0..n {
         let range = csr_row(starts, k).unwrap_or(0..0);
         let mut prev: Option<u16> = None;
