@@ -274,13 +274,6 @@ pub enum BankError {
         /// l.
         neighbour: u32,
     },
-    /// `C_lk` differs from `C_kl^T` beyond the tolerance.
-    CklAsymmetric {
-        /// k.
-        node: u32,
-        /// l.
-        neighbour: u32,
-    },
     /// The 6x6 compliance of the pair `{k, l}` is not symmetric positive definite.
     PairNotSpd {
         /// k.
@@ -329,11 +322,18 @@ pub enum BankError {
         /// Index of the coefficient (0..8, the order of `GravityCompensation::coeffs`).
         coefficient: u32,
     },
+    /// A 16-bit coupling block's exponent outside [`crate::CKL16_EXP_MIN`]`..=`
+    /// [`crate::CKL16_EXP_MAX`] (its values would not decode exactly to finite f32).
+    CklExponent {
+        /// Which block.
+        entry: u32,
+    },
 }
 
 impl BankError {
-    /// A stable small number per variant (1-based, in declaration order), for fault reports
-    /// over the link where the full error does not fit.
+    /// A stable small number per variant (1-based, in declaration order; a retired variant's
+    /// code is never reused: 31), for fault reports over the link where the full error does
+    /// not fit.
     pub const fn code(&self) -> u16 {
         match self {
             BankError::TooShort { .. } => 1,
@@ -366,7 +366,7 @@ impl BankError {
             BankError::NeighbourSelf { .. } => 28,
             BankError::NeighbourNotSorted { .. } => 29,
             BankError::NeighbourNotReciprocal { .. } => 30,
-            BankError::CklAsymmetric { .. } => 31,
+            // 31 was `CklAsymmetric` (3.x stored both directions of a pair); retired in 4.0.
             BankError::PairNotSpd { .. } => 32,
             BankError::MissingNeighbour { .. } => 33,
             BankError::TriangleEdgeNotCoupled { .. } => 34,
@@ -380,6 +380,7 @@ impl BankError {
             BankError::CellCandidates { .. } => 42,
             BankError::CellClearance { .. } => 43,
             BankError::GravityOutOfRange { .. } => 44,
+            BankError::CklExponent { .. } => 45,
         }
     }
 }
@@ -457,9 +458,6 @@ impl fmt::Display for BankError {
                 f,
                 "node {neighbour} is a neighbour of {node} but not the reverse"
             ),
-            E::CklAsymmetric { node, neighbour } => {
-                write!(f, "C_lk != C_kl^T for k = {node}, l = {neighbour}")
-            }
             E::PairNotSpd { node, neighbour } => {
                 write!(f, "compliance of pair ({node}, {neighbour}) is not SPD")
             }
@@ -484,6 +482,12 @@ impl fmt::Display for BankError {
                 f,
                 "gravity coefficient {coefficient} beyond +-{} (N m or N)",
                 crate::GRAVITY_COEFF_MAX
+            ),
+            E::CklExponent { entry } => write!(
+                f,
+                "16-bit C_kl block {entry}: exponent outside {}..={}",
+                crate::CKL16_EXP_MIN,
+                crate::CKL16_EXP_MAX
             ),
         }
     }

@@ -10,12 +10,13 @@ use bytemuck::{Pod, Zeroable};
 pub const MAGIC: [u8; 8] = *b"HAPTBANK";
 /// Major version this crate reads and writes. A reader rejects any other major version. 2: the
 /// device record gained the speed thresholds; 3: the per-cell contact certificates (clearance
-/// and candidate triangles) became required sections (`SPEC.md`, "Versioning").
-pub const VERSION_MAJOR: u16 = 3;
+/// and candidate triangles) became required sections; 4: each coupled pair's block stored once
+/// ([`SectionKind::CouplingStarts`]), narrower index arrays (`SPEC.md`, "Versioning").
+pub const VERSION_MAJOR: u16 = 4;
 /// Minor version this crate writes. Readers accept any minor version of their major version
-/// (minor versions only add optional sections, which older readers skip). 1: the optional
-/// gravity section ([`SectionKind::Gravity`]).
-pub const VERSION_MINOR: u16 = 1;
+/// (minor versions only add optional sections, which older readers skip). 4.0 has the optional
+/// gravity section ([`SectionKind::Gravity`], added in 3.1).
+pub const VERSION_MINOR: u16 = 0;
 /// Size of [`BankHeader`] in bytes; the section table follows it.
 pub const HEADER_LEN: usize = 32;
 /// Size of one [`SectionEntry`] in bytes.
@@ -31,7 +32,8 @@ pub const BANK_ALIGN: usize = 4;
 pub const CRC_OFFSET: usize = 20;
 /// Largest number of nodes in the reachable region R (node indices are `u16`).
 pub const MAX_NODES: usize = u16::MAX as usize;
-/// Largest number of triangles (the cells' candidate lists hold `u16` triangle indices).
+/// Largest number of triangles (the cells' candidate lists and the node-triangle items hold
+/// `u16` triangle indices).
 pub const MAX_TRIANGLES: usize = u16::MAX as usize;
 /// A cell's candidate triangles are those whose bounding box, widened by this many cells on
 /// every side, meets the cell (`SPEC.md`, "cell candidates"): a path piece of Chebyshev length
@@ -107,11 +109,11 @@ pub enum SectionKind {
     Triangles,
     /// CSR row starts (`u32`, n + 1) of the node-to-triangle adjacency.
     NodeTriStarts,
-    /// CSR items (`u32` triangle indices) of the node-to-triangle adjacency.
+    /// CSR items (`u16` triangle indices) of the node-to-triangle adjacency.
     NodeTriItems,
     /// [`GridHeader`], one element.
     Grid,
-    /// CSR bucket starts (`u32`, cells + 1) of the collision grid.
+    /// CSR bucket starts (`u16`, cells + 1) of the collision grid.
     GridStarts,
     /// CSR bucket items (`u16` node indices) of the collision grid.
     GridItems,
@@ -126,10 +128,17 @@ pub enum SectionKind {
     Ckk,
     /// CSR row starts (`u32`, n + 1) of the neighbour lists.
     NeighbourStarts,
-    /// Neighbour node indices (`u16`), each row strictly ascending.
+    /// Neighbour node indices (`u16`), each row strictly ascending, both directions.
     NeighbourIndex,
-    /// Coupling blocks `C_kl`, `[f32; 9]` row-major, m/N, one per neighbour entry.
+    /// Coupling blocks `C_kl`, `[f32; 9]` row-major, m/N, one per coupled pair `k < l`, in node
+    /// `k`'s row order (`C_lk = C_kl^T` is not stored).
     NeighbourCkl,
+    /// CSR starts (`u32`, n + 1) of each node's blocks in [`SectionKind::NeighbourCkl`] (or
+    /// [`SectionKind::NeighbourCkl16`]): those of its row's entries `l > k` (4.0).
+    CouplingStarts,
+    /// The same blocks as [`SectionKind::NeighbourCkl`], stored as [`Ckl16`] (16-bit mantissas
+    /// and one exponent per block); a bank holds exactly one of the two (4.0).
+    NeighbourCkl16,
     /// [`LawRecord`], one element: the tissue force law Q.
     TissueLaw,
     /// [`DeviceCalibration`], one element.
@@ -142,7 +151,8 @@ pub enum SectionKind {
 
 impl SectionKind {
     /// The sections a valid bank of this major version must contain, in the order the writer
-    /// lays them out.
+    /// lays them out; besides these, exactly one of [`SectionKind::NeighbourCkl`] and
+    /// [`SectionKind::NeighbourCkl16`] (the storage precision, [`Precision`]).
     pub const REQUIRED: [SectionKind; 18] = [
         SectionKind::Meta,
         SectionKind::Positions,
@@ -159,7 +169,7 @@ impl SectionKind {
         SectionKind::Ckk,
         SectionKind::NeighbourStarts,
         SectionKind::NeighbourIndex,
-        SectionKind::NeighbourCkl,
+        SectionKind::CouplingStarts,
         SectionKind::TissueLaw,
         SectionKind::Device,
     ];
@@ -186,6 +196,8 @@ impl SectionKind {
             16 => SectionKind::CellClearance,
             17 => SectionKind::CellTriStarts,
             18 => SectionKind::CellTriItems,
+            19 => SectionKind::CouplingStarts,
+            20 => SectionKind::NeighbourCkl16,
             24 => SectionKind::Gravity,
             other => SectionKind::Unknown(other),
         }
@@ -213,6 +225,8 @@ impl SectionKind {
             SectionKind::CellClearance => 16,
             SectionKind::CellTriStarts => 17,
             SectionKind::CellTriItems => 18,
+            SectionKind::CouplingStarts => 19,
+            SectionKind::NeighbourCkl16 => 20,
             SectionKind::Gravity => 24,
             SectionKind::Unknown(code) => code,
         }
@@ -228,9 +242,9 @@ impl SectionKind {
             SectionKind::MeshIds => 4,
             SectionKind::Triangles => 6,
             SectionKind::NodeTriStarts => 4,
-            SectionKind::NodeTriItems => 4,
+            SectionKind::NodeTriItems => 2,
             SectionKind::Grid => core::mem::size_of::<GridHeader>(),
-            SectionKind::GridStarts => 4,
+            SectionKind::GridStarts => 2,
             SectionKind::GridItems => 2,
             SectionKind::CellClearance => 1,
             SectionKind::CellTriStarts => 4,
@@ -239,6 +253,8 @@ impl SectionKind {
             SectionKind::NeighbourStarts => 4,
             SectionKind::NeighbourIndex => 2,
             SectionKind::NeighbourCkl => 36,
+            SectionKind::CouplingStarts => 4,
+            SectionKind::NeighbourCkl16 => core::mem::size_of::<Ckl16>(),
             SectionKind::TissueLaw => core::mem::size_of::<LawRecord>(),
             SectionKind::Device => core::mem::size_of::<DeviceCalibration>(),
             SectionKind::Gravity => core::mem::size_of::<GravityCompensation>(),
@@ -265,6 +281,8 @@ impl SectionKind {
             SectionKind::NeighbourStarts => "neighbour starts",
             SectionKind::NeighbourIndex => "neighbour index",
             SectionKind::NeighbourCkl => "C_kl",
+            SectionKind::CouplingStarts => "coupling starts",
+            SectionKind::NeighbourCkl16 => "C_kl, 16-bit",
             SectionKind::TissueLaw => "tissue law",
             SectionKind::Device => "device",
             SectionKind::Gravity => "gravity",
@@ -318,6 +336,62 @@ pub struct GridHeader {
     pub dims: [u16; 3],
     /// Reserved, zero.
     pub reserved: u16,
+}
+
+/// Storage precision of the coupling blocks `C_kl` (`SPEC.md`, "16-bit blocks").
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Default)]
+pub enum Precision {
+    /// IEEE-754 single precision, [`SectionKind::NeighbourCkl`], 36 bytes a block.
+    #[default]
+    F32,
+    /// Block floating point, [`SectionKind::NeighbourCkl16`], 20 bytes a block: each entry off
+    /// by at most `max |C_kl| / 32767`.
+    Bfp16,
+}
+
+impl Precision {
+    /// Every precision.
+    pub const ALL: [Precision; 2] = [Precision::F32, Precision::Bfp16];
+
+    /// The name a scene file uses: "f32" or "bfp16".
+    pub const fn name(self) -> &'static str {
+        match self {
+            Precision::F32 => "f32",
+            Precision::Bfp16 => "bfp16",
+        }
+    }
+
+    /// The precision named `name` ([`Precision::name`]).
+    pub fn from_name(name: &str) -> Option<Precision> {
+        Precision::ALL.into_iter().find(|p| p.name() == name)
+    }
+}
+
+/// Smallest exponent of a [`Ckl16`] (its `2^e` is then the smallest normal f32 power of two).
+pub const CKL16_EXP_MIN: i16 = -126;
+/// Largest exponent of a [`Ckl16`] (`32767 * 2^112` is below `f32::MAX`).
+pub const CKL16_EXP_MAX: i16 = 112;
+
+/// A coupling block in block floating point (section [`SectionKind::NeighbourCkl16`]):
+/// `C_kl[i] = mantissa[i] * 2^exponent`, row-major, m/N. 2-byte fields, 20 bytes.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Pod, Zeroable)]
+pub struct Ckl16 {
+    /// Row-major mantissas.
+    pub mantissa: [i16; 9],
+    /// The block's exponent, in [`CKL16_EXP_MIN`]`..=`[`CKL16_EXP_MAX`] in a valid bank.
+    pub exponent: i16,
+}
+
+impl Ckl16 {
+    /// The block in f32, row-major: exact for an exponent in range (at most 16 significant
+    /// bits, a normal number or 0). `2^e` is built from its exponent bits (no libm); an
+    /// exponent out of range is clamped (the reader rejects such banks).
+    pub fn decode(&self) -> [f32; 9] {
+        let e = self.exponent.clamp(CKL16_EXP_MIN, CKL16_EXP_MAX);
+        let scale = f32::from_bits(((i32::from(e) + 127) as u32) << 23);
+        self.mantissa.map(|m| f32::from(m) * scale)
+    }
 }
 
 /// Law kind code: `Q(f) = c0 + c1 f` (two coefficients, `c1 > 0`).
@@ -487,4 +561,5 @@ const _: () = {
     assert!(core::mem::size_of::<DeviceCalibration>() == 156);
     assert!(core::mem::align_of::<DeviceCalibration>() == BANK_ALIGN);
     assert!(core::mem::size_of::<GravityCompensation>() == 32);
+    assert!(core::mem::size_of::<Ckl16>() == 20);
 };

@@ -28,7 +28,7 @@
 //! // Firmware at boot: validate the bank region once, then read it in place.
 //! fn boot(bank_region: &'static [u8]) -> Result<f32, BankError> {
 //!     let bank = Bank::parse(bank_region)?;
-//!     let (_neighbours, _c_kl) = bank.neighbours(0);
+//!     let _c_01 = bank.neighbours(0).first().and_then(|&l| bank.coupling(0, usize::from(l)));
 //!     Ok(bank.tissue_law().eval(1.0))
 //! }
 //! assert_eq!(boot(&[]), Err(BankError::TooShort { needed: 32, got: 0 }));
@@ -80,15 +80,16 @@ pub use frame::{
 pub use heapless;
 pub use law::{LAW_SAMPLES, LawKind, TissueLaw};
 pub use layout::{
-    BANK_ALIGN, BankHeader, BankMeta, CANDIDATE_WIDEN_CELLS, CRC_OFFSET, CRC32, DeviceCalibration,
-    GRAVITY_COEFF_MAX, GRAVITY_COEFFS, GravityCompensation, GridHeader, HEADER_LEN, LAW_CHEBYSHEV,
-    LAW_LINEAR, LawRecord, MAGIC, MAX_LAW_COEFFS, MAX_NODES, MAX_SECTIONS, MAX_TRIANGLES,
-    OCCUPIED_WIDEN_CELLS, PIECE_CELLS, SECTION_ALIGN, SECTION_ENTRY_LEN, SectionEntry, SectionKind,
-    VERSION_MAJOR, VERSION_MINOR, bank_crc, reseal,
+    BANK_ALIGN, BankHeader, BankMeta, CANDIDATE_WIDEN_CELLS, CKL16_EXP_MAX, CKL16_EXP_MIN,
+    CRC_OFFSET, CRC32, Ckl16, DeviceCalibration, GRAVITY_COEFF_MAX, GRAVITY_COEFFS,
+    GravityCompensation, GridHeader, HEADER_LEN, LAW_CHEBYSHEV, LAW_LINEAR, LawRecord, MAGIC,
+    MAX_LAW_COEFFS, MAX_NODES, MAX_SECTIONS, MAX_TRIANGLES, OCCUPIED_WIDEN_CELLS, PIECE_CELLS,
+    Precision, SECTION_ALIGN, SECTION_ENTRY_LEN, SectionEntry, SectionKind, VERSION_MAJOR,
+    VERSION_MINOR, bank_crc, reseal,
 };
-pub use reader::{Bank, Grid, SPD_PIVOT_REL, SYMMETRY_REL, TRUNCATION_SLACK, validate_device};
+pub use reader::{Bank, Grid, SPD_PIVOT_REL, TRUNCATION_SLACK, validate_device};
 #[cfg(feature = "alloc")]
-pub use writer::{AlignedBytes, BankBuilder, BuildError, INPUT_SYMMETRY_REL};
+pub use writer::{AlignedBytes, BankBuilder, BuildError, INPUT_SYMMETRY_REL, encode_ckl16};
 
 /// Every quantity crossing the host-device boundary is SI: metres, newtons, pascals, seconds,
 /// amperes. Compliance blocks are therefore in metres per newton.

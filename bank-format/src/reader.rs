@@ -4,10 +4,10 @@
 use crate::error::{BankError, DeviceField};
 use crate::law::TissueLaw;
 use crate::layout::{
-    BANK_ALIGN, BankHeader, BankMeta, CANDIDATE_WIDEN_CELLS, DeviceCalibration, GRAVITY_COEFF_MAX,
-    GravityCompensation, GridHeader, HEADER_LEN, MAGIC, MAX_NODES, MAX_SECTIONS, MAX_TRIANGLES,
-    OCCUPIED_WIDEN_CELLS, SECTION_ALIGN, SECTION_ENTRY_LEN, SectionEntry, SectionKind,
-    VERSION_MAJOR, bank_crc,
+    BANK_ALIGN, BankHeader, BankMeta, CANDIDATE_WIDEN_CELLS, CKL16_EXP_MAX, CKL16_EXP_MIN, Ckl16,
+    DeviceCalibration, GRAVITY_COEFF_MAX, GravityCompensation, GridHeader, HEADER_LEN, MAGIC,
+    MAX_NODES, MAX_SECTIONS, MAX_TRIANGLES, OCCUPIED_WIDEN_CELLS, Precision, SECTION_ALIGN,
+    SECTION_ENTRY_LEN, SectionEntry, SectionKind, VERSION_MAJOR, bank_crc,
 };
 use bytemuck::Pod;
 use core::ops::Range;
@@ -16,8 +16,6 @@ use core::ops::Range;
 /// a `C_kk` or a pair's 6x6 compliance is positive definite (below it the block is singular at
 /// f32 precision).
 pub const SPD_PIVOT_REL: f64 = 1.0e-7;
-/// Tolerance on `|C_lk - C_kl^T|` per entry, relative to `sqrt(max diag C_kk * max diag C_ll)`.
-pub const SYMMETRY_REL: f64 = 1.0e-5;
 /// Pairs closer than `truncation_radius_m * (1 - TRUNCATION_SLACK)` must be coupled; the slack
 /// absorbs the rounding of positions to f32.
 pub const TRUNCATION_SLACK: f64 = 1.0e-4;
@@ -33,15 +31,42 @@ pub struct Bank<'a> {
     mesh_ids: &'a [u32],
     triangles: &'a [[u16; 3]],
     node_tri_starts: &'a [u32],
-    node_tri_items: &'a [u32],
+    node_tri_items: &'a [u16],
     grid: Grid<'a>,
     ckk: &'a [[f32; 6]],
     nb_starts: &'a [u32],
     nb_index: &'a [u16],
-    nb_ckl: &'a [[f32; 9]],
+    nb_ckl: Blocks<'a>,
+    coupling_starts: &'a [u32],
     law: TissueLaw,
     device: &'a DeviceCalibration,
     gravity: Option<&'a GravityCompensation>,
+}
+
+/// The coupling blocks, one per pair, in the bank's storage precision.
+#[derive(Clone, Copy, Debug)]
+enum Blocks<'a> {
+    /// [`SectionKind::NeighbourCkl`].
+    F32(&'a [[f32; 9]]),
+    /// [`SectionKind::NeighbourCkl16`].
+    Bfp16(&'a [Ckl16]),
+}
+
+impl Blocks<'_> {
+    fn len(&self) -> usize {
+        match self {
+            Blocks::F32(b) => b.len(),
+            Blocks::Bfp16(b) => b.len(),
+        }
+    }
+
+    /// Block `i`, row-major f32 (16-bit blocks decoded, exactly).
+    fn get(&self, i: usize) -> Option<[f32; 9]> {
+        match self {
+            Blocks::F32(b) => b.get(i).copied(),
+            Blocks::Bfp16(b) => b.get(i).map(Ckl16::decode),
+        }
+    }
 }
 
 /// The collision grid: buckets of node indices over R (CSR: the nodes of cell `c` are
@@ -52,7 +77,7 @@ pub struct Bank<'a> {
 #[derive(Clone, Copy, Debug)]
 pub struct Grid<'a> {
     header: &'a GridHeader,
-    starts: &'a [u32],
+    starts: &'a [u16],
     items: &'a [u16],
     clearance: &'a [u8],
     tri_starts: &'a [u32],
@@ -82,7 +107,7 @@ impl<'a> Grid<'a> {
     }
 
     /// CSR starts, `cell_count() + 1` entries.
-    pub fn starts(&self) -> &'a [u32] {
+    pub fn starts(&self) -> &'a [u16] {
         self.starts
     }
 
@@ -203,10 +228,10 @@ fn signed_cell(x: f32, origin: f32, h: f32) -> i64 {
     }
 }
 
-/// The index range of CSR row `i`.
-fn csr_row(starts: &[u32], i: usize) -> Option<Range<usize>> {
-    let a = *starts.get(i)? as usize;
-    let b = *starts.get(i.checked_add(1)?)? as usize;
+/// The index range of CSR row `i` (starts of any unsigned width up to `u32`).
+fn csr_row<S: Copy + Into<u32>>(starts: &[S], i: usize) -> Option<Range<usize>> {
+    let a = (*starts.get(i)?).into() as usize;
+    let b = (*starts.get(i.checked_add(1)?)?).into() as usize;
     (a <= b).then_some(a..b)
 }
 
@@ -419,9 +444,9 @@ fn parse_node_triangles<'a>(
     sections: &Sections<'a>,
     triangles: &[[u16; 3]],
     n: usize,
-) -> Result<(&'a [u32], &'a [u32]), BankError> {
+) -> Result<(&'a [u32], &'a [u16]), BankError> {
     let starts: &[u32] = sections.slice(SectionKind::NodeTriStarts)?;
-    let items: &[u32] = sections.slice(SectionKind::NodeTriItems)?;
+    let items: &[u16] = sections.slice(SectionKind::NodeTriItems)?;
     expect_count(starts.len(), n + 1, SectionKind::NodeTriStarts)?;
     expect_count(
         items.len(),
@@ -437,9 +462,9 @@ fn parse_node_triangles<'a>(
                 entry: k as u32,
             });
         };
-        let mut prev: Option<u32> = None;
+        let mut prev: Option<u16> = None;
         for (offset, &t) in row.iter().enumerate() {
-            let Some(tri) = triangles.get(t as usize) else {
+            let Some(tri) = triangles.get(usize::from(t)) else {
                 return Err(BankError::IndexOutOfRange {
                     section: SectionKind::NodeTriItems,
                     entry: (range.start + offset) as u32,
@@ -465,7 +490,7 @@ fn parse_grid<'a>(
 ) -> Result<Grid<'a>, BankError> {
     let header: &GridHeader = sections.single(SectionKind::Grid)?;
     let cells = check_grid_geometry(header)?;
-    let starts: &[u32] = sections.slice(SectionKind::GridStarts)?;
+    let starts: &[u16] = sections.slice(SectionKind::GridStarts)?;
     let items: &[u16] = sections.slice(SectionKind::GridItems)?;
     expect_count(starts.len(), cells + 1, SectionKind::GridStarts)?;
     expect_count(items.len(), positions.len(), SectionKind::GridItems)?;
@@ -696,27 +721,47 @@ fn parse_ckk<'a>(sections: &Sections<'a>, n: usize) -> Result<&'a [[f32; 6]], Ba
     Ok(ckk)
 }
 
-/// The neighbour sections `(starts, index, C_kl blocks)`, as [`parse_neighbours`] returns them.
-type NeighbourLists<'a> = (&'a [u32], &'a [u16], &'a [[f32; 9]]);
+/// The neighbour sections `(starts, index, C_kl blocks, coupling starts)`, as
+/// [`parse_neighbours`] returns them.
+type NeighbourLists<'a> = (&'a [u32], &'a [u16], Blocks<'a>, &'a [u32]);
 
-/// `SPEC.md` "Validation" rule 12, neighbours: n + 1 starts, one C_kl block per index, CSR
-/// starts, blocks finite; per row, indices < n, != k, strictly ascending. Returns
-/// `(starts, index, blocks)`.
+/// `SPEC.md` "Validation" rule 12, neighbours: n + 1 neighbour and coupling starts, both CSR
+/// (the coupling starts over the C_kl blocks), blocks finite; per row, indices < n, != k,
+/// strictly ascending, and as many blocks as entries `l > k`. Returns
+/// `(starts, index, blocks, coupling starts)`.
 fn parse_neighbours<'a>(
     sections: &Sections<'a>,
     n: usize,
 ) -> Result<NeighbourLists<'a>, BankError> {
     let starts: &[u32] = sections.slice(SectionKind::NeighbourStarts)?;
     let index: &[u16] = sections.slice(SectionKind::NeighbourIndex)?;
-    let ckl: &[[f32; 9]] = sections.slice(SectionKind::NeighbourCkl)?;
+    let ckl = if sections.has(SectionKind::NeighbourCkl16) {
+        Blocks::Bfp16(sections.slice(SectionKind::NeighbourCkl16)?)
+    } else {
+        Blocks::F32(sections.slice(SectionKind::NeighbourCkl)?)
+    };
+    let cstarts: &[u32] = sections.slice(SectionKind::CouplingStarts)?;
     expect_count(starts.len(), n + 1, SectionKind::NeighbourStarts)?;
-    expect_count(ckl.len(), index.len(), SectionKind::NeighbourCkl)?;
+    expect_count(cstarts.len(), n + 1, SectionKind::CouplingStarts)?;
     check_starts(starts, index.len(), SectionKind::NeighbourStarts)?;
-    if let Some(e) = ckl.iter().position(|c| !all_finite(c)) {
-        return Err(BankError::NonFinite {
-            section: SectionKind::NeighbourCkl,
-            entry: e as u32,
-        });
+    check_starts(cstarts, ckl.len(), SectionKind::CouplingStarts)?;
+    match ckl {
+        Blocks::F32(b) => {
+            if let Some(e) = b.iter().position(|c| !all_finite(c)) {
+                return Err(BankError::NonFinite {
+                    section: SectionKind::NeighbourCkl,
+                    entry: e as u32,
+                });
+            }
+        }
+        Blocks::Bfp16(b) => {
+            if let Some(e) = b
+                .iter()
+                .position(|c| !(CKL16_EXP_MIN..=CKL16_EXP_MAX).contains(&c.exponent))
+            {
+                return Err(BankError::CklExponent { entry: e as u32 });
+            }
+        }
     }
     for k in 0..n {
         let range = csr_row(starts, k).unwrap_or(0..0);
@@ -737,8 +782,16 @@ fn parse_neighbours<'a>(
             }
             prev = Some(l);
         }
+        let row = csr_row(starts, k).and_then(|r| index.get(r)).unwrap_or(&[]);
+        let upper = row.iter().filter(|&&l| usize::from(l) > k).count();
+        if csr_row(cstarts, k).map(|r| r.len()) != Some(upper) {
+            return Err(BankError::BadCsrStarts {
+                section: SectionKind::CouplingStarts,
+                entry: (k + 1) as u32,
+            });
+        }
     }
-    Ok((starts, index, ckl))
+    Ok((starts, index, ckl, cstarts))
 }
 
 impl<'a> Bank<'a> {
@@ -763,7 +816,7 @@ impl<'a> Bank<'a> {
         let (node_tri_starts, node_tri_items) = parse_node_triangles(&sections, triangles, n)?;
         let grid = parse_grid(&sections, positions, triangles)?;
         let ckk = parse_ckk(&sections, n)?;
-        let (nb_starts, nb_index, nb_ckl) = parse_neighbours(&sections, n)?;
+        let (nb_starts, nb_index, nb_ckl, coupling_starts) = parse_neighbours(&sections, n)?;
         let bank = Bank {
             bytes: bank,
             header,
@@ -779,6 +832,7 @@ impl<'a> Bank<'a> {
             nb_starts,
             nb_index,
             nb_ckl,
+            coupling_starts,
             law,
             device,
             gravity,
@@ -788,42 +842,29 @@ impl<'a> Bank<'a> {
         Ok(bank)
     }
 
-    /// `SPEC.md` "Validation" rule 13: reciprocity, symmetry and pairwise positive
-    /// definiteness of the couplings, then every triangle edge coupled.
+    /// `SPEC.md` "Validation" rule 13: reciprocity and pairwise positive definiteness of the
+    /// couplings, then every triangle edge coupled.
     fn check_couplings(&self) -> Result<(), BankError> {
         let n = self.node_count();
         for k in 0..n {
-            let (ls, blocks) = self.neighbours(k);
-            for (&l, c_kl) in ls.iter().zip(blocks) {
+            for &l in self.neighbours(k) {
                 let l = usize::from(l);
                 let err_node = k as u32;
                 let err_nb = l as u32;
-                let Some(c_lk) = self.find_coupling(l, k) else {
+                if self.neighbours(l).binary_search(&(k as u16)).is_err() {
                     return Err(BankError::NeighbourNotReciprocal {
                         node: err_node,
                         neighbour: err_nb,
                     });
-                };
+                }
                 if l < k {
                     continue; // the pair was checked from its smaller node
                 }
-                let (Some(ckk), Some(cll)) = (self.ckk.get(k), self.ckk.get(l)) else {
+                let (Some(ckk), Some(cll), Some(c_kl)) =
+                    (self.ckk.get(k), self.ckk.get(l), self.find_coupling(k, l))
+                else {
                     continue;
                 };
-                let dk = f64::from(ckk[0].max(ckk[3]).max(ckk[5]));
-                let dl = f64::from(cll[0].max(cll[3]).max(cll[5]));
-                let tol2 = SYMMETRY_REL * SYMMETRY_REL * dk * dl;
-                for i in 0..3 {
-                    for j in 0..3 {
-                        let d = f64::from(c_lk[3 * j + i]) - f64::from(c_kl[3 * i + j]);
-                        if !(d * d <= tol2) {
-                            return Err(BankError::CklAsymmetric {
-                                node: err_node,
-                                neighbour: err_nb,
-                            });
-                        }
-                    }
-                }
                 let a = sym3(ckk);
                 let b = sym3(cll);
                 let mut m = [[0.0f64; 6]; 6];
@@ -907,11 +948,23 @@ impl<'a> Bank<'a> {
         Ok(())
     }
 
-    fn find_coupling(&self, k: usize, l: usize) -> Option<&'a [f32; 9]> {
-        let (ls, blocks) = self.neighbours(k);
-        let l = u16::try_from(l).ok()?;
-        let i = ls.binary_search(&l).ok()?;
-        blocks.get(i)
+    /// `C_kl` row-major for `k != l`: the stored block of the pair, from the row of the smaller
+    /// node (`SPEC.md`, "Pairs stored once (4.0)"), transposed when `k > l`.
+    fn find_coupling(&self, k: usize, l: usize) -> Option<[f32; 9]> {
+        let (a, b) = if k < l { (k, l) } else { (l, k) };
+        let row = self.neighbours(a);
+        let i = row.binary_search(&u16::try_from(b).ok()?).ok()?;
+        let blocks = csr_row(self.coupling_starts, a)?;
+        // The row's last `blocks.len()` entries are its l > a, in block order.
+        let first_upper = row.len().checked_sub(blocks.len())?;
+        let c = self
+            .nb_ckl
+            .get(blocks.start + i.checked_sub(first_upper)?)?;
+        Some(if k < l {
+            c
+        } else {
+            [c[0], c[3], c[6], c[1], c[4], c[7], c[2], c[5], c[8]]
+        })
     }
 
     /// The bank's bytes (exactly `total_len` of them).
@@ -970,7 +1023,7 @@ impl<'a> Bank<'a> {
     }
 
     /// Indices of the triangles that contain node `k`, ascending (empty for `k` out of range).
-    pub fn node_triangles(&self, k: usize) -> &'a [u32] {
+    pub fn node_triangles(&self, k: usize) -> &'a [u16] {
         csr_row(self.node_tri_starts, k)
             .and_then(|r| self.node_tri_items.get(r))
             .unwrap_or(&[])
@@ -993,20 +1046,31 @@ impl<'a> Bank<'a> {
             .map(|c| [[c[0], c[1], c[2]], [c[1], c[3], c[4]], [c[2], c[4], c[5]]])
     }
 
-    /// Node `k`'s neighbours `l` (ascending, `l != k`) and the blocks `C_kl` (row-major 3x3,
-    /// m/N: displacement of `k` per unit force at `l`). Empty for `k` out of range.
-    pub fn neighbours(&self, k: usize) -> (&'a [u16], &'a [[f32; 9]]) {
-        match csr_row(self.nb_starts, k) {
-            Some(r) => match (self.nb_index.get(r.clone()), self.nb_ckl.get(r)) {
-                (Some(ls), Some(cs)) => (ls, cs),
-                _ => (&[], &[]),
-            },
-            None => (&[], &[]),
+    /// Node `k`'s neighbours `l`: every node coupled with it, ascending, `l != k` (the blocks are
+    /// read with [`Bank::coupling`]). Empty for `k` out of range.
+    pub fn neighbours(&self, k: usize) -> &'a [u16] {
+        csr_row(self.nb_starts, k)
+            .and_then(|r| self.nb_index.get(r))
+            .unwrap_or(&[])
+    }
+
+    /// Number of coupled pairs (blocks stored, one per pair).
+    pub fn pair_count(&self) -> usize {
+        self.nb_ckl.len()
+    }
+
+    /// The storage precision of the coupling blocks.
+    pub fn precision(&self) -> Precision {
+        match self.nb_ckl {
+            Blocks::F32(_) => Precision::F32,
+            Blocks::Bfp16(_) => Precision::Bfp16,
         }
     }
 
-    /// The 3x3 compliance block `C_kl` (m/N) for any two nodes: `C_kk` when `k == l`, the stored
-    /// coupling when `l` is a neighbour of `k`, `None` otherwise (truncated or out of range).
+    /// The 3x3 compliance block `C_kl` (m/N: displacement of `k` per unit force at `l`) for any
+    /// two nodes: `C_kk` when `k == l`, the stored coupling (`C_lk^T` when `k > l`) when `l` is
+    /// a neighbour of `k`, `None` otherwise (truncated or out of range). No allocation: one
+    /// binary search in the smaller node's row.
     pub fn coupling(&self, k: usize, l: usize) -> Option<[[f32; 3]; 3]> {
         if k == l {
             return self.c_kk_matrix(k);
@@ -1099,6 +1163,10 @@ impl<'a> Sections<'a> {
         Ok((bytes, entry.count))
     }
 
+    fn has(&self, kind: SectionKind) -> bool {
+        self.table.iter().any(|e| e.kind == kind.code())
+    }
+
     fn slice<T: Pod>(&self, kind: SectionKind) -> Result<&'a [T], BankError> {
         let (bytes, _) = self.bytes(kind)?;
         cast(bytes, kind)
@@ -1122,9 +1190,14 @@ fn expect_count(got: usize, want: usize, section: SectionKind) -> Result<(), Ban
     }
 }
 
-fn check_starts(starts: &[u32], items: usize, section: SectionKind) -> Result<(), BankError> {
+fn check_starts<S: Copy + Into<u32>>(
+    starts: &[S],
+    items: usize,
+    section: SectionKind,
+) -> Result<(), BankError> {
     let mut prev = 0u32;
-    for (i, &s) in starts.iter().enumerate() {
+    for (i, s) in starts.iter().enumerate() {
+        let s: u32 = (*s).into();
         let bad = if i == 0 { s != 0 } else { s < prev };
         if bad {
             return Err(BankError::BadCsrStarts {
@@ -1183,7 +1256,19 @@ fn check_table(table: &[SectionEntry], table_end: usize, total: usize) -> Result
             return Err(BankError::MissingSection { section });
         }
     }
-    Ok(())
+    let has = |k: SectionKind| table.iter().any(|e| e.kind == k.code());
+    match (
+        has(SectionKind::NeighbourCkl),
+        has(SectionKind::NeighbourCkl16),
+    ) {
+        (false, false) => Err(BankError::MissingSection {
+            section: SectionKind::NeighbourCkl,
+        }),
+        (true, true) => Err(BankError::DuplicateSection {
+            section: SectionKind::NeighbourCkl16,
+        }),
+        _ => Ok(()),
+    }
 }
 
 fn sym3(c: &[f32; 6]) -> [[f64; 3]; 3] {

@@ -4,9 +4,10 @@
 use crate::error::BankError;
 use crate::law::TissueLaw;
 use crate::layout::{
-    BankHeader, BankMeta, CANDIDATE_WIDEN_CELLS, DeviceCalibration, GravityCompensation,
-    GridHeader, HEADER_LEN, MAGIC, MAX_NODES, MAX_TRIANGLES, OCCUPIED_WIDEN_CELLS, SECTION_ALIGN,
-    SECTION_ENTRY_LEN, SectionEntry, SectionKind, VERSION_MAJOR, VERSION_MINOR, reseal,
+    BankHeader, BankMeta, CANDIDATE_WIDEN_CELLS, CKL16_EXP_MAX, CKL16_EXP_MIN, Ckl16,
+    DeviceCalibration, GravityCompensation, GridHeader, HEADER_LEN, MAGIC, MAX_NODES,
+    MAX_TRIANGLES, OCCUPIED_WIDEN_CELLS, Precision, SECTION_ALIGN, SECTION_ENTRY_LEN, SectionEntry,
+    SectionKind, VERSION_MAJOR, VERSION_MINOR, reseal,
 };
 use crate::reader::{Bank, cell_of, triangle_cells};
 use alloc::collections::BTreeMap;
@@ -31,7 +32,7 @@ pub struct BankBuilder {
     /// `C_kk` per node, m/N (symmetric; stored symmetrised).
     pub c_kk: Vec<[[f64; 3]; 3]>,
     /// Couplings `(k, l, C_kl)`, `k != l`, m/N. Each unordered pair once or in both directions
-    /// (then `C_lk` must equal `C_kl^T`); the bank stores both directions.
+    /// (then `C_lk` must equal `C_kl^T`); the bank stores one block per pair.
     pub couplings: Vec<(u32, u32, [[f64; 3]; 3])>,
     /// Edge of the collision grid's cubic cells, m (e.g. the mean surface edge length). Any size
     /// finds every contact (the cell certificates are structural); flash cost: 9 bytes per cell
@@ -86,6 +87,21 @@ pub enum BuildError {
     Grid,
     /// The bank would exceed 4 GiB.
     TooLarge,
+    /// A coupling block too large (or not finite) for the 16-bit storage's exponent.
+    BlockRange {
+        /// Smaller node of the pair.
+        k: u16,
+        /// Larger node.
+        l: u16,
+    },
+    /// A CSR section has more items than its `u16` starts can count (65535; only the grid
+    /// starts are `u16`, and they count at most the 65535 nodes).
+    TooManyItems {
+        /// The section whose items overflow.
+        section: SectionKind,
+        /// Items it would hold.
+        count: usize,
+    },
     /// The output fails the reader's validation (the input breaks a format rule).
     Rejected(BankError),
 }
@@ -109,6 +125,16 @@ impl fmt::Display for BuildError {
             }
             BuildError::Grid => f.write_str("grid cell size invalid or grid too large"),
             BuildError::TooLarge => f.write_str("bank larger than 4 GiB"),
+            BuildError::BlockRange { k, l } => {
+                write!(
+                    f,
+                    "C_kl of pair ({k}, {l}) out of the 16-bit storage's range"
+                )
+            }
+            BuildError::TooManyItems { section, count } => write!(
+                f,
+                "{section}: {count} items, more than the 65535 its u16 starts can count"
+            ),
             BuildError::Rejected(e) => write!(f, "bank rejected by the reader: {e}"),
         }
     }
@@ -190,9 +216,63 @@ fn close(a: &[[f64; 3]; 3], b: &[[f64; 3]; 3]) -> bool {
         .all(|(x, y)| (x - y).abs() <= tol)
 }
 
+/// `2^e` in f64 (`e` within the normal range).
+fn pow2(e: i32) -> f64 {
+    f64::from_bits(((e + 1023) as u64) << 52)
+}
+
+/// `x` rounded to the nearest integer, halves away from zero (`|x| < 2^52`; no libm).
+fn round_i(x: f64) -> i64 {
+    if x >= 0.0 {
+        (x + 0.5) as i64
+    } else {
+        -((-x + 0.5) as i64)
+    }
+}
+
+/// Block floating point (`SPEC.md`, "16-bit blocks"): the smallest exponent e >=
+/// [`CKL16_EXP_MIN`] with `round(max |c| / 2^e) <= 32767`, and the mantissas `round(c / 2^e)`,
+/// so each entry is off by at most `2^(e-1) <= max |c| / 32767`. `None` for a block too large
+/// for [`CKL16_EXP_MAX`] or not finite.
+pub fn encode_ckl16(c: &[[f64; 3]; 3]) -> Option<Ckl16> {
+    if !c.iter().flatten().all(|v| v.is_finite()) {
+        return None;
+    }
+    let max = max_abs(c);
+    let limit = f64::from(i16::MAX);
+    let mut e = i32::from(CKL16_EXP_MIN);
+    if max > 0.0 {
+        // max < 2^(x + 1) for its binary exponent x, so e = x - 14 gives max / 2^e < 2^15;
+        // x - 15 would give >= 2^15: e = x - 14 is the smallest unless rounding reaches 32768.
+        let x = ((max.to_bits() >> 52) & 0x7ff) as i32 - 1023;
+        e = e.max(x - 14);
+        while round_i(max / pow2(e)) > i64::from(i16::MAX) {
+            e += 1;
+        }
+    }
+    if e > i32::from(CKL16_EXP_MAX) || max / pow2(e) > limit + 0.5 {
+        return None;
+    }
+    let scale = pow2(e);
+    let mut mantissa = [0i16; 9];
+    for (m, v) in mantissa.iter_mut().zip(c.iter().flatten()) {
+        *m = i16::try_from(round_i(v / scale)).ok()?;
+    }
+    Some(Ckl16 {
+        mantissa,
+        exponent: e as i16,
+    })
+}
+
 impl BankBuilder {
-    /// Write the bank. Fails on malformed input, and on any input the reader rejects.
+    /// Write the bank with `C_kl` in f32 ([`BankBuilder::build_with_precision`]).
     pub fn build(&self) -> Result<Vec<u8>, BuildError> {
+        self.build_with_precision(Precision::F32)
+    }
+
+    /// Write the bank, its coupling blocks in `precision` (`C_kk` is always f32). Fails on
+    /// malformed input, and on any input the reader rejects.
+    pub fn build_with_precision(&self, precision: Precision) -> Result<Vec<u8>, BuildError> {
         let n = self.positions_m.len();
         if self.mesh_ids.len() != n {
             return Err(BuildError::LengthMismatch { field: "mesh_ids" });
@@ -210,7 +290,13 @@ impl BankBuilder {
 
         // Triangles and node -> triangle adjacency (ascending by construction).
         let mut triangles = Vec::with_capacity(self.triangles.len());
-        let mut node_tris: Vec<Vec<u32>> = vec![Vec::new(); n];
+        if self.triangles.len() > MAX_TRIANGLES {
+            return Err(BankError::TriangleCount {
+                count: u32::try_from(self.triangles.len()).unwrap_or(u32::MAX),
+            }
+            .into());
+        }
+        let mut node_tris: Vec<Vec<u16>> = vec![Vec::new(); n];
         for (t, tri) in self.triangles.iter().enumerate() {
             let mut out = [0u16; 3];
             for (o, &v) in out.iter_mut().zip(tri) {
@@ -223,7 +309,7 @@ impl BankBuilder {
                     })?;
             }
             triangles.push(out);
-            let t = u32::try_from(t).map_err(|_| BuildError::TooLarge)?;
+            let t = u16::try_from(t).map_err(|_| BuildError::TooLarge)?;
             for v in out {
                 match node_tris.get_mut(usize::from(v)) {
                     Some(list) if list.last() != Some(&t) => list.push(t),
@@ -272,13 +358,7 @@ impl BankBuilder {
             let c = usize::from(i) + nx * (usize::from(j) + ny * usize::from(l));
             buckets.get_mut(c).ok_or(BuildError::Grid)?.push(k as u16);
         }
-        let (grid_starts, grid_items) = csr(&buckets)?;
-        if triangles.len() > MAX_TRIANGLES {
-            return Err(BankError::TriangleCount {
-                count: u32::try_from(triangles.len()).unwrap_or(u32::MAX),
-            }
-            .into());
-        }
+        let (grid_starts, grid_items) = csr16(&buckets, SectionKind::GridItems)?;
         let (clearance, cell_tri_starts, cell_tri_items) =
             cell_certificates(&grid, &positions, &triangles, cells as usize)?;
 
@@ -292,7 +372,8 @@ impl BankBuilder {
             ckk.push([s(0, 0), s(0, 1), s(0, 2), s(1, 1), s(1, 2), s(2, 2)]);
         }
 
-        // Couplings: one canonical block per unordered pair, stored both ways.
+        // Couplings: one canonical block per unordered pair (k < l), stored once in k's row;
+        // the index lists both directions.
         let mut pairs: BTreeMap<(u16, u16), [[f64; 3]; 3]> = BTreeMap::new();
         for (e, (k, l, c)) in self.couplings.iter().enumerate() {
             let idx = |v: u32| {
@@ -322,29 +403,40 @@ impl BankBuilder {
                 }
             }
         }
-        let mut rows: Vec<Vec<(u16, [f32; 9])>> = vec![Vec::new(); n];
+        let mut nb_lists: Vec<Vec<u16>> = vec![Vec::new(); n];
+        let mut blocks: Vec<Vec<[f32; 9]>> = vec![Vec::new(); n];
+        let mut blocks16: Vec<Vec<Ckl16>> = vec![Vec::new(); n];
+        // BTreeMap order: by k, then l ascending, so each row's blocks come in index order.
         for (&(a, b), c) in &pairs {
             let m: [f32; 9] = [
                 c[0][0], c[0][1], c[0][2], c[1][0], c[1][1], c[1][2], c[2][0], c[2][1], c[2][2],
             ]
             .map(|v| v as f32);
-            let mt = [m[0], m[3], m[6], m[1], m[4], m[7], m[2], m[5], m[8]];
-            if let Some(r) = rows.get_mut(usize::from(a)) {
-                r.push((b, m));
+            match precision {
+                Precision::F32 => {
+                    if let Some(r) = blocks.get_mut(usize::from(a)) {
+                        r.push(m);
+                    }
+                }
+                Precision::Bfp16 => {
+                    let q = encode_ckl16(c).ok_or(BuildError::BlockRange { k: a, l: b })?;
+                    if let Some(r) = blocks16.get_mut(usize::from(a)) {
+                        r.push(q);
+                    }
+                }
             }
-            if let Some(r) = rows.get_mut(usize::from(b)) {
-                r.push((a, mt));
+            for (row, other) in [(a, b), (b, a)] {
+                if let Some(r) = nb_lists.get_mut(usize::from(row)) {
+                    r.push(other);
+                }
             }
         }
-        for r in &mut rows {
-            r.sort_by_key(|(l, _)| *l);
+        for r in &mut nb_lists {
+            r.sort_unstable();
         }
-        let nb_lists: Vec<Vec<u16>> = rows
-            .iter()
-            .map(|r| r.iter().map(|(l, _)| *l).collect())
-            .collect();
         let (nb_starts, nb_index) = csr(&nb_lists)?;
-        let nb_ckl: Vec<[f32; 9]> = rows.iter().flatten().map(|(_, c)| *c).collect();
+        let (coupling_starts, nb_ckl) = csr(&blocks)?;
+        let (coupling_starts16, nb_ckl16) = csr(&blocks16)?;
 
         let meta = BankMeta {
             scene_id: [self.scene_id as u32, (self.scene_id >> 32) as u32],
@@ -370,7 +462,16 @@ impl BankBuilder {
         body.push_slice(SectionKind::Ckk, &ckk)?;
         body.push_slice(SectionKind::NeighbourStarts, &nb_starts)?;
         body.push_slice(SectionKind::NeighbourIndex, &nb_index)?;
-        body.push_slice(SectionKind::NeighbourCkl, &nb_ckl)?;
+        match precision {
+            Precision::F32 => {
+                body.push_slice(SectionKind::NeighbourCkl, &nb_ckl)?;
+                body.push_slice(SectionKind::CouplingStarts, &coupling_starts)?;
+            }
+            Precision::Bfp16 => {
+                body.push_slice(SectionKind::NeighbourCkl16, &nb_ckl16)?;
+                body.push_slice(SectionKind::CouplingStarts, &coupling_starts16)?;
+            }
+        }
         body.push(SectionKind::TissueLaw, bytemuck::bytes_of(&law), 1)?;
         body.push(SectionKind::Device, bytemuck::bytes_of(&self.device), 1)?;
         if let Some(gravity) = &self.gravity {
@@ -499,6 +600,19 @@ fn csr<T: Copy>(rows: &[Vec<T>]) -> Result<(Vec<u32>, Vec<T>), BuildError> {
         items.extend_from_slice(r);
         starts.push(u32::try_from(items.len()).map_err(|_| BuildError::TooLarge)?);
     }
+    Ok((starts, items))
+}
+
+/// CSR (starts, items) of per-row lists with `u16` starts; `section` names the items in the
+/// error when they are more than 65535.
+fn csr16<T: Copy>(rows: &[Vec<T>], section: SectionKind) -> Result<(Vec<u16>, Vec<T>), BuildError> {
+    let (starts, items) = csr(rows)?;
+    let count = items.len();
+    let starts = starts
+        .into_iter()
+        .map(u16::try_from)
+        .collect::<Result<Vec<u16>, _>>()
+        .map_err(|_| BuildError::TooManyItems { section, count })?;
     Ok((starts, items))
 }
 

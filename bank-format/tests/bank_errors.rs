@@ -11,8 +11,18 @@ use bank_format::{
 };
 use common::*;
 
-/// The number of `BankError` variants, counted in its definition (codes run 1..=this), so a
-/// new variant without a case below fails `every_variant_has_a_case`.
+/// Codes of retired variants, never reused (31: `CklAsymmetric`, gone in 4.0 when each pair's
+/// block came to be stored once).
+const RETIRED: [u16; 1] = [31];
+
+/// The highest `BankError` code: the variants counted in its definition plus the retired codes
+/// (codes run 1..=this), so a new variant without a case below fails
+/// `every_variant_has_a_case`.
+fn last_code() -> u16 {
+    variant_count() + RETIRED.len() as u16
+}
+
+/// The number of `BankError` variants, counted in its definition.
 fn variant_count() -> u16 {
     let src = include_str!("../src/error.rs");
     let (_, body) = src
@@ -74,10 +84,10 @@ macro_rules! cases {
         #[test]
         fn every_variant_has_a_case() {
             let codes = [$(run::$name().unwrap_err().code()),*];
-            let last = variant_count();
-            assert!(last >= 40, "BankError has {last} variants?");
-            assert!(codes.iter().all(|c| (1..=last).contains(c)), "{codes:?}");
-            for code in 1..=last {
+            let last = last_code();
+            assert!(last >= 40, "BankError has {last} codes?");
+            assert!(codes.iter().all(|c| (1..=last).contains(c) && !RETIRED.contains(c)), "{codes:?}");
+            for code in (1..=last).filter(|c| !RETIRED.contains(c)) {
                 assert!(codes.contains(&code), "no test produces error code {code}");
             }
         }
@@ -103,9 +113,9 @@ cases! {
         Bank::parse(&aligned[1..]).map(|_| ())
     };
     bad_magic: E::BadMagic => corrupt(|b| b[0] = b'X');
-    // A bank of the previous major version (it lacks the cell certificates).
-    unsupported_version: E::UnsupportedVersion { major: 2, .. } => corrupt(|b| put_u16(b, 8, 2));
-    unsupported_later_version: E::UnsupportedVersion { major: 4, .. } => corrupt(|b| put_u16(b, 8, 4));
+    // A bank of the previous major version (it stores both directions of each pair).
+    unsupported_version: E::UnsupportedVersion { major: 3, .. } => corrupt(|b| put_u16(b, 8, 3));
+    unsupported_later_version: E::UnsupportedVersion { major: 5, .. } => corrupt(|b| put_u16(b, 8, 5));
     bad_header_length: E::BadHeaderLength { header_len: 24 } => corrupt(|b| put_u16(b, 12, 24));
     too_many_sections: E::TooManySections { count: 33 } => corrupt(|b| put_u16(b, 14, 33));
     bad_total_length_unaligned: E::BadTotalLength { .. } => {
@@ -175,7 +185,7 @@ cases! {
     triangle_index_out_of_range: E::IndexOutOfRange { section: K::Triangles, entry: 1 } =>
         corrupt_section(K::Triangles, |s| put_u16(s, 6 + 4, 4));
     node_triangle_index_out_of_range: E::IndexOutOfRange { section: K::NodeTriItems, entry: 2 } =>
-        corrupt_section(K::NodeTriItems, |s| put_u32(s, 2 * 4, 2));
+        corrupt_section(K::NodeTriItems, |s| put_u16(s, 2 * 2, 2));
     grid_item_out_of_range: E::IndexOutOfRange { section: K::GridItems, entry: 1 } =>
         corrupt_section(K::GridItems, |s| put_u16(s, 2, 9));
     neighbour_index_out_of_range: E::IndexOutOfRange { section: K::NeighbourIndex, entry: 2 } =>
@@ -183,13 +193,18 @@ cases! {
     bad_neighbour_starts: E::BadCsrStarts { section: K::NeighbourStarts, entry: 0 } =>
         corrupt_section(K::NeighbourStarts, |s| put_u32(s, 0, 1));
     bad_grid_starts_end: E::BadCsrStarts { section: K::GridStarts, entry: 4 } =>
-        corrupt_section(K::GridStarts, |s| put_u32(s, 16, 3));
+        corrupt_section(K::GridStarts, |s| put_u16(s, 8, 3));
     bad_node_triangle_starts_decrease: E::BadCsrStarts { section: K::NodeTriStarts, entry: 2 } =>
         corrupt_section(K::NodeTriStarts, |s| put_u32(s, 8, 1));
+    // Coupling starts [0, 3, 4, 5, 5] made [0, 2, 4, 5, 5]: node 0 has three entries l > 0.
+    coupling_starts_disagree: E::BadCsrStarts { section: K::CouplingStarts, entry: 1 } =>
+        corrupt_section(K::CouplingStarts, |s| put_u32(s, 4, 2));
+    coupling_starts_end: E::BadCsrStarts { section: K::CouplingStarts, entry: 4 } =>
+        corrupt_section(K::CouplingStarts, |s| put_u32(s, 16, 4));
     degenerate_triangle: E::DegenerateTriangle { triangle: 1 } =>
         corrupt_section(K::Triangles, |s| put_u16(s, 6 + 4, 0));
     node_triangle_mismatch: E::NodeTriangleMismatch { node: 1 } =>
-        corrupt_section(K::NodeTriItems, |s| put_u32(s, 2 * 4, 1));
+        corrupt_section(K::NodeTriItems, |s| put_u16(s, 2 * 2, 1));
     grid_cell_size_zero: E::GridGeometry => corrupt_section(K::Grid, |s| put_f32(s, 12, 0.0));
     grid_dimension_zero: E::GridGeometry => corrupt_section(K::Grid, |s| put_u16(s, 18, 0));
     reserved_grid: E::ReservedNotZero { section: K::Grid } => corrupt_section(K::Grid, |s| put_u16(s, 22, 1));
@@ -198,13 +213,13 @@ cases! {
     grid_items_not_sorted: E::GridItemsNotSorted { cell: 0 } => corrupt(|b| {
         let (_, st, ..) = section(b, K::GridStarts);
         let (_, it, ..) = section(b, K::GridItems);
-        put_u32(b, st + 4, 2);
-        put_u32(b, st + 8, 2);
+        put_u16(b, st + 2, 2);
+        put_u16(b, st + 4, 2);
         put_u16(b, it + 2, 0);
     });
     triangle_count: E::TriangleCount { count: 65536 } => {
         let mut b = builder();
-        b.triangles = vec![[0, 1, 2]; 65536];
+        b.triangles = vec![[0, 1, 2]; bank_format::MAX_TRIANGLES + 1];
         match b.build() {
             Err(BuildError::Rejected(e)) => Err(e),
             other => panic!("{other:?}"),
@@ -239,16 +254,10 @@ cases! {
     });
     neighbour_not_reciprocal: E::NeighbourNotReciprocal { node: 1, neighbour: 3 } =>
         corrupt_section(K::NeighbourIndex, |s| put_u16(s, 4 * 2, 3));
-    ckl_asymmetric: E::CklAsymmetric { node: 0, neighbour: 1 } => corrupt_section(K::NeighbourCkl, |s| {
-        let v = get_f32(s, 4);
-        put_f32(s, 4, 2.0 * v + 1.0e-4);
-    });
     pair_not_spd: E::PairNotSpd { node: 0, neighbour: 1 } => corrupt_section(K::NeighbourCkl, |s| {
-        // C_01 (entry 0) and C_10 (entry 3, first of row 1) both 0.02 I: consistent, not SPD.
-        for entry in [0, 3] {
-            for i in 0..9 {
-                put_f32(s, entry * 36 + 4 * i, if i % 4 == 0 { 0.02 } else { 0.0 });
-            }
+        // C_01 (block 0, the pair's only one) 0.02 I: larger than C_00's and C_11's diagonals.
+        for i in 0..9 {
+            put_f32(s, 4 * i, if i % 4 == 0 { 0.02 } else { 0.0 });
         }
     });
     missing_neighbour: E::MissingNeighbour { node: 1, neighbour: 3 } =>
@@ -300,6 +309,26 @@ cases! {
         device_f32(DEV_JOINT_SPEED + 4, -3.0);
     device_max_joint_speed_insertion: E::Device { field: F::MaxJointSpeed { axis: 2 } } =>
         device_f32(DEV_JOINT_SPEED + 8, -0.0);
+    ckl_exponent: E::CklExponent { entry: 1 } => {
+        let mut bytes = builder().build_with_precision(bank_format::Precision::Bfp16).unwrap();
+        let (_, off, ..) = section(&bytes, K::NeighbourCkl16);
+        put_u16(&mut bytes, off + 20 + 18, (-127i16) as u16);
+        assert!(bank_format::reseal(&mut bytes));
+        parse(&bytes)
+    };
+    ckl_missing: E::MissingSection { section: K::NeighbourCkl } => set_entry(K::NeighbourCkl, 0, 99);
+    // The optional gravity section's entry made an empty 16-bit C_kl beside the f32 one.
+    ckl_in_both_precisions: E::DuplicateSection { section: K::NeighbourCkl16 } => {
+        let mut b = builder();
+        b.gravity = Some(bank_format::GravityCompensation { coeffs: [0.0; 8] });
+        let mut bytes = b.build().unwrap();
+        let (i, ..) = section(&bytes, K::Gravity);
+        put_u32(&mut bytes, entry_field(i, 0), K::NeighbourCkl16.code());
+        put_u32(&mut bytes, entry_field(i, 2), 0);
+        put_u32(&mut bytes, entry_field(i, 3), 0);
+        assert!(bank_format::reseal(&mut bytes));
+        parse(&bytes)
+    };
     gravity_out_of_range: E::GravityOutOfRange { coefficient: 3 } => {
         let mut b = builder();
         b.gravity = Some(bank_format::GravityCompensation { coeffs: [0.0; 8] });
@@ -317,7 +346,13 @@ fn error_codes_are_distinct_and_stable() {
     assert_eq!(E::Device { field: F::MaxForce }.code(), 40);
     assert_eq!(E::CellClearance { cell: 0 }.code(), 43);
     assert_eq!(
-        E::GravityOutOfRange { coefficient: 0 }.code(),
-        variant_count()
+        E::PairNotSpd {
+            node: 0,
+            neighbour: 0
+        }
+        .code(),
+        32
     );
+    assert_eq!(E::GravityOutOfRange { coefficient: 0 }.code(), 44);
+    assert_eq!(E::CklExponent { entry: 0 }.code(), last_code());
 }

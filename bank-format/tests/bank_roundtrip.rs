@@ -39,7 +39,7 @@ fn every_accessor_returns_what_was_written() {
     assert_eq!(bank.node_triangles(1), &[0]);
     assert_eq!(bank.node_triangles(2), &[0, 1]);
     assert_eq!(bank.node_triangles(3), &[1]);
-    assert_eq!(bank.node_triangles(4), &[] as &[u32]);
+    assert_eq!(bank.node_triangles(4), &[] as &[u16]);
 
     // Self-compliance, both forms.
     for k in 0..4 {
@@ -60,12 +60,12 @@ fn every_accessor_returns_what_was_written() {
     }
     assert_eq!(bank.c_kk(4), None);
 
-    // Couplings: both directions, C_lk = C_kl^T exactly, 1-3 truncated.
+    // Couplings: both directions in the index, one block per pair (C_lk = C_kl^T exactly),
+    // 1-3 truncated: pairs 01, 02, 03, 12, 23.
     let expected_rows: [&[u16]; 4] = [&[1, 2, 3], &[0, 2], &[0, 1, 3], &[0, 2]];
     for (k, row) in expected_rows.iter().enumerate() {
-        let (ls, cs) = bank.neighbours(k);
+        let ls = bank.neighbours(k);
         assert_eq!(ls, *row);
-        assert_eq!(cs.len(), ls.len());
         for &l in ls.iter() {
             let l = usize::from(l);
             let want = block(k, l);
@@ -82,7 +82,8 @@ fn every_accessor_returns_what_was_written() {
     assert_eq!(bank.coupling(1, 3), None);
     assert_eq!(bank.coupling(0, 9), None);
     assert_eq!(bank.coupling(2, 2), bank.c_kk_matrix(2));
-    assert_eq!(bank.neighbours(4), (&[] as &[u16], &[] as &[[f32; 9]]));
+    assert_eq!(bank.neighbours(4), &[] as &[u16]);
+    assert_eq!(bank.pair_count(), 5);
 
     // Grid: 8 mm cells, origin half a cell below the minimum, one node per cell.
     let g = bank.grid();
@@ -153,8 +154,12 @@ fn the_reader_exposes_the_section_table_as_written() {
     let bytes = valid_bytes();
     let aligned = AlignedBytes::new(&bytes);
     let bank = Bank::parse(&aligned).unwrap();
-    assert_eq!(bank.sections().len(), SectionKind::REQUIRED.len());
-    for kind in SectionKind::REQUIRED {
+    // The required kinds and the f32 blocks (the default precision).
+    assert_eq!(bank.sections().len(), SectionKind::REQUIRED.len() + 1);
+    for kind in SectionKind::REQUIRED
+        .into_iter()
+        .chain([SectionKind::NeighbourCkl])
+    {
         let (_, off, len, count) = section(&bytes, kind);
         let e = bank
             .sections()
@@ -493,4 +498,73 @@ fn the_speed_thresholds_round_trip_and_bad_ones_are_refused() {
         );
         assert_eq!(bank_format::validate_device(&x.device), Err(want));
     }
+}
+
+/// The 16-bit storage (`SPEC.md`, "16-bit blocks"): the same bank with each block as 16-bit
+/// mantissas and one exponent, 16 bytes less per pair, every entry within half a unit of the
+/// block's exponent, `max |C_kl| / 32767`, of the f64 compliance, both directions read from the
+/// one stored block.
+#[test]
+fn bfp16_blocks_round_within_half_a_unit_of_their_exponent() {
+    let b = builder();
+    let f32_bytes = b.build().unwrap();
+    let bytes = b
+        .build_with_precision(bank_format::Precision::Bfp16)
+        .unwrap();
+    assert_eq!(f32_bytes.len() - bytes.len(), 16 * PAIRS.len());
+    let aligned = AlignedBytes::new(&bytes);
+    let bank = Bank::parse(&aligned).unwrap();
+    assert_eq!(bank.precision(), bank_format::Precision::Bfp16);
+    assert_eq!(bank.pair_count(), PAIRS.len());
+    let mut worst = 0.0f64;
+    for &(k, l) in &PAIRS {
+        let want = block(k, l);
+        let max = want.iter().flatten().fold(0.0f64, |a, v| a.max(v.abs()));
+        let got = bank.coupling(k, l).unwrap();
+        let back = bank.coupling(l, k).unwrap();
+        for i in 0..3 {
+            for j in 0..3 {
+                let err = (f64::from(got[i][j]) - want[i][j]).abs();
+                assert!(err <= max / 32767.0, "C_{k}{l}[{i}][{j}] off by {err:e}");
+                worst = worst.max(err / max);
+                assert_eq!(back[j][i], got[i][j]);
+            }
+        }
+    }
+    // Not better than 16 bits could be: the rounding is really there.
+    assert!(worst > 1e-7, "{worst:e}");
+    // C_kk stays f32.
+    assert_eq!(
+        bank.c_kk_matrix(2),
+        Bank::parse(&AlignedBytes::new(&f32_bytes))
+            .unwrap()
+            .c_kk_matrix(2)
+    );
+}
+
+/// The encoder takes the smallest exponent: the largest mantissa is at least 16384 (else one
+/// exponent less would do), at most 32767; zero blocks and huge blocks are handled.
+#[test]
+fn bfp16_encoder_uses_the_smallest_exponent() {
+    for scale in [1e-9, 3.7e-4, 1.0, 32767.0, 32767.5, 65535.0, 6.0e30] {
+        let c = [
+            [scale, -0.5 * scale, 0.0],
+            [0.25 * scale, 0.0, 1e-3 * scale],
+            [0.0; 3],
+        ];
+        let q = bank_format::encode_ckl16(&c).unwrap();
+        let top = q.mantissa.iter().map(|m| m.unsigned_abs()).max().unwrap();
+        assert!((16384..=32767).contains(&top), "{scale}: {q:?}");
+        let d = q.decode();
+        for (v, w) in d.iter().zip(c.iter().flatten()) {
+            assert!(
+                (f64::from(*v) - w).abs() <= scale / 32767.0,
+                "{scale}: {v} vs {w}"
+            );
+        }
+    }
+    let zero = bank_format::encode_ckl16(&[[0.0; 3]; 3]).unwrap();
+    assert_eq!(zero.decode(), [0.0; 9]);
+    assert!(bank_format::encode_ckl16(&[[1e39, 0.0, 0.0], [0.0; 3], [0.0; 3]]).is_none());
+    assert!(bank_format::encode_ckl16(&[[f64::NAN, 0.0, 0.0], [0.0; 3], [0.0; 3]]).is_none());
 }

@@ -370,8 +370,9 @@ fn neighbour_across(bank: &Bank, t: u32, u: u16, v: u16) -> Option<(u32, [u16; 3
     let triangles = bank.triangles();
     bank.node_triangles(usize::from(u))
         .iter()
-        .filter(|&&o| o != t)
-        .find_map(|&o| {
+        .map(|&o| u32::from(o))
+        .filter(|&o| o != t)
+        .find_map(|o| {
             let tri = *triangles.get(o as usize)?;
             tri.contains(&v).then_some((o, tri))
         })

@@ -343,7 +343,7 @@ fn nodal_pressures(
             },
         )
         .0;
-    let (neighbours, _) = bank.neighbours(usize::from(nearest));
+    let neighbours = bank.neighbours(usize::from(nearest));
     let mut n_eff = 0.0f32;
     for &k in core::iter::once(&nearest).chain(neighbours) {
         let Some(&x) = bank.positions().get(usize::from(k)) else {
@@ -501,7 +501,7 @@ impl Accumulator {
             let coupled = patch
                 .nodes()
                 .iter()
-                .all(|&n| bank.neighbours(usize::from(n)).0.binary_search(&k).is_ok());
+                .all(|&n| bank.neighbours(usize::from(n)).binary_search(&k).is_ok());
             if !coupled {
                 continue;
             }

@@ -239,6 +239,18 @@ impl Prepared {
         radius: f64,
         extra: Option<&BTreeSet<(usize, usize)>>,
     ) -> Result<BuiltBank> {
+        self.bank_in(rows, radius, extra, self.scene.bank.precision)
+    }
+
+    /// [`Prepared::bank_keeping`] with the coupling blocks stored in `precision` (the scene's
+    /// `bank.precision` aside).
+    pub fn bank_in(
+        &self,
+        rows: &[Vec<(usize, Block3)>],
+        radius: f64,
+        extra: Option<&BTreeSet<(usize, usize)>>,
+        precision: bank_format::Precision,
+    ) -> Result<BuiltBank> {
         let mut edges = self.edges();
         if let Some(extra) = extra {
             edges.extend(extra.iter().copied());
@@ -304,7 +316,7 @@ impl Prepared {
             device: self.scene.device,
         };
         let bytes = builder
-            .build()
+            .build_with_precision(precision)
             .map_err(|e| anyhow::anyhow!("the bank writer refused the scene's data: {e}"))?;
         Ok(BuiltBank { bytes, pairs })
     }
@@ -389,7 +401,7 @@ impl Prepared {
                     let nearest =
                         (0..3).fold(0, |best, c| if bary[c] > bary[best] { c } else { best });
                     let a = tri[nearest];
-                    for &b in probe.neighbours(usize::from(a)).0 {
+                    for &b in probe.neighbours(usize::from(a)) {
                         let p = positions[usize::from(b)];
                         let d2: f32 = (0..3).map(|c| (p[c] - anchor[c]).powi(2)).sum();
                         if d2 < r2 {

@@ -247,6 +247,8 @@ pub struct BankOptions {
     pub grid_cell_m: Option<f64>,
     /// Extra distance beyond the tip radius at which a surface node still counts as reachable.
     pub reach_margin_m: f64,
+    /// Storage precision of the coupling blocks `C_kl` (`bank.precision`, default f32).
+    pub precision: bank_format::Precision,
 }
 
 /// A validated scene.
@@ -1115,18 +1117,20 @@ fn parse_bank(ctx: &Ctx, b: &RawBank) -> Result<BankOptions, SceneError> {
             ));
         }
     };
-    if let Some(p) = &b.precision
-        && p.get_ref() != "f32"
-    {
-        return Err(ctx.err(
-            p.span(),
-            "bank.precision",
-            format!(
-                "storage precision {:?} is not supported by bank format 3.0 (only \"f32\")",
-                p.get_ref()
-            ),
-        ));
-    }
+    let precision = match &b.precision {
+        None => bank_format::Precision::F32,
+        Some(p) => bank_format::Precision::from_name(p.get_ref()).ok_or_else(|| {
+            ctx.err(
+                p.span(),
+                "bank.precision",
+                format!(
+                    "storage precision {:?} is not one of bank format 4.0's: \"f32\" or \"bfp16\" \
+                     (16-bit mantissas, one exponent per block)",
+                    p.get_ref()
+                ),
+            )
+        })?,
+    };
     let max_contact_nodes = match &b.max_contact_nodes {
         Some(m) => {
             let v = *m.get_ref();
@@ -1182,6 +1186,7 @@ fn parse_bank(ctx: &Ctx, b: &RawBank) -> Result<BankOptions, SceneError> {
         max_contact_nodes,
         grid_cell_m,
         reach_margin_m,
+        precision,
     })
 }
 
@@ -1296,11 +1301,7 @@ mod tests {
                 "truncation_radius_m = -1.0",
                 "bank.truncation_radius_m",
             ),
-            (
-                "truncation_radius_m",
-                "couplings = \"knn\"",
-                "bank.couplings",
-            ),
+            ("couplings", "couplings = \"knn\"", "bank.couplings"),
         ] {
             let (text, line) = with_line(&t, key, bad);
             let e = err_of(&text);

@@ -63,8 +63,8 @@ fn shipped_scene_builds_a_valid_bank_and_inspect_refuses_damaged_copies() {
         "{summary}"
     );
 
-    // The scene's speed thresholds and the cell certificates are in the bank (format 3).
-    assert_eq!(bank.version().0, 3);
+    // The scene's speed thresholds, the cell certificates and pairs stored once (format 4).
+    assert_eq!(bank.version().0, 4);
     assert_eq!(bank.device().max_tip_speed_m_s, 1.0);
     assert_eq!(bank.device().max_joint_speed, [10.0, 10.0, 1.0]);
     let o = host(&["bank", "inspect", s(&out)]);
@@ -281,7 +281,7 @@ fn odd_arguments_are_refused_with_their_name() {
     let dir = tempfile::tempdir().unwrap();
     let text = std::fs::read_to_string(scene()).unwrap();
     let p = dir.path().join("s.toml");
-    let edited = text.replacen("# grid_cell_m = 0.02", "grid_cell_m = 1e-9", 1);
+    let edited = text.replacen("grid_cell_m = 0.009", "grid_cell_m = 1e-9", 1);
     assert!(edited != text);
     std::fs::write(&p, edited).unwrap();
     let o = host(&["bank", "build", s(&p), "-o", s(&dir.path().join("x.bank"))]);
@@ -348,6 +348,8 @@ fn sweep_prints_a_row_per_rule_and_radius() {
         "0,0.03",
         "--sites",
         "20",
+        "--precision",
+        "f32,bfp16",
     ];
     let o = host(&args);
     assert!(o.status.success(), "{}", stderr(&o));
@@ -356,14 +358,25 @@ fn sweep_prints_a_row_per_rule_and_radius() {
         .lines()
         .filter(|l| l.starts_with("| radius |") || l.starts_with("| tool |"))
         .collect();
-    assert_eq!(rows.len(), 3, "{table}");
+    assert_eq!(rows.len(), 6, "{table}");
     let o = host(&[args.as_slice(), &["--json"]].concat());
     assert!(o.status.success(), "{}", stderr(&o));
     let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
     let rows = v["rows"].as_array().unwrap();
-    assert_eq!(rows.len(), 3, "{v}");
-    let (zero, tool) = (&rows[0], &rows[2]);
+    assert_eq!(rows.len(), 6, "{v}");
+    // Per (rule, radius) one row per precision, f32 first.
+    let (zero, tool, tool16) = (&rows[0], &rows[4], &rows[5]);
     assert_eq!(tool["rule"], "tool");
+    assert_eq!(
+        (tool["precision"].as_str(), tool16["precision"].as_str()),
+        (Some("f32"), Some("bfp16"))
+    );
+    assert_eq!(
+        tool["bank_bytes"].as_u64().unwrap() - tool16["bank_bytes"].as_u64().unwrap(),
+        16 * tool["pairs"].as_u64().unwrap(),
+        "{v}"
+    );
+    assert!(tool16["patch_max"].as_f64().unwrap() <= 1e-4, "{v}");
     // Edges only: the tool patch loses couplings; the tool's pairs: exact forces.
     assert!(zero["patch_max"].as_f64().unwrap() > 1e-3, "{v}");
     assert!(tool["patch_max"].as_f64().unwrap() <= 1e-4, "{v}");

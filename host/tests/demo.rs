@@ -458,7 +458,7 @@ fn viewer_renders_the_liver_and_the_press_deforms_it_under_the_tool() {
         "the largest change is {largest}; force {force}"
     );
     let changed: Vec<(f64, f64)> = pairs()
-        .filter(|(_, (a, b))| 2 * change(a, b) >= largest)
+        .filter(|(_, (a, b))| 2 * u16::from(change(a, b)) >= u16::from(largest))
         .map(|(i, _)| ((i % before.width) as f64, (i / before.width) as f64))
         .collect();
     assert!(

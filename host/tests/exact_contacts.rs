@@ -1,4 +1,5 @@
-//! A bank of the tool's pairs (host/scenes/liver.toml with `bank.couplings = "tool"`) is exact
+//! The shipped bank, the tool's pairs (host/scenes/liver.toml, `bank.couplings = "tool"`), fits
+//! the demo's 128 KiB and is exact
 //! on every contact the tool can make: at 1,200 contact sites spread over the reachable surface (area-uniform,
 //! anchors off the lattice the bank's pairs were sampled on), the firmware's force (f32, its own
 //! patch and solve on the bank's bytes) is within 1e-4 relative of the f64 solve on untruncated
@@ -7,26 +8,23 @@
 //! a patch can load (see `host::bank::sweep`); the reference forces come from the compliance's
 //! direct solves, not from the bank.
 
-use bank_format::{AlignedBytes, Bank};
+#![allow(clippy::needless_range_loop)] // index loops read best for 3x3 blocks
+
+use bank_format::{AlignedBytes, Bank, Precision};
+use firmware::solve::WeightedSolve;
 use host::bank::Prepared;
 use host::bank::sweep;
 use std::path::Path;
 
 #[test]
 fn the_tool_bank_is_exact_on_every_contact_the_tool_can_make() {
-    let shipped = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/liver.toml");
-    let text = std::fs::read_to_string(&shipped).unwrap();
-    let tool = text.replacen("# couplings = \"tool\"", "couplings = \"tool\"", 1);
-    assert_ne!(tool, text);
-    let dir = tempfile::tempdir().unwrap();
-    let scene = dir.path().join("liver-tool.toml");
-    std::fs::write(&scene, tool).unwrap();
+    let scene = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/liver.toml");
     let prep = Prepared::load(&scene).unwrap();
     assert_eq!(prep.scene.bank.couplings, host::scene::Couplings::Tool);
     let built = prep.build_bank(None).unwrap();
     assert!(
-        built.bytes.len() <= bank_format::region::BANK_LEN,
-        "the tool bank is {} bytes, over the bank region",
+        built.bytes.len() <= 128 * 1024,
+        "the tool bank is {} bytes, over the demo's 128 KiB",
         built.bytes.len()
     );
     let aligned = AlignedBytes::new(&built.bytes);
@@ -67,4 +65,137 @@ fn the_tool_bank_is_exact_on_every_contact_the_tool_can_make() {
     assert_eq!(e.failed, 0, "{e:?}");
     assert!(e.point_max <= 1e-4, "{e:?}");
     assert!(e.patch_max <= 1e-4, "{e:?}");
+}
+
+/// The shipped scene with 16-bit coupling blocks (`bank.precision = "bfp16"`, `SPEC.md` "16-bit
+/// blocks"): 16 bytes less per pair, and at every site the firmware's force is within the
+/// bound the format's rounding gives. Each stored entry of `C_ab` is off by at most
+/// `u_ab = max |C_ab| / 32767` (half a unit of the block's exponent), so `||dC_ab||_2 <=
+/// ||dC_ab||_F <= 3 u_ab`, and the patch compliance `W = sum_ab w_a w_b C_ab` (weights >= 0, the
+/// diagonal blocks f32) moves by `||dW||_2 <= sum_{a != b} w_a w_b 3 u_ab`. The solve `F = W^-1
+/// d` then moves by at most `eta / (1 - eta)` relative, `eta = ||W^-1||_2 ||dW||_2` (bounded
+/// with `||W^-1||_F`). On top of that the firmware's f32 arithmetic, as on the f32 bank: the
+/// assertion adds twice the worst error the same sites show on the f32 bank.
+#[test]
+fn bfp16_blocks_stay_within_their_rounding_bound() {
+    let scene = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/liver.toml");
+    let prep = Prepared::load(&scene).unwrap();
+    let rows = prep.blocks(prep.probe_radius(), None).unwrap();
+    let probe_bytes = sweep::probe_bytes(&prep, &rows).unwrap();
+    let probe = Bank::parse(&probe_bytes).unwrap();
+    let pairs = prep
+        .tool_pairs(&probe, host::bank::TOOL_DIVISIONS)
+        .unwrap()
+        .pairs;
+    let radius_m = prep.scene.bank.truncation_radius_m;
+    let f32_bank = prep
+        .bank_in(&rows, radius_m, Some(&pairs), Precision::F32)
+        .unwrap();
+    let b16_bank = prep
+        .bank_in(&rows, radius_m, Some(&pairs), Precision::Bfp16)
+        .unwrap();
+    assert_eq!(
+        f32_bank.bytes.len() - b16_bank.bytes.len(),
+        16 * f32_bank.pairs,
+        "20 instead of 36 bytes a pair, nothing else changes"
+    );
+    let (a32, a16) = (
+        AlignedBytes::new(&f32_bank.bytes),
+        AlignedBytes::new(&b16_bank.bytes),
+    );
+    let (bank32, bank16) = (Bank::parse(&a32).unwrap(), Bank::parse(&a16).unwrap());
+    assert_eq!(bank16.precision(), Precision::Bfp16);
+
+    let sites = sweep::sites(&probe, 1000, 0.005, 11);
+    let refs = sweep::references(&prep, &probe, &sites).unwrap();
+    let radius = prep.scene.tip_radius_m as f32;
+    let rel = |got: [f32; 3], want: [f64; 3]| {
+        let d: [f64; 3] = std::array::from_fn(|c| f64::from(got[c]) - want[c]);
+        fem::vec3::norm(d) / fem::vec3::norm(want)
+    };
+    // (bound, error on the 16-bit bank, error on the f32 bank) per site and contact model.
+    let mut cases = Vec::new();
+    for r in &refs {
+        let s = r.site;
+        let tri = probe.triangles()[s.triangle];
+        for (tip, want) in [(0.0, r.point_n), (radius, r.patch_n)] {
+            let patch =
+                firmware::patch::tool_patch(&bank16, s.triangle as u32, tri, s.bary, s.anchor, tip);
+            let force = |bank: &Bank| {
+                WeightedSolve::new(bank, patch.nodes(), patch.weights())
+                    .and_then(|w| w.forces(s.press))
+                    .unwrap()
+                    .tool_force_n
+            };
+            let ids: Vec<usize> = patch
+                .nodes()
+                .iter()
+                .map(|&k| prep.region[usize::from(k)])
+                .collect();
+            let c = prep.compliance.blocks(&ids, None).unwrap();
+            let w: Vec<f64> = patch.weights().iter().map(|&x| f64::from(x)).collect();
+            let mut m = [[0.0f64; 3]; 3];
+            let mut dm = 0.0f64;
+            for (a, &wa) in w.iter().enumerate() {
+                for (b, &wb) in w.iter().enumerate() {
+                    for i in 0..3 {
+                        for j in 0..3 {
+                            m[i][j] += wa * wb * c[a][b][i][j];
+                        }
+                    }
+                    if a != b {
+                        let max = c[a][b].iter().flatten().fold(0.0f64, |x, v| x.max(v.abs()));
+                        dm += wa * wb * 3.0 * max / 32767.0;
+                    }
+                }
+            }
+            let eta = inverse_frobenius(&m) * dm;
+            assert!(eta < 0.5, "site {s:?}: eta {eta}");
+            cases.push((
+                eta / (1.0 - eta),
+                rel(force(&bank16), want),
+                rel(force(&bank32), want),
+            ));
+        }
+    }
+    let f32_worst = cases.iter().map(|c| c.2).fold(0.0, f64::max);
+    let worst16 = cases.iter().map(|c| c.1).fold(0.0, f64::max);
+    let bound_worst = cases.iter().map(|c| c.0).fold(0.0, f64::max);
+    let used = cases
+        .iter()
+        .map(|c| c.1 / (c.0 + 2.0 * f32_worst))
+        .fold(0.0, f64::max);
+    eprintln!(
+        "bfp16 bank {} B ({} pairs; f32 {} B); {} cases: worst error {worst16:.2e} (f32 bank \
+         {f32_worst:.2e}), worst rounding bound {bound_worst:.2e}, largest share of its bound \
+         used {used:.2}",
+        b16_bank.bytes.len(),
+        b16_bank.pairs,
+        f32_bank.bytes.len(),
+        cases.len()
+    );
+    for (bound, e16, _) in &cases {
+        assert!(
+            *e16 <= bound + 2.0 * f32_worst,
+            "{e16:e} > {bound:e} + 2 x {f32_worst:e}"
+        );
+    }
+    // The rounding is visible (16 bits are not f32) and within the issue's 1e-4.
+    assert!(worst16 > 10.0 * f32_worst, "{worst16:e} vs {f32_worst:e}");
+    assert!(worst16 <= 1e-4, "{worst16:e}");
+}
+
+/// `||M^-1||_F` of a 3 x 3 matrix by cofactors (an upper bound of `||M^-1||_2`).
+fn inverse_frobenius(m: &[[f64; 3]; 3]) -> f64 {
+    let cof = |i: usize, j: usize| {
+        let (r0, r1) = ((i + 1) % 3, (i + 2) % 3);
+        let (c0, c1) = ((j + 1) % 3, (j + 2) % 3);
+        m[r0][c0] * m[r1][c1] - m[r0][c1] * m[r1][c0]
+    };
+    let det = m[0][0] * cof(0, 0) + m[0][1] * cof(0, 1) + m[0][2] * cof(0, 2);
+    let sum: f64 = (0..3)
+        .flat_map(|i| (0..3).map(move |j| (i, j)))
+        .map(|(i, j)| cof(i, j) * cof(i, j))
+        .sum();
+    sum.sqrt() / det.abs()
 }

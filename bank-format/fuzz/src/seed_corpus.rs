@@ -1,5 +1,5 @@
-//! Writes seed inputs for the fuzz targets: the tests' valid 4-node bank (plain and with the
-//! "reseal" mode byte) and one frame of each message kind. Run from `bank-format/fuzz`.
+//! Writes seed inputs for the fuzz targets: the tests' valid 4-node bank, in f32 and in bfp16
+//! (plain and with the "reseal" mode byte), and one frame of each message kind. Run from `bank-format/fuzz`.
 
 #[path = "../../tests/common/mod.rs"]
 #[allow(dead_code, clippy::needless_range_loop)]
@@ -18,6 +18,15 @@ fn main() -> std::io::Result<()> {
         let mut seed = vec![mode];
         seed.extend_from_slice(&bank);
         fs::write(format!("corpus/bank_parse/seed-valid-{mode}"), seed)?;
+    }
+    // The same bank with 16-bit coupling blocks (section kind 20).
+    let bfp16 = common::builder()
+        .build_with_precision(bank_format::Precision::Bfp16)
+        .map_err(std::io::Error::other)?;
+    for mode in [0u8, 1] {
+        let mut seed = vec![mode];
+        seed.extend_from_slice(&bfp16);
+        fs::write(format!("corpus/bank_parse/seed-valid-bfp16-{mode}"), seed)?;
     }
     let mut all = Vec::new();
     let mut buf = [0u8; MAX_FRAME];

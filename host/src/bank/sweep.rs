@@ -17,7 +17,7 @@ use super::{BlockRows, Prepared, UNCOUPLED_TOL};
 use crate::contact::weighted_tool_force;
 use anyhow::{Context, Result, bail};
 use bank_format::region::BANK_LEN;
-use bank_format::{AlignedBytes, Bank};
+use bank_format::{AlignedBytes, Bank, Precision};
 use fem::progress::Progress;
 use firmware::patch::tool_patch;
 use firmware::solve::WeightedSolve;
@@ -73,7 +73,8 @@ pub struct SweepRow {
     pub rule: &'static str,
     /// Truncation radius, m.
     pub radius_m: f64,
-    /// Storage precision of `C` ("f32", the only one bank format 3 has).
+    /// Storage precision of the coupling blocks `C_kl`: "f32" or "bfp16" (16-bit mantissas,
+    /// one exponent per block; `bank_format::Precision`).
     pub precision: &'static str,
     /// Coupled pairs stored.
     pub pairs: usize,
@@ -102,6 +103,8 @@ pub struct SweepConfig {
     pub depth_m: f64,
     /// Seed of the sites' placement.
     pub seed: u64,
+    /// Storage precisions of `C_kl`: every (rule, radius) is built in each.
+    pub precisions: Vec<Precision>,
 }
 
 /// SplitMix64: a deterministic stream for placing sites.
@@ -258,7 +261,9 @@ pub fn errors(prep: &Prepared, bank: &Bank, refs: &[Reference]) -> Errors {
 /// The probe bank's bytes (every pair within [`Prepared::probe_radius`]) from `rows`.
 pub fn probe_bytes(prep: &Prepared, rows: &BlockRows) -> Result<AlignedBytes> {
     Ok(AlignedBytes::new(
-        &prep.bank(rows, prep.probe_radius())?.bytes,
+        &prep
+            .bank_in(rows, prep.probe_radius(), None, Precision::F32)?
+            .bytes,
     ))
 }
 
@@ -295,22 +300,29 @@ pub fn run(
         .map_err(|e| anyhow::anyhow!("internal: the probe bank is invalid: {e}"))?;
     let sites = sites(&probe, config.sites, config.depth_m, config.seed);
     let refs = references(prep, &probe, &sites)?;
-    let mut plan: Vec<(&'static str, f64)> = config.radii.iter().map(|&r| ("radius", r)).collect();
-    plan.extend(config.tool_radii.iter().map(|&r| ("tool", r)));
+    if config.precisions.is_empty() {
+        bail!("at least one storage precision is needed");
+    }
+    let mut rules: Vec<(&'static str, f64)> = config.radii.iter().map(|&r| ("radius", r)).collect();
+    rules.extend(config.tool_radii.iter().map(|&r| ("tool", r)));
+    let plan: Vec<(&'static str, f64, Precision)> = rules
+        .iter()
+        .flat_map(|&(rule, r)| config.precisions.iter().map(move |&p| (rule, r, p)))
+        .collect();
     if let Some(p) = progress {
         p.start(plan.len() as u64);
     }
     let mut out = Vec::with_capacity(plan.len());
     let mut tool_pairs = None;
-    for (rule, radius) in plan {
+    for (rule, radius, precision) in plan {
         let built = if rule == "tool" {
             let pairs = match &tool_pairs {
                 Some(p) => p,
                 None => tool_pairs.insert(prep.tool_pairs(&probe, super::TOOL_DIVISIONS)?.pairs),
             };
-            prep.bank_keeping(&rows, radius, Some(pairs))?
+            prep.bank_in(&rows, radius, Some(pairs), precision)?
         } else {
-            prep.bank(&rows, radius)?
+            prep.bank_in(&rows, radius, None, precision)?
         };
         let aligned = AlignedBytes::new(&built.bytes);
         let bank = Bank::parse(&aligned)
@@ -319,7 +331,7 @@ pub fn run(
         out.push(SweepRow {
             rule,
             radius_m: radius,
-            precision: "f32",
+            precision: precision.name(),
             pairs: built.pairs,
             bank_bytes: built.bytes.len(),
             fits_region: built.bytes.len() <= BANK_LEN,

@@ -71,6 +71,10 @@ pub struct SweepArgs {
     /// Press depth along the inward normal, m.
     #[arg(long, default_value_t = 0.005)]
     depth: f64,
+    /// Storage precisions of C_kl, comma separated: "f32" and/or "bfp16" (16-bit mantissas,
+    /// one exponent per 3x3 block); every rule and radius is built in each.
+    #[arg(long, default_value = "f32,bfp16")]
+    precision: String,
     /// Print one JSON object instead of the table.
     #[arg(long)]
     json: bool,
@@ -261,7 +265,7 @@ fn inspect(args: InspectArgs) -> Result<()> {
     };
     let d = bank.device();
     let pairs = (0..bank.node_count())
-        .map(|k| bank.neighbours(k).0.len())
+        .map(|k| bank.neighbours(k).len())
         .sum::<usize>()
         / 2;
     let sections = section_table(&bank);
@@ -376,9 +380,18 @@ fn sweep(args: SweepArgs) -> Result<()> {
     if !(args.depth.is_finite() && args.depth > 0.0) {
         bail!("--depth must be > 0 m, got {}", args.depth);
     }
+    let precisions = args
+        .precision
+        .split(',')
+        .map(|p| {
+            bank_format::Precision::from_name(p.trim())
+                .with_context(|| format!("--precision: {p:?} is not \"f32\" or \"bfp16\""))
+        })
+        .collect::<Result<Vec<_>>>()?;
     let prep = Prepared::load(&scene)?;
     prep.warnings.iter().for_each(|w| eprintln!("{w}"));
     let config = SweepConfig {
+        precisions,
         radii,
         tool_radii: if args.no_tool { vec![] } else { vec![0.0] },
         sites: args.sites,

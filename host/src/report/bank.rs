@@ -11,6 +11,7 @@ use crate::bank::Prepared;
 use crate::bank::sweep::{self, SweepConfig, SweepRow};
 use crate::scene::Couplings;
 use anyhow::Result;
+use bank_format::Precision;
 
 /// The sweep the report runs: radius rule over a few radii, and the tool rule alone and with
 /// two radii's pairs added (three points per series).
@@ -25,6 +26,7 @@ pub fn measure(prep: &Prepared, quick: bool) -> Result<Vec<SweepRow>> {
         sites: if quick { 300 } else { 1000 },
         depth_m: 0.005,
         seed: 1,
+        precisions: vec![Precision::F32, Precision::Bfp16],
     };
     sweep::run(prep, &config, None)
 }
@@ -38,33 +40,38 @@ pub fn section(rows: &[SweepRow], prep: &Prepared) -> (Knob, Vec<HardCase>) {
     let point = |r: &SweepRow, y: f64| Point {
         x: r.bank_bytes as f64,
         y: y.max(FLOOR),
-        label: format!("{} {:.0} mm", r.rule, r.radius_m * 1e3),
+        label: format!("{} {:.0} mm {}", r.rule, r.radius_m * 1e3, r.precision),
     };
-    let series = |rule: &str, name: &str, y: fn(&SweepRow) -> f64| Series {
+    let series = |rule: &str, precision: Precision, name: &str, y: fn(&SweepRow) -> f64| Series {
         name: name.into(),
         points: rows
             .iter()
-            .filter(|r| r.rule == rule)
+            .filter(|r| r.rule == rule && r.precision == precision.name())
             .map(|r| point(r, y(r)))
             .collect(),
     };
+    let f32 = Precision::F32.name();
     let bank = &prep.scene.bank;
     let (rule, radius) = match bank.couplings {
         Couplings::Radius => ("radius", bank.truncation_radius_m),
         Couplings::Tool => ("tool", bank.truncation_radius_m),
     };
-    let own = rows
+    let own = rows.iter().find(|r| {
+        r.rule == rule && (r.radius_m - radius).abs() < 1e-9 && r.precision == bank.precision.name()
+    });
+    let tool = rows.iter().find(|r| r.rule == "tool" && r.precision == f32);
+    let tool16 = rows
         .iter()
-        .find(|r| r.rule == rule && (r.radius_m - radius).abs() < 1e-9);
-    let tool = rows.iter().find(|r| r.rule == "tool");
+        .find(|r| r.rule == "tool" && r.precision == Precision::Bfp16.name());
     let sites = rows.first().map_or(0, |r| r.sites);
     let finding = match (own, tool) {
         (Some(o), Some(t)) => format!(
-            "the scene's bank ({} rule, {:.0} mm): {} B, worst tool-patch error {:.1e} over {} \
-             sites; the tool rule keeps the pairs one tool patch can load together: {} B, \
-             worst {:.1e}{}",
+            "the scene's bank ({} rule, {:.0} mm, {}): {} B, worst tool-patch error {:.1e} over \
+             {} sites; the tool rule keeps the pairs one tool patch can load together: {} B, \
+             worst {:.1e}{}{}",
             o.rule,
             o.radius_m * 1e3,
+            o.precision,
             o.bank_bytes,
             o.errors.patch_max,
             sites,
@@ -74,25 +81,45 @@ pub fn section(rows: &[SweepRow], prep: &Prepared) -> (Knob, Vec<HardCase>) {
                 " (over the demo's 128 KiB budget)"
             } else {
                 ""
-            }
+            },
+            tool16.map_or(String::new(), |h| format!(
+                "; with 16-bit blocks (bfp16) {} B, worst {:.1e}",
+                h.bank_bytes, h.errors.patch_max
+            ))
         ),
         _ => "the scene's own bank is not among the swept rows".into(),
     };
     let knob = Knob {
         id: "bank-couplings".into(),
-        title: "Bank couplings: truncation rule against force error and bytes".into(),
+        title:
+            "Bank couplings: truncation rule and storage precision against force error and bytes"
+                .into(),
         x_label: "bank bytes".into(),
         y_label: "worst relative force error over the reachable region".into(),
         log_x: true,
         log_y: true,
         series: vec![
-            series("radius", "radius rule, tool patch", |r| r.errors.patch_max),
-            series("radius", "radius rule, point contact", |r| {
-                r.errors.point_max
-            }),
-            series("tool", "tool rule (+ radius), tool patch", |r| {
+            series("radius", Precision::F32, "radius rule, tool patch", |r| {
                 r.errors.patch_max
             }),
+            series(
+                "radius",
+                Precision::F32,
+                "radius rule, point contact",
+                |r| r.errors.point_max,
+            ),
+            series(
+                "tool",
+                Precision::F32,
+                "tool rule (+ radius), tool patch",
+                |r| r.errors.patch_max,
+            ),
+            series(
+                "tool",
+                Precision::Bfp16,
+                "storage precision bfp16: tool rule (+ radius), tool patch",
+                |r| r.errors.patch_max,
+            ),
         ],
         chosen: own.map(|o| point(o, o.errors.patch_max)),
         finding,
@@ -101,8 +128,8 @@ pub fn section(rows: &[SweepRow], prep: &Prepared) -> (Knob, Vec<HardCase>) {
     let row = |case: String, r: &SweepRow| HardCase {
         case,
         measurement: format!(
-            "firmware f32 tool-patch force on a {} B bank, worst over {} sites",
-            r.bank_bytes, r.sites
+            "firmware f32 tool-patch force on a {} B bank ({} blocks), worst over {} sites",
+            r.bank_bytes, r.precision, r.sites
         ),
         reference: "f64 solve on the untruncated compliance, bound 1e-4".into(),
         verdict: if r.errors.patch_max <= 1e-4 {
