@@ -419,26 +419,28 @@ impl Prepared {
     /// `bank.truncation_radius_m`, and with "tool" also [`Prepared::tool_pairs`].
     pub fn build_bank(&self, progress: Option<&dyn Progress>) -> Result<BuiltBank> {
         let b = &self.scene.bank;
-        self.build_bank_as(b.couplings, b.truncation_radius_m, progress)
+        self.build_bank_as(b.couplings, b.truncation_radius_m, b.precision, progress)
     }
 
-    /// The bank the scene would have with coupling rule `couplings` and truncation radius
-    /// `radius` (m) instead of its own; everything else as [`Prepared::build_bank`].
+    /// The bank the scene would have with coupling rule `couplings`, truncation radius
+    /// `radius` (m) and storage `precision` instead of its own; everything else as
+    /// [`Prepared::build_bank`].
     pub fn build_bank_as(
         &self,
         couplings: Couplings,
         radius: f64,
+        precision: bank_format::Precision,
         progress: Option<&dyn Progress>,
     ) -> Result<BuiltBank> {
         match couplings {
             Couplings::Radius => {
                 let rows = self.blocks(radius, progress)?;
-                self.bank(&rows, radius)
+                self.bank_in(&rows, radius, None, precision)
             }
             Couplings::Tool => {
                 let rows = self.blocks(radius.max(self.probe_radius()), progress)?;
                 let pairs = self.tool_pairs_from(&rows)?.pairs;
-                self.bank_keeping(&rows, radius, Some(&pairs))
+                self.bank_in(&rows, radius, Some(&pairs), precision)
             }
         }
     }

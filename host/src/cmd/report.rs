@@ -54,7 +54,6 @@ pub fn run(args: Args) -> Result<()> {
     let mut knobs = Vec::new();
     let mut cases = Vec::new();
     let mut not_measured = vec![
-        "bank storage precision: only f32 blocks exist (f16 is not built)".to_string(),
         "the split of the firmware's loop body into kinematics, detection, patch, solve, law \
          and supervisor: the image counts the body and the whole tick only, so the page shows \
          cost by contact-set size and the link/executor share"
@@ -159,15 +158,18 @@ pub fn run(args: Args) -> Result<()> {
             let mut run_banks = Vec::new();
             for row in swept.iter().filter(|r| r.fits_region) {
                 step(&format!(
-                    "firmware on the {} {:.0} mm bank",
+                    "firmware on the {} {:.0} mm {} bank",
                     row.rule,
-                    row.radius_m * 1e3
+                    row.radius_m * 1e3,
+                    row.precision
                 ));
                 let couplings = match row.rule {
                     "tool" => Couplings::Tool,
                     _ => Couplings::Radius,
                 };
-                let variant = prepared.build_bank_as(couplings, row.radius_m, None)?;
+                let precision = bank_format::Precision::from_name(row.precision)
+                    .context("internal: a swept row's precision has no name")?;
+                let variant = prepared.build_bank_as(couplings, row.radius_m, precision, None)?;
                 let aligned = bank_format::AlignedBytes::new(&variant.bytes);
                 let parsed = bank_format::Bank::parse(&aligned)
                     .map_err(|e| anyhow::anyhow!("internal: a swept bank does not parse: {e}"))?;
@@ -239,7 +241,11 @@ pub fn run(args: Args) -> Result<()> {
         Couplings::Radius => "radius",
         Couplings::Tool => "tool",
     };
-    match pareto::section(&runs, &run_banks, (own_rule, own.truncation_radius_m)) {
+    match pareto::section(
+        &runs,
+        &run_banks,
+        (own_rule, own.truncation_radius_m, own.precision.name()),
+    ) {
         Some(k) => knobs.push(k),
         None => not_measured.push(
             "the Pareto front (it needs the firmware's instruction counts and a tool-patch \

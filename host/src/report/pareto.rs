@@ -1,5 +1,6 @@
 //! Where the knobs combine: the scene's mesh with each contact model ([`super::scale`]) and
-//! each swept bank ([`super::bank`], the truncation rule and radius), against force error,
+//! each swept bank ([`super::bank`]: truncation rule, radius and storage precision), against
+//! force error,
 //! bank bytes and the MCU's worst loop-body instructions measured on that very bank (QEMU,
 //! [`super::firmware`]). The front is the set of combinations no other beats on all three.
 //!
@@ -46,8 +47,8 @@ struct Combo {
 const FLOOR: f64 = 1e-6;
 
 /// The knob, or `None` when there is no reference (one mesh only) or no bank was run.
-/// `scene_bank` is the scene's own rule and radius (m).
-pub fn section(runs: &[MeshRun], banks: &[RunBank], scene_bank: (&str, f64)) -> Option<Knob> {
+/// `scene_bank` is the scene's own rule, radius (m) and storage precision.
+pub fn section(runs: &[MeshRun], banks: &[RunBank], scene_bank: (&str, f64, &str)) -> Option<Knob> {
     let (coarse, finest) = (runs.first()?, runs.last()?);
     if runs.len() < 2 || banks.is_empty() {
         return None;
@@ -75,10 +76,10 @@ pub fn section(runs: &[MeshRun], banks: &[RunBank], scene_bank: (&str, f64)) -> 
             } else {
                 b.row.errors.point_max
             };
-            let (rule, radius) = (b.row.rule, b.row.radius_m);
+            let (rule, radius, precision) = (b.row.rule, b.row.radius_m, b.row.precision);
             combos.push(Combo {
                 label: format!(
-                    "{} / {} / {rule} {:.0} mm bank",
+                    "{} / {} / {rule} {:.0} mm {precision} bank",
                     coarse.name,
                     f.model,
                     radius * 1e3
@@ -88,7 +89,8 @@ pub fn section(runs: &[MeshRun], banks: &[RunBank], scene_bank: (&str, f64)) -> 
                 instructions: worst,
                 chosen: i == scene_model
                     && rule == scene_bank.0
-                    && (radius - scene_bank.1).abs() < 1e-9,
+                    && (radius - scene_bank.1).abs() < 1e-9
+                    && precision == scene_bank.2,
             });
         }
     }
