@@ -48,11 +48,11 @@
 //! under the supervisor, which faults `BadCommand` on one that is not finite or over its limit
 //! rather than clamping it). The mode is set only while not armed ([`HapticLoop::set_mode`]).
 
-use bank_format::{Bank, Contact, Counters, MAX_CONTACTS, Mode, Telemetry, heapless};
+use bank_format::{Bank, Contact, Counters, MAX_CONTACTS, Mode, PhaseCycles, Telemetry, heapless};
 
 use crate::contact::{ContactState, ContactTracker};
 use crate::device::{Device, Joints, sin_cos, transpose_mul};
-use crate::hal::Interlocks;
+use crate::hal::{CycleCounter, Interlocks};
 use crate::patch::{Patch, PatchBuild};
 use crate::safety::{ArmRefused, Fault, SafetyConfig, State, Supervisor, TickInput};
 use crate::solve::{SolveError, WeightedSolve, apply_tissue_law};
@@ -339,6 +339,17 @@ impl<'b> HapticLoop<'b> {
 
     /// One tick (see the module notes). Never panics.
     pub fn tick(&mut self, input: LoopInput) -> LoopOutput {
+        self.tick_marked(input, &NoCounter).0
+    }
+
+    /// [`HapticLoop::tick`], reading `clock` at the ends of its first five phases
+    /// ([`PhaseMarks`]: kinematics, detection, patch, solve, law; the supervisor's phase ends
+    /// where the caller stops timing). Five counter reads a tick, nothing else changes.
+    pub fn tick_marked<C: CycleCounter>(
+        &mut self,
+        input: LoopInput,
+        clock: &C,
+    ) -> (LoopOutput, PhaseMarks) {
         self.tick = self.tick.wrapping_add(1);
         if input.overrun {
             self.counters.overruns = self.counters.overruns.wrapping_add(1);
@@ -347,12 +358,26 @@ impl<'b> HapticLoop<'b> {
         let counts = sub_wrapping(input.encoder_counts, self.encoder_offset);
         let q = self.device.joints(counts);
         let (tip, jac) = self.device.tip_and_jacobian(&q);
+        let kinematics = clock.cycles();
         let prev = self.prev_tip.unwrap_or(tip);
         let contact = self.tracker.update(self.bank, prev, tip);
         self.prev_tip = Some(tip);
+        let detection = clock.cycles();
 
-        let (contacts, force_on_tool, solve_error) = match self.contact_force(&contact) {
-            Ok((contacts, f)) => (contacts, self.device.limit_force(f), None),
+        let solve = self.contact_solve(&contact);
+        let patch = clock.cycles();
+        let linear = solve.and_then(|held| held.map(|(s, d)| node_forces(&s, d)).transpose());
+        let solved = clock.cycles();
+        let rendered = linear.and_then(|l| match l {
+            None => Ok((Contacts::new(), [0.0; 3])),
+            Some((contacts, f, d)) => self.law(f, d).map(|on_tissue| (contacts, on_tissue)),
+        });
+        let (contacts, force_on_tool, solve_error) = match rendered {
+            Ok((contacts, on_tissue)) => (
+                contacts,
+                self.device.limit_force(on_tissue.map(|f| -f)),
+                None,
+            ),
             Err(e) => (Contacts::new(), [0.0; 3], Some(e)),
         };
         let dropped_load = match self.held {
@@ -373,6 +398,7 @@ impl<'b> HapticLoop<'b> {
                 self.device.requested_currents([fp + gp, fy + gy, fi + gi])
             }
         };
+        let law = clock.cycles();
         let out = self.supervisor.tick(&TickInput {
             bank_error: None,
             counts,
@@ -394,7 +420,7 @@ impl<'b> HapticLoop<'b> {
             tool_force_n: force_on_tool,
             dropped_load,
         };
-        LoopOutput {
+        let output = LoopOutput {
             tick: self.tick,
             currents_a: out.currents_a,
             clamped: out.clamped,
@@ -408,7 +434,15 @@ impl<'b> HapticLoop<'b> {
             solve_error,
             patch: self.held.map(|h| h.origin),
             dropped_load,
-        }
+        };
+        let marks = PhaseMarks {
+            kinematics,
+            detection,
+            patch,
+            solve: solved,
+            law,
+        };
+        (output, marks)
     }
 
     /// Telemetry of the last tick (for decimated sending).
@@ -427,11 +461,12 @@ impl<'b> HapticLoop<'b> {
         }
     }
 
-    /// Contact forces on the tissue (linear model) and the force on the tool (N) for the mode.
-    fn contact_force(
+    /// The factored contact solve to render with this tick and the tip's displacement, when
+    /// touching (the patch phase: the first tick's contact triangle, or [`Self::maintain_patch`]).
+    fn contact_solve(
         &mut self,
         contact: &ContactState,
-    ) -> Result<(Contacts, [f32; 3]), SolveError> {
+    ) -> Result<Option<(WeightedSolve, [f32; 3])>, SolveError> {
         let ContactState::Touching {
             triangle,
             nodes,
@@ -442,7 +477,7 @@ impl<'b> HapticLoop<'b> {
         else {
             self.held = None;
             self.pending.origin = None;
-            return Ok((Contacts::new(), [0.0; 3]));
+            return Ok(None);
         };
         let tip_radius = self.bank.device().tip_radius_m;
         let repatch = REPATCH_FRACTION * tip_radius;
@@ -476,22 +511,76 @@ impl<'b> HapticLoop<'b> {
             }
             Some(held) => self.maintain_patch(held, origin, repatch)?,
         };
-        let forces = solve.forces(displacement)?;
-        let mut contacts = Contacts::new();
-        for (&node, &force_n) in forces.nodes().iter().zip(forces.forces()) {
-            // MAX_CONTACTS == MAX_CONTACT_NODES: never full.
-            if contacts.push(Contact { node, force_n }).is_err() {
-                break;
-            }
+        Ok(Some((solve, displacement)))
+    }
+
+    /// The force on the tissue for the mode from the linear model's tool force `f` at
+    /// displacement `d` (the law phase): Q in `Render`, `f` itself in `LinearLaw`, none in
+    /// the modes that render no contact.
+    fn law(&self, f: [f32; 3], d: [f32; 3]) -> Result<[f32; 3], SolveError> {
+        match self.mode {
+            Mode::Render => apply_tissue_law(self.bank.tissue_law(), f, d),
+            Mode::LinearLaw => Ok(f),
+            Mode::Transparent | Mode::ConstantCurrent { .. } => Ok([0.0; 3]),
         }
-        let on_tissue = match self.mode {
-            Mode::Render => {
-                apply_tissue_law(self.bank.tissue_law(), forces.tool_force_n, displacement)?
-            }
-            Mode::LinearLaw => forces.tool_force_n,
-            Mode::Transparent | Mode::ConstantCurrent { .. } => [0.0; 3],
-        };
-        Ok((contacts, on_tissue.map(|f| -f)))
+    }
+}
+
+/// The solve phase: the node forces `f_k = w_k f_tool` of `solve` at displacement `d` as
+/// telemetry's contact set, the linear model's tool force, and `d` (for the law).
+fn node_forces(
+    solve: &WeightedSolve,
+    d: [f32; 3],
+) -> Result<(Contacts, [f32; 3], [f32; 3]), SolveError> {
+    let forces = solve.forces(d)?;
+    let mut contacts = Contacts::new();
+    for (&node, &force_n) in forces.nodes().iter().zip(forces.forces()) {
+        // MAX_CONTACTS == MAX_CONTACT_NODES: never full.
+        if contacts.push(Contact { node, force_n }).is_err() {
+            break;
+        }
+    }
+    Ok((contacts, forces.tool_force_n, d))
+}
+
+/// Counter readings at the ends of a tick's first five phases
+/// ([`HapticLoop::tick_marked`]); the caller's readings before and after the tick bound the
+/// first and the last (supervisor) phase.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct PhaseMarks {
+    /// After encoder counts to joints, tip and Jacobian.
+    pub kinematics: u32,
+    /// After the contact tracker's update.
+    pub detection: u32,
+    /// After the patch (and its factored solve) for this tick.
+    pub patch: u32,
+    /// After the 3 x 3 solve and the node forces.
+    pub solve: u32,
+    /// After the law, the force cap and the requested currents.
+    pub law: u32,
+}
+
+impl PhaseMarks {
+    /// The phases' lengths between `start` (read before the tick) and `end` (after it),
+    /// wrapping: they sum to `end - start`.
+    pub fn phases(&self, start: u32, end: u32) -> PhaseCycles {
+        PhaseCycles {
+            kinematics: self.kinematics.wrapping_sub(start),
+            detection: self.detection.wrapping_sub(self.kinematics),
+            patch: self.patch.wrapping_sub(self.detection),
+            solve: self.solve.wrapping_sub(self.patch),
+            law: self.law.wrapping_sub(self.solve),
+            supervisor: end.wrapping_sub(self.law),
+        }
+    }
+}
+
+/// The counter of an untimed tick ([`HapticLoop::tick`]): always 0, compiled away.
+struct NoCounter;
+
+impl CycleCounter for NoCounter {
+    fn cycles(&self) -> u32 {
+        0
     }
 }
 

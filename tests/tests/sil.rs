@@ -108,6 +108,19 @@ fn ten_seconds_of_slide_match_the_native_loop_without_overrun() {
     // Every tick, executor and I/O included, well inside its 125,000-instruction period.
     let worst = run.ticks.iter().map(|t| t.tick_instructions).max().unwrap();
     assert!(worst < harness::INSTRUCTIONS_PER_TICK / 2, "{worst}");
+    // The image's per-phase counts (the loop body split at the tick's phase boundaries) add
+    // up to its loop body in every tick, and the contact phases ran when in contact.
+    for t in &run.ticks {
+        assert_eq!(t.phase_instructions.total(), t.body_instructions, "{t:?}");
+        if t.contact_nodes > 0 {
+            let p = t.phase_instructions;
+            assert!(p.patch > 0 && p.solve > 0 && p.law > 0, "{t:?}");
+        }
+    }
+    // A tick's whole cost (reported with the next tick) holds its body.
+    for w in run.ticks.windows(2) {
+        assert!(w[1].tick_instructions >= w[0].body_instructions, "{w:?}");
+    }
     // Telemetry every 10 ticks, nothing dropped either way on the link.
     let tel = run.telemetry();
     assert!(tel.len() >= 995, "{}", tel.len());
