@@ -8,7 +8,7 @@ use bank_format::{
     Mode, State, encode_frame, reseal,
 };
 use firmware::tick::{HapticLoop, LoopInput};
-use host::sil::cost::Phases;
+use host::sil::cost::{CodePhaseMax, Phases};
 use host::sil::harness::{self, ARM_TICK, LinkSend, Run, Session, Setup};
 use host::sil::script::{Script, Trajectory, surface_insertion};
 use std::path::PathBuf;
@@ -546,4 +546,5 @@ fn a_recorded_near_surface_trajectory_replays_bit_identical_to_the_native_loop()
             p.ticks, p.max_body_instructions, p.max_tick_instructions
         );
     }
+    eprintln!("code phases, max: {:?}", CodePhaseMax::of(&run.ticks));
 }
