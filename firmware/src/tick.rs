@@ -494,18 +494,26 @@ impl<'b> HapticLoop<'b> {
             // tip's patch is built over the next ticks.
             None => {
                 self.pending.origin = None;
-                // `tool_patch(.., 0.0)` in the idle rebuild's place (no large temporary).
-                let build = &mut self.pending.build;
-                build.start(self.bank, triangle, nodes, bary, anchor, 0.0);
-                let patch = build.finish(self.bank);
-                let solve = WeightedSolve::new(self.bank, patch.nodes(), patch.weights())?;
+                let (solve, dropped) = match triangle_solve(self.bank, nodes, bary) {
+                    Some(solve) => (solve, 0.0),
+                    None => {
+                        // A vertex pair the bank does not couple (or a failing solve): the
+                        // patch rule's choice, `tool_patch(.., 0.0)`, in the idle rebuild's
+                        // place (no large temporary).
+                        let build = &mut self.pending.build;
+                        build.start(self.bank, triangle, nodes, bary, anchor, 0.0);
+                        let patch = build.finish(self.bank);
+                        let solve = WeightedSolve::new(self.bank, patch.nodes(), patch.weights())?;
+                        (solve, patch.dropped)
+                    }
+                };
                 self.held = Some(Held {
                     origin: PatchOrigin {
                         radius_m: 0.0,
                         ..origin
                     },
                     solve,
-                    dropped: patch.dropped,
+                    dropped,
                 });
                 solve
             }
@@ -524,6 +532,32 @@ impl<'b> HapticLoop<'b> {
             Mode::Transparent | Mode::ConstantCurrent { .. } => Ok([0.0; 3]),
         }
     }
+}
+
+/// The first tick's solve on the contact triangle alone: its vertices with a positive
+/// barycentric coordinate, weighted by it (normalised). The same weights as the patch rule at
+/// radius 0 ([`PatchBuild`]: one load per vertex, no quadrature) without building a patch;
+/// `None` when the bank does not couple two of the vertices or the solve fails, for the
+/// caller to take the patch rule's path (which drops an uncoupled vertex).
+fn triangle_solve(bank: &Bank, nodes: [u16; 3], bary: [f32; 3]) -> Option<WeightedSolve> {
+    let (mut n, mut w, mut len) = ([0u16; 3], [0.0f32; 3], 0);
+    for (&k, &b) in nodes.iter().zip(&bary) {
+        if b > 0.0
+            && b.is_finite()
+            && let (Some(nk), Some(wk)) = (n.get_mut(len), w.get_mut(len))
+        {
+            (*nk, *wk) = (k, b);
+            len += 1;
+        }
+    }
+    if len == 0 {
+        return None;
+    }
+    let kept: f32 = w.iter().sum();
+    for x in w.iter_mut() {
+        *x /= kept;
+    }
+    WeightedSolve::new(bank, n.get(..len)?, w.get(..len)?).ok()
 }
 
 /// The solve phase: the node forces `f_k = w_k f_tool` of `solve` at displacement `d` as
@@ -713,6 +747,34 @@ mod tests {
         assert!(norm(out.tool_force_n) <= cal.max_force_n * (1.0 + 1e-5));
         if out.state != State::Armed {
             assert_eq!(out.currents_a, [0.0; 3]);
+        }
+    }
+
+    #[test]
+    fn the_first_ticks_triangle_solve_is_the_patch_rules_at_radius_zero() {
+        let bytes = flat_patch();
+        let bank = Bank::parse(bytes.as_slice()).unwrap();
+        let mut build = PatchBuild::new();
+        let d = [1.0e-4, -2.0e-4, -5.0e-4];
+        for (ti, &tri) in bank.triangles().iter().enumerate().take(8) {
+            for bary in [[0.2, 0.3, 0.5], [0.0, 0.25, 0.75], [1.0, 0.0, 0.0]] {
+                let direct = triangle_solve(&bank, tri, bary).unwrap().forces(d).unwrap();
+                build.start(&bank, ti as u32, tri, bary, [0.0; 3], 0.0);
+                let patch = build.finish(&bank);
+                let rule = WeightedSolve::new(&bank, patch.nodes(), patch.weights())
+                    .unwrap()
+                    .forces(d)
+                    .unwrap();
+                let (f, g) = (direct.tool_force_n, rule.tool_force_n);
+                let err = norm([f[0] - g[0], f[1] - g[1], f[2] - g[2]]);
+                assert!(err <= 1e-5 * norm(g), "{ti} {bary:?}: {f:?} vs {g:?}");
+                // The same nodes carry the load (the order may differ).
+                let mut a: Vec<u16> = direct.nodes().to_vec();
+                let mut b: Vec<u16> = rule.nodes().to_vec();
+                a.sort_unstable();
+                b.sort_unstable();
+                assert_eq!(a, b);
+            }
         }
     }
 
