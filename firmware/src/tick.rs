@@ -364,9 +364,13 @@ impl<'b> HapticLoop<'b> {
         self.prev_tip = Some(tip);
         let detection = clock.cycles();
 
-        let solve = self.contact_solve(&contact);
+        let touching = self.contact_solve(&contact);
         let patch = clock.cycles();
-        let linear = solve.and_then(|held| held.map(|(s, d)| node_forces(&s, d)).transpose());
+        // The solve to render is the held one (`contact_solve` has just kept or replaced it).
+        let linear = touching.and_then(|d| match (d, &self.held) {
+            (Some(d), Some(held)) => node_forces(&held.solve, d).map(Some),
+            _ => Ok(None),
+        });
         let solved = clock.cycles();
         let rendered = linear.and_then(|l| match l {
             None => Ok((Contacts::new(), [0.0; 3])),
@@ -461,12 +465,10 @@ impl<'b> HapticLoop<'b> {
         }
     }
 
-    /// The factored contact solve to render with this tick and the tip's displacement, when
-    /// touching (the patch phase: the first tick's contact triangle, or [`Self::maintain_patch`]).
-    fn contact_solve(
-        &mut self,
-        contact: &ContactState,
-    ) -> Result<Option<(WeightedSolve, [f32; 3])>, SolveError> {
+    /// The patch phase: holds the factored contact solve to render with this tick (the first
+    /// tick's contact triangle, or [`Self::maintain_patch`]) and returns the tip's
+    /// displacement, when touching (the solve is then `self.held`'s).
+    fn contact_solve(&mut self, contact: &ContactState) -> Result<Option<[f32; 3]>, SolveError> {
         let ContactState::Touching {
             triangle,
             nodes,
@@ -488,7 +490,7 @@ impl<'b> HapticLoop<'b> {
             anchor,
             radius_m: tip_radius,
         };
-        let solve = match self.held {
+        match self.held {
             // The first tick of a contact also ran the detection: it solves on the contact
             // triangle alone (the tip's displacement is still tiny, so is the force); the
             // tip's patch is built over the next ticks.
@@ -515,11 +517,10 @@ impl<'b> HapticLoop<'b> {
                     solve,
                     dropped,
                 });
-                solve
             }
-            Some(held) => self.maintain_patch(held, origin, repatch)?,
-        };
-        Ok(Some((solve, displacement)))
+            Some(Held { origin: held, .. }) => self.maintain_patch(held, origin, repatch)?,
+        }
+        Ok(Some(displacement))
     }
 
     /// The force on the tissue for the mode from the linear model's tool force `f` at
@@ -623,22 +624,22 @@ impl HapticLoop<'_> {
     /// first tick's (radius 0) or its anchor has slid [`REPATCH_FRACTION`] of the tip radius,
     /// else advance the rebuild in progress by one step ([`POINTS_PER_TICK`] points, merging
     /// and choosing the nodes, or factoring), swapping it in when done. A rebuild that needs no points (zero
-    /// radius, or a mesh that resolves the tip) finishes in the tick it starts. Returns the
-    /// solve to render with this tick.
+    /// radius, or a mesh that resolves the tip) finishes in the tick it starts. The solve to
+    /// render with this tick is then `self.held`'s (`held` is where it was built).
     fn maintain_patch(
         &mut self,
-        held: Held,
+        held: PatchOrigin,
         origin: PatchOrigin,
         repatch: f32,
-    ) -> Result<WeightedSolve, SolveError> {
+    ) -> Result<(), SolveError> {
         let p = &mut self.pending;
         let Some(building) = p.origin else {
-            let h = held.origin;
+            let h = held;
             let stale = h.radius_m != origin.radius_m
                 || (h.anchor != origin.anchor
                     && dist2(h.anchor, origin.anchor) >= repatch * repatch);
             if !stale {
-                return Ok(held.solve);
+                return Ok(());
             }
             let o = origin;
             let build = &mut p.build;
@@ -650,18 +651,18 @@ impl HapticLoop<'_> {
             }
             p.origin = Some(origin);
             p.stage = Stage::Locating;
-            return Ok(held.solve);
+            return Ok(());
         };
         match p.stage {
             Stage::Locating => {
                 if p.build.locate(self.bank, POINTS_PER_TICK) {
                     p.stage = Stage::Located;
                 }
-                Ok(held.solve)
+                Ok(())
             }
             Stage::Located => {
                 p.stage = Stage::Chosen(p.build.finish(self.bank));
-                Ok(held.solve)
+                Ok(())
             }
             Stage::Chosen(patch) => {
                 p.origin = None;
@@ -671,14 +672,14 @@ impl HapticLoop<'_> {
     }
 
     /// Factors `patch` (built at `origin`) and holds it.
-    fn swap_in(&mut self, origin: PatchOrigin, patch: &Patch) -> Result<WeightedSolve, SolveError> {
+    fn swap_in(&mut self, origin: PatchOrigin, patch: &Patch) -> Result<(), SolveError> {
         let solve = WeightedSolve::new(self.bank, patch.nodes(), patch.weights())?;
         self.held = Some(Held {
             origin,
             solve,
             dropped: patch.dropped,
         });
-        Ok(solve)
+        Ok(())
     }
 }
 
