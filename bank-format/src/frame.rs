@@ -156,6 +156,43 @@ pub struct Telemetry {
     pub counters: Counters,
 }
 
+/// The loop body of one tick split at the code's phase boundaries (same unit as the body's
+/// count: CPU cycles, or instructions under QEMU); the parts sum to the body.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub struct PhaseCycles {
+    /// Encoder counts to joints, tip and Jacobian.
+    pub kinematics: u32,
+    /// The contact tracker's update on the tip's path (detection, or following the anchor).
+    pub detection: u32,
+    /// Keeping the contact patch: its nodes and weights and the factored `B C B^T`.
+    pub patch: u32,
+    /// The tick's 3 x 3 solve and the node forces.
+    pub solve: u32,
+    /// The tissue law Q, the force cap and the requested currents (`J^T F` plus gravity).
+    pub law: u32,
+    /// The safety supervisor and the tick's outputs.
+    pub supervisor: u32,
+}
+
+impl PhaseCycles {
+    /// The parts in order: kinematics, detection, patch, solve, law, supervisor.
+    pub fn to_array(&self) -> [u32; 6] {
+        [
+            self.kinematics,
+            self.detection,
+            self.patch,
+            self.solve,
+            self.law,
+            self.supervisor,
+        ]
+    }
+
+    /// The sum of the parts (wrapping, as the counts are).
+    pub fn total(&self) -> u32 {
+        self.to_array().iter().fold(0, |a, &b| a.wrapping_add(b))
+    }
+}
+
 /// Messages from the device.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub enum DeviceToHost {
@@ -190,6 +227,9 @@ pub enum DeviceToHost {
         body_cycles: u32,
         /// Cost of the whole previous tick (executor, link and plant I/O included), same unit.
         tick_cycles: u32,
+        /// `body_cycles` split at the loop's phase boundaries (protocol 5): the six parts sum
+        /// to `body_cycles`.
+        phase_cycles: PhaseCycles,
     },
     /// Sent once when a fault is latched.
     Fault {
@@ -284,6 +324,30 @@ pub fn encode_frame<'b, M: Serialize>(
     let n = cobs::try_encode(payload, buf).map_err(|_| FrameError::BufferTooSmall)?;
     *buf.get_mut(n).ok_or(FrameError::BufferTooSmall)? = 0;
     buf.get_mut(..=n).ok_or(FrameError::BufferTooSmall)
+}
+
+/// Encode a plant-channel message (`SPEC.md`, "Plant channel"): `len: u8 ++ postcard(msg)`,
+/// no CRC, no COBS (the lockstep pipes of software in the loop neither lose nor corrupt bytes).
+/// Returns the bytes written into `buf`.
+pub fn encode_plant<'b, M: Serialize>(msg: &M, buf: &'b mut [u8]) -> Result<&'b [u8], FrameError> {
+    let (len, body) = buf.split_first_mut().ok_or(FrameError::BufferTooSmall)?;
+    let used = postcard::to_slice(msg, body)
+        .map_err(|_| FrameError::BufferTooSmall)?
+        .len();
+    *len = u8::try_from(used).map_err(|_| FrameError::MessageTooLarge)?;
+    buf.get(..=used).ok_or(FrameError::BufferTooSmall)
+}
+
+/// Decode a plant-channel message from `body`, the `len` bytes that followed its length byte
+/// ([`encode_plant`]): they must decode to exactly one message.
+pub fn decode_plant<M: DeserializeOwned>(body: &[u8]) -> Result<M, FrameError> {
+    if body.is_empty() {
+        return Err(FrameError::TooShort);
+    }
+    match postcard::take_from_bytes(body) {
+        Ok((msg, [])) => Ok(msg),
+        _ => Err(FrameError::Malformed),
+    }
 }
 
 /// Decode one complete frame held in `frame` (COBS bytes, with or without the trailing 0x00;

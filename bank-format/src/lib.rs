@@ -73,7 +73,8 @@ pub use error::{BankError, DeviceField};
 pub use frame::{
     Contact, Counters, DeviceToHost, FRAME_CRC_LEN, FaultReason, FeedIter, FrameDecoder,
     FrameError, FrameStats, HostToDevice, MAX_CONTACTS, MAX_FRAME, MAX_MESSAGE, Mode,
-    PROTOCOL_VERSION, State, Telemetry, cobs_max_len, decode_frame, encode_frame,
+    PROTOCOL_VERSION, PhaseCycles, State, Telemetry, cobs_max_len, decode_frame, decode_plant,
+    encode_frame, encode_plant,
 };
 /// The `heapless` crate the message types use (telemetry's contact list), re-exported so the
 /// firmware and host build `Telemetry` with the same version.

@@ -69,6 +69,14 @@ fn device_messages() -> Vec<DeviceToHost> {
             contact_nodes: 8,
             body_cycles: u32::MAX,
             tick_cycles: 0,
+            phase_cycles: bank_format::PhaseCycles {
+                kinematics: 1,
+                detection: u32::MAX,
+                patch: 127,
+                solve: 128,
+                law: 0,
+                supervisor: 16_384,
+            },
         },
         DeviceToHost::Fault {
             tick: 99,
@@ -360,4 +368,57 @@ fn reset_drops_a_partial_frame() {
         dec.feed_slice(&good).collect::<Vec<_>>(),
         vec![Ok(HostToDevice::Arm)]
     );
+}
+
+#[test]
+fn plant_messages_are_a_length_byte_and_postcard() {
+    use bank_format::{decode_plant, encode_plant};
+    let msg = HostToDevice::Plant {
+        tick: 300,
+        encoder_counts: [-1, 0, i32::MAX],
+    };
+    let mut buf = [0u8; 64];
+    let bytes = encode_plant(&msg, &mut buf).unwrap().to_vec();
+    let body = postcard::to_slice(&msg, &mut [0u8; 64]).unwrap().to_vec();
+    assert_eq!(usize::from(bytes[0]), body.len());
+    assert_eq!(bytes[1..], body[..]);
+    assert_eq!(decode_plant::<HostToDevice>(&bytes[1..]).unwrap(), msg);
+    // Refused: empty, truncated, trailing bytes; a buffer too small to encode into.
+    assert_eq!(decode_plant::<HostToDevice>(&[]), Err(FrameError::TooShort));
+    assert_eq!(
+        decode_plant::<HostToDevice>(&bytes[1..bytes.len() - 1]),
+        Err(FrameError::Malformed)
+    );
+    let mut long = bytes[1..].to_vec();
+    long.push(0);
+    assert_eq!(
+        decode_plant::<HostToDevice>(&long),
+        Err(FrameError::Malformed)
+    );
+    assert_eq!(
+        encode_plant(&msg, &mut [0u8; 4]),
+        Err(FrameError::BufferTooSmall)
+    );
+    // The image's largest reply (every varint at its longest) is 72 bytes, within the 127
+    // its plant channel allows for (firmware/qemu/src/plant.rs).
+    let m = u32::MAX;
+    let reply = DeviceToHost::Plant {
+        tick: m,
+        currents_a: [f32::MAX; 3],
+        force_n: [f32::MAX; 3],
+        state: State::Fault,
+        contact_nodes: u8::MAX,
+        body_cycles: m,
+        tick_cycles: m,
+        phase_cycles: bank_format::PhaseCycles {
+            kinematics: m,
+            detection: m,
+            patch: m,
+            solve: m,
+            law: m,
+            supervisor: m,
+        },
+    };
+    let mut buf = [0u8; 256];
+    assert_eq!(encode_plant(&reply, &mut buf).unwrap().len(), 1 + 72);
 }

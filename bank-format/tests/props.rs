@@ -376,10 +376,17 @@ fn device_msg() -> impl Strategy<Value = DeviceToHost> {
                 Just(State::Fault)
             ],
             any::<u8>(),
-            any::<(u32, u32)>()
+            (any::<(u32, u32)>(), any::<[u32; 6]>())
         )
             .prop_map(
-                |(tick, currents_a, force_n, state, contact_nodes, (body_cycles, tick_cycles))| {
+                |(
+                    tick,
+                    currents_a,
+                    force_n,
+                    state,
+                    contact_nodes,
+                    ((body_cycles, tick_cycles), p),
+                )| {
                     DeviceToHost::Plant {
                         tick,
                         currents_a,
@@ -388,6 +395,14 @@ fn device_msg() -> impl Strategy<Value = DeviceToHost> {
                         contact_nodes,
                         body_cycles,
                         tick_cycles,
+                        phase_cycles: bank_format::PhaseCycles {
+                            kinematics: p[0],
+                            detection: p[1],
+                            patch: p[2],
+                            solve: p[3],
+                            law: p[4],
+                            supervisor: p[5],
+                        },
                     }
                 }
             ),

@@ -18,13 +18,13 @@
 
 use bank_format::{
     Bank, BankError, Counters, DeviceToHost, FaultReason, FrameDecoder, HostToDevice, Mode,
-    PROTOCOL_VERSION, State, Telemetry, heapless,
+    PROTOCOL_VERSION, PhaseCycles, State, Telemetry, heapless,
 };
 
 use crate::hal::{CycleCounter, Plant};
 use crate::link::TickEnd;
 use crate::safety::{ArmRefused, Fault, SafetyConfig, Supervisor, TickInput};
-use crate::tick::{HapticLoop, LoopInput};
+use crate::tick::{HapticLoop, LoopInput, PhaseMarks};
 
 /// Telemetry goes out every this many ticks (100 Hz at 1 kHz).
 pub const TELEMETRY_EVERY_TICKS: u32 = 10;
@@ -51,6 +51,9 @@ pub struct TickReport {
     pub body_cycles: u32,
     /// Cost of the whole previous tick, cycles.
     pub tick_cycles: u32,
+    /// `body_cycles` split at the loop's phase boundaries ([`HapticLoop::tick_marked`]): the
+    /// parts sum to `body_cycles`. Without a bank the body is all supervisor.
+    pub phase_cycles: PhaseCycles,
 }
 
 /// What runs the ticks: the loop over a valid bank, or the zero-current stand-in without one.
@@ -174,9 +177,9 @@ impl<'b, 'q> App<'b, 'q> {
             link_silence_ticks: self.link_silence(),
             interlocks,
         };
-        let (out, new_fault) = match &mut self.core {
+        let (out, new_fault, marks) = match &mut self.core {
             Core::Loop(lp) => {
-                let out = lp.tick(input);
+                let (out, marks) = lp.tick_marked(input, clock);
                 let report = TickReport {
                     tick: out.tick,
                     currents_a: out.currents_a,
@@ -185,8 +188,9 @@ impl<'b, 'q> App<'b, 'q> {
                     contact_nodes: out.contacts.len() as u8,
                     body_cycles: 0,
                     tick_cycles: self.last_tick_cycles,
+                    phase_cycles: PhaseCycles::default(),
                 };
-                (report, out.new_fault)
+                (report, out.new_fault, marks)
             }
             Core::NoBank {
                 supervisor,
@@ -212,12 +216,22 @@ impl<'b, 'q> App<'b, 'q> {
                     contact_nodes: 0,
                     body_cycles: 0,
                     tick_cycles: self.last_tick_cycles,
+                    phase_cycles: PhaseCycles::default(),
                 };
-                (report, s.new_fault)
+                let marks = PhaseMarks {
+                    kinematics: start,
+                    detection: start,
+                    patch: start,
+                    solve: start,
+                    law: start,
+                };
+                (report, s.new_fault, marks)
             }
         };
+        let end = clock.cycles();
         let out = TickReport {
-            body_cycles: clock.cycles().wrapping_sub(start),
+            body_cycles: end.wrapping_sub(start),
+            phase_cycles: marks.phases(start, end),
             ..out
         };
         self.ticks_since_host_frame = self.ticks_since_host_frame.saturating_add(1);
@@ -592,8 +606,14 @@ mod tests {
         assert!(reports.iter().all(|a| a.state == WireState::Armed));
         // Armed: every tick drove the motors.
         assert!(plant.driven.iter().all(Option::is_some));
-        // The body was measured between two readings of the clock.
-        assert!(reports.iter().all(|a| a.body_cycles == 100));
+        // The body was measured between two readings of the clock around the loop, which
+        // read it five more times (the ends of its first five phases): six phases of 100
+        // cycles each, which sum to the body.
+        for r in &reports {
+            assert_eq!(r.body_cycles, 600);
+            assert_eq!(r.phase_cycles.to_array(), [100; 6]);
+            assert_eq!(r.phase_cycles.total(), r.body_cycles);
+        }
     }
 
     #[test]
@@ -992,5 +1012,10 @@ mod tests {
         assert!(reports.iter().all(|a| a.state == WireState::Fault));
         assert!(plant.driven.iter().all(Option::is_none));
         assert_eq!(app.telemetry().fault, Some(FaultReason::InvalidBank));
+        // No loop: the body (two clock readings, 100 cycles apart) is all supervisor.
+        for r in &reports {
+            assert_eq!(r.body_cycles, 100);
+            assert_eq!(r.phase_cycles.to_array(), [0, 0, 0, 0, 0, 100]);
+        }
     }
 }

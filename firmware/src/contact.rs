@@ -226,6 +226,13 @@ fn intersect(
 ) -> Option<Hit> {
     let [a, b, c] = vertices(positions, tri)?;
     let n = cross(sub(b, a), sub(c, a));
+    // The plane first: a tick's short segment crosses the planes of few candidates, so most
+    // stop here (the tests below are a conjunction: their order changes no result).
+    let s0 = dot(sub(p0, a), n);
+    let s1 = dot(sub(p1, a), n);
+    if !(s0 >= 0.0 && s1 <= 0.0 && s0 > s1) {
+        return None;
+    }
     let nn = dot(n, n);
     if !(nn > 0.0) {
         return None;
@@ -234,11 +241,6 @@ fn intersect(
     let dn = dot(dir, n);
     // Entering only, and not grazing.
     if !(dn < 0.0) || dn * dn <= PARALLEL_TOL * PARALLEL_TOL * dot(dir, dir) * nn {
-        return None;
-    }
-    let s0 = dot(sub(p0, a), n);
-    let s1 = dot(sub(p1, a), n);
-    if !(s0 >= 0.0 && s1 <= 0.0 && s0 > s1) {
         return None;
     }
     let t = (s0 / (s0 - s1)).clamp(0.0, 1.0);

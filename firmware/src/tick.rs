@@ -48,11 +48,11 @@
 //! under the supervisor, which faults `BadCommand` on one that is not finite or over its limit
 //! rather than clamping it). The mode is set only while not armed ([`HapticLoop::set_mode`]).
 
-use bank_format::{Bank, Contact, Counters, MAX_CONTACTS, Mode, Telemetry, heapless};
+use bank_format::{Bank, Contact, Counters, MAX_CONTACTS, Mode, PhaseCycles, Telemetry, heapless};
 
 use crate::contact::{ContactState, ContactTracker};
 use crate::device::{Device, Joints, sin_cos, transpose_mul};
-use crate::hal::Interlocks;
+use crate::hal::{CycleCounter, Interlocks};
 use crate::patch::{Patch, PatchBuild};
 use crate::safety::{ArmRefused, Fault, SafetyConfig, State, Supervisor, TickInput};
 use crate::solve::{SolveError, WeightedSolve, apply_tissue_law};
@@ -345,6 +345,17 @@ impl<'b> HapticLoop<'b> {
 
     /// One tick (see the module notes). Never panics.
     pub fn tick(&mut self, input: LoopInput) -> LoopOutput {
+        self.tick_marked(input, &NoCounter).0
+    }
+
+    /// [`HapticLoop::tick`], reading `clock` at the ends of its first five phases
+    /// ([`PhaseMarks`]: kinematics, detection, patch, solve, law; the supervisor's phase ends
+    /// where the caller stops timing). Five counter reads a tick, nothing else changes.
+    pub fn tick_marked<C: CycleCounter>(
+        &mut self,
+        input: LoopInput,
+        clock: &C,
+    ) -> (LoopOutput, PhaseMarks) {
         self.tick = self.tick.wrapping_add(1);
         if input.overrun {
             self.counters.overruns = self.counters.overruns.wrapping_add(1);
@@ -353,12 +364,30 @@ impl<'b> HapticLoop<'b> {
         let counts = sub_wrapping(input.encoder_counts, self.encoder_offset);
         let q = self.device.joints(counts);
         let (tip, jac) = self.device.tip_and_jacobian(&q);
+        let kinematics = clock.cycles();
         let prev = self.prev_tip.unwrap_or(tip);
         let contact = self.tracker.update(self.bank, prev, tip);
         self.prev_tip = Some(tip);
+        let detection = clock.cycles();
 
-        let (contacts, force_on_tool, solve_error) = match self.contact_force(&contact) {
-            Ok((contacts, f)) => (contacts, self.device.limit_force(f), None),
+        let touching = self.contact_solve(&contact);
+        let patch = clock.cycles();
+        // The solve to render is the held one (`contact_solve` has just kept or replaced it).
+        let linear = touching.and_then(|d| match (d, &self.held) {
+            (Some(d), Some(held)) => node_forces(&held.solve, d).map(Some),
+            _ => Ok(None),
+        });
+        let solved = clock.cycles();
+        let rendered = linear.and_then(|l| match l {
+            None => Ok((Contacts::new(), [0.0; 3])),
+            Some((contacts, f, d)) => self.law(f, d).map(|on_tissue| (contacts, on_tissue)),
+        });
+        let (contacts, force_on_tool, solve_error) = match rendered {
+            Ok((contacts, on_tissue)) => (
+                contacts,
+                self.device.limit_force(on_tissue.map(|f| -f)),
+                None,
+            ),
             Err(e) => (Contacts::new(), [0.0; 3], Some(e)),
         };
         let dropped_load = match self.held {
@@ -379,6 +408,7 @@ impl<'b> HapticLoop<'b> {
                 self.device.requested_currents([fp + gp, fy + gy, fi + gi])
             }
         };
+        let law = clock.cycles();
         let out = self.supervisor.tick(&TickInput {
             bank_error: None,
             counts,
@@ -400,7 +430,7 @@ impl<'b> HapticLoop<'b> {
             tool_force_n: force_on_tool,
             dropped_load,
         };
-        LoopOutput {
+        let output = LoopOutput {
             tick: self.tick,
             currents_a: out.currents_a,
             clamped: out.clamped,
@@ -414,7 +444,15 @@ impl<'b> HapticLoop<'b> {
             solve_error,
             patch: self.held.map(|h| h.origin),
             dropped_load,
-        }
+        };
+        let marks = PhaseMarks {
+            kinematics,
+            detection,
+            patch,
+            solve: solved,
+            law,
+        };
+        (output, marks)
     }
 
     /// Telemetry of the last tick (for decimated sending).
@@ -433,11 +471,10 @@ impl<'b> HapticLoop<'b> {
         }
     }
 
-    /// Contact forces on the tissue (linear model) and the force on the tool (N) for the mode.
-    fn contact_force(
-        &mut self,
-        contact: &ContactState,
-    ) -> Result<(Contacts, [f32; 3]), SolveError> {
+    /// The patch phase: holds the factored contact solve to render with this tick (the first
+    /// tick's contact triangle, or [`Self::maintain_patch`]) and returns the tip's
+    /// displacement, when touching (the solve is then `self.held`'s).
+    fn contact_solve(&mut self, contact: &ContactState) -> Result<Option<[f32; 3]>, SolveError> {
         let ContactState::Touching {
             triangle,
             nodes,
@@ -448,7 +485,7 @@ impl<'b> HapticLoop<'b> {
         else {
             self.held = None;
             self.pending.origin = None;
-            return Ok((Contacts::new(), [0.0; 3]));
+            return Ok(None);
         };
         let tip_radius = self.bank.device().tip_radius_m;
         let repatch = REPATCH_FRACTION * tip_radius;
@@ -459,45 +496,132 @@ impl<'b> HapticLoop<'b> {
             anchor,
             radius_m: tip_radius,
         };
-        let solve = match self.held {
+        match self.held {
             // The first tick of a contact also ran the detection: it solves on the contact
             // triangle alone (the tip's displacement is still tiny, so is the force); the
             // tip's patch is built over the next ticks.
             None => {
                 self.pending.origin = None;
-                // `tool_patch(.., 0.0)` in the idle rebuild's place (no large temporary).
-                let build = &mut self.pending.build;
-                build.start(self.bank, triangle, nodes, bary, anchor, 0.0);
-                let patch = build.finish(self.bank);
-                let solve = WeightedSolve::new(self.bank, patch.nodes(), patch.weights())?;
+                let (solve, dropped) = match triangle_solve(self.bank, nodes, bary) {
+                    Some(solve) => (solve, 0.0),
+                    None => {
+                        // A vertex pair the bank does not couple (or a failing solve): the
+                        // patch rule's choice, `tool_patch(.., 0.0)`, in the idle rebuild's
+                        // place (no large temporary).
+                        let build = &mut self.pending.build;
+                        build.start(self.bank, triangle, nodes, bary, anchor, 0.0);
+                        let patch = build.finish(self.bank);
+                        let solve = WeightedSolve::new(self.bank, patch.nodes(), patch.weights())?;
+                        (solve, patch.dropped)
+                    }
+                };
                 self.held = Some(Held {
                     origin: PatchOrigin {
                         radius_m: 0.0,
                         ..origin
                     },
                     solve,
-                    dropped: patch.dropped,
+                    dropped,
                 });
-                solve
             }
-            Some(held) => self.maintain_patch(held, origin, repatch)?,
-        };
-        let forces = solve.forces(displacement)?;
-        let mut contacts = Contacts::new();
-        for (&node, &force_n) in forces.nodes().iter().zip(forces.forces()) {
-            // MAX_CONTACTS == MAX_CONTACT_NODES: never full.
-            if contacts.push(Contact { node, force_n }).is_err() {
-                break;
-            }
+            Some(Held { origin: held, .. }) => self.maintain_patch(held, origin, repatch)?,
         }
-        let on_tissue = match self.mode {
-            Mode::Render => {
-                apply_tissue_law(self.bank.tissue_law(), forces.tool_force_n, displacement)?
-            }
-            Mode::LinearLaw => forces.tool_force_n,
-            Mode::Transparent | Mode::ConstantCurrent { .. } => [0.0; 3],
-        };
-        Ok((contacts, on_tissue.map(|f| -f)))
+        Ok(Some(displacement))
+    }
+
+    /// The force on the tissue for the mode from the linear model's tool force `f` at
+    /// displacement `d` (the law phase): Q in `Render`, `f` itself in `LinearLaw`, none in
+    /// the modes that render no contact.
+    fn law(&self, f: [f32; 3], d: [f32; 3]) -> Result<[f32; 3], SolveError> {
+        match self.mode {
+            Mode::Render => apply_tissue_law(self.bank.tissue_law(), f, d),
+            Mode::LinearLaw => Ok(f),
+            Mode::Transparent | Mode::ConstantCurrent { .. } => Ok([0.0; 3]),
+        }
+    }
+}
+
+/// The first tick's solve on the contact triangle alone: its vertices with a positive
+/// barycentric coordinate, weighted by it (normalised). The same weights as the patch rule at
+/// radius 0 ([`PatchBuild`]: one load per vertex, no quadrature) without building a patch;
+/// `None` when the bank does not couple two of the vertices or the solve fails, for the
+/// caller to take the patch rule's path (which drops an uncoupled vertex).
+fn triangle_solve(bank: &Bank, nodes: [u16; 3], bary: [f32; 3]) -> Option<WeightedSolve> {
+    let (mut n, mut w, mut len) = ([0u16; 3], [0.0f32; 3], 0);
+    for (&k, &b) in nodes.iter().zip(&bary) {
+        if b > 0.0
+            && b.is_finite()
+            && let (Some(nk), Some(wk)) = (n.get_mut(len), w.get_mut(len))
+        {
+            (*nk, *wk) = (k, b);
+            len += 1;
+        }
+    }
+    if len == 0 {
+        return None;
+    }
+    let kept: f32 = w.iter().sum();
+    for x in w.iter_mut() {
+        *x /= kept;
+    }
+    WeightedSolve::new(bank, n.get(..len)?, w.get(..len)?).ok()
+}
+
+/// The solve phase: the node forces `f_k = w_k f_tool` of `solve` at displacement `d` as
+/// telemetry's contact set, the linear model's tool force, and `d` (for the law).
+fn node_forces(
+    solve: &WeightedSolve,
+    d: [f32; 3],
+) -> Result<(Contacts, [f32; 3], [f32; 3]), SolveError> {
+    let forces = solve.forces(d)?;
+    let mut contacts = Contacts::new();
+    for (&node, &force_n) in forces.nodes().iter().zip(forces.forces()) {
+        // MAX_CONTACTS == MAX_CONTACT_NODES: never full.
+        if contacts.push(Contact { node, force_n }).is_err() {
+            break;
+        }
+    }
+    Ok((contacts, forces.tool_force_n, d))
+}
+
+/// Counter readings at the ends of a tick's first five phases
+/// ([`HapticLoop::tick_marked`]); the caller's readings before and after the tick bound the
+/// first and the last (supervisor) phase.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct PhaseMarks {
+    /// After encoder counts to joints, tip and Jacobian.
+    pub kinematics: u32,
+    /// After the contact tracker's update.
+    pub detection: u32,
+    /// After the patch (and its factored solve) for this tick.
+    pub patch: u32,
+    /// After the 3 x 3 solve and the node forces.
+    pub solve: u32,
+    /// After the law, the force cap and the requested currents.
+    pub law: u32,
+}
+
+impl PhaseMarks {
+    /// The phases' lengths between `start` (read before the tick) and `end` (after it),
+    /// wrapping: they sum to `end - start`.
+    pub fn phases(&self, start: u32, end: u32) -> PhaseCycles {
+        PhaseCycles {
+            kinematics: self.kinematics.wrapping_sub(start),
+            detection: self.detection.wrapping_sub(self.kinematics),
+            patch: self.patch.wrapping_sub(self.detection),
+            solve: self.solve.wrapping_sub(self.patch),
+            law: self.law.wrapping_sub(self.solve),
+            supervisor: end.wrapping_sub(self.law),
+        }
+    }
+}
+
+/// The counter of an untimed tick ([`HapticLoop::tick`]): always 0, compiled away.
+struct NoCounter;
+
+impl CycleCounter for NoCounter {
+    fn cycles(&self) -> u32 {
+        0
     }
 }
 
@@ -506,22 +630,22 @@ impl HapticLoop<'_> {
     /// first tick's (radius 0) or its anchor has slid [`REPATCH_FRACTION`] of the tip radius,
     /// else advance the rebuild in progress by one step ([`POINTS_PER_TICK`] points, merging
     /// and choosing the nodes, or factoring), swapping it in when done. A rebuild that needs no points (zero
-    /// radius, or a mesh that resolves the tip) finishes in the tick it starts. Returns the
-    /// solve to render with this tick.
+    /// radius, or a mesh that resolves the tip) finishes in the tick it starts. The solve to
+    /// render with this tick is then `self.held`'s (`held` is where it was built).
     fn maintain_patch(
         &mut self,
-        held: Held,
+        held: PatchOrigin,
         origin: PatchOrigin,
         repatch: f32,
-    ) -> Result<WeightedSolve, SolveError> {
+    ) -> Result<(), SolveError> {
         let p = &mut self.pending;
         let Some(building) = p.origin else {
-            let h = held.origin;
+            let h = held;
             let stale = h.radius_m != origin.radius_m
                 || (h.anchor != origin.anchor
                     && dist2(h.anchor, origin.anchor) >= repatch * repatch);
             if !stale {
-                return Ok(held.solve);
+                return Ok(());
             }
             let o = origin;
             let build = &mut p.build;
@@ -533,18 +657,18 @@ impl HapticLoop<'_> {
             }
             p.origin = Some(origin);
             p.stage = Stage::Locating;
-            return Ok(held.solve);
+            return Ok(());
         };
         match p.stage {
             Stage::Locating => {
                 if p.build.locate(self.bank, POINTS_PER_TICK) {
                     p.stage = Stage::Located;
                 }
-                Ok(held.solve)
+                Ok(())
             }
             Stage::Located => {
                 p.stage = Stage::Chosen(p.build.finish(self.bank));
-                Ok(held.solve)
+                Ok(())
             }
             Stage::Chosen(patch) => {
                 p.origin = None;
@@ -554,14 +678,14 @@ impl HapticLoop<'_> {
     }
 
     /// Factors `patch` (built at `origin`) and holds it.
-    fn swap_in(&mut self, origin: PatchOrigin, patch: &Patch) -> Result<WeightedSolve, SolveError> {
+    fn swap_in(&mut self, origin: PatchOrigin, patch: &Patch) -> Result<(), SolveError> {
         let solve = WeightedSolve::new(self.bank, patch.nodes(), patch.weights())?;
         self.held = Some(Held {
             origin,
             solve,
             dropped: patch.dropped,
         });
-        Ok(solve)
+        Ok(())
     }
 }
 
@@ -630,6 +754,34 @@ mod tests {
         assert!(norm(out.tool_force_n) <= cal.max_force_n * (1.0 + 1e-5));
         if out.state != State::Armed {
             assert_eq!(out.currents_a, [0.0; 3]);
+        }
+    }
+
+    #[test]
+    fn the_first_ticks_triangle_solve_is_the_patch_rules_at_radius_zero() {
+        let bytes = flat_patch();
+        let bank = Bank::parse(bytes.as_slice()).unwrap();
+        let mut build = PatchBuild::new();
+        let d = [1.0e-4, -2.0e-4, -5.0e-4];
+        for (ti, &tri) in bank.triangles().iter().enumerate().take(8) {
+            for bary in [[0.2, 0.3, 0.5], [0.0, 0.25, 0.75], [1.0, 0.0, 0.0]] {
+                let direct = triangle_solve(&bank, tri, bary).unwrap().forces(d).unwrap();
+                build.start(&bank, ti as u32, tri, bary, [0.0; 3], 0.0);
+                let patch = build.finish(&bank);
+                let rule = WeightedSolve::new(&bank, patch.nodes(), patch.weights())
+                    .unwrap()
+                    .forces(d)
+                    .unwrap();
+                let (f, g) = (direct.tool_force_n, rule.tool_force_n);
+                let err = norm([f[0] - g[0], f[1] - g[1], f[2] - g[2]]);
+                assert!(err <= 1e-5 * norm(g), "{ti} {bary:?}: {f:?} vs {g:?}");
+                // The same nodes carry the load (the order may differ).
+                let mut a: Vec<u16> = direct.nodes().to_vec();
+                let mut b: Vec<u16> = rule.nodes().to_vec();
+                a.sort_unstable();
+                b.sort_unstable();
+                assert_eq!(a, b);
+            }
         }
     }
 

@@ -110,6 +110,8 @@ fn quick_report_renders_every_plot_and_agrees_with_the_references() {
     for id in [
         "firmware-histogram",
         "firmware-phases",
+        "firmware-code-phase-histogram",
+        "firmware-code-phases",
         "f32-vs-f64",
         "contact-refinement",
         "mesh-bank",
@@ -156,8 +158,13 @@ fn quick_report_renders_every_plot_and_agrees_with_the_references() {
     assert_eq!(find("edge and vertex hits")["verdict"], "matches_reference");
     // The supervisor's overspeed rule (firmware/src/safety.rs) refuses a 50 m/s tip.
     assert_eq!(find("a 5 cm strike in one tick")["verdict"], "refused");
-    // Every histogram series is a distribution of the script's ticks: its shares sum to 100 %.
-    for s in knob("firmware-histogram")["series"].as_array().unwrap() {
+    // Every histogram series is a distribution of the script's (or the code phase's) ticks:
+    // its shares sum to 100 %.
+    let histograms = ["firmware-histogram", "firmware-code-phase-histogram"];
+    for s in histograms
+        .iter()
+        .flat_map(|id| knob(id)["series"].as_array().unwrap())
+    {
         let total: f64 = s["points"]
             .as_array()
             .unwrap()
@@ -172,6 +179,17 @@ fn quick_report_renders_every_plot_and_agrees_with_the_references() {
         .as_f64()
         .unwrap();
     assert!(worst_tick > 0.0 && worst_tick < 125_000.0, "{worst_tick}");
+    // Every code phase ran (the scripts touch the organ, so patch and solve did too), and
+    // the whole tick holds the link phase and the body's phases.
+    let code_worst = knob("firmware-code-phases")["series"][0]["points"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|p| p["y"].as_f64().unwrap())
+        .collect::<Vec<_>>();
+    assert_eq!(code_worst.len(), 7);
+    assert!(code_worst.iter().all(|&w| w > 0.0), "{code_worst:?}");
+    assert!(code_worst[6] < worst_tick, "{code_worst:?} {worst_tick}");
     // The scene's bank on the plot is the one `host bank build` writes.
     let scene = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/liver.toml");
     let bank = dir.path().join("liver.bank");

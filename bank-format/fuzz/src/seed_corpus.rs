@@ -45,6 +45,14 @@ fn main() -> std::io::Result<()> {
             contact_nodes: 3,
             body_cycles: 2500,
             tick_cycles: 9000,
+            phase_cycles: bank_format::PhaseCycles {
+                kinematics: 300,
+                detection: 900,
+                patch: 600,
+                solve: 200,
+                law: 250,
+                supervisor: 250,
+            },
         },
         DeviceToHost::Fault {
             tick: 5,

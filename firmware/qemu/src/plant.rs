@@ -2,12 +2,17 @@
 //! peripherals; here they are the host's plant simulator, reached through two named pipes that
 //! QEMU's semihosting opens in its working directory: `sil-plant-in` (host -> image,
 //! `HostToDevice::Plant { tick, encoder_counts }`) and `sil-plant-out` (image -> host,
-//! `DeviceToHost::Plant { tick, currents_a, .. }`), both as link frames (postcard + COBS + CRC).
+//! `DeviceToHost::Plant { tick, currents_a, .. }`), both as plant-channel messages (a length
+//! byte and postcard, `SPEC.md` "Plant channel": the pipes need no CRC and no COBS, which cost
+//! the tick about 1,000 instructions).
 //!
 //! Semihosting calls stop the virtual CPU, so virtual time (`-icount`) stands still while the
 //! host computes the next encoder counts: the exchange is lockstep and runs are deterministic.
 
-use bank_format::{DeviceToHost, FrameDecoder, FrameError, HostToDevice, MAX_FRAME, encode_frame};
+use crate::systick::instructions;
+use bank_format::{
+    DeviceToHost, FrameError, HostToDevice, PhaseCycles, decode_plant, encode_plant,
+};
 use core::fmt;
 use firmware::app::TickReport;
 use firmware::hal::Plant;
@@ -26,7 +31,7 @@ pub enum PlantError {
     Closed,
     /// A semihosting call failed.
     Io(semihosting::io::Error),
-    /// A frame from the host was dropped.
+    /// A message from the host did not decode (or one to it did not encode).
     Frame(FrameError),
     /// The host answered for another tick or with another message (a missed plant frame).
     Unexpected {
@@ -40,7 +45,7 @@ impl fmt::Display for PlantError {
         match self {
             PlantError::Closed => f.write_str("closed by the host"),
             PlantError::Io(e) => write!(f, "semihosting I/O: {e:?}"),
-            PlantError::Frame(e) => write!(f, "bad frame from the host: {e}"),
+            PlantError::Frame(e) => write!(f, "bad plant message: {e}"),
             PlantError::Unexpected { expected } => {
                 write!(f, "expected the encoder frame of tick {expected}")
             }
@@ -52,7 +57,6 @@ impl fmt::Display for PlantError {
 pub struct PlantChannel {
     rx: File,
     tx: File,
-    decoder: FrameDecoder<HostToDevice>,
     buf: [u8; 64],
     pos: usize,
     len: usize,
@@ -68,7 +72,6 @@ impl PlantChannel {
         Ok(PlantChannel {
             rx,
             tx,
-            decoder: FrameDecoder::new(),
             buf: [0; 64],
             pos: 0,
             len: 0,
@@ -76,14 +79,12 @@ impl PlantChannel {
         })
     }
 
-    /// The next frame from the host (blocking; virtual time stands still meanwhile).
-    fn next_frame(&mut self) -> Result<HostToDevice, PlantError> {
+    /// The next byte from the host (blocking; virtual time stands still meanwhile).
+    fn next_byte(&mut self) -> Result<u8, PlantError> {
         loop {
-            while let Some(&b) = self.buf.get(self.pos).filter(|_| self.pos < self.len) {
+            if let Some(&b) = self.buf.get(self.pos).filter(|_| self.pos < self.len) {
                 self.pos += 1;
-                if let Some(r) = self.decoder.feed(b) {
-                    return r.map_err(PlantError::Frame);
-                }
+                return Ok(b);
             }
             let n = self.rx.read(&mut self.buf).map_err(PlantError::Io)?;
             if n == 0 {
@@ -92,24 +93,64 @@ impl PlantChannel {
             (self.pos, self.len) = (0, n);
         }
     }
+
+    /// The next message from the host: its length byte, then its postcard bytes.
+    fn next_message(&mut self) -> Result<HostToDevice, PlantError> {
+        let len = usize::from(self.next_byte()?);
+        let mut body = [0u8; MAX_FROM_HOST];
+        let body = body
+            .get_mut(..len)
+            .ok_or(PlantError::Frame(FrameError::Oversize))?;
+        for b in body.iter_mut() {
+            *b = self.next_byte()?;
+        }
+        decode_plant(body).map_err(PlantError::Frame)
+    }
 }
+
+/// The largest plant message the host sends (`Plant { tick, encoder_counts }` takes at most
+/// 21 postcard bytes).
+const MAX_FROM_HOST: usize = 32;
+/// Room for the image's `Plant` reply (at most 72 postcard bytes: `bank-format/tests/frames.rs`) and
+/// its length byte.
+const MAX_TO_HOST: usize = 128;
 
 impl PlantChannel {
     /// Answer the host with the tick's outcome: the currents (zero unless armed) and what the
     /// harness records.
     pub fn reply(&mut self, out: &TickReport) -> Result<(), PlantError> {
+        // The report counts virtual core cycles (`InstructionCounter`); the harness gets
+        // instructions. Each phase ends where the cumulative count since the body's start
+        // does, so the converted phases still sum to the converted body.
+        let p = out.phase_cycles.to_array();
+        let mut ends = [0u32; 6];
+        let mut at = 0u32;
+        for (end, part) in ends.iter_mut().zip(p) {
+            at = at.wrapping_add(part);
+            *end = instructions(at);
+        }
+        let [k, d, pa, s, l, su] = ends;
+        let phase_cycles = PhaseCycles {
+            kinematics: k,
+            detection: d.wrapping_sub(k),
+            patch: pa.wrapping_sub(d),
+            solve: s.wrapping_sub(pa),
+            law: l.wrapping_sub(s),
+            supervisor: su.wrapping_sub(l),
+        };
         let msg = DeviceToHost::Plant {
             tick: out.tick,
             currents_a: out.currents_a,
             force_n: out.force_n,
             state: out.state,
             contact_nodes: out.contact_nodes,
-            body_cycles: out.body_cycles,
+            body_cycles: instructions(out.body_cycles),
             tick_cycles: out.tick_cycles,
+            phase_cycles,
         };
-        let mut buf = [0u8; MAX_FRAME];
-        let frame = encode_frame(&msg, &mut buf).map_err(PlantError::Frame)?;
-        self.tx.write_all(frame).map_err(PlantError::Io)
+        let mut buf = [0u8; MAX_TO_HOST];
+        let bytes = encode_plant(&msg, &mut buf).map_err(PlantError::Frame)?;
+        self.tx.write_all(bytes).map_err(PlantError::Io)
     }
 }
 
@@ -120,7 +161,7 @@ impl Plant for PlantChannel {
 
     fn read_encoders(&mut self) -> Result<[i32; 3], PlantError> {
         let tick = self.tick.wrapping_add(1);
-        match self.next_frame()? {
+        match self.next_message()? {
             HostToDevice::Plant {
                 tick: t,
                 encoder_counts,

@@ -4,8 +4,9 @@
 //! SysTick runs from the 168 MHz core clock and interrupts once per millisecond; the driver's
 //! time base is that millisecond count (`tick-hz-1_000`). Under QEMU's `-icount shift=3` every
 //! instruction advances virtual time by 2^3 ns, i.e. SysTick by 0.168 x 8 = 1.344 counts, so
-//! 168 counts are exactly 125 instructions: [`InstructionCounter`] turns the SysTick position
-//! into an instruction count (on a board DWT's cycle counter would take its place).
+//! 168 counts are exactly 125 instructions: [`InstructionCounter`] reads the SysTick position
+//! as a count of virtual core cycles and [`instructions`] converts (on a board DWT's cycle
+//! counter takes its place).
 
 use core::cell::{Cell, RefCell};
 use core::task::Waker;
@@ -71,32 +72,33 @@ fn SysTick() {
     });
 }
 
-/// Instructions executed since [`start`] (wrapping), from the period count and SysTick's
-/// position in the period (exact under `-icount shift=3`).
+/// The loop's cycle counter: SysTick counts since [`start`] (virtual core cycles at 168 MHz,
+/// wrapping), cheap to read (no 64-bit division: the tick reads it seven times);
+/// [`instructions`] turns a difference of two readings into instructions.
 pub struct InstructionCounter;
 
 impl InstructionCounter {
     /// Instructions since the SysTick interrupt that began the current period.
     pub fn since_period_start(&self) -> u32 {
-        to_instructions(u64::from(elapsed_in_period()))
+        instructions(elapsed_in_period())
     }
 }
 
 impl CycleCounter for InstructionCounter {
     fn cycles(&self) -> u32 {
-        let counts = critical_section::with(|cs| {
-            let ms = DRIVER.state.borrow(cs).0.get();
+        critical_section::with(|cs| {
+            // Wrapping: only differences of readings are used.
+            let ms = DRIVER.state.borrow(cs).0.get() as u32;
             let mut within = elapsed_in_period();
             // A wrap not yet counted (interrupts are masked here): the period has ended.
             let ms = if cortex_m::peripheral::SCB::is_pendst_pending() {
                 within = elapsed_in_period();
-                ms + 1
+                ms.wrapping_add(1)
             } else {
                 ms
             };
-            ms * u64::from(COUNTS_PER_PERIOD) + u64::from(within)
-        });
-        to_instructions(counts)
+            ms.wrapping_mul(COUNTS_PER_PERIOD).wrapping_add(within)
+        })
     }
 }
 
@@ -105,7 +107,8 @@ fn elapsed_in_period() -> u32 {
     COUNTS_PER_PERIOD - 1 - SYST::get_current()
 }
 
-/// 168 SysTick counts = 125 instructions under `-icount shift=3`.
-fn to_instructions(counts: u64) -> u32 {
-    (counts * 125 / 168) as u32
+/// 168 SysTick counts = 125 instructions under `-icount shift=3` (rounded down; saturates
+/// past 34 million counts, 200 ms, far beyond any tick).
+pub fn instructions(counts: u32) -> u32 {
+    counts.saturating_mul(125) / 168
 }

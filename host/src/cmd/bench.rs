@@ -370,7 +370,9 @@ fn tick(args: TickArgs) -> Result<()> {
 
 fn sil(args: SilArgs) -> Result<()> {
     use bank_format::region::{FIRMWARE_LEN, RAM_LEN, RAM_ORIGIN};
-    use host::sil::cost::{by_contact_nodes, image_size};
+    use host::sil::cost::{
+        CODE_PHASES, CodePhaseStats, by_contact_nodes, code_phase_samples, image_size,
+    };
     use host::sil::harness::{self, Session};
     use host::sil::script::Script;
     let (setup, bytes) = args.setup.resolve()?;
@@ -393,6 +395,18 @@ fn sil(args: SilArgs) -> Result<()> {
         records.push(run.ticks);
     }
     let groups = by_contact_nodes(&records.concat());
+    // Per code phase over every tick of every run (each run's link samples from its own ticks).
+    let mut samples: [Vec<u32>; 7] = Default::default();
+    for run in &records {
+        for (all, v) in samples.iter_mut().zip(code_phase_samples(run)) {
+            all.extend(v);
+        }
+    }
+    let code: Vec<(&str, CodePhaseStats)> = CODE_PHASES
+        .iter()
+        .zip(&samples)
+        .map(|(&n, v)| (n, CodePhaseStats::of(v)))
+        .collect();
     let size = image_size(&setup.image, RAM_ORIGIN, RAM_LEN as u32)?;
     let worst = groups.values().map(|g| g.body_max).max().unwrap_or(0);
     let worst_tick = groups.values().map(|g| g.tick_max).max().unwrap_or(0);
@@ -404,6 +418,7 @@ fn sil(args: SilArgs) -> Result<()> {
         let out = serde_json::json!({
             "instructions_per_period": harness::INSTRUCTIONS_PER_TICK,
             "by_contact_nodes": by,
+            "code_phases": code.iter().map(|(n, c)| ((*n).to_string(), serde_json::json!(c))).collect::<serde_json::Map<_, _>>(),
             "worst_body_instructions": worst,
             "worst_tick_instructions": worst_tick,
             "flash_bytes": size.flash,
@@ -444,6 +459,19 @@ fn sil(args: SilArgs) -> Result<()> {
         );
     }
     println!("worst case       body {worst}, whole tick {worst_tick}");
+    println!(
+        "instructions per tick by code phase, every tick (armed or not); link = whole tick less body"
+    );
+    println!(
+        "{:<16} {:>7} {:>10} {:>9} {:>9} {:>9}",
+        "code phase", "ticks", "mean", "p50", "p99", "max"
+    );
+    for (n, c) in &code {
+        println!(
+            "{:<16} {:>7} {:>10.0} {:>9} {:>9} {:>9}",
+            n, c.ticks, c.mean, c.p50, c.p99, c.max
+        );
+    }
     println!("image            {}", size_line(&size));
     Ok(())
 }

@@ -6,7 +6,7 @@ use anyhow::{Context, Result, bail};
 use bank_format::{AlignedBytes, Bank};
 use host::bank::scene_bank;
 use host::fsio::write_atomic;
-use host::sil::cost::Phases;
+use host::sil::cost::{CodePhaseMax, Phases};
 use host::sil::harness::{self, Run, Session, Setup};
 use host::sil::script::{Script, Trajectory};
 use std::path::{Path, PathBuf};
@@ -148,6 +148,9 @@ pub struct Summary {
     /// Per-phase maxima: free motion, the first tick of a contact, a held contact, the first
     /// free tick after one ([`Phases`]).
     phases: Phases,
+    /// Per-code-phase maxima over every tick: kinematics, detection, patch, solve, law,
+    /// supervisor (the loop body's parts) and link (whole tick less body) ([`CodePhaseMax`]).
+    code_phases: CodePhaseMax,
     peak_force_n: f32,
     faults: Vec<FaultJson>,
     final_state: String,
@@ -198,6 +201,7 @@ impl Summary {
                 .unwrap_or(0),
             max_tick_instructions: max_tick,
             phases: Phases::of(&run.ticks),
+            code_phases: CodePhaseMax::of(&run.ticks),
             peak_force_n: run.peak_force_n(),
             faults: run
                 .faults()

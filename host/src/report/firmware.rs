@@ -1,19 +1,15 @@
 //! The firmware's instructions per tick, from the QEMU image (`firmware/qemu`) over the SIL
 //! scripts (press, slide, strike), through [`crate::sil::harness`] as `host bench sil` runs
-//! it: a histogram of the loop body's instructions per tick, and the mean, 99th percentile and
-//! worst case by contact-set size, with the whole tick's (executor, link task and plant I/O
-//! included).
-//!
-//! The image reports two counts per tick (`TickRecord`): the loop body and the whole tick. The
-//! split of the body into kinematics, detection, patch, solve, law and supervisor needs
-//! per-phase counters inside `firmware::app`'s tick, which this report does not add (that code
-//! belongs to the firmware's work on instruction counts); what it shows per phase is what the
-//! two counts and the contact-set size separate: free motion (kinematics, detection,
-//! supervisor), each added contact node (patch, solve, law), and the link and executor (whole
-//! tick less body).
+//! it: a histogram of the loop body's instructions per tick, the worst case by phase of a
+//! contact (free, first contact, held, release), and a histogram and the worst case per phase
+//! of the code (kinematics, detection, patch, solve, law, supervisor: the loop body split at
+//! `firmware::tick`'s phase boundaries, which the image reports per tick; and link, the whole
+//! tick less the body: plant exchange, link queues, executor).
 
 use super::{HardCase, Knob, Point, Series, Verdict};
-use crate::sil::cost::{CostStats, PhaseMax, Phases};
+use crate::sil::cost::{
+    CODE_PHASES, CodePhaseStats, CostStats, PhaseMax, Phases, code_phase_samples,
+};
 use crate::sil::harness::{self, INSTRUCTIONS_PER_TICK, Session, Setup, TickRecord};
 use crate::sil::script::Script;
 use anyhow::{Result, bail};
@@ -191,15 +187,14 @@ pub fn section(sil: &SilRuns) -> (Vec<Knob>, HardCase) {
         series,
         chosen: None,
         finding: format!(
-            "free motion (kinematics, detection, supervisor) takes {:.0} instructions on \
-             average, the link, executor and plant I/O {:.0} more per tick; by contact-set \
-             size: {}. The split of the body into kinematics, detection, patch, solve, law and \
-             supervisor is not measured: the image counts the body and the whole tick only",
+            "free motion takes {:.0} instructions on average, the link, executor and plant \
+             I/O {:.0} more per tick; by contact-set size: {}",
             idle.body_mean,
             idle.tick_mean - idle.body_mean,
             by_nodes.join("; ")
         ),
     };
+    let (code_hist, code_worst) = code_phase_knobs(sil);
     let row = HardCase {
         case: "worst-case tick on the MCU (QEMU)".into(),
         measurement: format!(
@@ -216,7 +211,104 @@ pub fn section(sil: &SilRuns) -> (Vec<Knob>, HardCase) {
         value: Some(f64::from(worst_tick)),
         reference_value: Some(f64::from(INSTRUCTIONS_PER_TICK)),
     };
-    (vec![hist, by], row)
+    (vec![hist, by, code_hist, code_worst], row)
+}
+
+/// Per code phase ([`CODE_PHASES`]) over every tick of every script: a histogram of each
+/// phase's instructions per tick (its own bins between its least and largest, log axis) and
+/// the worst, 99th percentile and mean per phase.
+fn code_phase_knobs(sil: &SilRuns) -> (Knob, Knob) {
+    let mut samples: [Vec<u32>; 7] = Default::default();
+    for (_, ticks) in &sil.runs {
+        for (all, v) in samples.iter_mut().zip(code_phase_samples(ticks)) {
+            all.extend(v);
+        }
+    }
+    let histogram = CODE_PHASES
+        .iter()
+        .zip(&samples)
+        .map(|(&name, v)| {
+            let lo = v.iter().copied().min().unwrap_or(0);
+            let hi = v.iter().copied().max().unwrap_or(1).max(lo + 1);
+            let width = f64::from(hi - lo) / BINS as f64;
+            let mut counts = [0usize; BINS];
+            for &x in v {
+                counts[((f64::from(x - lo) / width) as usize).min(BINS - 1)] += 1;
+            }
+            let total = v.len().max(1) as f64;
+            Series {
+                name: name.into(),
+                points: counts
+                    .iter()
+                    .enumerate()
+                    .map(|(b, &n)| Point {
+                        x: f64::from(lo) + width * (b as f64 + 0.5),
+                        y: 100.0 * n as f64 / total,
+                        label: format!("{name}: {n} ticks"),
+                    })
+                    .collect(),
+            }
+        })
+        .collect();
+    let stats: Vec<CodePhaseStats> = samples.iter().map(|v| CodePhaseStats::of(v)).collect();
+    let worst_of = |f: fn(&CodePhaseStats) -> f64, name: &str| Series {
+        name: name.into(),
+        points: stats
+            .iter()
+            .zip(CODE_PHASES)
+            .enumerate()
+            .map(|(i, (c, n))| Point {
+                x: i as f64,
+                y: f(c),
+                label: format!("{n} ({} ticks)", c.ticks),
+            })
+            .collect(),
+    };
+    let ticks: usize = sil.runs.iter().map(|r| r.1.len()).sum();
+    let listed: Vec<String> = stats
+        .iter()
+        .zip(CODE_PHASES)
+        .map(|(c, n)| format!("{n} {} (p99 {})", c.max, c.p99))
+        .collect();
+    let hist = Knob {
+        id: "firmware-code-phase-histogram".into(),
+        title: "Firmware: instructions per tick by code phase (QEMU image, SIL scripts)".into(),
+        x_label: "instructions in the phase (log)".into(),
+        y_label: "share of the ticks, %".into(),
+        log_x: true,
+        log_y: false,
+        series: histogram,
+        chosen: None,
+        finding: format!(
+            "{ticks} ticks of press, slide and strike, armed or not; each phase's own bins \
+             between its least and largest count; the six body phases sum to the loop body \
+             in every tick, link is the whole tick less the body"
+        ),
+    };
+    let worst = Knob {
+        id: "firmware-code-phases".into(),
+        title: "Firmware: worst instructions per tick by code phase (QEMU image)".into(),
+        x_label: format!(
+            "code phase: {}",
+            CODE_PHASES
+                .iter()
+                .enumerate()
+                .map(|(i, n)| format!("{i} {n}"))
+                .collect::<Vec<_>>()
+                .join(", ")
+        ),
+        y_label: "instructions per tick".into(),
+        log_x: false,
+        log_y: false,
+        series: vec![
+            worst_of(|c| f64::from(c.max), "worst"),
+            worst_of(|c| f64::from(c.p99), "99th percentile"),
+            worst_of(|c| c.mean, "mean"),
+        ],
+        chosen: None,
+        finding: format!("worst per phase over {ticks} ticks: {}", listed.join(", ")),
+    };
+    (hist, worst)
 }
 
 /// The worst body instructions of a tick with `nodes` contact nodes (the largest measured

@@ -1,5 +1,6 @@
 //! Where the instructions go under QEMU: per-tick costs of a run grouped by contact-set size,
-//! and the image's flash and RAM use read from its ELF section headers.
+//! by phase of a contact ([`Phases`]) and by phase of the code ([`CODE_PHASES`]), and the
+//! image's flash and RAM use read from its ELF section headers.
 
 use super::harness::TickRecord;
 use anyhow::{Context, Result, bail};
@@ -118,6 +119,104 @@ impl Phases {
     }
 }
 
+/// The code phases of a tick, in order: the loop body's six (`firmware::tick`'s phase
+/// boundaries, [`bank_format::PhaseCycles`]) and `link`, the rest of the whole tick (the plant exchange,
+/// the link queues and the executor: whole tick less body).
+pub const CODE_PHASES: [&str; 7] = [
+    "kinematics",
+    "detection",
+    "patch",
+    "solve",
+    "law",
+    "supervisor",
+    "link",
+];
+
+/// Instructions of each code phase ([`CODE_PHASES`]) over every tick of `records` (in tick
+/// order, armed or not). A record's whole tick is read from its successor, so the last record
+/// has no `link` sample.
+pub fn code_phase_samples(records: &[TickRecord]) -> [Vec<u32>; 7] {
+    let mut out: [Vec<u32>; 7] = Default::default();
+    for (i, r) in records.iter().enumerate() {
+        for (v, x) in out.iter_mut().zip(r.phase_instructions.to_array()) {
+            v.push(x);
+        }
+        if let Some(next) = records.get(i + 1) {
+            out[6].push(next.tick_instructions.saturating_sub(r.body_instructions));
+        }
+    }
+    out
+}
+
+/// Statistics of one code phase's instructions per tick.
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]
+pub struct CodePhaseStats {
+    /// Ticks measured.
+    pub ticks: usize,
+    /// Mean instructions.
+    pub mean: f64,
+    /// Median.
+    pub p50: u32,
+    /// 99th percentile.
+    pub p99: u32,
+    /// Largest.
+    pub max: u32,
+}
+
+impl CodePhaseStats {
+    /// The statistics of `samples`.
+    pub fn of(samples: &[u32]) -> CodePhaseStats {
+        let mut v = samples.to_vec();
+        v.sort_unstable();
+        let Some(&max) = v.last() else {
+            return CodePhaseStats::default();
+        };
+        let at = |q: f64| v[((v.len() - 1) as f64 * q).round() as usize];
+        CodePhaseStats {
+            ticks: v.len(),
+            mean: v.iter().map(|&x| f64::from(x)).sum::<f64>() / v.len() as f64,
+            p50: at(0.5),
+            p99: at(0.99),
+            max,
+        }
+    }
+}
+
+/// The largest instructions of each code phase in a run (`host sil --json`'s `code_phases`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]
+pub struct CodePhaseMax {
+    /// Encoder counts to joints, tip and Jacobian.
+    pub kinematics: u32,
+    /// The contact tracker (detection on the tip's path, or following the anchor).
+    pub detection: u32,
+    /// The contact patch and its factored `B C B^T`.
+    pub patch: u32,
+    /// The 3 x 3 solve and the node forces.
+    pub solve: u32,
+    /// The law Q, the force cap and the requested currents.
+    pub law: u32,
+    /// The supervisor and the tick's outputs.
+    pub supervisor: u32,
+    /// Whole tick less body: plant exchange, link queues, executor.
+    pub link: u32,
+}
+
+impl CodePhaseMax {
+    /// The maxima over `records` (in tick order).
+    pub fn of(records: &[TickRecord]) -> CodePhaseMax {
+        let m = code_phase_samples(records).map(|v| v.into_iter().max().unwrap_or(0));
+        CodePhaseMax {
+            kinematics: m[0],
+            detection: m[1],
+            patch: m[2],
+            solve: m[3],
+            law: m[4],
+            supervisor: m[5],
+            link: m[6],
+        }
+    }
+}
+
 /// Bytes of flash (code, read-only data and the initial values of `.data`) and of statically
 /// allocated RAM (`.data`, `.bss`, `.uninit`; the stack takes the rest) of an ELF32 image.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
@@ -207,6 +306,7 @@ pub fn initial_stack_pointer(path: &Path, flash_origin: u32) -> Result<u32> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use bank_format::PhaseCycles;
 
     fn rec(tick: u32, nodes: u8, body: u32, prev_tick: u32, state: State) -> TickRecord {
         TickRecord {
@@ -219,6 +319,10 @@ mod tests {
             contact_nodes: nodes,
             body_instructions: body,
             tick_instructions: prev_tick,
+            phase_instructions: PhaseCycles {
+                supervisor: body,
+                ..PhaseCycles::default()
+            },
         }
     }
 
@@ -268,6 +372,48 @@ mod tests {
         assert_eq!(p.first_contact, m(1, 8000, 9000));
         assert_eq!(p.contact, m(2, 4500, 7500));
         assert_eq!(p.release, m(1, 1500, 3000));
+    }
+
+    #[test]
+    fn code_phases_take_the_link_from_the_successors_whole_tick() {
+        let split = |p: [u32; 6]| PhaseCycles {
+            kinematics: p[0],
+            detection: p[1],
+            patch: p[2],
+            solve: p[3],
+            law: p[4],
+            supervisor: p[5],
+        };
+        let mut r = [
+            rec(1, 0, 1000, 0, State::Armed),
+            rec(2, 3, 6000, 4000, State::Armed),
+            rec(3, 3, 3000, 9000, State::Armed),
+        ];
+        r[0].phase_instructions = split([300, 400, 0, 0, 0, 300]);
+        r[1].phase_instructions = split([300, 3000, 1500, 400, 300, 500]);
+        r[2].phase_instructions = split([300, 900, 600, 400, 300, 500]);
+        let s = code_phase_samples(&r);
+        assert_eq!(s[1], [400, 3000, 900]);
+        // Tick 1's whole tick is 4000 (tick 2's report), its body 1000; tick 2's 9000 - 6000;
+        // tick 3 has no successor.
+        assert_eq!(s[6], [3000, 3000]);
+        let m = CodePhaseMax::of(&r);
+        assert_eq!(
+            (
+                m.kinematics,
+                m.detection,
+                m.patch,
+                m.solve,
+                m.law,
+                m.supervisor,
+                m.link
+            ),
+            (300, 3000, 1500, 400, 300, 500, 3000)
+        );
+        let d = CodePhaseStats::of(&s[1]);
+        assert_eq!((d.ticks, d.p50, d.max), (3, 900, 3000));
+        assert!((d.mean - 4300.0 / 3.0).abs() < 1e-9);
+        assert_eq!(CodePhaseStats::of(&[]), CodePhaseStats::default());
     }
 
     #[test]

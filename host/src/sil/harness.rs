@@ -25,7 +25,7 @@ use anyhow::{Context, Result, bail};
 use bank_format::region::BANK_ORIGIN;
 use bank_format::{
     Bank, DeviceCalibration, DeviceToHost, FaultReason, FrameDecoder, FrameStats, HostToDevice,
-    MAX_FRAME, State, Telemetry, encode_frame,
+    MAX_FRAME, PhaseCycles, State, Telemetry, decode_plant, encode_frame, encode_plant,
 };
 use std::fs::File;
 use std::io::{Read, Write};
@@ -160,6 +160,9 @@ pub struct TickRecord {
     pub body_instructions: u32,
     /// Instructions of the whole previous tick (executor, link and plant I/O included).
     pub tick_instructions: u32,
+    /// The loop body's instructions split at the code's phase boundaries (they sum to
+    /// `body_instructions`).
+    pub phase_instructions: PhaseCycles,
 }
 
 fn ser_state<S: serde::Serializer>(s: &State, ser: S) -> Result<S::Ok, S::Error> {
@@ -442,10 +445,8 @@ fn exchange(
     };
 
     let mut gimbal = Gimbal::new(&session.calibration, session.plant);
-    let mut decoder = FrameDecoder::<DeviceToHost>::new();
     let mut records = Vec::with_capacity(session.ticks as usize);
     let mut buf = [0u8; MAX_FRAME];
-    let mut rx = Vec::new();
     let mut stopped = None;
     let mut hand_prev = session.trajectory.at(0.0);
     let started = Instant::now();
@@ -470,20 +471,20 @@ fn exchange(
             .iter()
             .find(|(t, _)| *t == tick)
             .map_or_else(|| gimbal.encoder_counts(), |o| o.1);
-        let frame = encode_frame(
+        let message = encode_plant(
             &HostToDevice::Plant {
                 tick,
                 encoder_counts: counts,
             },
             &mut buf,
         )?;
-        if let Err(e) = to_image.write_all(frame) {
+        if let Err(e) = to_image.write_all(message) {
             stopped = Some(format!(
                 "tick {tick}: the image closed its plant input ({e})"
             ));
             break;
         }
-        let reply = match read_frame(&mut from_image, &mut decoder, &mut rx) {
+        let reply = match read_plant(&mut from_image) {
             Ok(Some(m)) => m,
             Ok(None) => {
                 stopped = Some(format!("tick {tick}: the image closed its plant output"));
@@ -502,6 +503,7 @@ fn exchange(
             contact_nodes,
             body_cycles,
             tick_cycles,
+            phase_cycles,
         } = reply
         else {
             stopped = Some(format!(
@@ -523,6 +525,7 @@ fn exchange(
             contact_nodes,
             body_instructions: body_cycles,
             tick_instructions: tick_cycles,
+            phase_instructions: phase_cycles,
         });
         let hand = session.trajectory.at(f64::from(tick) * TICK_S);
         gimbal.step(currents_a, hand_prev, hand);
@@ -584,27 +587,21 @@ fn send_link(sock: &mut TcpStream, send: &LinkSend) -> Result<()> {
 }
 
 /// The next frame from the image's plant output (`None` at end of file).
-fn read_frame(
-    f: &mut File,
-    decoder: &mut FrameDecoder<DeviceToHost>,
-    pending: &mut Vec<u8>,
-) -> Result<Option<DeviceToHost>> {
-    let mut buf = [0u8; 512];
-    loop {
-        while !pending.is_empty() {
-            let b = pending.remove(0);
-            if let Some(r) = decoder.feed(b) {
-                return r
-                    .map(Some)
-                    .map_err(|e| anyhow::anyhow!("bad plant frame from the image: {e}"));
-            }
-        }
-        let n = f.read(&mut buf).context("plant pipe read failed")?;
-        if n == 0 {
-            return Ok(None);
-        }
-        pending.extend_from_slice(&buf[..n]);
+/// The image's next plant message (`SPEC.md`, "Plant channel": a length byte, then postcard);
+/// `None` when the image closed the pipe before a message began.
+fn read_plant(f: &mut File) -> Result<Option<DeviceToHost>> {
+    let mut len = [0u8; 1];
+    match f.read_exact(&mut len) {
+        Ok(()) => {}
+        Err(e) if e.kind() == std::io::ErrorKind::UnexpectedEof => return Ok(None),
+        Err(e) => return Err(e).context("plant pipe read failed"),
     }
+    let mut body = vec![0u8; usize::from(len[0])];
+    f.read_exact(&mut body)
+        .context("the image closed its plant output inside a message")?;
+    decode_plant(&body)
+        .map(Some)
+        .map_err(|e| anyhow::anyhow!("bad plant message from the image: {e}"))
 }
 
 fn accept_until(listener: &TcpListener, child: &mut Child, deadline: Instant) -> Result<TcpStream> {
