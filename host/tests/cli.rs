@@ -304,9 +304,11 @@ fn malformed_msh41_prints_only_the_error() {
     assert_eq!(stderr.trim().lines().count(), 1, "{stderr}");
 }
 
-/// A little-endian ELF32 file with the given sections `(type, flags, address, size)` (the file
-/// holds the headers only, which is all `bench image` reads).
-fn elf32(sections: &[(u32, u32, u32, u32)]) -> Vec<u8> {
+/// A little-endian ELF32 file with the given sections `(type, flags, address, size)`: the file
+/// holds the headers, and then the word `first_word`, the contents of every section (`bench
+/// image` reads the headers and the vector table's first word, the initial stack pointer).
+fn elf32(sections: &[(u32, u32, u32, u32)], first_word: u32) -> Vec<u8> {
+    let contents = 52 + 40 * (sections.len() as u32 + 1);
     let mut b = vec![0u8; 52];
     b[..6].copy_from_slice(&[0x7f, b'E', b'L', b'F', 1, 1]);
     b[0x20..0x24].copy_from_slice(&52u32.to_le_bytes()); // e_shoff
@@ -319,9 +321,11 @@ fn elf32(sections: &[(u32, u32, u32, u32)]) -> Vec<u8> {
         h[4..8].copy_from_slice(&kind.to_le_bytes());
         h[8..12].copy_from_slice(&flags.to_le_bytes());
         h[12..16].copy_from_slice(&addr.to_le_bytes());
+        h[16..20].copy_from_slice(&contents.to_le_bytes());
         h[20..24].copy_from_slice(&size.to_le_bytes());
         b.extend_from_slice(&h);
     }
+    b.extend_from_slice(&first_word.to_le_bytes());
     b
 }
 
@@ -333,14 +337,18 @@ fn bench_image_prints_flash_and_static_ram_against_memory_x() {
     const ALLOC: u32 = 2;
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("image.elf");
-    // .text 65,536 B in flash; .data 256 B (in RAM, its initial values in flash); .bss
-    // 1,792 B; a debug section (not allocated) counts for neither.
-    let elf = elf32(&[
-        (PROGBITS, ALLOC | 4, 0x0800_0000, 65_536),
-        (PROGBITS, ALLOC | 1, RAM_ORIGIN, 256),
-        (NOBITS, ALLOC | 1, RAM_ORIGIN + 256, 1_792),
-        (PROGBITS, 0, 0, 99_999),
-    ]);
+    // .text 65,536 B in flash, starting with the initial stack pointer; .data 256 B (in RAM,
+    // its initial values in flash); .bss 1,792 B; a debug section (not allocated) counts for
+    // neither.
+    let elf = elf32(
+        &[
+            (PROGBITS, ALLOC | 4, 0x0800_0000, 65_536),
+            (PROGBITS, ALLOC | 1, RAM_ORIGIN, 256),
+            (NOBITS, ALLOC | 1, RAM_ORIGIN + 256, 1_792),
+            (PROGBITS, 0, 0, 99_999),
+        ],
+        0x1001_0000,
+    );
     std::fs::write(&path, elf).unwrap();
     let out = host(&["bench", "image", path.to_str().unwrap()]);
     assert!(
@@ -354,8 +362,14 @@ fn bench_image_prints_flash_and_static_ram_against_memory_x() {
         String::from_utf8_lossy(&out.stdout),
         format!(
             "flash 65792 B of {FIRMWARE_LEN} B ({flash_pct:.1}%), static RAM 2048 B of \
-             {RAM_LEN} B ({ram_pct:.1}%)\n"
+             {RAM_LEN} B ({ram_pct:.1}%)\ninitial stack pointer 0x10010000\n"
         )
+    );
+    // No section at the flash origin: no vector table, an error saying so.
+    std::fs::write(&path, elf32(&[(PROGBITS, ALLOC | 4, 0x0800_0100, 64)], 0)).unwrap();
+    fails_with(
+        &["bench", "image", path.to_str().unwrap()],
+        "no vector table",
     );
     // Not an ELF file, and no file: an error naming it.
     std::fs::write(&path, b"not an elf").unwrap();

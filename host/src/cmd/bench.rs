@@ -479,9 +479,9 @@ fn sil(args: SilArgs) -> Result<()> {
 fn image(args: ImageArgs) -> Result<()> {
     use bank_format::region::{RAM_LEN, RAM_ORIGIN};
     let size = host::sil::cost::image_size(&args.elf, RAM_ORIGIN, RAM_LEN as u32)?;
-    println!("{}", size_line(&size));
     let sp =
         host::sil::cost::initial_stack_pointer(&args.elf, bank_format::region::FIRMWARE_ORIGIN)?;
+    println!("{}", size_line(&size));
     println!("initial stack pointer {sp:#010x}");
     Ok(())
 }
