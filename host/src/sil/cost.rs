@@ -227,43 +227,65 @@ pub struct ImageSize {
     pub ram: u64,
 }
 
-/// Read [`ImageSize`] from the section headers of the little-endian ELF32 file at `path`;
-/// `ram_start..ram_start + ram_len` is the RAM region (allocated sections there count as RAM).
-pub fn image_size(path: &Path, ram_start: u32, ram_len: u32) -> Result<ImageSize> {
+/// One section header of an ELF32 file.
+struct Section {
+    kind: u32,
+    flags: u32,
+    addr: u32,
+    offset: u32,
+    len: u32,
+}
+
+/// The bytes of the little-endian ELF32 file at `path` and its section headers.
+fn elf_sections(path: &Path) -> Result<(Vec<u8>, Vec<Section>)> {
     let b = std::fs::read(path).with_context(|| format!("cannot read {}", path.display()))?;
-    let u16_at = |o: usize| b.get(o..o + 2).map(|s| u16::from_le_bytes([s[0], s[1]]));
-    let u32_at = |o: usize| {
-        b.get(o..o + 4)
-            .map(|s| u32::from_le_bytes([s[0], s[1], s[2], s[3]]))
-    };
     if b.get(..6) != Some(&[0x7f, b'E', b'L', b'F', 1, 1][..]) {
         bail!("{}: not a little-endian ELF32 file", path.display());
     }
     let bad = || anyhow::anyhow!("{}: truncated ELF section table", path.display());
-    let shoff = u32_at(0x20).ok_or_else(bad)? as usize;
-    let shentsize = usize::from(u16_at(0x2e).ok_or_else(bad)?);
-    let shnum = usize::from(u16_at(0x30).ok_or_else(bad)?);
+    let u16_at = |o: usize| {
+        b.get(o..o + 2)
+            .map(|s| u16::from_le_bytes([s[0], s[1]]))
+            .ok_or_else(bad)
+    };
+    let u32_at = |o: usize| {
+        b.get(o..o + 4)
+            .map(|s| u32::from_le_bytes([s[0], s[1], s[2], s[3]]))
+            .ok_or_else(bad)
+    };
+    let shoff = u32_at(0x20)? as usize;
+    let shentsize = usize::from(u16_at(0x2e)?);
+    let shnum = usize::from(u16_at(0x30)?);
+    let sections = (0..shnum)
+        .map(|i| {
+            let h = shoff + i * shentsize;
+            Ok(Section {
+                kind: u32_at(h + 4)?,
+                flags: u32_at(h + 8)?,
+                addr: u32_at(h + 12)?,
+                offset: u32_at(h + 16)?,
+                len: u32_at(h + 20)?,
+            })
+        })
+        .collect::<Result<Vec<_>>>()?;
+    Ok((b, sections))
+}
+
+/// Read [`ImageSize`] from the section headers of the little-endian ELF32 file at `path`;
+/// `ram_start..ram_start + ram_len` is the RAM region (allocated sections there count as RAM).
+pub fn image_size(path: &Path, ram_start: u32, ram_len: u32) -> Result<ImageSize> {
     const SHF_ALLOC: u32 = 2;
     const SHT_NOBITS: u32 = 8;
     let mut size = ImageSize { flash: 0, ram: 0 };
-    for i in 0..shnum {
-        let h = shoff + i * shentsize;
-        let (kind, flags) = (
-            u32_at(h + 4).ok_or_else(bad)?,
-            u32_at(h + 8).ok_or_else(bad)?,
-        );
-        let (addr, len) = (
-            u32_at(h + 12).ok_or_else(bad)?,
-            u32_at(h + 20).ok_or_else(bad)?,
-        );
-        if flags & SHF_ALLOC == 0 {
+    for s in elf_sections(path)?.1 {
+        if s.flags & SHF_ALLOC == 0 {
             continue;
         }
-        if kind != SHT_NOBITS {
-            size.flash += u64::from(len);
+        if s.kind != SHT_NOBITS {
+            size.flash += u64::from(s.len);
         }
-        if addr >= ram_start && u64::from(addr) < u64::from(ram_start) + u64::from(ram_len) {
-            size.ram += u64::from(len);
+        if s.addr >= ram_start && u64::from(s.addr) < u64::from(ram_start) + u64::from(ram_len) {
+            size.ram += u64::from(s.len);
         }
     }
     Ok(size)
@@ -272,35 +294,26 @@ pub fn image_size(path: &Path, ram_start: u32, ram_len: u32) -> Result<ImageSize
 /// The initial stack pointer of the ELF32 image at `path`: the first word of the vector
 /// table, the loaded section that starts at `flash_origin` (where the core reads it at reset).
 pub fn initial_stack_pointer(path: &Path, flash_origin: u32) -> Result<u32> {
-    let b = std::fs::read(path).with_context(|| format!("cannot read {}", path.display()))?;
-    let u16_at = |o: usize| b.get(o..o + 2).map(|s| u16::from_le_bytes([s[0], s[1]]));
-    let u32_at = |o: usize| {
-        b.get(o..o + 4)
-            .map(|s| u32::from_le_bytes([s[0], s[1], s[2], s[3]]))
-    };
-    if b.get(..6) != Some(&[0x7f, b'E', b'L', b'F', 1, 1][..]) {
-        bail!("{}: not a little-endian ELF32 file", path.display());
-    }
-    let bad = || anyhow::anyhow!("{}: truncated ELF section table", path.display());
-    let shoff = u32_at(0x20).ok_or_else(bad)? as usize;
-    let shentsize = usize::from(u16_at(0x2e).ok_or_else(bad)?);
-    let shnum = usize::from(u16_at(0x30).ok_or_else(bad)?);
-    for i in 0..shnum {
-        let h = shoff + i * shentsize;
-        let (kind, addr, offset) = (
-            u32_at(h + 4).ok_or_else(bad)?,
-            u32_at(h + 12).ok_or_else(bad)?,
-            u32_at(h + 16).ok_or_else(bad)?,
-        );
-        const SHT_PROGBITS: u32 = 1;
-        if kind == SHT_PROGBITS && addr == flash_origin {
-            return u32_at(offset as usize).ok_or_else(bad);
-        }
-    }
-    bail!(
-        "{}: no section at the flash origin {flash_origin:#010x} (no vector table)",
-        path.display()
-    )
+    const SHT_PROGBITS: u32 = 1;
+    let (b, sections) = elf_sections(path)?;
+    let table = sections
+        .iter()
+        .find(|s| s.kind == SHT_PROGBITS && s.addr == flash_origin)
+        .with_context(|| {
+            format!(
+                "{}: no section at the flash origin {flash_origin:#010x} (no vector table)",
+                path.display()
+            )
+        })?;
+    let o = table.offset as usize;
+    b.get(o..o + 4)
+        .map(|s| u32::from_le_bytes([s[0], s[1], s[2], s[3]]))
+        .with_context(|| {
+            format!(
+                "{}: the vector table is past the file's end",
+                path.display()
+            )
+        })
 }
 
 #[cfg(test)]
