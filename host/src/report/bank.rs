@@ -95,7 +95,7 @@ pub fn section(rows: &[SweepRow], prep: &Prepared) -> (Knob, Vec<HardCase>) {
             "Bank couplings: truncation rule and storage precision against force error and bytes"
                 .into(),
         x_label: "bank bytes".into(),
-        y_label: "worst relative force error over the reachable region".into(),
+        y_label: "relative force error over the reachable region (worst; mean where named)".into(),
         log_x: true,
         log_y: true,
         series: vec![
@@ -105,8 +105,20 @@ pub fn section(rows: &[SweepRow], prep: &Prepared) -> (Knob, Vec<HardCase>) {
             series(
                 "radius",
                 Precision::F32,
+                "radius rule, tool patch, mean",
+                |r| r.errors.patch_mean,
+            ),
+            series(
+                "radius",
+                Precision::F32,
                 "radius rule, point contact",
                 |r| r.errors.point_max,
+            ),
+            series(
+                "radius",
+                Precision::Bfp16,
+                "storage precision bfp16: radius rule, tool patch",
+                |r| r.errors.patch_max,
             ),
             series(
                 "tool",
