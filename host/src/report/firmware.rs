@@ -79,29 +79,12 @@ pub fn section(sil: &SilRuns) -> (Vec<Knob>, HardCase) {
     };
     let lo = bodies().min().unwrap_or(0);
     let hi = bodies().max().unwrap_or(1).max(lo + 1);
-    let width = f64::from(hi - lo) / BINS as f64;
     let histogram = sil
         .runs
         .iter()
         .map(|(script, ticks)| {
-            let mut counts = [0usize; BINS];
-            for r in ticks {
-                let b = ((f64::from(r.body_instructions - lo) / width) as usize).min(BINS - 1);
-                counts[b] += 1;
-            }
-            let total = ticks.len().max(1) as f64;
-            Series {
-                name: format!("{script:?}").to_lowercase(),
-                points: counts
-                    .iter()
-                    .enumerate()
-                    .map(|(b, &n)| Point {
-                        x: f64::from(lo) + width * (b as f64 + 0.5),
-                        y: 100.0 * n as f64 / total,
-                        label: format!("{n} ticks"),
-                    })
-                    .collect(),
-            }
+            let body: Vec<u32> = ticks.iter().map(|r| r.body_instructions).collect();
+            histogram(format!("{script:?}").to_lowercase(), &body, (lo, hi), "")
         })
         .collect();
     let groups = sil.by_contact_nodes();
@@ -214,6 +197,29 @@ pub fn section(sil: &SilRuns) -> (Vec<Knob>, HardCase) {
     (vec![hist, by, code_hist, code_worst], row)
 }
 
+/// The share (%) of `values` in each of [`BINS`] equal bins over `lo..hi` (`lo < hi`; larger
+/// values count in the last bin), drawn at the bins' centres, labelled `{prefix}{n} ticks`.
+fn histogram(name: String, values: &[u32], (lo, hi): (u32, u32), prefix: &str) -> Series {
+    let width = f64::from(hi - lo) / BINS as f64;
+    let mut counts = [0usize; BINS];
+    for &x in values {
+        counts[((f64::from(x - lo) / width) as usize).min(BINS - 1)] += 1;
+    }
+    let total = values.len().max(1) as f64;
+    Series {
+        name,
+        points: counts
+            .iter()
+            .enumerate()
+            .map(|(b, &n)| Point {
+                x: f64::from(lo) + width * (b as f64 + 0.5),
+                y: 100.0 * n as f64 / total,
+                label: format!("{prefix}{n} ticks"),
+            })
+            .collect(),
+    }
+}
+
 /// Per code phase ([`CODE_PHASES`]) over every tick of every script: a histogram of each
 /// phase's instructions per tick (its own bins between its least and largest, log axis) and
 /// the worst, 99th percentile and mean per phase.
@@ -230,24 +236,7 @@ fn code_phase_knobs(sil: &SilRuns) -> (Knob, Knob) {
         .map(|(&name, v)| {
             let lo = v.iter().copied().min().unwrap_or(0);
             let hi = v.iter().copied().max().unwrap_or(1).max(lo + 1);
-            let width = f64::from(hi - lo) / BINS as f64;
-            let mut counts = [0usize; BINS];
-            for &x in v {
-                counts[((f64::from(x - lo) / width) as usize).min(BINS - 1)] += 1;
-            }
-            let total = v.len().max(1) as f64;
-            Series {
-                name: name.into(),
-                points: counts
-                    .iter()
-                    .enumerate()
-                    .map(|(b, &n)| Point {
-                        x: f64::from(lo) + width * (b as f64 + 0.5),
-                        y: 100.0 * n as f64 / total,
-                        label: format!("{name}: {n} ticks"),
-                    })
-                    .collect(),
-            }
+            histogram(name.into(), v, (lo, hi), &format!("{name}: "))
         })
         .collect();
     let stats: Vec<CodePhaseStats> = samples.iter().map(|v| CodePhaseStats::of(v)).collect();
