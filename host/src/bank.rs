@@ -418,29 +418,16 @@ impl Prepared {
     /// The scene's bank by its coupling rule (`bank.couplings`): the pairs within
     /// `bank.truncation_radius_m`, and with "tool" also [`Prepared::tool_pairs`].
     pub fn build_bank(&self, progress: Option<&dyn Progress>) -> Result<BuiltBank> {
-        let b = &self.scene.bank;
-        self.build_bank_as(b.couplings, b.truncation_radius_m, b.precision, progress)
-    }
-
-    /// The bank the scene would have with coupling rule `couplings`, truncation radius
-    /// `radius` (m) and storage `precision` instead of its own; everything else as
-    /// [`Prepared::build_bank`].
-    pub fn build_bank_as(
-        &self,
-        couplings: Couplings,
-        radius: f64,
-        precision: bank_format::Precision,
-        progress: Option<&dyn Progress>,
-    ) -> Result<BuiltBank> {
-        match couplings {
+        let radius = self.scene.bank.truncation_radius_m;
+        match self.scene.bank.couplings {
             Couplings::Radius => {
                 let rows = self.blocks(radius, progress)?;
-                self.bank_in(&rows, radius, None, precision)
+                self.bank(&rows, radius)
             }
             Couplings::Tool => {
                 let rows = self.blocks(radius.max(self.probe_radius()), progress)?;
                 let pairs = self.tool_pairs_from(&rows)?.pairs;
-                self.bank_in(&rows, radius, Some(&pairs), precision)
+                self.bank_keeping(&rows, radius, Some(&pairs))
             }
         }
     }

@@ -87,6 +87,9 @@ pub struct SweepRow {
     /// The firmware's errors on this bank (flattened into the row's JSON).
     #[serde(flatten)]
     pub errors: Errors,
+    /// The bank itself, as `host bank build` would write it (not in the JSON).
+    #[serde(skip)]
+    pub bank: Vec<u8>,
 }
 
 /// What to sweep.
@@ -328,6 +331,7 @@ pub fn run(
         let bank = Bank::parse(&aligned)
             .map_err(|e| anyhow::anyhow!("the swept bank ({rule}, {radius} m): {e}"))
             .context("internal")?;
+        let errors = errors(prep, &bank, &refs);
         out.push(SweepRow {
             rule,
             radius_m: radius,
@@ -336,7 +340,8 @@ pub fn run(
             bank_bytes: built.bytes.len(),
             fits_region: built.bytes.len() <= BANK_LEN,
             sites: refs.len(),
-            errors: errors(prep, &bank, &refs),
+            errors,
+            bank: built.bytes,
         });
         if let Some(p) = progress {
             p.advance(1);

@@ -163,17 +163,10 @@ pub fn run(args: Args) -> Result<()> {
                     row.radius_m * 1e3,
                     row.precision
                 ));
-                let couplings = match row.rule {
-                    "tool" => Couplings::Tool,
-                    _ => Couplings::Radius,
-                };
-                let precision = bank_format::Precision::from_name(row.precision)
-                    .context("internal: a swept row's precision has no name")?;
-                let variant = prepared.build_bank_as(couplings, row.radius_m, precision, None)?;
-                let aligned = bank_format::AlignedBytes::new(&variant.bytes);
+                let aligned = bank_format::AlignedBytes::new(&row.bank);
                 let parsed = bank_format::Bank::parse(&aligned)
                     .map_err(|e| anyhow::anyhow!("internal: a swept bank does not parse: {e}"))?;
-                let (setup, _dir) = image.with_bank(&variant.bytes)?;
+                let (setup, _dir) = image.with_bank(&row.bank)?;
                 let quiet = |_: &str| {};
                 let sil = firmware::measure(&setup, &parsed, seconds, &quiet)?;
                 run_banks.push(pareto::RunBank {
