@@ -4,7 +4,12 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
-step() { printf '\n== %s\n' "$*"; }
+step() {
+    current_step="$*"
+    printf '\n== %s\n' "$*"
+}
+# A failure names its step and command, so a log's last lines say what broke.
+trap 'echo "test-all.sh: failed in step \"${current_step:-set-up}\" at line $LINENO: $BASH_COMMAND" >&2' ERR
 
 # apt-get install as root, or through sudo; says what to do when neither is possible.
 apt_install() {
@@ -48,7 +53,7 @@ step "Debian tools: qemu-system-arm (software in the loop), chromium (viewer tes
 need qemu-system-arm qemu-system-arm
 need chromium chromium
 need shellcheck shellcheck
-qemu-system-arm --version | head -n 1
+qemu-system-arm --version | sed -n 1p
 
 step "shell scripts"
 shellcheck scripts/*.sh .ci/run
