@@ -388,9 +388,14 @@ impl Ckl16 {
     /// bits, a normal number or 0). `2^e` is built from its exponent bits (no libm); an
     /// exponent out of range is clamped (the reader rejects such banks).
     pub fn decode(&self) -> [f32; 9] {
-        let e = self.exponent.clamp(CKL16_EXP_MIN, CKL16_EXP_MAX);
-        let scale = f32::from_bits(((i32::from(e) + 127) as u32) << 23);
+        let scale = self.scale();
         self.mantissa.map(|m| f32::from(m) * scale)
+    }
+
+    /// The block's `2^e`, built from its exponent bits (clamped like [`Ckl16::decode`]).
+    pub fn scale(&self) -> f32 {
+        let e = self.exponent.clamp(CKL16_EXP_MIN, CKL16_EXP_MAX);
+        f32::from_bits(((i32::from(e) + 127) as u32) << 23)
     }
 }
 

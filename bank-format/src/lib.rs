@@ -88,7 +88,7 @@ pub use layout::{
     Precision, SECTION_ALIGN, SECTION_ENTRY_LEN, SectionEntry, SectionKind, VERSION_MAJOR,
     VERSION_MINOR, bank_crc, reseal,
 };
-pub use reader::{Bank, Grid, SPD_PIVOT_REL, TRUNCATION_SLACK, validate_device};
+pub use reader::{Bank, Grid, SPD_PIVOT_REL, TRUNCATION_SLACK, UpperCouplings, validate_device};
 #[cfg(feature = "alloc")]
 pub use writer::{AlignedBytes, BankBuilder, BuildError, INPUT_SYMMETRY_REL, encode_ckl16};
 

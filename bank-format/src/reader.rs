@@ -52,7 +52,7 @@ enum Blocks<'a> {
     Bfp16(&'a [Ckl16]),
 }
 
-impl Blocks<'_> {
+impl<'a> Blocks<'a> {
     fn len(&self) -> usize {
         match self {
             Blocks::F32(b) => b.len(),
@@ -66,6 +66,77 @@ impl Blocks<'_> {
             Blocks::F32(b) => b.get(i).copied(),
             Blocks::Bfp16(b) => b.get(i).map(Ckl16::decode),
         }
+    }
+
+    /// Blocks `range` (empty when out of bounds).
+    fn slice(&self, range: Range<usize>) -> Blocks<'a> {
+        match self {
+            Blocks::F32(b) => Blocks::F32(b.get(range).unwrap_or(&[])),
+            Blocks::Bfp16(b) => Blocks::Bfp16(b.get(range).unwrap_or(&[])),
+        }
+    }
+}
+
+/// The couplings stored in one node k's row ([`Bank::upper_couplings`]): its neighbours
+/// `l > k`, ascending, and their blocks `C_kl` in the same order (`SPEC.md`, "Pairs stored
+/// once (4.0)"). Walking it beside an ascending list of nodes finds all their blocks with no
+/// search.
+#[derive(Clone, Copy, Debug)]
+pub struct UpperCouplings<'a> {
+    nodes: &'a [u16],
+    blocks: Blocks<'a>,
+}
+
+impl<'a> UpperCouplings<'a> {
+    /// The neighbours `l > k`, strictly ascending.
+    pub fn nodes(&self) -> &'a [u16] {
+        self.nodes
+    }
+
+    /// Adds `w (C_kl + C_kl^T)` for entry `i` (the coupling of k with `nodes()[i]`) to the
+    /// upper triangle `m = [xx, xy, xz, yy, yz, zz]` of a symmetric 3x3; `false` (nothing
+    /// added) for `i` out of range. A 16-bit block adds its mantissa pairs as integers and
+    /// scales once by `w 2^e`: the same f32 result as adding the decoded entries (both sums
+    /// are exact, and so is `w 2^e` unless it is subnormal, for a weight below `2^(-126 - e)`).
+    pub fn add_symmetric_part(&self, i: usize, w: f32, m: &mut [f32; 6]) -> bool {
+        let (c, scale) = match self.blocks {
+            Blocks::F32(b) => match b.get(i) {
+                Some(c) => (
+                    [
+                        c[0] + c[0],
+                        c[1] + c[3],
+                        c[2] + c[6],
+                        c[4] + c[4],
+                        c[5] + c[7],
+                        c[8] + c[8],
+                    ],
+                    w,
+                ),
+                None => return false,
+            },
+            Blocks::Bfp16(b) => match b.get(i) {
+                Some(b) => {
+                    let q = b.mantissa.map(i32::from);
+                    (
+                        [
+                            q[0] + q[0],
+                            q[1] + q[3],
+                            q[2] + q[6],
+                            q[4] + q[4],
+                            q[5] + q[7],
+                            q[8] + q[8],
+                        ]
+                        .map(|v| v as f32),
+                        w * b.scale(),
+                    )
+                }
+                None => return false,
+            },
+        };
+        for (acc, v) in m.iter_mut().zip(c) {
+            *acc += scale * v;
+        }
+        true
     }
 }
 
@@ -1052,6 +1123,18 @@ impl<'a> Bank<'a> {
         csr_row(self.nb_starts, k)
             .and_then(|r| self.nb_index.get(r))
             .unwrap_or(&[])
+    }
+
+    /// The couplings stored in node `k`'s row: its neighbours `l > k` and their blocks
+    /// ([`UpperCouplings`]; empty for `k` out of range).
+    pub fn upper_couplings(&self, k: usize) -> UpperCouplings<'a> {
+        let row = self.neighbours(k);
+        let blocks = csr_row(self.coupling_starts, k).unwrap_or(0..0);
+        let first = row.len().saturating_sub(blocks.len());
+        UpperCouplings {
+            nodes: row.get(first..).unwrap_or(&[]),
+            blocks: self.nb_ckl.slice(blocks),
+        }
     }
 
     /// Number of coupled pairs (blocks stored, one per pair).

@@ -261,8 +261,7 @@ impl PatchBuild {
         self.next >= QUADRATURE.len()
     }
 
-    /// The last step: merge the quadrature's loads with the nodal ones, then choose the heaviest
-    /// mutually coupled nodes, normalised (call after
+    /// The last steps at once: [`PatchBuild::merge`] then [`PatchBuild::choose`] (call after
     /// [`PatchBuild::locate`] returned `true`; points not yet located are missing from the
     /// load). Works in place (the build is large); call it once.
     pub fn finish(&mut self, bank: &Bank) -> Patch {
@@ -271,7 +270,7 @@ impl PatchBuild {
     }
 
     /// The quadrature's loads merged with the nodal ones (once, after the last point).
-    fn merge(&mut self) {
+    pub fn merge(&mut self) {
         if self.basis.is_some() && self.theta < 1.0 {
             self.quad.add_bary(self.nodes, self.in_contact, 1.0);
             self.acc.merge_scaled(&self.quad, 1.0 - self.theta);
@@ -280,7 +279,7 @@ impl PatchBuild {
 
     /// The heaviest mutually coupled nodes of the merged loads, normalised (once, after
     /// [`PatchBuild::merge`]).
-    fn choose(&mut self, bank: &Bank) -> Patch {
+    pub fn choose(&mut self, bank: &Bank) -> Patch {
         self.acc.finish(bank)
     }
 }

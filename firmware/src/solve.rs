@@ -232,7 +232,7 @@ impl<const D: usize> Factor<D> {
     }
 }
 
-fn check_nodes(bank: &Bank, nodes: &[u16], max: usize) -> Result<(), SolveError> {
+fn check_count(nodes: &[u16], max: usize) -> Result<(), SolveError> {
     if nodes.is_empty() {
         return Err(SolveError::NoNodes);
     }
@@ -242,6 +242,11 @@ fn check_nodes(bank: &Bank, nodes: &[u16], max: usize) -> Result<(), SolveError>
             max,
         });
     }
+    Ok(())
+}
+
+fn check_nodes(bank: &Bank, nodes: &[u16], max: usize) -> Result<(), SolveError> {
+    check_count(nodes, max)?;
     for (a, &k) in nodes.iter().enumerate() {
         if usize::from(k) >= bank.node_count() {
             return Err(SolveError::NodeOutOfRange { node: k });
@@ -407,7 +412,8 @@ impl WeightedSolve {
     /// Assembles and factors `M` for `nodes` with `weights` (finite, `>= 0`, sum 1). Every
     /// pair must be coupled in the bank; an ill-conditioned `M` is an error.
     pub fn new(bank: &Bank, nodes: &[u16], weights: &[f32]) -> Result<WeightedSolve, SolveError> {
-        check_nodes(bank, nodes, MAX_CONTACT_NODES)?;
+        // Range and duplicates are checked by the assembly, which sorts the nodes.
+        check_count(nodes, MAX_CONTACT_NODES)?;
         if weights.len() != nodes.len() {
             return Err(SolveError::LengthMismatch {
                 nodes: nodes.len(),
@@ -415,26 +421,7 @@ impl WeightedSolve {
             });
         }
         check_weights(weights)?;
-        // M = sum_ab w_a w_b C_ab, symmetric: blocks (a, b) and (b, a) are transposes, so
-        // visit b >= a and add w_a w_b (C_ab + C_ab^T) (half of it on the diagonal blocks),
-        // upper triangle only, mirrored at the end.
-        let mut m = [[0.0f32; 3]; 3];
-        for (a, (&k, &wa)) in nodes.iter().zip(weights).enumerate() {
-            for (&l, &wb) in nodes.iter().zip(weights).skip(a) {
-                let c = bank
-                    .coupling(usize::from(k), usize::from(l))
-                    .ok_or(SolveError::MissingCoupling { k, l })?;
-                let w = if k == l { 0.5 * wa * wb } else { wa * wb };
-                let [[c00, c01, c02], [c10, c11, c12], [c20, c21, c22]] = c;
-                m[0][0] += w * (c00 + c00);
-                m[0][1] += w * (c01 + c10);
-                m[0][2] += w * (c02 + c20);
-                m[1][1] += w * (c11 + c11);
-                m[1][2] += w * (c12 + c21);
-                m[2][2] += w * (c22 + c22);
-            }
-        }
-        (m[1][0], m[2][0], m[2][1]) = (m[0][1], m[0][2], m[1][2]);
+        let m = weighted_compliance(bank, nodes, weights)?;
         // A NaN or infinite compliance entry reaches M (a zero weight turns an infinity
         // into NaN): one check on the sum.
         if !m.iter().flatten().all(|v| v.is_finite()) {
@@ -492,6 +479,60 @@ impl WeightedSolve {
         }
         Ok(out)
     }
+}
+
+/// `M = B C_SS B^T = sum_ab w_a w_b C_ab` (3 x 3, m/N) for `nodes` (at most
+/// [`MAX_CONTACT_NODES`]; a repeated or out-of-range node is an error) with `weights`.
+/// Symmetric, so visited in ascending node order: for each node k, `w_k^2 C_kk`,
+/// then the pairs `(k, l > k)` as `w_k w_l (C_kl + C_kl^T)` from k's stored row
+/// ([`Bank::upper_couplings`]), walked once beside the remaining nodes: no search per pair.
+fn weighted_compliance(
+    bank: &Bank,
+    nodes: &[u16],
+    weights: &[f32],
+) -> Result<[[f32; 3]; 3], SolveError> {
+    // Ascending order of the (at most MAX_CONTACT_NODES) nodes, by insertion.
+    let mut order = [(0u16, 0.0f32); MAX_CONTACT_NODES];
+    let len = nodes.len().min(MAX_CONTACT_NODES);
+    for (i, (&k, &w)) in nodes.iter().zip(weights).take(len).enumerate() {
+        let mut j = i;
+        while let Some(&prev) = j.checked_sub(1).and_then(|p| order.get(p))
+            && prev.0 >= k
+        {
+            if prev.0 == k {
+                return Err(SolveError::DuplicateNode { node: k });
+            }
+            if let Some(slot) = order.get_mut(j) {
+                *slot = prev;
+            }
+            j -= 1;
+        }
+        if let Some(slot) = order.get_mut(j) {
+            *slot = (k, w);
+        }
+    }
+    let order = order.get(..len).unwrap_or(&[]);
+    // Upper triangle xx, xy, xz, yy, yz, zz.
+    let mut m = [0.0f32; 6];
+    for (a, &(k, wa)) in order.iter().enumerate() {
+        let c = bank
+            .c_kk(usize::from(k))
+            .ok_or(SolveError::NodeOutOfRange { node: k })?;
+        let w = wa * wa;
+        for (acc, v) in m.iter_mut().zip(c) {
+            *acc += w * v;
+        }
+        let row = bank.upper_couplings(usize::from(k));
+        let mut at = row.nodes().iter().enumerate();
+        for &(l, wb) in order.iter().skip(a + 1) {
+            let Some((i, _)) = at.find(|&(_, &n)| n >= l).filter(|&(_, &n)| n == l) else {
+                return Err(SolveError::MissingCoupling { k, l });
+            };
+            row.add_symmetric_part(i, wa * wb, &mut m);
+        }
+    }
+    let [xx, xy, xz, yy, yz, zz] = m;
+    Ok([[xx, xy, xz], [xy, yy, yz], [xz, yz, zz]])
 }
 
 /// Weighted contact, energy-minimal form: [`WeightedSolve::new`] then

@@ -184,8 +184,10 @@ struct Pending {
 enum Stage {
     /// Quadrature points still to locate.
     Locating,
-    /// All located: next, merge the loads and choose the nodes.
+    /// All located: next, merge the quadrature's loads with the nodal ones.
     Located,
+    /// Merged: next, choose the nodes.
+    Merged,
     /// Nodes chosen: next, factor the solve.
     Chosen(Patch),
 }
@@ -667,7 +669,12 @@ impl HapticLoop<'_> {
                 Ok(())
             }
             Stage::Located => {
-                p.stage = Stage::Chosen(p.build.finish(self.bank));
+                p.build.merge();
+                p.stage = Stage::Merged;
+                Ok(())
+            }
+            Stage::Merged => {
+                p.stage = Stage::Chosen(p.build.choose(self.bank));
                 Ok(())
             }
             Stage::Chosen(patch) => {

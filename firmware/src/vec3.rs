@@ -1,8 +1,38 @@
-//! Small 3-vector helpers on `[f32; 3]` shared by the loop's modules (f32, the `libm` square
-//! root, so the MCU image and a native build compute bit for bit alike).
+//! Small 3-vector helpers on `[f32; 3]` shared by the loop's modules (f32; a correctly rounded
+//! square root, so the MCU image and a native build compute bit for bit alike).
 
-/// `sqrt(x)` (`libm::sqrtf`: correctly rounded, 53 instructions on the MCU; micromath's is
-/// 10 but 6% off, README "the card's crates").
+/// `sqrt(x)`, correctly rounded (IEEE 754) on every target, so the MCU and a native build agree
+/// bit for bit: the Cortex-M4F's `VSQRT.F32` on the MCU (three instructions with the call;
+/// libm's software `sqrtf` took 53, README "the card's crates"), `libm::sqrtf` elsewhere.
+#[cfg(all(target_arch = "arm", target_abi = "eabihf"))]
+pub(crate) fn sqrt(x: f32) -> f32 {
+    // SAFETY: `firmware_vsqrt_f32` (below) reads s0 and writes s0, as the hard-float AAPCS
+    // passes and returns an f32; it touches no memory.
+    unsafe { firmware_vsqrt_f32(x) }
+}
+
+#[cfg(all(target_arch = "arm", target_abi = "eabihf"))]
+unsafe extern "C" {
+    fn firmware_vsqrt_f32(x: f32) -> f32;
+}
+
+// A leaf function: the inline `asm!` register class for s-registers needs a target feature
+// Rust does not name on this target, and the assembler must be told the M4F's FPU.
+#[cfg(all(target_arch = "arm", target_abi = "eabihf"))]
+core::arch::global_asm!(
+    ".section .text.firmware_vsqrt_f32,\"ax\",%progbits",
+    ".global firmware_vsqrt_f32",
+    ".type firmware_vsqrt_f32,%function",
+    ".fpu fpv4-sp-d16",
+    ".thumb_func",
+    "firmware_vsqrt_f32:",
+    "vsqrt.f32 s0, s0",
+    "bx lr",
+    ".size firmware_vsqrt_f32, . - firmware_vsqrt_f32",
+);
+
+/// `sqrt(x)`, correctly rounded (`libm::sqrtf`; the MCU uses `VSQRT.F32`, the same result).
+#[cfg(not(all(target_arch = "arm", target_abi = "eabihf")))]
 pub(crate) fn sqrt(x: f32) -> f32 {
     libm::sqrtf(x)
 }
