@@ -148,6 +148,12 @@ pub struct PatchBuild {
     /// end: one merge instead of three per point).
     in_contact: [f32; 3],
     next: usize,
+    /// Where the next point's surface walk starts: the triangle the last point outside the
+    /// contact triangle landed on (the points go round their ring, so it is near), else the
+    /// contact triangle.
+    walk_from: (u32, [u16; 3]),
+    /// The node choice so far ([`PatchBuild::choose_step`]).
+    choice: Choice,
 }
 
 impl Default for PatchBuild {
@@ -172,6 +178,8 @@ impl PatchBuild {
             quad: Accumulator::default(),
             in_contact: [0.0; 3],
             next: QUADRATURE.len(),
+            walk_from: (0, [0; 3]),
+            choice: Choice::new(0.0),
         }
     }
 
@@ -205,6 +213,7 @@ impl PatchBuild {
         self.quad.clear();
         self.in_contact = [0.0; 3];
         self.next = QUADRATURE.len();
+        self.walk_from = (triangle, nodes);
         let Some((e1, e2)) = basis else {
             self.acc.add_bary(nodes, bary, 1.0);
             return;
@@ -224,7 +233,8 @@ impl PatchBuild {
     /// Locates up to `points` more quadrature points; `true` once all are located. The points
     /// lie in the contact triangle's plane, where the barycentric coordinates are affine: a
     /// point inside the contact triangle costs six multiply-adds (its affine frame); only the
-    /// points outside it walk the surface ([`closest_surface_point`]).
+    /// points outside it walk the surface ([`closest_surface_point`]), each from where the
+    /// last one landed.
     pub fn locate(&mut self, bank: &Bank, points: usize) -> bool {
         let Some((e1, e2)) = self.basis else {
             return true;
@@ -252,8 +262,12 @@ impl PatchBuild {
             }
             let r = self.radius_m;
             let q = add(add(self.anchor, scale(e1, r * u)), scale(e2, r * v));
-            match closest_surface_point(bank, self.triangle, self.nodes, q) {
-                Some(sp) => self.quad.add_bary(sp.nodes, sp.bary, w),
+            let (t, n) = self.walk_from;
+            match closest_surface_point(bank, t, n, q) {
+                Some(sp) => {
+                    self.quad.add_bary(sp.nodes, sp.bary, w);
+                    self.walk_from = (sp.triangle, sp.nodes);
+                }
                 None => self.quad.add_bary(self.nodes, self.bary, w),
             }
         }
@@ -261,26 +275,44 @@ impl PatchBuild {
         self.next >= QUADRATURE.len()
     }
 
-    /// The last steps at once: [`PatchBuild::merge`] then [`PatchBuild::choose`] (call after
-    /// [`PatchBuild::locate`] returned `true`; points not yet located are missing from the
-    /// load). Works in place (the build is large); call it once.
+    /// The last steps at once: [`PatchBuild::merge`], then [`PatchBuild::choose_step`] until
+    /// done (call after [`PatchBuild::locate`] returned `true`; points not yet located are
+    /// missing from the load). Works in place (the build is large); call it once.
     pub fn finish(&mut self, bank: &Bank) -> Patch {
         self.merge();
-        self.choose(bank)
+        loop {
+            if let Some(patch) = self.choose_step(bank, CANDIDATES) {
+                return patch;
+            }
+        }
     }
 
-    /// The quadrature's loads merged with the nodal ones (once, after the last point).
+    /// The quadrature's loads merged with the nodal ones (once, after the last point), and the
+    /// node choice started.
     pub fn merge(&mut self) {
         if self.basis.is_some() && self.theta < 1.0 {
             self.quad.add_bary(self.nodes, self.in_contact, 1.0);
             self.acc.merge_scaled(&self.quad, 1.0 - self.theta);
         }
+        self.choice = Choice::new(self.acc.total());
     }
 
-    /// The heaviest mutually coupled nodes of the merged loads, normalised (once, after
-    /// [`PatchBuild::merge`]).
-    pub fn choose(&mut self, bank: &Bank) -> Patch {
-        self.acc.finish(bank)
+    /// Examines up to `candidates` more of the merged loads' nodes, heaviest first, keeping
+    /// each one coupled with all kept so far, until [`MAX_CONTACT_NODES`] are kept or none is
+    /// left; then the patch, normalised (`None` while not done). After
+    /// [`PatchBuild::merge`]; each call costs at most `candidates` scans of the loads and
+    /// coupling checks against the kept nodes.
+    pub fn choose_step(&mut self, bank: &Bank, candidates: usize) -> Option<Patch> {
+        for _ in 0..candidates {
+            if self.choice.patch.len >= MAX_CONTACT_NODES {
+                break;
+            }
+            match self.acc.take_heaviest() {
+                Some((k, q)) => self.choice.consider(bank, k, q),
+                None => return Some(self.choice.finish()),
+            }
+        }
+        (self.choice.patch.len >= MAX_CONTACT_NODES).then(|| self.choice.finish())
     }
 }
 
@@ -467,53 +499,78 @@ impl Accumulator {
         }
     }
 
-    /// The heaviest nodes, mutually coupled, normalised (consumes the loads).
-    fn finish(&mut self, bank: &Bank) -> Patch {
-        let total = self.loads.iter().take(self.len).sum::<f32>() + self.overflow;
-        let mut patch = Patch {
-            nodes: [0; MAX_CONTACT_NODES],
-            weights: [0.0; MAX_CONTACT_NODES],
-            len: 0,
-            dropped: 0.0,
-        };
-        let mut kept = 0.0f32;
-        while patch.len < MAX_CONTACT_NODES {
-            // Heaviest remaining candidate (ties: the first).
-            let Some((i, &q)) = self
-                .loads
-                .iter()
-                .take(self.len)
-                .enumerate()
-                .filter(|&(_, &q)| q > 0.0)
-                .fold(None, |best: Option<(usize, &f32)>, c| match best {
-                    Some(b) if *b.1 >= *c.1 => Some(b),
-                    _ => Some(c),
-                })
-            else {
-                break;
-            };
-            let k = self.nodes.get(i).copied().unwrap_or(0);
-            if let Some(l) = self.loads.get_mut(i) {
-                *l = 0.0;
-            }
-            // Membership in the neighbour index is enough (kept nodes differ from k).
-            let coupled = patch
-                .nodes()
-                .iter()
-                .all(|&n| bank.neighbours(usize::from(n)).binary_search(&k).is_ok());
-            if !coupled {
-                continue;
-            }
-            if let (Some(n), Some(w)) = (
-                patch.nodes.get_mut(patch.len),
-                patch.weights.get_mut(patch.len),
-            ) {
-                *n = k;
-                *w = q;
-            }
-            patch.len += 1;
-            kept += q;
+    /// The sum of the loads, kept and overflowed.
+    fn total(&self) -> f32 {
+        self.loads.iter().take(self.len).sum::<f32>() + self.overflow
+    }
+
+    /// The heaviest remaining candidate (ties: the first) and its load, removed (its load set to
+    /// 0); `None` when no load is left.
+    fn take_heaviest(&mut self) -> Option<(u16, f32)> {
+        let (i, &q) = self
+            .loads
+            .iter()
+            .take(self.len)
+            .enumerate()
+            .filter(|&(_, &q)| q > 0.0)
+            .fold(None, |best: Option<(usize, &f32)>, c| match best {
+                Some(b) if *b.1 >= *c.1 => Some(b),
+                _ => Some(c),
+            })?;
+        let k = self.nodes.get(i).copied()?;
+        if let Some(l) = self.loads.get_mut(i) {
+            *l = 0.0;
         }
+        Some((k, q))
+    }
+}
+
+/// A node choice in progress ([`PatchBuild::choose_step`]): the nodes kept so far with their
+/// loads, and the total load they are chosen from.
+#[derive(Clone, Copy, Debug)]
+struct Choice {
+    patch: Patch,
+    kept: f32,
+    total: f32,
+}
+
+impl Choice {
+    fn new(total: f32) -> Choice {
+        Choice {
+            patch: Patch {
+                nodes: [0; MAX_CONTACT_NODES],
+                weights: [0.0; MAX_CONTACT_NODES],
+                len: 0,
+                dropped: 0.0,
+            },
+            kept: 0.0,
+            total,
+        }
+    }
+
+    /// Keeps node `k` with load `q` if the bank couples it with every node kept so far
+    /// (membership in the neighbour index is enough: kept nodes differ from k).
+    fn consider(&mut self, bank: &Bank, k: u16, q: f32) {
+        let p = &mut self.patch;
+        let coupled = p
+            .nodes()
+            .iter()
+            .all(|&n| bank.neighbours(usize::from(n)).binary_search(&k).is_ok());
+        if !coupled {
+            return;
+        }
+        if let (Some(n), Some(w)) = (p.nodes.get_mut(p.len), p.weights.get_mut(p.len)) {
+            *n = k;
+            *w = q;
+            p.len += 1;
+            self.kept += q;
+        }
+    }
+
+    /// The kept nodes, normalised, with the share of the load they leave out.
+    fn finish(&self) -> Patch {
+        let mut patch = self.patch;
+        let (kept, total) = (self.kept, self.total);
         if kept > 0.0 && total > 0.0 {
             for w in patch.weights.iter_mut() {
                 *w /= kept;

@@ -412,39 +412,9 @@ impl WeightedSolve {
     /// Assembles and factors `M` for `nodes` with `weights` (finite, `>= 0`, sum 1). Every
     /// pair must be coupled in the bank; an ill-conditioned `M` is an error.
     pub fn new(bank: &Bank, nodes: &[u16], weights: &[f32]) -> Result<WeightedSolve, SolveError> {
-        // Range and duplicates are checked by the assembly, which sorts the nodes.
-        check_count(nodes, MAX_CONTACT_NODES)?;
-        if weights.len() != nodes.len() {
-            return Err(SolveError::LengthMismatch {
-                nodes: nodes.len(),
-                imposed: weights.len(),
-            });
-        }
-        check_weights(weights)?;
-        let m = weighted_compliance(bank, nodes, weights)?;
-        // A NaN or infinite compliance entry reaches M (a zero weight turns an infinity
-        // into NaN): one check on the sum.
-        if !m.iter().flatten().all(|v| v.is_finite()) {
-            return Err(SolveError::NonFinite);
-        }
-        let factor = Factor::new(m, 3)?;
-        factor.check()?;
-        let mut out = WeightedSolve {
-            nodes: [0; MAX_CONTACT_NODES],
-            weights: [0.0; MAX_CONTACT_NODES],
-            len: nodes.len(),
-            factor,
-        };
-        for ((n, w), (&k, &wk)) in out
-            .nodes
-            .iter_mut()
-            .zip(out.weights.iter_mut())
-            .zip(nodes.iter().zip(weights))
-        {
-            *n = k;
-            *w = wk;
-        }
-        Ok(out)
+        let mut fill = WeightedFill::new(nodes, weights)?;
+        while !fill.step(bank, usize::MAX)? {}
+        fill.factor()
     }
 
     /// The contact nodes.
@@ -460,10 +430,20 @@ impl WeightedSolve {
     /// The forces that move the weighted mean `sum_a w_a u_a` by `d_m` (m): `f_tool = M^-1 d`,
     /// `f_a = w_a f_tool` (N, on the tissue).
     pub fn forces(&self, d_m: [f32; 3]) -> Result<ContactForces, SolveError> {
+        Ok(self.distribute(self.tool_force(d_m)?))
+    }
+
+    /// `f_tool = M^-1 d` (N, on the tissue) for the displacement `d_m` (m) of the weighted mean.
+    pub fn tool_force(&self, d_m: [f32; 3]) -> Result<[f32; 3], SolveError> {
         if !d_m.iter().all(|v| v.is_finite()) {
             return Err(SolveError::NonFinite);
         }
-        let tool = self.factor.solve(&d_m)?;
+        self.factor.solve(&d_m)
+    }
+
+    /// A tool force `tool` (N, on the tissue) spread over the nodes as `f_a = w_a tool`; the
+    /// result's `tool_force_n` is their sum.
+    pub fn distribute(&self, tool: [f32; 3]) -> ContactForces {
         let mut out = ContactForces {
             nodes: self.nodes,
             len: self.len,
@@ -477,62 +457,125 @@ impl WeightedSolve {
                 *t += *v;
             }
         }
-        Ok(out)
+        out
     }
 }
 
-/// `M = B C_SS B^T = sum_ab w_a w_b C_ab` (3 x 3, m/N) for `nodes` (at most
-/// [`MAX_CONTACT_NODES`]; a repeated or out-of-range node is an error) with `weights`.
-/// Symmetric, so visited in ascending node order: for each node k, `w_k^2 C_kk`,
-/// then the pairs `(k, l > k)` as `w_k w_l (C_kl + C_kl^T)` from k's stored row
-/// ([`Bank::upper_couplings`]), walked once beside the remaining nodes: no search per pair.
-fn weighted_compliance(
-    bank: &Bank,
-    nodes: &[u16],
-    weights: &[f32],
-) -> Result<[[f32; 3]; 3], SolveError> {
-    // Ascending order of the (at most MAX_CONTACT_NODES) nodes, by insertion.
-    let mut order = [(0u16, 0.0f32); MAX_CONTACT_NODES];
-    let len = nodes.len().min(MAX_CONTACT_NODES);
-    for (i, (&k, &w)) in nodes.iter().zip(weights).take(len).enumerate() {
-        let mut j = i;
-        while let Some(&prev) = j.checked_sub(1).and_then(|p| order.get(p))
-            && prev.0 >= k
-        {
-            if prev.0 == k {
-                return Err(SolveError::DuplicateNode { node: k });
+/// [`WeightedSolve::new`] in steps, so that the loop can spread a large patch's assembly over
+/// ticks: `M = B C_SS B^T = sum_ab w_a w_b C_ab` (3 x 3, m/N), symmetric, visited in ascending
+/// node order: for each node k, `w_k^2 C_kk`, then the pairs `(k, l > k)` as
+/// `w_k w_l (C_kl + C_kl^T)` from k's stored row ([`Bank::upper_couplings`]), walked once beside
+/// the remaining nodes (no search per pair); then [`WeightedFill::factor`]. The same sums in the
+/// same order however it is stepped, so the result is bit for bit [`WeightedSolve::new`]'s.
+#[derive(Clone, Copy, Debug)]
+pub struct WeightedFill {
+    /// The nodes and weights, ascending by node.
+    order: [(u16, f32); MAX_CONTACT_NODES],
+    /// The nodes and weights as given (the solve keeps their order).
+    nodes: [u16; MAX_CONTACT_NODES],
+    weights: [f32; MAX_CONTACT_NODES],
+    len: usize,
+    /// Rows of `order` added so far.
+    next: usize,
+    /// Upper triangle of M: xx, xy, xz, yy, yz, zz.
+    m: [f32; 6],
+}
+
+impl WeightedFill {
+    /// Starts the assembly for `nodes` (1 ..= [`MAX_CONTACT_NODES`], distinct) with `weights`
+    /// (finite, `>= 0`, sum 1).
+    pub fn new(nodes: &[u16], weights: &[f32]) -> Result<WeightedFill, SolveError> {
+        check_count(nodes, MAX_CONTACT_NODES)?;
+        if weights.len() != nodes.len() {
+            return Err(SolveError::LengthMismatch {
+                nodes: nodes.len(),
+                imposed: weights.len(),
+            });
+        }
+        check_weights(weights)?;
+        let mut out = WeightedFill {
+            order: [(0, 0.0); MAX_CONTACT_NODES],
+            nodes: [0; MAX_CONTACT_NODES],
+            weights: [0.0; MAX_CONTACT_NODES],
+            len: nodes.len(),
+            next: 0,
+            m: [0.0; 6],
+        };
+        // Ascending order by insertion; a repeated node is met on the way.
+        for (i, (&k, &w)) in nodes.iter().zip(weights).enumerate() {
+            if let (Some(n), Some(wv)) = (out.nodes.get_mut(i), out.weights.get_mut(i)) {
+                (*n, *wv) = (k, w);
             }
-            if let Some(slot) = order.get_mut(j) {
-                *slot = prev;
+            let mut j = i;
+            while let Some(&prev) = j.checked_sub(1).and_then(|p| out.order.get(p))
+                && prev.0 >= k
+            {
+                if prev.0 == k {
+                    return Err(SolveError::DuplicateNode { node: k });
+                }
+                if let Some(slot) = out.order.get_mut(j) {
+                    *slot = prev;
+                }
+                j -= 1;
             }
-            j -= 1;
+            if let Some(slot) = out.order.get_mut(j) {
+                *slot = (k, w);
+            }
         }
-        if let Some(slot) = order.get_mut(j) {
-            *slot = (k, w);
-        }
+        Ok(out)
     }
-    let order = order.get(..len).unwrap_or(&[]);
-    // Upper triangle xx, xy, xz, yy, yz, zz.
-    let mut m = [0.0f32; 6];
-    for (a, &(k, wa)) in order.iter().enumerate() {
-        let c = bank
-            .c_kk(usize::from(k))
-            .ok_or(SolveError::NodeOutOfRange { node: k })?;
-        let w = wa * wa;
-        for (acc, v) in m.iter_mut().zip(c) {
-            *acc += w * v;
+
+    /// Adds the next rows of M, at least one and then as long as the blocks added this call
+    /// stay within `budget` (a row of node a costs `len - a` blocks, its `C_kk` included);
+    /// `true` once every row is in. An out-of-range node or an uncoupled pair is an error.
+    pub fn step(&mut self, bank: &Bank, budget: usize) -> Result<bool, SolveError> {
+        let order = self.order.get(..self.len).unwrap_or(&[]);
+        let mut spent = 0usize;
+        while let Some(&(k, wa)) = order.get(self.next) {
+            let cost = self.len - self.next;
+            if spent > 0 && spent + cost > budget {
+                break;
+            }
+            spent += cost;
+            let c = bank
+                .c_kk(usize::from(k))
+                .ok_or(SolveError::NodeOutOfRange { node: k })?;
+            let w = wa * wa;
+            for (acc, v) in self.m.iter_mut().zip(c) {
+                *acc += w * v;
+            }
+            let row = bank.upper_couplings(usize::from(k));
+            let mut at = row.nodes().iter().enumerate();
+            for &(l, wb) in order.iter().skip(self.next + 1) {
+                let Some((i, _)) = at.find(|&(_, &n)| n >= l).filter(|&(_, &n)| n == l) else {
+                    return Err(SolveError::MissingCoupling { k, l });
+                };
+                row.add_symmetric_part(i, wa * wb, &mut self.m);
+            }
+            self.next += 1;
         }
-        let row = bank.upper_couplings(usize::from(k));
-        let mut at = row.nodes().iter().enumerate();
-        for &(l, wb) in order.iter().skip(a + 1) {
-            let Some((i, _)) = at.find(|&(_, &n)| n >= l).filter(|&(_, &n)| n == l) else {
-                return Err(SolveError::MissingCoupling { k, l });
-            };
-            row.add_symmetric_part(i, wa * wb, &mut m);
-        }
+        Ok(self.next >= self.len)
     }
-    let [xx, xy, xz, yy, yz, zz] = m;
-    Ok([[xx, xy, xz], [xy, yy, yz], [xz, yz, zz]])
+
+    /// Factors M once every row is in ([`WeightedFill::step`] returned `true`); an
+    /// ill-conditioned or non-finite M is an error.
+    pub fn factor(&self) -> Result<WeightedSolve, SolveError> {
+        let [xx, xy, xz, yy, yz, zz] = self.m;
+        let m = [[xx, xy, xz], [xy, yy, yz], [xz, yz, zz]];
+        // A NaN or infinite compliance entry reaches M (a zero weight turns an infinity
+        // into NaN): one check on the sum.
+        if !m.iter().flatten().all(|v| v.is_finite()) {
+            return Err(SolveError::NonFinite);
+        }
+        let factor = Factor::new(m, 3)?;
+        factor.check()?;
+        Ok(WeightedSolve {
+            nodes: self.nodes,
+            weights: self.weights,
+            len: self.len,
+            factor,
+        })
+    }
 }
 
 /// Weighted contact, energy-minimal form: [`WeightedSolve::new`] then

@@ -101,8 +101,10 @@ fn slide_across_the_patch_while_pressed() {
     // The slide crossed several triangles; the last ticks are above the surface, force-free.
     assert!(triangles.len() >= 4, "{triangles:?}");
     assert!(max_f > 1.0, "{max_f}");
+    // A patch swap blends the outgoing solve's force into the new one's over BLEND_TICKS
+    // (a swap without it dropped the tangential force by 0.019 N in a tick here).
     assert!(
-        max_drop < 0.02,
+        max_drop < 0.01,
         "the tangential force fell by {max_drop} N in one tick"
     );
     let tel = lp.telemetry();
