@@ -143,6 +143,8 @@ pub struct HapticLoop<'b> {
     last: Last,
     held: Option<Held>,
     blend: Option<Blend>,
+    /// The contact was detected at an earlier tick (its force starts the tick after).
+    detected: bool,
     pending: Pending,
 }
 
@@ -272,6 +274,7 @@ impl<'b> HapticLoop<'b> {
             },
             held: None,
             blend: None,
+            detected: false,
             pending: Pending {
                 origin: None,
                 build: PatchBuild::new(),
@@ -522,8 +525,16 @@ impl<'b> HapticLoop<'b> {
             self.held = None;
             self.blend = None;
             self.pending.origin = None;
+            self.detected = false;
             return Ok(None);
         };
+        // The tick that detects a contact renders none: its displacement is under one tick of
+        // motion, and detection with a hit is the costliest phase of all; the contact
+        // triangle's solve comes the next tick, while detection only tracks.
+        if self.held.is_none() && !self.detected {
+            self.detected = true;
+            return Ok(None);
+        }
         if let Some(b) = &mut self.blend {
             b.left = b.left.saturating_sub(1);
             if b.left == 0 {
@@ -540,9 +551,9 @@ impl<'b> HapticLoop<'b> {
             radius_m: tip_radius,
         };
         match self.held {
-            // The first tick of a contact also ran the detection: it solves on the contact
-            // triangle alone (the tip's displacement is still tiny, so is the force); the
-            // tip's patch is built over the next ticks.
+            // The first tick of a contact's force solves on the contact triangle alone (the
+            // tip's displacement is still tiny, so is the force); the tip's patch is built
+            // over the next ticks.
             None => {
                 self.pending.origin = None;
                 let (solve, dropped) = match triangle_solve(self.bank, nodes, bary) {
@@ -1042,10 +1053,10 @@ mod tests {
                 continue;
             }
             touching += 1;
-            let radius = out.patch.unwrap().radius_m;
+            let radius = out.patch.map_or(0.0, |p| p.radius_m);
             if radius == 0.0 {
-                // The first ticks of a contact, until the tip's patch is built: the contact
-                // triangle alone, nothing dropped.
+                // The first ticks of a contact, until the tip's patch is built: none (the
+                // detecting tick), then the contact triangle alone, nothing dropped.
                 assert_eq!(out.dropped_load, 0.0, "{out:?}");
                 first += 1;
                 continue;
@@ -1086,6 +1097,11 @@ mod tests {
         assert_eq!(out.state, State::Fault(FaultReason::EncoderJump));
         assert_eq!(out.new_fault.unwrap().detail, 2);
         assert_eq!(out.currents_a, [0.0; 3]);
+        // The detecting tick renders no force; the next one computes the capped force, and
+        // the latched fault keeps the currents at zero.
+        assert_eq!(out.tool_force_n, [0.0; 3]);
+        let out = lp.tick(input(counts_for_insertion(&dev, 0.13)));
+        assert_eq!(out.currents_a, [0.0; 3]);
         assert!((norm(out.tool_force_n) - cal.max_force_n).abs() < 1e-3);
 
         // With the jump check relaxed, it is what it would physically be, a 50 m/s strike: the
@@ -1112,6 +1128,9 @@ mod tests {
         let out = lp.tick(input(counts_for_insertion(&dev, 0.13)));
         check(&out, &cal);
         assert!(matches!(out.contact, ContactState::Touching { .. }));
+        assert_eq!(out.tool_force_n, [0.0; 3]);
+        let out = lp.tick(input(counts_for_insertion(&dev, 0.13)));
+        check(&out, &cal);
         assert_eq!(out.state, State::Armed, "{out:?}");
         assert!((norm(out.tool_force_n) - cal.max_force_n).abs() < 1e-3);
         assert!(out.currents_a[2] < 0.0);
