@@ -568,3 +568,57 @@ fn bfp16_encoder_uses_the_smallest_exponent() {
     assert!(bank_format::encode_ckl16(&[[1e39, 0.0, 0.0], [0.0; 3], [0.0; 3]]).is_none());
     assert!(bank_format::encode_ckl16(&[[f64::NAN, 0.0, 0.0], [0.0; 3], [0.0; 3]]).is_none());
 }
+
+/// `Bank::upper_couplings` (a node's stored row: its neighbours above it and their blocks) in
+/// both precisions: the nodes are exactly the row's entries `l > k`, ascending, and
+/// `add_symmetric_part(i, w)` adds exactly `w (C_kl + C_kl^T)` of the decoded block, bit for
+/// bit (16-bit mantissa pairs summed as integers, scaled once). Out of range adds nothing.
+#[test]
+fn upper_couplings_walk_each_stored_row_and_add_its_symmetric_parts() {
+    let b = builder();
+    for precision in [bank_format::Precision::F32, bank_format::Precision::Bfp16] {
+        let aligned = AlignedBytes::new(&b.build_with_precision(precision).unwrap());
+        let bank = Bank::parse(&aligned).unwrap();
+        let mut seen = 0;
+        for k in 0..bank.node_count() {
+            let row = bank.upper_couplings(k);
+            let want: Vec<u16> = bank
+                .neighbours(k)
+                .iter()
+                .copied()
+                .filter(|&l| usize::from(l) > k)
+                .collect();
+            assert_eq!(row.nodes(), &want[..], "node {k}, {precision:?}");
+            for (i, &l) in row.nodes().iter().enumerate() {
+                let c = bank.coupling(k, usize::from(l)).unwrap();
+                let w = 0.37f32;
+                let mut m = [1.0f32, 2.0, 3.0, 4.0, 5.0, 6.0];
+                assert!(row.add_symmetric_part(i, w, &mut m));
+                let sym = [
+                    c[0][0] + c[0][0],
+                    c[0][1] + c[1][0],
+                    c[0][2] + c[2][0],
+                    c[1][1] + c[1][1],
+                    c[1][2] + c[2][1],
+                    c[2][2] + c[2][2],
+                ];
+                for (j, (&got, s)) in m.iter().zip(sym).enumerate() {
+                    let start = (j + 1) as f32;
+                    assert_eq!(got, start + w * s, "node {k}-{l} entry {j}, {precision:?}");
+                }
+                seen += 1;
+            }
+            let mut m = [0.0f32; 6];
+            assert!(!row.add_symmetric_part(row.nodes().len(), 1.0, &mut m));
+            assert_eq!(m, [0.0; 6]);
+        }
+        assert_eq!(seen, bank.pair_count());
+    }
+    assert!(
+        Bank::parse(&AlignedBytes::new(&b.build().unwrap()))
+            .unwrap()
+            .upper_couplings(usize::MAX)
+            .nodes()
+            .is_empty()
+    );
+}

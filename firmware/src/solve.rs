@@ -722,6 +722,85 @@ mod tests {
         c
     }
 
+    /// An 8-node weighted solve, every pair coupled: `WeightedFill` stepped with any block
+    /// budget gives `WeightedSolve::new`'s factor bit for bit (the same sums in the same
+    /// order), and both match the f64 `B C_SS B^T` solve; a missing pair or a repeated node is
+    /// an error naming it.
+    #[test]
+    fn weighted_fill_in_steps_equals_the_one_go_solve_and_f64() {
+        let p: Vec<[f64; 3]> = (0..8)
+            .map(|i| {
+                let a = i as f64 * 0.7;
+                [0.004 * a.cos(), 0.004 * a.sin(), 0.0003 * i as f64]
+            })
+            .collect();
+        let pairs: Vec<(u32, u32)> = (0..8u32)
+            .flat_map(|k| (k + 1..8).map(move |l| (k, l)))
+            .collect();
+        let bytes = bank_bytes(p, &pairs, 0.02);
+        let bank = Bank::parse(bytes.as_slice()).unwrap();
+        let nodes = [5u16, 0, 7, 2, 3, 6, 1, 4];
+        let raw = [0.3f32, 0.2, 0.1, 0.1, 0.1, 0.08, 0.07, 0.05];
+        let sum: f32 = raw.iter().sum();
+        let weights = raw.map(|w| w / sum);
+        let d = [0.2e-3, -0.1e-3, -1.0e-3];
+        let whole = WeightedSolve::new(&bank, &nodes, &weights).unwrap();
+        let want = whole.forces(d).unwrap();
+        for budget in [1, 5, 18, 36, usize::MAX] {
+            let mut fill = WeightedFill::new(&nodes, &weights).unwrap();
+            let mut steps = 1;
+            while !fill.step(&bank, budget).unwrap() {
+                steps += 1;
+            }
+            if budget == 18 {
+                assert_eq!(steps, 3, "8 nodes, 36 blocks, at most 18 a step");
+            }
+            let got = fill.factor().unwrap().forces(d).unwrap();
+            assert_eq!(got.nodes(), &nodes[..]);
+            for (a, b) in got.forces().iter().zip(want.forces()) {
+                assert_eq!(a.map(f32::to_bits), b.map(f32::to_bits), "budget {budget}");
+            }
+        }
+        // f64: M = sum_ab w_a w_b C_ab, f_tool = M^-1 d.
+        let c = css64(&bank, &nodes);
+        let mut m = vec![vec![0.0; 3]; 3];
+        for a in 0..8 {
+            for b in 0..8 {
+                let w = f64::from(weights[a]) * f64::from(weights[b]);
+                for i in 0..3 {
+                    for j in 0..3 {
+                        m[i][j] += w * c[3 * a + i][3 * b + j];
+                    }
+                }
+            }
+        }
+        let ft = gauss(m, d.map(f64::from).to_vec());
+        let tool: Vec<f64> = want.tool_force_n.iter().map(|&v| f64::from(v)).collect();
+        assert!(
+            rel_err(&[want.tool_force_n], &ft) < 1e-5,
+            "{tool:?} vs {ft:?}"
+        );
+
+        let kept: Vec<(u32, u32)> = pairs.iter().copied().filter(|&p| p != (3, 4)).collect();
+        let missing = bank_bytes(
+            (0..8)
+                .map(|i| [0.003 * i as f64, 0.001 * (i % 2) as f64, 0.0])
+                .collect(),
+            &kept,
+            0.0,
+        );
+        let missing = Bank::parse(missing.as_slice()).unwrap();
+        assert_eq!(
+            WeightedSolve::new(&missing, &nodes, &weights).unwrap_err(),
+            SolveError::MissingCoupling { k: 3, l: 4 }
+        );
+        let twice = [5u16, 0, 7, 2, 3, 6, 1, 5];
+        assert_eq!(
+            WeightedFill::new(&twice, &weights).unwrap_err(),
+            SolveError::DuplicateNode { node: 5 }
+        );
+    }
+
     #[test]
     fn point_contact_matches_f64() {
         let bytes = triangle_bank();
