@@ -371,7 +371,8 @@ fn tick(args: TickArgs) -> Result<()> {
 fn sil(args: SilArgs) -> Result<()> {
     use bank_format::region::{FIRMWARE_LEN, RAM_LEN, RAM_ORIGIN};
     use host::sil::cost::{
-        CODE_PHASES, CodePhaseStats, by_contact_nodes, code_phase_samples, image_size,
+        BODY_GOAL, CODE_PHASES, CodePhaseStats, TICK_GOAL, against_goal, by_contact_nodes,
+        code_phase_samples, image_size,
     };
     use host::sil::harness::{self, Session};
     use host::sil::script::Script;
@@ -410,6 +411,7 @@ fn sil(args: SilArgs) -> Result<()> {
     let size = image_size(&setup.image, RAM_ORIGIN, RAM_LEN as u32)?;
     let worst = groups.values().map(|g| g.body_max).max().unwrap_or(0);
     let worst_tick = groups.values().map(|g| g.tick_max).max().unwrap_or(0);
+    let (goal_body, goal_tick, met) = against_goal(&records.concat());
     if args.json {
         let by: serde_json::Map<String, serde_json::Value> = groups
             .iter()
@@ -421,6 +423,13 @@ fn sil(args: SilArgs) -> Result<()> {
             "code_phases": code.iter().map(|(n, c)| ((*n).to_string(), serde_json::json!(c))).collect::<serde_json::Map<_, _>>(),
             "worst_body_instructions": worst,
             "worst_tick_instructions": worst_tick,
+            "goal": {
+                "body_instructions": BODY_GOAL,
+                "tick_instructions": TICK_GOAL,
+                "max_body_instructions": goal_body,
+                "max_tick_instructions": goal_tick,
+                "met": met,
+            },
             "flash_bytes": size.flash,
             "flash_region_bytes": FIRMWARE_LEN,
             "ram_static_bytes": size.ram,
@@ -459,6 +468,11 @@ fn sil(args: SilArgs) -> Result<()> {
         );
     }
     println!("worst case       body {worst}, whole tick {worst_tick}");
+    println!(
+        "goal             every tick (armed or not): body {goal_body} <= {BODY_GOAL}, whole tick \
+         {goal_tick} <= {TICK_GOAL}: {}",
+        if met { "met" } else { "NOT met" }
+    );
     println!(
         "instructions per tick by code phase, every tick (armed or not); link = whole tick less body"
     );

@@ -52,6 +52,29 @@ impl CostStats {
     }
 }
 
+/// The loop's instruction budget (issue 15): every tick's loop body at most this many
+/// instructions on the MCU image...
+pub const BODY_GOAL: u32 = 5_000;
+/// ...and every whole tick (executor, link and plant I/O included) at most this many, which
+/// leaves room to run the same loop at 10 kHz (12,500 a period at 125 MIPS).
+pub const TICK_GOAL: u32 = 8_000;
+
+/// The largest loop body and whole tick over `records`, every tick (armed or not), and whether
+/// both are within [`BODY_GOAL`] and [`TICK_GOAL`].
+pub fn against_goal(records: &[TickRecord]) -> (u32, u32, bool) {
+    let body = records
+        .iter()
+        .map(|r| r.body_instructions)
+        .max()
+        .unwrap_or(0);
+    let tick = records
+        .iter()
+        .map(|r| r.tick_instructions)
+        .max()
+        .unwrap_or(0);
+    (body, tick, body <= BODY_GOAL && tick <= TICK_GOAL)
+}
+
 /// Costs of armed ticks grouped by contact nodes (0 = idle, free motion). A record's
 /// `tick_instructions` belongs to the tick before it, so each tick's whole cost is read from
 /// its successor.
