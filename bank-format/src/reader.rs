@@ -294,7 +294,11 @@ pub(crate) fn cell_of(g: &GridHeader, p: [f32; 3]) -> Option<[u16; 3]> {
 fn signed_cell(x: f32, origin: f32, h: f32) -> i64 {
     let t = (x - origin) / h;
     let i = t as i32;
-    i64::from(if (i as f32) > t { i.saturating_sub(1) } else { i })
+    i64::from(if (i as f32) > t {
+        i.saturating_sub(1)
+    } else {
+        i
+    })
 }
 
 /// The index range of CSR row `i` (starts of any unsigned width up to `u32`).
@@ -1496,7 +1500,10 @@ mod tests {
         assert_eq!(signed_cell(0.0, 0.0, 1.0), 0);
         assert_eq!(signed_cell(2.5, 0.0, 1.0), 2);
         // Saturates instead of overflowing (found by fuzzing), at the i32 range.
-        assert_eq!(signed_cell(f32::NEG_INFINITY, 0.0, 1.0), i64::from(i32::MIN));
+        assert_eq!(
+            signed_cell(f32::NEG_INFINITY, 0.0, 1.0),
+            i64::from(i32::MIN)
+        );
         assert_eq!(signed_cell(-3.0e38, 0.0, 1.0e-30), i64::from(i32::MIN));
         assert_eq!(signed_cell(f32::INFINITY, 0.0, 1.0), i64::from(i32::MAX));
         assert_eq!(signed_cell(-65_536.5, 0.0, 1.0), -65_537);
