@@ -328,6 +328,13 @@ pub enum BankError {
         /// Which block.
         entry: u32,
     },
+    /// A triangle's stored plane (section [`crate::SectionKind::TrianglePlanes`]) is not the
+    /// plane recomputed from its positions within [`crate::PLANE_TOL`] (`SPEC.md`, check 9),
+    /// or the triangle has zero area and so no plane.
+    TrianglePlane {
+        /// Which triangle.
+        triangle: u32,
+    },
 }
 
 impl BankError {
@@ -381,6 +388,7 @@ impl BankError {
             BankError::CellClearance { .. } => 43,
             BankError::GravityOutOfRange { .. } => 44,
             BankError::CklExponent { .. } => 45,
+            BankError::TrianglePlane { .. } => 46,
         }
     }
 }
@@ -488,6 +496,11 @@ impl fmt::Display for BankError {
                 "16-bit C_kl block {entry}: exponent outside {}..={}",
                 crate::CKL16_EXP_MIN,
                 crate::CKL16_EXP_MAX
+            ),
+            E::TrianglePlane { triangle } => write!(
+                f,
+                "triangle {triangle}: its stored plane is not the one of its positions (or it has \
+                 zero area)"
             ),
         }
     }

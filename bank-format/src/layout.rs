@@ -11,10 +11,11 @@ pub const MAGIC: [u8; 8] = *b"HAPTBANK";
 /// Major version this crate reads and writes. A reader rejects any other major version. 2: the
 /// device record gained the speed thresholds; 3: the per-cell contact certificates (clearance
 /// and candidate triangles) became required sections; 4: each coupled pair's block stored once
-/// ([`SectionKind::CouplingStarts`]), narrower index arrays (`SPEC.md`, "Versioning").
-pub const VERSION_MAJOR: u16 = 4;
+/// ([`SectionKind::CouplingStarts`]), narrower index arrays; 5: the per-triangle planes
+/// ([`SectionKind::TrianglePlanes`]) became a required section (`SPEC.md`, "Versioning").
+pub const VERSION_MAJOR: u16 = 5;
 /// Minor version this crate writes. Readers accept any minor version of their major version
-/// (minor versions only add optional sections, which older readers skip). 4.0 has the optional
+/// (minor versions only add optional sections, which older readers skip). 5.0 has the optional
 /// gravity section ([`SectionKind::Gravity`], added in 3.1).
 pub const VERSION_MINOR: u16 = 0;
 /// Size of [`BankHeader`] in bytes; the section table follows it.
@@ -107,6 +108,8 @@ pub enum SectionKind {
     MeshIds,
     /// Triangles of R's surface, `[u16; 3]` node indices, counter-clockwise seen from outside.
     Triangles,
+    /// [`TrianglePlane`] per triangle, in [`SectionKind::Triangles`]' order (5.0).
+    TrianglePlanes,
     /// CSR row starts (`u32`, n + 1) of the node-to-triangle adjacency.
     NodeTriStarts,
     /// CSR items (`u16` triangle indices) of the node-to-triangle adjacency.
@@ -153,11 +156,12 @@ impl SectionKind {
     /// The sections a valid bank of this major version must contain, in the order the writer
     /// lays them out; besides these, exactly one of [`SectionKind::NeighbourCkl`] and
     /// [`SectionKind::NeighbourCkl16`] (the storage precision, [`Precision`]).
-    pub const REQUIRED: [SectionKind; 18] = [
+    pub const REQUIRED: [SectionKind; 19] = [
         SectionKind::Meta,
         SectionKind::Positions,
         SectionKind::MeshIds,
         SectionKind::Triangles,
+        SectionKind::TrianglePlanes,
         SectionKind::NodeTriStarts,
         SectionKind::NodeTriItems,
         SectionKind::Grid,
@@ -198,6 +202,7 @@ impl SectionKind {
             18 => SectionKind::CellTriItems,
             19 => SectionKind::CouplingStarts,
             20 => SectionKind::NeighbourCkl16,
+            21 => SectionKind::TrianglePlanes,
             24 => SectionKind::Gravity,
             other => SectionKind::Unknown(other),
         }
@@ -227,6 +232,7 @@ impl SectionKind {
             SectionKind::CellTriItems => 18,
             SectionKind::CouplingStarts => 19,
             SectionKind::NeighbourCkl16 => 20,
+            SectionKind::TrianglePlanes => 21,
             SectionKind::Gravity => 24,
             SectionKind::Unknown(code) => code,
         }
@@ -241,6 +247,7 @@ impl SectionKind {
             SectionKind::Positions => 12,
             SectionKind::MeshIds => 4,
             SectionKind::Triangles => 6,
+            SectionKind::TrianglePlanes => core::mem::size_of::<TrianglePlane>(),
             SectionKind::NodeTriStarts => 4,
             SectionKind::NodeTriItems => 2,
             SectionKind::Grid => core::mem::size_of::<GridHeader>(),
@@ -269,6 +276,7 @@ impl SectionKind {
             SectionKind::Positions => "positions",
             SectionKind::MeshIds => "mesh ids",
             SectionKind::Triangles => "triangles",
+            SectionKind::TrianglePlanes => "triangle planes",
             SectionKind::NodeTriStarts => "node-triangle starts",
             SectionKind::NodeTriItems => "node-triangle items",
             SectionKind::Grid => "grid",
@@ -336,6 +344,33 @@ pub struct GridHeader {
     pub dims: [u16; 3],
     /// Reserved, zero.
     pub reserved: u16,
+}
+
+/// Relative tolerance of the reader's check of a [`TrianglePlane`] against its triangle's
+/// positions (`SPEC.md`, "triangle planes" and check 9): 16 times the writer's f32 rounding.
+pub const PLANE_TOL: f64 = 1.0e-6;
+
+/// A triangle's plane (section [`SectionKind::TrianglePlanes`], `SPEC.md` "triangle planes"):
+/// with `n = (b - a) x (c - a)` from the triangle's stored positions, `m = n / |n|^2` and `off =
+/// m . a`. The plane value `s(p) = m . p - off = (p - a) . n / |n|^2` has the sign of `(p - a)
+/// . n` (>= 0 outside), and the barycentric coordinates of the projection of `x` are `k1 = ((x -
+/// a) x (c - a)) . m`, `k2 = ((b - a) x (x - a)) . m`, `k0 = 1 - k1 - k2`: no division, and no
+/// vertex needed for the plane test.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, PartialEq, Pod, Zeroable)]
+pub struct TrianglePlane {
+    /// `n / |n|^2`, 1/m: the outward unit normal divided by `|n|`, twice the triangle's area.
+    pub m: [f32; 3],
+    /// `m . a` (dimensionless).
+    pub off: f32,
+}
+
+impl TrianglePlane {
+    /// The plane value `s(p) = m . p - off` in f32 (`(m0 p0 + m1 p1) + m2 p2`, then `- off`).
+    #[inline]
+    pub fn value(&self, p: [f32; 3]) -> f32 {
+        self.m[0] * p[0] + self.m[1] * p[1] + self.m[2] * p[2] - self.off
+    }
 }
 
 /// Storage precision of the coupling blocks `C_kl` (`SPEC.md`, "16-bit blocks").
@@ -567,4 +602,5 @@ const _: () = {
     assert!(core::mem::align_of::<DeviceCalibration>() == BANK_ALIGN);
     assert!(core::mem::size_of::<GravityCompensation>() == 32);
     assert!(core::mem::size_of::<Ckl16>() == 20);
+    assert!(core::mem::size_of::<TrianglePlane>() == 16);
 };

@@ -85,12 +85,14 @@ pub use layout::{
     CRC_OFFSET, CRC32, Ckl16, DeviceCalibration, GRAVITY_COEFF_MAX, GRAVITY_COEFFS,
     GravityCompensation, GridHeader, HEADER_LEN, LAW_CHEBYSHEV, LAW_LINEAR, LawRecord, MAGIC,
     MAX_LAW_COEFFS, MAX_NODES, MAX_SECTIONS, MAX_TRIANGLES, OCCUPIED_WIDEN_CELLS, PIECE_CELLS,
-    Precision, SECTION_ALIGN, SECTION_ENTRY_LEN, SectionEntry, SectionKind, VERSION_MAJOR,
-    VERSION_MINOR, bank_crc, reseal,
+    PLANE_TOL, Precision, SECTION_ALIGN, SECTION_ENTRY_LEN, SectionEntry, SectionKind,
+    TrianglePlane, VERSION_MAJOR, VERSION_MINOR, bank_crc, reseal,
 };
 pub use reader::{Bank, Grid, SPD_PIVOT_REL, TRUNCATION_SLACK, UpperCouplings, validate_device};
 #[cfg(feature = "alloc")]
-pub use writer::{AlignedBytes, BankBuilder, BuildError, INPUT_SYMMETRY_REL, encode_ckl16};
+pub use writer::{
+    AlignedBytes, BankBuilder, BuildError, INPUT_SYMMETRY_REL, encode_ckl16, triangle_plane,
+};
 
 /// Every quantity crossing the host-device boundary is SI: metres, newtons, pascals, seconds,
 /// amperes. Compliance blocks are therefore in metres per newton.

@@ -6,8 +6,9 @@ use crate::law::TissueLaw;
 use crate::layout::{
     BANK_ALIGN, BankHeader, BankMeta, CANDIDATE_WIDEN_CELLS, CKL16_EXP_MAX, CKL16_EXP_MIN, Ckl16,
     DeviceCalibration, GRAVITY_COEFF_MAX, GravityCompensation, GridHeader, HEADER_LEN, MAGIC,
-    MAX_NODES, MAX_SECTIONS, MAX_TRIANGLES, OCCUPIED_WIDEN_CELLS, Precision, SECTION_ALIGN,
-    SECTION_ENTRY_LEN, SectionEntry, SectionKind, VERSION_MAJOR, bank_crc,
+    MAX_NODES, MAX_SECTIONS, MAX_TRIANGLES, OCCUPIED_WIDEN_CELLS, PLANE_TOL, Precision,
+    SECTION_ALIGN, SECTION_ENTRY_LEN, SectionEntry, SectionKind, TrianglePlane, VERSION_MAJOR,
+    bank_crc,
 };
 use bytemuck::Pod;
 use core::ops::Range;
@@ -30,6 +31,7 @@ pub struct Bank<'a> {
     positions: &'a [[f32; 3]],
     mesh_ids: &'a [u32],
     triangles: &'a [[u16; 3]],
+    planes: &'a [TrianglePlane],
     node_tri_starts: &'a [u32],
     node_tri_items: &'a [u16],
     grid: Grid<'a>,
@@ -553,6 +555,79 @@ fn parse_node_triangles<'a>(
     Ok((starts, items))
 }
 
+/// `SPEC.md` "Validation" rule 9, triangle planes: one per triangle, finite, and each the plane
+/// of its triangle's stored positions within [`PLANE_TOL`] ([`check_plane`]).
+fn parse_planes<'a>(
+    sections: &Sections<'a>,
+    positions: &[[f32; 3]],
+    triangles: &[[u16; 3]],
+) -> Result<&'a [TrianglePlane], BankError> {
+    let section = SectionKind::TrianglePlanes;
+    let planes: &[TrianglePlane] = sections.slice(section)?;
+    expect_count(planes.len(), triangles.len(), section)?;
+    if let Some(t) = planes
+        .iter()
+        .position(|q| !all_finite(&q.m) || !q.off.is_finite())
+    {
+        return Err(BankError::NonFinite {
+            section,
+            entry: t as u32,
+        });
+    }
+    for (t, (plane, tri)) in planes.iter().zip(triangles).enumerate() {
+        let v = tri.map(|k| positions.get(usize::from(k)).map(|p| p.map(f64::from)));
+        let ok = match v {
+            [Some(a), Some(b), Some(c)] => check_plane(plane, a, b, c),
+            _ => false,
+        };
+        if !ok {
+            return Err(BankError::TrianglePlane { triangle: t as u32 });
+        }
+    }
+    Ok(planes)
+}
+
+/// Whether `plane` is the plane of the triangle `abc` (`SPEC.md`, check 9): with `n = (b - a) x
+/// (c - a)` in f64, `n != 0`, `|m - n / |n|^2| <= PLANE_TOL |n / |n|^2|`, and every vertex v
+/// with `|m . v - off| <= PLANE_TOL |m| max |v|`.
+pub(crate) fn check_plane(plane: &TrianglePlane, a: [f64; 3], b: [f64; 3], c: [f64; 3]) -> bool {
+    let n = cross64(sub64(b, a), sub64(c, a));
+    let nn = dot64(n, n);
+    if !(nn > 0.0) {
+        return false;
+    }
+    let want = n.map(|x| x / nn);
+    let m = plane.m.map(f64::from);
+    let dm = sub64(m, want);
+    if !(dot64(dm, dm) <= PLANE_TOL * PLANE_TOL * dot64(want, want)) {
+        return false;
+    }
+    // Squared, so no square root (core has none): (m . v - off)^2 <= TOL^2 |m|^2 max |v|^2.
+    let r2 = [a, b, c].iter().fold(0.0f64, |r, v| r.max(dot64(*v, *v)));
+    let limit2 = PLANE_TOL * PLANE_TOL * dot64(m, m) * r2;
+    let off = f64::from(plane.off);
+    [a, b, c].iter().all(|&v| {
+        let s = dot64(m, v) - off;
+        s * s <= limit2
+    })
+}
+
+fn sub64(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
+    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
+}
+
+fn dot64(a: [f64; 3], b: [f64; 3]) -> f64 {
+    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+}
+
+fn cross64(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
+    [
+        a[1] * b[2] - a[2] * b[1],
+        a[2] * b[0] - a[0] * b[2],
+        a[0] * b[1] - a[1] * b[0],
+    ]
+}
+
 /// `SPEC.md` "Validation" rule 10, the collision grid: the geometry
 /// ([`check_grid_geometry`]), cells + 1 starts and n items, CSR starts, then the buckets
 /// ([`check_grid_buckets`]).
@@ -887,6 +962,7 @@ impl<'a> Bank<'a> {
         let mesh_ids = parse_mesh_ids(&sections, n)?;
         let triangles = parse_triangles(&sections, n)?;
         let (node_tri_starts, node_tri_items) = parse_node_triangles(&sections, triangles, n)?;
+        let planes = parse_planes(&sections, positions, triangles)?;
         let grid = parse_grid(&sections, positions, triangles)?;
         let ckk = parse_ckk(&sections, n)?;
         let (nb_starts, nb_index, nb_ckl, coupling_starts) = parse_neighbours(&sections, n)?;
@@ -898,6 +974,7 @@ impl<'a> Bank<'a> {
             positions,
             mesh_ids,
             triangles,
+            planes,
             node_tri_starts,
             node_tri_items,
             grid,
@@ -1093,6 +1170,13 @@ impl<'a> Bank<'a> {
     /// R's surface triangles (node indices, counter-clockwise seen from outside).
     pub fn triangles(&self) -> &'a [[u16; 3]] {
         self.triangles
+    }
+
+    /// The triangles' planes, one per triangle in [`Bank::triangles`]' order (`SPEC.md`,
+    /// "triangle planes"): the plane test `m . p - off` and the barycentric coordinates without
+    /// loading the vertices or dividing.
+    pub fn triangle_planes(&self) -> &'a [TrianglePlane] {
+        self.planes
     }
 
     /// Indices of the triangles that contain node `k`, ascending (empty for `k` out of range).

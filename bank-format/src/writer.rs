@@ -7,7 +7,7 @@ use crate::layout::{
     BankHeader, BankMeta, CANDIDATE_WIDEN_CELLS, CKL16_EXP_MAX, CKL16_EXP_MIN, Ckl16,
     DeviceCalibration, GravityCompensation, GridHeader, HEADER_LEN, MAGIC, MAX_NODES,
     MAX_TRIANGLES, OCCUPIED_WIDEN_CELLS, Precision, SECTION_ALIGN, SECTION_ENTRY_LEN, SectionEntry,
-    SectionKind, VERSION_MAJOR, VERSION_MINOR, reseal,
+    SectionKind, TrianglePlane, VERSION_MAJOR, VERSION_MINOR, reseal,
 };
 use crate::reader::{Bank, cell_of, triangle_cells};
 use alloc::collections::BTreeMap;
@@ -264,6 +264,33 @@ pub fn encode_ckl16(c: &[[f64; 3]; 3]) -> Option<Ckl16> {
     })
 }
 
+/// The plane of the triangle with stored (f32) vertices `a`, `b`, `c` as the writer stores it
+/// (`SPEC.md`, "triangle planes"): in f64 `n = (b - a) x (c - a)` and `m = n / (n . n)`, rounded
+/// to f32; then `off = m . a` in f64 from the rounded `m`, rounded. A zero-area triangle has no
+/// plane: it gets all zeros, which the reader rejects (`BankError::TrianglePlane`).
+pub fn triangle_plane(a: [f32; 3], b: [f32; 3], c: [f32; 3]) -> TrianglePlane {
+    let [a, b, c] = [a, b, c].map(|v| v.map(f64::from));
+    let (u, v) = (
+        [b[0] - a[0], b[1] - a[1], b[2] - a[2]],
+        [c[0] - a[0], c[1] - a[1], c[2] - a[2]],
+    );
+    let n = [
+        u[1] * v[2] - u[2] * v[1],
+        u[2] * v[0] - u[0] * v[2],
+        u[0] * v[1] - u[1] * v[0],
+    ];
+    let nn = n[0] * n[0] + n[1] * n[1] + n[2] * n[2];
+    if !(nn > 0.0) {
+        return TrianglePlane {
+            m: [0.0; 3],
+            off: 0.0,
+        };
+    }
+    let m = n.map(|x| (x / nn) as f32);
+    let off = (0..3).map(|i| f64::from(m[i]) * a[i]).sum::<f64>() as f32;
+    TrianglePlane { m, off }
+}
+
 impl BankBuilder {
     /// Write the bank with `C_kl` in f32 ([`BankBuilder::build_with_precision`]).
     pub fn build(&self) -> Result<Vec<u8>, BuildError> {
@@ -318,6 +345,13 @@ impl BankBuilder {
             }
         }
         let (node_tri_starts, node_tri_items) = csr(&node_tris)?;
+        let planes: Vec<TrianglePlane> = triangles
+            .iter()
+            .map(|tri| {
+                let [a, b, c] = tri.map(|k| positions[usize::from(k)]);
+                triangle_plane(a, b, c)
+            })
+            .collect();
 
         // Grid: origin half a cell below the smallest coordinate, dims from the largest.
         let h = self.grid_cell_size_m as f32;
@@ -451,6 +485,7 @@ impl BankBuilder {
         body.push_slice(SectionKind::Positions, &positions)?;
         body.push_slice(SectionKind::MeshIds, &self.mesh_ids)?;
         body.push_slice(SectionKind::Triangles, &triangles)?;
+        body.push_slice(SectionKind::TrianglePlanes, &planes)?;
         body.push_slice(SectionKind::NodeTriStarts, &node_tri_starts)?;
         body.push_slice(SectionKind::NodeTriItems, &node_tri_items)?;
         body.push(SectionKind::Grid, bytemuck::bytes_of(&grid), 1)?;

@@ -113,9 +113,9 @@ cases! {
         Bank::parse(&aligned[1..]).map(|_| ())
     };
     bad_magic: E::BadMagic => corrupt(|b| b[0] = b'X');
-    // A bank of the previous major version (it stores both directions of each pair).
-    unsupported_version: E::UnsupportedVersion { major: 3, .. } => corrupt(|b| put_u16(b, 8, 3));
-    unsupported_later_version: E::UnsupportedVersion { major: 5, .. } => corrupt(|b| put_u16(b, 8, 5));
+    // A bank of the previous major version (it has no triangle planes).
+    unsupported_version: E::UnsupportedVersion { major: 4, .. } => corrupt(|b| put_u16(b, 8, 4));
+    unsupported_later_version: E::UnsupportedVersion { major: 6, .. } => corrupt(|b| put_u16(b, 8, 6));
     bad_header_length: E::BadHeaderLength { header_len: 24 } => corrupt(|b| put_u16(b, 12, 24));
     too_many_sections: E::TooManySections { count: 33 } => corrupt(|b| put_u16(b, 14, 33));
     bad_total_length_unaligned: E::BadTotalLength { .. } => {
@@ -205,6 +205,43 @@ cases! {
         corrupt_section(K::Triangles, |s| put_u16(s, 6 + 4, 0));
     node_triangle_mismatch: E::NodeTriangleMismatch { node: 1 } =>
         corrupt_section(K::NodeTriItems, |s| put_u16(s, 2 * 2, 1));
+    // Both triangles lie in z = 0 with n = (0, 0, SIDE^2): m = (0, 0, 1e4) 1/m, off = 0.
+    plane_count_mismatch: E::CountMismatch { section: K::TrianglePlanes } => corrupt(|b| {
+        let (i, ..) = section(b, K::TrianglePlanes);
+        put_u32(b, entry_field(i, 2), 16);
+        put_u32(b, entry_field(i, 3), 1);
+    });
+    non_finite_plane: E::NonFinite { section: K::TrianglePlanes, entry: 1 } =>
+        corrupt_section(K::TrianglePlanes, |s| put_f32(s, 16 + 4, f32::NAN));
+    // Triangle 1's normal flipped: the plane of a triangle facing the other way.
+    triangle_plane_flipped: E::TrianglePlane { triangle: 1 } =>
+        corrupt_section(K::TrianglePlanes, |s| put_f32(s, 16 + 8, -1.0e4));
+    // Triangle 0's scale off by 1e-5 (ten times the tolerance): m is n / |n|^2, not near it.
+    triangle_plane_scale: E::TrianglePlane { triangle: 0 } =>
+        corrupt_section(K::TrianglePlanes, |s| put_f32(s, 8, 1.0e4 * (1.0 + 1.0e-5)));
+    // Triangle 0's plane moved 1 mm along its normal (off = m . a + 10).
+    triangle_plane_offset: E::TrianglePlane { triangle: 0 } =>
+        corrupt_section(K::TrianglePlanes, |s| put_f32(s, 12, 10.0));
+    // Triangle 0's plane in triangle 1's place (node 3 lifted 4 mm, so the two differ).
+    triangle_plane_of_another_triangle: E::TrianglePlane { triangle: 1 } => {
+        let mut b = builder();
+        b.positions_m[3][2] = 0.004;
+        let mut bytes = b.build().unwrap();
+        let (_, off, ..) = section(&bytes, K::TrianglePlanes);
+        let first: [u8; 16] = bytes[off..off + 16].try_into().unwrap();
+        bytes[off + 16..off + 32].copy_from_slice(&first);
+        assert!(bank_format::reseal(&mut bytes));
+        parse(&bytes)
+    };
+    // Node 1 moved onto the diagonal 0-2: triangle 0 has zero area, hence no plane.
+    zero_area_triangle: E::TrianglePlane { triangle: 0 } => {
+        let mut b = builder();
+        b.positions_m[1] = [0.5 * SIDE, 0.5 * SIDE, 0.0];
+        match b.build() {
+            Err(BuildError::Rejected(e)) => Err(e),
+            other => panic!("{other:?}"),
+        }
+    };
     grid_cell_size_zero: E::GridGeometry => corrupt_section(K::Grid, |s| put_f32(s, 12, 0.0));
     grid_dimension_zero: E::GridGeometry => corrupt_section(K::Grid, |s| put_u16(s, 18, 0));
     reserved_grid: E::ReservedNotZero { section: K::Grid } => corrupt_section(K::Grid, |s| put_u16(s, 22, 1));
@@ -354,5 +391,6 @@ fn error_codes_are_distinct_and_stable() {
         32
     );
     assert_eq!(E::GravityOutOfRange { coefficient: 0 }.code(), 44);
-    assert_eq!(E::CklExponent { entry: 0 }.code(), last_code());
+    assert_eq!(E::CklExponent { entry: 0 }.code(), 45);
+    assert_eq!(E::TrianglePlane { triangle: 0 }.code(), last_code());
 }

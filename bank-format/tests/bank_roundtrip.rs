@@ -40,6 +40,15 @@ fn every_accessor_returns_what_was_written() {
     assert_eq!(bank.node_triangles(2), &[0, 1]);
     assert_eq!(bank.node_triangles(3), &[1]);
     assert_eq!(bank.node_triangles(4), &[] as &[u16]);
+    // Both triangles lie in z = 0, counter-clockwise from +z: n = (0, 0, SIDE^2), so m = (0, 0,
+    // 1 / SIDE^2) and off = m . a = 0; the plane value is z / SIDE^2.
+    let m = (1.0 / (SIDE * SIDE)) as f32;
+    for plane in bank.triangle_planes() {
+        assert_eq!(plane.m, [0.0, 0.0, m]);
+        assert_eq!(plane.off, 0.0);
+        assert_eq!(plane.value([0.3, -2.0, 0.001]), 0.001 * m);
+    }
+    assert_eq!(bank.triangle_planes().len(), 2);
 
     // Self-compliance, both forms.
     for k in 0..4 {

@@ -255,8 +255,47 @@ proptest! {
         }
         let edges: usize = (0..bank.node_count()).map(|k| bank.neighbours(k).len()).sum();
         prop_assert_eq!(edges, 2 * b.couplings.len());
+        // Each triangle's plane is the writer's rule on its stored vertices, and SPEC.md's
+        // identities hold (in f64 from the stored plane): at x = 0.2 a + 0.3 b + 0.5 c + h n / |n|
+        // the plane value is h / |n| and the division-free coordinates are (0.2, 0.3, 0.5).
+        prop_assert_eq!(bank.triangle_planes().len(), bank.triangles().len());
+        for (plane, tri) in bank.triangle_planes().iter().zip(bank.triangles()) {
+            let [a, b, c] = tri.map(|k| bank.positions()[usize::from(k)]);
+            prop_assert_eq!(*plane, bank_format::triangle_plane(a, b, c));
+            let [a, b, c] = [a, b, c].map(|v| v.map(f64::from));
+            let n = cross(sub(b, a), sub(c, a));
+            let len = dot(n, n).sqrt();
+            let h = 0.001;
+            let x: [f64; 3] =
+                std::array::from_fn(|i| 0.2 * a[i] + 0.3 * b[i] + 0.5 * c[i] + h * n[i] / len);
+            let m = plane.m.map(f64::from);
+            let s = dot(m, x) - f64::from(plane.off);
+            prop_assert!((s * len - h).abs() <= 1e-5 * h, "plane value {} for {}", s * len, h);
+            let k1 = dot(cross(sub(x, a), sub(c, a)), m);
+            let k2 = dot(cross(sub(b, a), sub(x, a)), m);
+            let k0 = dot(cross(sub(c, b), sub(x, b)), m);
+            for (got, want) in [(k0, 0.2), (k1, 0.3), (k2, 0.5)] {
+                prop_assert!((got - want).abs() <= 1e-5, "{:?}", (k0, k1, k2));
+            }
+        }
         exercise(&bank, [0.01, 0.01, 0.01]);
     }
+}
+
+fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
+    std::array::from_fn(|i| a[i] - b[i])
+}
+
+fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
+    (0..3).map(|i| a[i] * b[i]).sum()
+}
+
+fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
+    [
+        a[1] * b[2] - a[2] * b[1],
+        a[2] * b[0] - a[0] * b[2],
+        a[0] * b[1] - a[1] * b[0],
+    ]
 }
 
 fn f32_finite() -> impl Strategy<Value = f32> {

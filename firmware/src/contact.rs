@@ -16,7 +16,12 @@
 //! (the segment goes from the outer side, `(p0 - a) . n >= 0`, to the inner side,
 //! `(p1 - a) . n <= 0`, against the outward normal), motions within [`PARALLEL_TOL`] of the
 //! plane are grazing and ignored, and the crossing point's barycentric coordinates are accepted
-//! within [`BARY_TOL`] of the triangle and then clamped to `[0, 1]` and renormalised. A hit
+//! within [`BARY_TOL`] of the triangle and then clamped to `[0, 1]` and renormalised. The plane
+//! test reads only the triangle's stored plane (`SPEC.md`, "triangle planes": `m = n / |n|^2`,
+//! `off = m . a`, so the plane value `m . p - off` has the sign of `(p - a) . n`): four loads
+//! and two dot products per candidate. Only the few candidates whose plane the segment crosses
+//! load their vertices, for the barycentric coordinates, which the plane gives without a
+//! division ([`plane_bary`]). A hit
 //! exactly on an edge or a vertex is accepted by every triangle around it; the first hit along
 //! the segment wins, ties going to the lowest triangle index, so it is reported once and
 //! deterministically. The lists are complete for any cell size (the rule is structural, not a
@@ -30,7 +35,9 @@
 //! around the contact triangle's inward normal: tangential part at most [`STICK_SLOPE`] times
 //! the normal part (a Coulomb-like friction cone, on displacements). When the tip leaves the
 //! cone, the contact slides: the anchor moves along the surface just far enough to put the
-//! displacement back on the cone (the target point is found on the rest surface by
+//! displacement back on the cone (the normal is the stored plane's `m / |m|`, so a press in
+//! place loads no vertex and takes no square root; the target point is found on the rest
+//! surface by
 //! [`closest_surface_point`], a walk across edges from the current triangle), so the
 //! tangential force is bounded by the slope and changes continuously, with no saw-tooth at
 //! triangle edges. Contact ends when `(tip - anchor) . n > 0` for the contact triangle's outward
@@ -40,7 +47,7 @@
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 
 use crate::vec3::{add, cross, dot, scale, sqrt, sub};
-use bank_format::{Bank, PIECE_CELLS};
+use bank_format::{Bank, PIECE_CELLS, TrianglePlane};
 
 /// Grazing threshold: a segment whose direction makes `|cos| <= PARALLEL_TOL` with a triangle's
 /// normal is treated as parallel to it (no hit).
@@ -145,7 +152,8 @@ impl ContactTracker {
 /// clearance >= 2 cannot reach the surface (every occupied cell is at least two cells away,
 /// more than the piece's length) and costs one cell lookup. Otherwise the cell's candidate
 /// triangles, which hold every triangle a piece starting in the cell can cross, are tested
-/// against the whole segment; a hit at `t` up to the piece's end is final (an earlier crossing
+/// against the whole segment ([`intersect`]: the stored plane first, the vertices only for a
+/// crossing); a hit at `t` up to the piece's end is final (an earlier crossing
 /// would lie in this or an earlier piece, whose candidates hold its triangle). The first piece
 /// with a hit gives the answer: the smallest `t`, ties going to the lowest triangle index.
 pub fn detect(bank: &Bank, p0: [f32; 3], p1: [f32; 3]) -> Option<Hit> {
@@ -182,6 +190,7 @@ pub fn detect(bank: &Bank, p0: [f32; 3], p1: [f32; 3]) -> Option<Hit> {
     let n = if q < 1.0e6 { q as u32 + 1 } else { 1_000_000 };
     let positions = bank.positions();
     let triangles = bank.triangles();
+    let planes = bank.triangle_planes();
     let span = tb - ta;
     for i in 0..n {
         let t0 = ta + span * (i as f32 / n as f32);
@@ -198,10 +207,7 @@ pub fn detect(bank: &Bank, p0: [f32; 3], p1: [f32; 3]) -> Option<Hit> {
         let last = i + 1 == n;
         let mut best: Option<Hit> = None;
         for &ti in grid.cell_triangles(index) {
-            let Some(&tri) = triangles.get(usize::from(ti)) else {
-                continue;
-            };
-            let Some(hit) = intersect(positions, u32::from(ti), tri, p0, p1) else {
+            let Some(hit) = intersect(planes, triangles, positions, ti, p0, p1) else {
                 continue;
             };
             // Candidates ascend, so on equal t the first one found has the lower index.
@@ -216,42 +222,51 @@ pub fn detect(bank: &Bank, p0: [f32; 3], p1: [f32; 3]) -> Option<Hit> {
     None
 }
 
-/// Entering crossing of `[p0, p1]` with triangle `tri` (index `ti`).
+/// Entering crossing of `[p0, p1]` with triangle `ti` (`SPEC.md`, "triangle planes").
+///
+/// The plane first, from the stored plane alone: the plane values `s0 = m . p0 - off` and
+/// `s1 = m . p1 - off` have the signs of `(p0 - a) . n` and `(p1 - a) . n`, and the segment
+/// enters when `s0 >= 0`, `s1 <= 0` and `s0 > s1`. A tick's short segment crosses the planes
+/// of few candidates, so most stop after `s0` or `s1` (the tests are a conjunction: their
+/// order changes no result). Then, for a crossing: not grazing (`(m . d)^2 > PARALLEL_TOL^2
+/// (d . d) (m . m)` for `d = p1 - p0`, the cosine test on `n`), the crossing at `t = s0 / (s0 -
+/// s1)`, and only now the vertices, for the barycentric coordinates ([`plane_bary`]).
+#[inline(always)]
 fn intersect(
+    planes: &[TrianglePlane],
+    triangles: &[[u16; 3]],
     positions: &[[f32; 3]],
-    ti: u32,
-    tri: [u16; 3],
+    ti: u16,
     p0: [f32; 3],
     p1: [f32; 3],
 ) -> Option<Hit> {
-    let [a, b, c] = vertices(positions, tri)?;
-    let n = cross(sub(b, a), sub(c, a));
-    // The plane first: a tick's short segment crosses the planes of few candidates, so most
-    // stop here (the tests below are a conjunction: their order changes no result).
-    let s0 = dot(sub(p0, a), n);
-    let s1 = dot(sub(p1, a), n);
-    if !(s0 >= 0.0 && s1 <= 0.0 && s0 > s1) {
+    let plane = planes.get(usize::from(ti))?;
+    let s0 = plane.value(p0);
+    if !(s0 >= 0.0) {
         return None;
     }
-    let nn = dot(n, n);
-    if !(nn > 0.0) {
+    let s1 = plane.value(p1);
+    if !(s1 <= 0.0 && s0 > s1) {
         return None;
     }
+    let m = plane.m;
     let dir = sub(p1, p0);
-    let dn = dot(dir, n);
+    let dm = dot(dir, m);
     // Entering only, and not grazing.
-    if !(dn < 0.0) || dn * dn <= PARALLEL_TOL * PARALLEL_TOL * dot(dir, dir) * nn {
+    if !(dm < 0.0) || dm * dm <= PARALLEL_TOL * PARALLEL_TOL * dot(dir, dir) * dot(m, m) {
         return None;
     }
     let t = (s0 / (s0 - s1)).clamp(0.0, 1.0);
     let x = add(p0, scale(dir, t));
-    let k = plane_bary(a, b, c, n, nn, x);
+    let tri = *triangles.get(usize::from(ti))?;
+    let [a, b, c] = vertices(positions, tri)?;
+    let k = plane_bary(a, b, c, m, x);
     if !(k[0] >= -BARY_TOL && k[1] >= -BARY_TOL && k[2] >= -BARY_TOL) {
         return None;
     }
     let bary = normalise(k)?;
     Some(Hit {
-        triangle: ti,
+        triangle: u32::from(ti),
         nodes: tri,
         t,
         point: combine(a, b, c, bary),
@@ -260,30 +275,34 @@ fn intersect(
 }
 
 /// Next tracking state, `None` when the contact is released.
+///
+/// From the contact triangle's stored plane `m` (parallel to the outward normal n, `SPEC.md`
+/// "triangle planes"): the contact pulls when `d . m > 0` (`d = tip - anchor`); the inward
+/// depth is `-(d . m) / |m|` and the tangential part `dt = d - m (d . m) / (m . m)`. The stick
+/// test `|dt| <= STICK_SLOPE depth` is compared squared, so a press in place takes no square
+/// root and loads no vertex; only a slide does.
 fn track(bank: &Bank, active: SurfacePoint, tip: [f32; 3]) -> Option<SurfacePoint> {
-    let positions = bank.positions();
-    let [a, b, c] = vertices(positions, active.nodes)?;
-    let n = cross(sub(b, a), sub(c, a));
-    let nn = dot(n, n);
+    let planes = bank.triangle_planes();
+    let m = planes.get(active.triangle as usize)?.m;
+    let mm = dot(m, m);
     let d = sub(tip, active.point);
-    if !(nn > 0.0) || dot(d, n) > 0.0 {
+    let dm = dot(d, m);
+    if !(mm > 0.0) || dm > 0.0 {
         return None;
     }
-    // Normal (inward, >= 0) and tangential parts of the displacement.
-    let len = sqrt(nn);
-    let depth = -dot(d, n) / len;
-    let dt = add(d, scale(n, depth / len));
-    let t = sqrt(dot(dt, dt));
-    let allowed = STICK_SLOPE * depth;
-    if !(t > allowed) {
+    // Normal (inward, >= 0: depth^2 = dm^2 / mm) and tangential parts of the displacement.
+    let dt = sub(d, scale(m, dm / mm));
+    let t2 = dot(dt, dt);
+    if !(t2 > STICK_SLOPE * STICK_SLOPE * (dm * dm / mm)) {
         return Some(active);
     }
     // Slide: move the anchor along the tangential displacement onto the cone's edge.
+    let t = sqrt(t2);
+    let allowed = STICK_SLOPE * (-dm / sqrt(mm));
     let target = add(active.point, scale(dt, 1.0 - allowed / t));
     let near = closest_surface_point(bank, active.triangle, active.nodes, target)?;
-    let [a, b, c] = vertices(positions, near.nodes)?;
-    let n = cross(sub(b, a), sub(c, a));
-    if dot(sub(tip, near.point), n) > 0.0 {
+    let m = planes.get(near.triangle as usize)?.m;
+    if dot(sub(tip, near.point), m) > 0.0 {
         return None;
     }
     Some(near)
@@ -303,7 +322,8 @@ pub struct SurfacePoint {
 }
 
 /// The rest-surface point under `p` (a point near the surface), by a walk from triangle
-/// `start` (nodes `start_nodes`): project `p` onto the current triangle's plane; if the
+/// `start` (nodes `start_nodes`): project `p` onto the current triangle's plane (its
+/// barycentric coordinates from the stored plane, [`plane_bary`]); if the
 /// projection lies inside, that is the point; otherwise cross the edge opposite the most
 /// negative barycentric coordinate into the neighbouring triangle and repeat, at most
 /// [`MAX_SLIDE_STEPS`] times. At a boundary edge of R, or when the walk would step straight back
@@ -317,17 +337,13 @@ pub fn closest_surface_point(
     p: [f32; 3],
 ) -> Option<SurfacePoint> {
     let positions = bank.positions();
+    let planes = bank.triangle_planes();
     let mut cur = start;
     let mut nodes = start_nodes;
     let mut came_from: Option<u32> = None;
     for _ in 0..MAX_SLIDE_STEPS {
         let [a, b, c] = vertices(positions, nodes)?;
-        let n = cross(sub(b, a), sub(c, a));
-        let nn = dot(n, n);
-        if !(nn > 0.0) {
-            return None;
-        }
-        let k = plane_bary(a, b, c, n, nn, p);
+        let k = plane_bary(a, b, c, planes.get(cur as usize)?.m, p);
         let (i, low) =
             k.iter().enumerate().fold(
                 (0, f32::INFINITY),
@@ -440,22 +456,20 @@ fn ratio(num: f32, den: f32) -> f32 {
     }
 }
 
-/// Barycentric coordinates of `x`'s projection onto the plane of `abc` (`n = ab x ac`,
-/// `nn = n . n > 0`).
+/// Barycentric coordinates of `x`'s projection onto the plane of `abc`, from the triangle's
+/// stored `m = n / |n|^2` (`SPEC.md`, "triangle planes"): `k1 = ((x - a) x (c - a)) . m`,
+/// `k2 = ((b - a) x (x - a)) . m`, `k0 = 1 - k1 - k2`. Two triple products, no division.
 pub(crate) fn plane_bary(
     a: [f32; 3],
     b: [f32; 3],
     c: [f32; 3],
-    n: [f32; 3],
-    nn: f32,
+    m: [f32; 3],
     x: [f32; 3],
 ) -> [f32; 3] {
-    let (xa, xb, xc) = (sub(a, x), sub(b, x), sub(c, x));
-    [
-        dot(cross(xb, xc), n) / nn,
-        dot(cross(xc, xa), n) / nn,
-        dot(cross(xa, xb), n) / nn,
-    ]
+    let xa = sub(x, a);
+    let k1 = dot(cross(xa, sub(c, a)), m);
+    let k2 = dot(cross(sub(b, a), xa), m);
+    [1.0 - k1 - k2, k1, k2]
 }
 
 /// Clamp to `[0, 1]` and rescale to sum 1; `None` for NaN or an all-zero input.
@@ -542,11 +556,16 @@ mod tests {
     }
 
     fn patch_shaped(cell: f64, bump: impl Fn(f64, f64) -> f64) -> AlignedBytes {
+        patch_placed(cell, [0.0; 3], bump)
+    }
+
+    /// [`patch_shaped`] moved by `offset` (m).
+    fn patch_placed(cell: f64, offset: [f64; 3], bump: impl Fn(f64, f64) -> f64) -> AlignedBytes {
         let mut p = Vec::new();
         for j in 0..5 {
             for i in 0..5 {
                 let (x, y) = (SPACING * i as f64, SPACING * j as f64);
-                p.push([x, y, bump(x, y)]);
+                p.push([x + offset[0], y + offset[1], bump(x, y) + offset[2]]);
             }
         }
         let id = |i: u32, j: u32| i + 5 * j;
@@ -671,42 +690,142 @@ mod tests {
         }
     }
 
+    /// Also with the patch 17 cm from the origin, where the plane values `m . p - off` are
+    /// evaluated from the points' absolute coordinates (`SPEC.md`, "triangle planes": their
+    /// rounding is a few ulp of `|p|`), an edge or vertex hit is still on the edge or vertex.
     #[test]
     fn hits_on_edges_and_vertices_count_once() {
-        let bytes = patch();
+        for o in [[0.0f32; 3], [0.12, -0.08, 0.1]] {
+            let bytes = patch_placed(SPACING, o.map(f64::from), |_, _| 0.0);
+            let bank = Bank::parse(&bytes).unwrap();
+            // Axis edge, diagonal edge, interior vertex, boundary vertex; vertical and slanted.
+            for (x, y) in [
+                (0.015f32, 0.01f32),
+                (0.015, 0.015),
+                (0.01, 0.01),
+                (0.0, 0.0),
+                (0.02, 0.04),
+            ] {
+                for (dx, dy) in [(0.0f32, 0.0f32), (0.003, -0.002)] {
+                    let from = [x + dx + o[0], y + dy + o[1], 0.002 + o[2]];
+                    let to = [x - 0.5 * dx + o[0], y - 0.5 * dy + o[1], -0.001 + o[2]];
+                    let (bary, anchor) = single_hit(&bank, from, to);
+                    let hit = detect(&bank, from, to).unwrap();
+                    assert_eq!(hit.bary, bary);
+                    assert!((anchor[0] - (x + o[0])).abs() < 1.0e-6, "{anchor:?}");
+                    assert!((anchor[1] - (y + o[1])).abs() < 1.0e-6, "{anchor:?}");
+                    assert!(bary.iter().any(|&k| k < 1.0e-5), "on an edge: {bary:?}");
+                }
+            }
+            let (x, y, z) = (0.01 + o[0], 0.01 + o[1], o[2]);
+            let (bary, _) = single_hit(&bank, [x, y, z + 0.002], [x, y, z - 0.002]);
+            assert!(
+                bary.iter().any(|&k| k > 1.0 - 1.0e-5),
+                "on a vertex: {bary:?}"
+            );
+        }
+    }
+
+    /// The division-free barycentric coordinates from the stored plane are those of the point's
+    /// projection (an f64 reference), on the curved patch's differently tilted triangles, for
+    /// points inside and outside the triangle and off its plane.
+    #[test]
+    fn plane_barycentric_coordinates_are_the_projections() {
+        let bytes = patch_shaped(SPACING, |x, y| 0.2 * (x - 0.02) * (y - 0.015) + 3.0 * x * x);
         let bank = Bank::parse(&bytes).unwrap();
-        // Axis edge, diagonal edge, interior vertex, boundary vertex; vertical and slanted.
-        for (x, y) in [
-            (0.015f32, 0.01f32),
-            (0.015, 0.015),
-            (0.01, 0.01),
-            (0.0, 0.0),
-            (0.02, 0.04),
-        ] {
-            for (dx, dy) in [(0.0f32, 0.0f32), (0.003, -0.002)] {
-                let from = [x + dx, y + dy, 0.002];
-                let to = [x - 0.5 * dx, y - 0.5 * dy, -0.001];
-                let (bary, anchor) = single_hit(&bank, from, to);
-                let hit = detect(&bank, from, to).unwrap();
-                assert_eq!(hit.bary, bary);
-                assert!((anchor[0] - x).abs() < 1.0e-6, "{anchor:?}");
-                assert!((anchor[1] - y).abs() < 1.0e-6, "{anchor:?}");
-                assert!(bary.iter().any(|&k| k < 1.0e-5), "on an edge: {bary:?}");
+        for (tri, plane) in bank.triangles().iter().zip(bank.triangle_planes()) {
+            let [a, b, c] = vertices(bank.positions(), *tri).unwrap();
+            let [a64, b64, c64] = [a, b, c].map(|v| v.map(f64::from));
+            let (u, v) = (
+                [0, 1, 2].map(|i| b64[i] - a64[i]),
+                [0, 1, 2].map(|i| c64[i] - a64[i]),
+            );
+            let n = [
+                u[1] * v[2] - u[2] * v[1],
+                u[2] * v[0] - u[0] * v[2],
+                u[0] * v[1] - u[1] * v[0],
+            ];
+            let len = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
+            for (k, h) in [
+                ([0.2, 0.3, 0.5], 0.0),
+                ([0.6, -0.1, 0.5], 0.002),
+                ([1.0, 0.0, 0.0], -0.001),
+                ([-0.5, 0.75, 0.75], 0.004),
+            ] {
+                let x = [0, 1, 2].map(|i| {
+                    (k[0] * a64[i] + k[1] * b64[i] + k[2] * c64[i] + h * n[i] / len) as f32
+                });
+                let got = plane_bary(a, b, c, plane.m, x);
+                for i in 0..3 {
+                    assert!(
+                        (f64::from(got[i]) - k[i]).abs() < 1.0e-5,
+                        "{got:?} vs {k:?}"
+                    );
+                }
             }
         }
-        let (bary, _) = single_hit(&bank, [0.01, 0.01, 0.002], [0.01, 0.01, -0.002]);
-        assert!(
-            bary.iter().any(|&k| k > 1.0 - 1.0e-5),
-            "on a vertex: {bary:?}"
-        );
+    }
+
+    /// The stick cone on a tilted plane (normal `(-0.3, -0.2, 1)`, neither an axis nor the same
+    /// scale in `m` per component): a tangential displacement within the cone keeps the anchor,
+    /// one beyond it slides the anchor until the displacement is on the cone's edge.
+    #[test]
+    fn stick_cone_on_a_tilted_plane() {
+        let bytes = patch_shaped(SPACING, |x, y| 0.3 * x + 0.2 * y);
+        let bank = Bank::parse(&bytes).unwrap();
+        let n = {
+            let (x, y, z) = (-0.3f32, -0.2f32, 1.0f32);
+            let l = (x * x + y * y + z * z).sqrt();
+            [x / l, y / l, z / l]
+        };
+        // A unit tangent.
+        let e = {
+            let (x, y, z) = (1.0f32, 0.0f32, 0.3f32);
+            let l = (x * x + y * y + z * z).sqrt();
+            [x / l, y / l, z / l]
+        };
+        let on = [0.021f32, 0.018, 0.3 * 0.021 + 0.2 * 0.018];
+        let depth = 0.002f32;
+        for (share, slides) in [(0.9f32, false), (1.5, true)] {
+            let mut tr = ContactTracker::new();
+            let above = add(on, scale(n, 0.001));
+            let below = add(on, scale(n, -0.0001));
+            let ContactState::Touching { anchor, .. } = tr.update(&bank, above, below) else {
+                panic!("no contact");
+            };
+            let tip = add(
+                add(anchor, scale(n, -depth)),
+                scale(e, share * STICK_SLOPE * depth),
+            );
+            let ContactState::Touching {
+                anchor: held,
+                displacement,
+                ..
+            } = tr.update(&bank, below, tip)
+            else {
+                panic!("released at {tip:?}");
+            };
+            let normal = -dot(displacement, n);
+            let tangential = sub(displacement, scale(n, -normal));
+            let t = sqrt(dot(tangential, tangential));
+            assert!((normal - depth).abs() < 1.0e-6, "{normal}");
+            if slides {
+                assert_ne!(held, anchor);
+                assert!((t - STICK_SLOPE * depth).abs() < 1.0e-3 * t, "{t}");
+            } else {
+                assert_eq!(held, anchor);
+                assert!((t - share * STICK_SLOPE * depth).abs() < 1.0e-3 * t, "{t}");
+            }
+        }
     }
 
     /// The first entering crossing over *every* triangle, by brute force: the reference the
     /// grid's certificates must reproduce.
     fn brute_force(bank: &Bank, p0: [f32; 3], p1: [f32; 3]) -> Option<Hit> {
         let mut best: Option<Hit> = None;
-        for (ti, &tri) in bank.triangles().iter().enumerate() {
-            if let Some(hit) = intersect(bank.positions(), ti as u32, tri, p0, p1)
+        for ti in 0..bank.triangles().len() as u16 {
+            let (planes, triangles) = (bank.triangle_planes(), bank.triangles());
+            if let Some(hit) = intersect(planes, triangles, bank.positions(), ti, p0, p1)
                 && best.is_none_or(|b| hit.t < b.t)
             {
                 best = Some(hit);

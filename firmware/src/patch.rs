@@ -225,7 +225,7 @@ impl PatchBuild {
             self.acc.merge_scaled(&nodal, self.theta);
         }
         if self.theta < 1.0 {
-            self.frame = contact_frame(bank, nodes, anchor, e1, e2, radius_m);
+            self.frame = contact_frame(bank, triangle, nodes, anchor, e1, e2, radius_m);
             self.next = 0;
         }
     }
@@ -318,9 +318,11 @@ impl PatchBuild {
 
 /// The contact triangle's barycentric coordinates at `anchor` and their change per tip radius
 /// along `e1` and `e2` (both in the triangle's plane): `k(anchor + r (u e1 + v e2)) = k0 + u g1
-/// + v g2`. `None` for a degenerate triangle.
+/// + v g2` (from the triangle's stored plane, [`plane_bary`]). `None` for a triangle or node
+/// out of range.
 fn contact_frame(
     bank: &Bank,
+    triangle: u32,
     nodes: [u16; 3],
     anchor: [f32; 3],
     e1: [f32; 3],
@@ -328,14 +330,10 @@ fn contact_frame(
     radius_m: f32,
 ) -> Option<[[f32; 3]; 3]> {
     let [a, b, c] = vertices(bank.positions(), nodes)?;
-    let n = cross(sub(b, a), sub(c, a));
-    let nn = dot(n, n);
-    if nn.is_nan() || nn <= 0.0 {
-        return None;
-    }
-    let k0 = plane_bary(a, b, c, n, nn, anchor);
-    let k1 = plane_bary(a, b, c, n, nn, add(anchor, scale(e1, radius_m)));
-    let k2 = plane_bary(a, b, c, n, nn, add(anchor, scale(e2, radius_m)));
+    let m = bank.triangle_planes().get(triangle as usize)?.m;
+    let k0 = plane_bary(a, b, c, m, anchor);
+    let k1 = plane_bary(a, b, c, m, add(anchor, scale(e1, radius_m)));
+    let k2 = plane_bary(a, b, c, m, add(anchor, scale(e2, radius_m)));
     Some([k0, sub(k1, k0), sub(k2, k0)])
 }
 

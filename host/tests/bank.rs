@@ -63,8 +63,10 @@ fn shipped_scene_builds_a_valid_bank_and_inspect_refuses_damaged_copies() {
         "{summary}"
     );
 
-    // The scene's speed thresholds, the cell certificates and pairs stored once (format 4).
-    assert_eq!(bank.version().0, 4);
+    // The scene's speed thresholds, the cell certificates, pairs stored once and the triangle
+    // planes (format 5).
+    assert_eq!(bank.version().0, 5);
+    assert_eq!(bank.triangle_planes().len(), bank.triangles().len());
     assert_eq!(bank.device().max_tip_speed_m_s, 1.0);
     assert_eq!(bank.device().max_joint_speed, [10.0, 10.0, 1.0]);
     let o = host(&["bank", "inspect", s(&out)]);

@@ -38,6 +38,11 @@ fuzz_target!(|data: &[u8]| {
             assert!(bank.coupling(k, usize::from(l)).is_some());
         }
     }
+    assert_eq!(bank.triangle_planes().len(), bank.triangles().len());
+    for (plane, tri) in bank.triangle_planes().iter().zip(bank.triangles()) {
+        let a = bank.positions()[usize::from(tri[0])];
+        assert!(plane.value(a).is_finite());
+    }
     let g = bank.grid();
     for c in 0..=g.cell_count() {
         for &i in g.cell_items(c) {
