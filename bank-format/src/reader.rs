@@ -228,7 +228,13 @@ impl<'a> Grid<'a> {
     }
 
     /// The cell containing `p` with each coordinate clamped to `0..dims` (the cell of `p`
-    /// moved into the grid box), or `None` for NaN.
+    /// moved into the grid box), or `None` for NaN (or an infinity).
+    ///
+    /// `floor((p - origin) / cell_size)` clamped to `0..=dims - 1`, computed by clamping the
+    /// quotient in f32 first (where truncation toward zero is the floor): the same cell as the
+    /// 64-bit floor then clamp, without the 64-bit conversions and `f32::max`/`min`, which are
+    /// library calls on the MCU (this runs for every piece of the detection's path; the
+    /// quotient is never NaN: `p`, the origin and the cell size are finite).
     pub fn clamped_cell(&self, p: [f32; 3]) -> Option<[u16; 3]> {
         let g = self.header;
         let mut out = [0u16; 3];
@@ -236,8 +242,14 @@ impl<'a> Grid<'a> {
             if !p[axis].is_finite() {
                 return None;
             }
-            let top = i64::from(g.dims[axis]) - 1;
-            out[axis] = signed_cell(p[axis], g.origin_m[axis], g.cell_size_m).clamp(0, top) as u16;
+            let t = (p[axis] - g.origin_m[axis]) / g.cell_size_m;
+            let top = f32::from(g.dims[axis].saturating_sub(1));
+            let clamped = if t > 0.0 {
+                if t < top { t } else { top }
+            } else {
+                0.0
+            };
+            out[axis] = clamped as u16;
         }
         Some(out)
     }
@@ -1576,6 +1588,64 @@ pub fn validate_device(d: &DeviceCalibration) -> Result<(), BankError> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// `Grid::clamped_cell` (f32 clamp, then truncation) is the 64-bit floor clamped to the
+    /// grid, on random points, on every cell boundary and one ulp either side, and far outside.
+    #[test]
+    fn clamped_cell_is_the_clamped_floor() {
+        let header = GridHeader {
+            origin_m: [-0.0713, -0.0482, -0.003],
+            cell_size_m: 0.006,
+            dims: [18, 16, 9],
+            reserved: 0,
+        };
+        let grid = Grid {
+            header: &header,
+            starts: &[],
+            items: &[],
+            clearance: &[],
+            tri_starts: &[],
+            tri_items: &[],
+        };
+        let want = |p: [f32; 3]| {
+            let mut out = [0u16; 3];
+            for a in 0..3 {
+                let top = i64::from(header.dims[a]) - 1;
+                let c = signed_cell(p[a], header.origin_m[a], header.cell_size_m);
+                out[a] = c.clamp(0, top) as u16;
+            }
+            out
+        };
+        let mut seed = 0x2545_f491_4f6c_dd1du64;
+        let mut next = move || {
+            seed ^= seed << 13;
+            seed ^= seed >> 7;
+            seed ^= seed << 17;
+            (seed >> 40) as f32 / (1u64 << 24) as f32
+        };
+        let mut values = [0.0f32, 1.0e30, -1.0e30, f32::MAX, f32::MIN].to_vec();
+        for k in -3..25 {
+            let x = header.origin_m[0] + k as f32 * header.cell_size_m;
+            values.extend([
+                x,
+                f32::from_bits(x.to_bits() + 1),
+                f32::from_bits(x.to_bits() - 1),
+            ]);
+        }
+        for _ in 0..20_000 {
+            values.push(0.4 * next() - 0.2);
+        }
+        for (i, &x) in values.iter().enumerate() {
+            let p = [
+                x,
+                values[(i * 7) % values.len()],
+                values[(i * 13) % values.len()],
+            ];
+            assert_eq!(grid.clamped_cell(p), Some(want(p)), "{p:?}");
+        }
+        assert_eq!(grid.clamped_cell([0.0, f32::NAN, 0.0]), None);
+        assert_eq!(grid.clamped_cell([0.0, 0.0, f32::INFINITY]), None);
+    }
 
     #[test]
     fn signed_cell_floors() {

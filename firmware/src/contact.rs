@@ -177,14 +177,15 @@ pub fn detect(bank: &Bank, p0: [f32; 3], p1: [f32; 3]) -> Option<Hit> {
             }
         } else {
             let (u, v) = ((lo - p) / d, (hi - p) / d);
-            ta = ta.max(u.min(v));
-            tb = tb.min(u.max(v));
+            let (near, far) = if u < v { (u, v) } else { (v, u) };
+            ta = larger(ta, near);
+            tb = smaller(tb, far);
         }
     }
     if !(ta <= tb) {
         return None;
     }
-    let cheb = dir.iter().fold(0.0f32, |m, v| m.max(v.abs())) * (tb - ta);
+    let cheb = dir.iter().fold(0.0f32, |m, v| larger(m, v.abs())) * (tb - ta);
     // The clipped segment spans at most 65535 cells per axis: n <= 145,635.
     let q = cheb / (h * PIECE_CELLS);
     let n = if q < 1.0e6 { q as u32 + 1 } else { 1_000_000 };
@@ -207,11 +208,9 @@ pub fn detect(bank: &Bank, p0: [f32; 3], p1: [f32; 3]) -> Option<Hit> {
         let last = i + 1 == n;
         let mut best: Option<Hit> = None;
         for &ti in grid.cell_triangles(index) {
-            let Some(hit) = intersect(planes, triangles, positions, ti, p0, p1) else {
-                continue;
-            };
             // Candidates ascend, so on equal t the first one found has the lower index.
-            if (last || hit.t <= t1) && best.is_none_or(|b| hit.t < b.t) {
+            let keep = |t: f32| (last || t <= t1) && best.is_none_or(|b| t < b.t);
+            if let Some(hit) = intersect(planes, triangles, positions, ti, p0, p1, keep) {
                 best = Some(hit);
             }
         }
@@ -222,15 +221,18 @@ pub fn detect(bank: &Bank, p0: [f32; 3], p1: [f32; 3]) -> Option<Hit> {
     None
 }
 
-/// Entering crossing of `[p0, p1]` with triangle `ti` (`SPEC.md`, "triangle planes").
+/// Entering crossing of `[p0, p1]` with triangle `ti` (`SPEC.md`, "triangle planes"), if the
+/// caller would `keep` a hit at its `t`.
 ///
 /// The plane first, from the stored plane alone: the plane values `s0 = m . p0 - off` and
 /// `s1 = m . p1 - off` have the signs of `(p0 - a) . n` and `(p1 - a) . n`, and the segment
-/// enters when `s0 >= 0`, `s1 <= 0` and `s0 > s1`. A tick's short segment crosses the planes
-/// of few candidates, so most stop after `s0` or `s1` (the tests are a conjunction: their
-/// order changes no result). Then, for a crossing: not grazing (`(m . d)^2 > PARALLEL_TOL^2
-/// (d . d) (m . m)` for `d = p1 - p0`, the cosine test on `n`), the crossing at `t = s0 / (s0 -
-/// s1)`, and only now the vertices, for the barycentric coordinates ([`plane_bary`]).
+/// enters when `s0 >= 0`, `s1 <= 0` and `s0 > s1`, at `t = s0 / (s0 - s1)`. A tick's short
+/// segment crosses the planes of few candidates, so most stop after `s0` or `s1`. For a
+/// crossing the caller keeps, and only then, the vertices: the crossing point's barycentric
+/// coordinates ([`plane_bary`]'s, each tested as soon as it is known), then not grazing
+/// (`(m . d)^2 > PARALLEL_TOL^2 (d . d) (m . m)` for `d = p1 - p0`: the cosine test on `n`).
+/// The tests are a conjunction, so their order changes no result; it puts the cheap ones and
+/// those that reject most (a crossing of a candidate's plane mostly misses the triangle) first.
 #[inline(always)]
 fn intersect(
     planes: &[TrianglePlane],
@@ -239,6 +241,7 @@ fn intersect(
     ti: u16,
     p0: [f32; 3],
     p1: [f32; 3],
+    keep: impl Fn(f32) -> bool,
 ) -> Option<Hit> {
     let plane = planes.get(usize::from(ti))?;
     let s0 = plane.value(p0);
@@ -249,19 +252,32 @@ fn intersect(
     if !(s1 <= 0.0 && s0 > s1) {
         return None;
     }
-    let m = plane.m;
-    let dir = sub(p1, p0);
-    let dm = dot(dir, m);
-    // Entering only, and not grazing.
-    if !(dm < 0.0) || dm * dm <= PARALLEL_TOL * PARALLEL_TOL * dot(dir, dir) * dot(m, m) {
+    // In [0, 1] without a clamp: 0 <= s0 <= s0 - s1 (s1 <= 0; rounding is monotone).
+    let t = s0 / (s0 - s1);
+    if !keep(t) {
         return None;
     }
-    let t = (s0 / (s0 - s1)).clamp(0.0, 1.0);
+    let m = plane.m;
+    let dir = sub(p1, p0);
     let x = add(p0, scale(dir, t));
+    // plane_bary's coordinates, each vertex loaded when first needed.
     let tri = *triangles.get(usize::from(ti))?;
-    let [a, b, c] = vertices(positions, tri)?;
-    let k = plane_bary(a, b, c, m, x);
-    if !(k[0] >= -BARY_TOL && k[1] >= -BARY_TOL && k[2] >= -BARY_TOL) {
+    let [ia, ib, ic] = tri.map(usize::from);
+    let (a, c) = (*positions.get(ia)?, *positions.get(ic)?);
+    let xa = sub(x, a);
+    let k1 = dot(cross(xa, sub(c, a)), m);
+    if !(k1 >= -BARY_TOL) {
+        return None;
+    }
+    let b = *positions.get(ib)?;
+    let k2 = dot(cross(sub(b, a), xa), m);
+    let k = [1.0 - k1 - k2, k1, k2];
+    if !(k2 >= -BARY_TOL && k[0] >= -BARY_TOL) {
+        return None;
+    }
+    // Entering only, and not grazing.
+    let dm = dot(dir, m);
+    if !(dm < 0.0) || dm * dm <= PARALLEL_TOL * PARALLEL_TOL * dot(dir, dir) * dot(m, m) {
         return None;
     }
     let bary = normalise(k)?;
@@ -474,31 +490,21 @@ pub(crate) fn plane_bary(
 
 /// Clamp to `[0, 1]` and rescale to sum 1; `None` for NaN or an all-zero input.
 pub(crate) fn normalise(k: [f32; 3]) -> Option<[f32; 3]> {
-    let k = k.map(|v| v.clamp(0.0, 1.0));
-    let s = k[0] + k[1] + k[2];
+    let [k0, k1, k2] = k.map(|v| v.clamp(0.0, 1.0));
+    let s = k0 + k1 + k2;
     if !(s > 0.0) || !s.is_finite() {
         return None;
     }
-    let k = k.map(|v| v / s);
-    // Put the rounding residue on the largest coordinate.
-    let mut out = k;
-    let big = if k[0] >= k[1] && k[0] >= k[2] {
-        0
-    } else if k[1] >= k[2] {
-        1
+    let (k0, k1, k2) = (k0 / s, k1 / s, k2 / s);
+    // Put the rounding residue on the largest coordinate (the first of equals).
+    let rest = |x: f32, y: f32| (1.0 - (x + y)).clamp(0.0, 1.0);
+    Some(if k0 >= k1 && k0 >= k2 {
+        [rest(k1, k2), k1, k2]
+    } else if k1 >= k2 {
+        [k0, rest(k0, k2), k2]
     } else {
-        2
-    };
-    let rest: f32 = out
-        .iter()
-        .enumerate()
-        .filter(|&(i, _)| i != big)
-        .map(|(_, v)| v)
-        .sum();
-    if let Some(v) = out.get_mut(big) {
-        *v = (1.0 - rest).clamp(0.0, 1.0);
-    }
-    Some(out)
+        [k0, k1, rest(k0, k1)]
+    })
 }
 
 pub(crate) fn vertices(positions: &[[f32; 3]], tri: [u16; 3]) -> Option<[[f32; 3]; 3]> {
@@ -516,6 +522,17 @@ fn combine(a: [f32; 3], b: [f32; 3], c: [f32; 3], k: [f32; 3]) -> [f32; 3] {
         *o = k0 * x + k1 * y + k2 * z;
     }
     out
+}
+
+/// The larger of `a` and `b`, by one comparison (`f32::max` is a library call on the MCU); the
+/// callers' values are never NaN.
+fn larger(a: f32, b: f32) -> f32 {
+    if a > b { a } else { b }
+}
+
+/// The smaller of `a` and `b` (see [`larger`]).
+fn smaller(a: f32, b: f32) -> f32 {
+    if a < b { a } else { b }
 }
 
 fn finite(p: [f32; 3]) -> bool {
@@ -822,12 +839,12 @@ mod tests {
     /// The first entering crossing over *every* triangle, by brute force: the reference the
     /// grid's certificates must reproduce.
     fn brute_force(bank: &Bank, p0: [f32; 3], p1: [f32; 3]) -> Option<Hit> {
+        let (planes, triangles, positions) =
+            (bank.triangle_planes(), bank.triangles(), bank.positions());
         let mut best: Option<Hit> = None;
-        for ti in 0..bank.triangles().len() as u16 {
-            let (planes, triangles) = (bank.triangle_planes(), bank.triangles());
-            if let Some(hit) = intersect(planes, triangles, bank.positions(), ti, p0, p1)
-                && best.is_none_or(|b| hit.t < b.t)
-            {
+        for ti in 0..triangles.len() as u16 {
+            let keep = |t: f32| best.is_none_or(|b| t < b.t);
+            if let Some(hit) = intersect(planes, triangles, positions, ti, p0, p1, keep) {
                 best = Some(hit);
             }
         }
@@ -987,6 +1004,57 @@ mod tests {
         let tips = [[0.02f32, 0.02, -0.003], [0.03, 0.01, -0.001]];
         let states = run(&bank, &mut tr, [0.013, 0.017, -0.002], &tips);
         assert!(states.iter().all(|s| *s == ContactState::Free));
+    }
+
+    /// `normalise` gives, bit for bit, what its earlier form (residue put through an iterator
+    /// sum over the other two coordinates) gave, on random inputs, ties and edge values.
+    #[test]
+    fn normalise_is_its_earlier_form() {
+        fn earlier(k: [f32; 3]) -> Option<[f32; 3]> {
+            let k = k.map(|v| v.clamp(0.0, 1.0));
+            let s = k[0] + k[1] + k[2];
+            if !(s > 0.0) || !s.is_finite() {
+                return None;
+            }
+            let mut out = k.map(|v| v / s);
+            let big = if out[0] >= out[1] && out[0] >= out[2] {
+                0
+            } else if out[1] >= out[2] {
+                1
+            } else {
+                2
+            };
+            let rest: f32 = (0..3).filter(|&i| i != big).map(|i| out[i]).sum();
+            out[big] = (1.0 - rest).clamp(0.0, 1.0);
+            Some(out)
+        }
+        let mut seed = 0x9e37_79b9_7f4a_7c15u64;
+        let mut next = move || {
+            seed ^= seed << 13;
+            seed ^= seed >> 7;
+            seed ^= seed << 17;
+            (seed >> 40) as f32 / (1u64 << 24) as f32 * 1.4 - 0.2
+        };
+        let mut cases = std::vec![
+            [0.0, 0.0, 0.0],
+            [1.0, 0.0, 0.0],
+            [0.5, 0.5, 0.0],
+            [1.0 / 3.0; 3],
+            [-1.0e-6, 0.5, 0.5],
+            [f32::NAN, 0.2, 0.3],
+            [f32::INFINITY, 0.0, 0.0],
+            [-0.0, 0.0, 1.0],
+        ];
+        for _ in 0..20_000 {
+            cases.push([next(), next(), next()]);
+        }
+        for k in cases {
+            let (got, want) = (normalise(k), earlier(k));
+            assert_eq!(
+                got.map(|v| v.map(f32::to_bits)),
+                want.map(|v| v.map(f32::to_bits))
+            );
+        }
     }
 
     #[test]

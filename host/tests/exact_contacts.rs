@@ -1,9 +1,12 @@
 //! The shipped bank, the tool's pairs (host/scenes/liver.toml, `bank.couplings = "tool"`), fits
-//! the demo's 128 KiB and is exact
+//! the demo's 128 KiB and is exact, up to its storage precision,
 //! on every contact the tool can make: at 1,200 contact sites spread over the reachable surface (area-uniform,
 //! anchors off the lattice the bank's pairs were sampled on), the firmware's force (f32, its own
 //! patch and solve on the bank's bytes) is within 1e-4 relative of the f64 solve on untruncated
 //! compliance, for a point contact (barycentric weights) and for the scene's 3 mm tool patch.
+//! The shipped scene stores `C_kl` in 16 bits (`bank.precision = "bfp16"`, for the room the
+//! format 5.0 triangle planes need): its error is then that rounding's, which the second test
+//! bounds site by site.
 //! The reference weights are the firmware's patch rule on a probe bank that couples every pair
 //! a patch can load (see `host::bank::sweep`); the reference forces come from the compliance's
 //! direct solves, not from the bank.
@@ -29,6 +32,7 @@ fn the_tool_bank_is_exact_on_every_contact_the_tool_can_make() {
     );
     let aligned = AlignedBytes::new(&built.bytes);
     let bank = Bank::parse(&aligned).unwrap();
+    assert_eq!(bank.precision(), prep.scene.bank.precision);
 
     let rows = prep.blocks(prep.probe_radius(), None).unwrap();
     let probe_bytes = sweep::probe_bytes(&prep, &rows).unwrap();
@@ -63,12 +67,18 @@ fn the_tool_bank_is_exact_on_every_contact_the_tool_can_make() {
         e.dropped_max
     );
     assert_eq!(e.failed, 0, "{e:?}");
+    // The issue's bound, unchanged and the same for either precision (not loosened for bfp16):
+    // an f32 bank meets it by far (about 5e-7, the f32 arithmetic alone), the shipped bfp16 one
+    // with its 16-bit rounding (about 3e-5). That this is the rounding and nothing else is
+    // `bfp16_blocks_stay_within_their_rounding_bound`'s check, site by site, against the bound
+    // the format's rounding gives, on a bank built the same way.
     assert!(e.point_max <= 1e-4, "{e:?}");
     assert!(e.patch_max <= 1e-4, "{e:?}");
 }
 
 /// The shipped scene with 16-bit coupling blocks (`bank.precision = "bfp16"`, `SPEC.md` "16-bit
-/// blocks"): 16 bytes less per pair, and at every site the firmware's force is within the
+/// blocks", the shipped precision): 16 bytes less per pair, and at every site the firmware's
+/// force is within the
 /// bound the format's rounding gives. Each stored entry of `C_ab` is off by at most
 /// `u_ab = max |C_ab| / 32767` (half a unit of the block's exponent), so `||dC_ab||_2 <=
 /// ||dC_ab||_F <= 3 u_ab`, and the patch compliance `W = sum_ab w_a w_b C_ab` (weights >= 0, the
