@@ -197,8 +197,8 @@ pub const POINTS_PER_TICK: usize = 2;
 pub const CHOICES_PER_TICK: usize = 3;
 
 /// Blocks of `B C_SS B^T` a rebuild adds per tick ([`WeightedFill::step`]): a full 8-node patch
-/// (36 blocks) takes three ticks.
-pub const BLOCKS_PER_TICK: usize = 18;
+/// (36 blocks) takes three ticks, and the factor one more.
+pub const BLOCKS_PER_TICK: usize = 15;
 
 /// A patch being rebuilt over several ticks, while the held one renders (`origin` is `None`
 /// when no rebuild is in progress). Kept in place: the build is large, and moving it costs
@@ -220,9 +220,11 @@ enum Stage {
     Located,
     /// Choosing the nodes, [`CHOICES_PER_TICK`] candidates a tick.
     Choosing,
-    /// Assembling `B C_SS B^T` (about [`BLOCKS_PER_TICK`] blocks a tick), factored in the
-    /// tick that adds the last row; the chosen patch's dropped share.
+    /// Assembling `B C_SS B^T` (about [`BLOCKS_PER_TICK`] blocks a tick); the chosen patch's
+    /// dropped share.
     Filling(WeightedFill, f32),
+    /// Assembled: next, the factor.
+    Filled(WeightedFill, f32),
     /// Factored, waiting for the last swap's [`Blend`] to end.
     Ready(WeightedSolve, f32),
 }
@@ -734,8 +736,11 @@ impl HapticLoop<'_> {
             }
             Stage::Filling(ref mut fill, dropped) => {
                 if fill.step(self.bank, BLOCKS_PER_TICK)? {
-                    p.stage = Stage::Ready(fill.factor()?, dropped);
+                    p.stage = Stage::Filled(*fill, dropped);
                 }
+            }
+            Stage::Filled(fill, dropped) => {
+                p.stage = Stage::Ready(fill.factor()?, dropped);
             }
             // Swapped in once the last swap's blend is over.
             Stage::Ready(..) if self.blend.is_some() => {}
