@@ -317,9 +317,9 @@ impl PatchBuild {
 }
 
 /// The contact triangle's barycentric coordinates at `anchor` and their change per tip radius
-/// along `e1` and `e2` (both in the triangle's plane): `k(anchor + r (u e1 + v e2)) = k0 + u g1
-/// + v g2` (from the triangle's stored plane, [`plane_bary`]). `None` for a triangle or node
-/// out of range.
+/// along `e1` and `e2` (both in the triangle's plane): `k(anchor + r (u e1 + v e2)) =
+/// k0 + u g1 + v g2` (from the triangle's stored plane, [`plane_bary`]). `None` for a triangle
+/// or node out of range.
 fn contact_frame(
     bank: &Bank,
     triangle: u32,
