@@ -21,7 +21,7 @@
 //! `off = m . a`, so the plane value `m . p - off` has the sign of `(p - a) . n`): four loads
 //! and two dot products per candidate. Only the few candidates whose plane the segment crosses
 //! load their vertices, for the barycentric coordinates, which the plane gives without a
-//! division ([`plane_bary`]). A hit
+//! division (`plane_bary`). A hit
 //! exactly on an edge or a vertex is accepted by every triangle around it; the first hit along
 //! the segment wins, ties going to the lowest triangle index, so it is reported once and
 //! deterministically. The lists are complete for any cell size (the rule is structural, not a
@@ -152,7 +152,7 @@ impl ContactTracker {
 /// clearance >= 2 cannot reach the surface (every occupied cell is at least two cells away,
 /// more than the piece's length) and costs one cell lookup. Otherwise the cell's candidate
 /// triangles, which hold every triangle a piece starting in the cell can cross, are tested
-/// against the whole segment ([`intersect`]: the stored plane first, the vertices only for a
+/// against the whole segment (`intersect`: the stored plane first, the vertices only for a
 /// crossing); a hit at `t` up to the piece's end is final (an earlier crossing
 /// would lie in this or an earlier piece, whose candidates hold its triangle). The first piece
 /// with a hit gives the answer: the smallest `t`, ties going to the lowest triangle index.
@@ -229,7 +229,7 @@ pub fn detect(bank: &Bank, p0: [f32; 3], p1: [f32; 3]) -> Option<Hit> {
 /// enters when `s0 >= 0`, `s1 <= 0` and `s0 > s1`, at `t = s0 / (s0 - s1)`. A tick's short
 /// segment crosses the planes of few candidates, so most stop after `s0` or `s1`. For a
 /// crossing the caller keeps, and only then, the vertices: the crossing point's barycentric
-/// coordinates ([`plane_bary`]'s, each tested as soon as it is known), then not grazing
+/// coordinates (`plane_bary`'s, each tested as soon as it is known), then not grazing
 /// (`(m . d)^2 > PARALLEL_TOL^2 (d . d) (m . m)` for `d = p1 - p0`: the cosine test on `n`).
 /// The tests are a conjunction, so their order changes no result; it puts the cheap ones and
 /// those that reject most (a crossing of a candidate's plane mostly misses the triangle) first.
@@ -339,7 +339,7 @@ pub struct SurfacePoint {
 
 /// The rest-surface point under `p` (a point near the surface), by a walk from triangle
 /// `start` (nodes `start_nodes`): project `p` onto the current triangle's plane (its
-/// barycentric coordinates from the stored plane, [`plane_bary`]); if the
+/// barycentric coordinates from the stored plane, `plane_bary`); if the
 /// projection lies inside, that is the point; otherwise cross the edge opposite the most
 /// negative barycentric coordinate into the neighbouring triangle and repeat, at most
 /// [`MAX_SLIDE_STEPS`] times. At a boundary edge of R, or when the walk would step straight back

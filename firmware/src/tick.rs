@@ -20,13 +20,13 @@
 //!    (one 3 x 3 solve a tick) and rebuilt when it has slid [`REPATCH_FRACTION`] of the tip
 //!    radius; the first tick of a contact, which also ran the detection, solves on the contact
 //!    triangle alone (the displacement, hence the force, is still tiny then). A rebuild is
-//!    spread over about twelve ticks, one bounded step each ([`Stage`]: start,
+//!    spread over about twelve ticks, one bounded step each (`Stage`: start,
 //!    [`POINTS_PER_TICK`] quadrature points a tick, the merge, [`CHOICES_PER_TICK`] candidate
 //!    nodes a tick, [`BLOCKS_PER_TICK`] blocks of `B C_SS B^T` a tick and the factor), while
 //!    the held patch keeps rendering, so no tick pays for a whole patch; the patch in use lags
 //!    the anchor by [`REPATCH_FRACTION`] of the tip radius plus the rebuild's ticks of sliding.
 //!    At a swap the force passes from the outgoing solve's to the new one's over
-//!    [`BLEND_TICKS`] ([`Blend`]), so a sliding contact's force has no step at swaps. The node
+//!    [`BLEND_TICKS`] (`Blend`), so a sliding contact's force has no step at swaps. The node
 //!    forces `f_S` (on the tissue, linear model) are what telemetry reports, so the host's
 //!    `u = C f_S` displays the surface under the tip;
 //! 4. the tissue law Q on the tool force ([`apply_tissue_law`], bank's law), except in
@@ -169,7 +169,7 @@ struct Held {
 }
 
 /// Ticks over which the rendered force passes from the outgoing patch's solve to the new one's
-/// after a swap ([`Blend`]): without it, each swap of a sliding contact is a step in the force
+/// after a swap (`Blend`): without it, each swap of a sliding contact is a step in the force
 /// (both patches see the same displacement, but their compliances differ by the anchor's slide
 /// since the last rebuild began). A patch that is ready waits for the blend before it is
 /// swapped in, so a blend always starts from a single patch.
@@ -225,7 +225,7 @@ enum Stage {
     Filling(WeightedFill, f32),
     /// Assembled: next, the factor.
     Filled(WeightedFill, f32),
-    /// Factored, waiting for the last swap's [`Blend`] to end.
+    /// Factored, waiting for the last swap's `Blend` to end.
     Ready(WeightedSolve, f32),
 }
 
@@ -624,7 +624,7 @@ fn triangle_solve(bank: &Bank, nodes: [u16; 3], bary: [f32; 3]) -> Option<Weight
 }
 
 /// The solve phase: the tool force of `solve` at displacement `d` (blended with the outgoing
-/// patch's, [`Blend`]), the node forces `f_k = w_k f_tool` on `solve`'s nodes as telemetry's
+/// patch's, `Blend`), the node forces `f_k = w_k f_tool` on `solve`'s nodes as telemetry's
 /// contact set, the linear model's tool force, and `d` (for the law).
 fn node_forces(
     solve: &WeightedSolve,
@@ -694,8 +694,8 @@ impl CycleCounter for NoCounter {
 impl HapticLoop<'_> {
     /// One step of keeping the patch under the tip: start a rebuild when the held patch is the
     /// first tick's (radius 0) or its anchor has slid [`REPATCH_FRACTION`] of the tip radius,
-    /// else advance the rebuild in progress by one bounded step ([`Stage`]), swapping it in
-    /// when it is ready and no [`Blend`] is running. The solve to render with this tick is
+    /// else advance the rebuild in progress by one bounded step (`Stage`), swapping it in
+    /// when it is ready and no `Blend` is running. The solve to render with this tick is
     /// then `self.held`'s (`held` is where it was built).
     fn maintain_patch(
         &mut self,
