@@ -283,7 +283,7 @@ fn odd_arguments_are_refused_with_their_name() {
     let dir = tempfile::tempdir().unwrap();
     let text = std::fs::read_to_string(scene()).unwrap();
     let p = dir.path().join("s.toml");
-    let edited = text.replacen("grid_cell_m = 0.009", "grid_cell_m = 1e-9", 1);
+    let edited = text.replacen("grid_cell_m = 0.006", "grid_cell_m = 1e-9", 1);
     assert!(edited != text);
     std::fs::write(&p, edited).unwrap();
     let o = host(&["bank", "build", s(&p), "-o", s(&dir.path().join("x.bank"))]);

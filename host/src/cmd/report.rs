@@ -127,13 +127,21 @@ pub fn run(args: Args) -> Result<()> {
     let bank = bank_format::Bank::parse(&bytes)
         .map_err(|e| anyhow::anyhow!("the scene's bank does not parse: {e}"))?;
     step("f32 against f64 across the reachable region");
-    let errors = precision::region_errors(&prepared, &bank, args.quick)?;
+    // Arithmetic precision alone: the scene's bank with f32 blocks (the storage precision is
+    // the bank-couplings knob's).
+    let mut p32 = Prepared::from_scene(scene.clone())?;
+    p32.scene.bank.precision = bank_format::Precision::F32;
+    let built32 = p32.build_bank(None)?;
+    let bytes32 = bank_format::AlignedBytes::new(&built32.bytes);
+    let bank32 = bank_format::Bank::parse(&bytes32)
+        .map_err(|e| anyhow::anyhow!("the scene's f32 bank does not parse: {e}"))?;
+    let errors = precision::region_errors(&p32, &bank32, args.quick)?;
     knobs.push(precision::section(
         &errors,
         prepared.scene.bank.truncation_radius_m,
     ));
     cases.extend(precision::nu_cases(&precision::nu_rows(
-        &prepared,
+        &p32,
         &locking::POISSON,
         &step,
     )?));
@@ -143,7 +151,9 @@ pub fn run(args: Args) -> Result<()> {
     knobs.push(knob);
     cases.extend(rows);
     step("hard cases of the loop (firmware code, natively)");
-    cases.extend(loops::cases(&prepared, &bank)?);
+    // Their references are f32 against f64: on the f32 bank (the storage's error is the
+    // bank-couplings knob's).
+    cases.extend(loops::cases(&p32, &bank32)?);
 
     let seconds = if args.quick { 1.5 } else { 3.0 };
     let image = qemu_image()?;
