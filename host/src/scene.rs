@@ -1124,7 +1124,7 @@ fn parse_bank(ctx: &Ctx, b: &RawBank) -> Result<BankOptions, SceneError> {
                 p.span(),
                 "bank.precision",
                 format!(
-                    "storage precision {:?} is not one of bank format 4.0's: \"f32\" or \"bfp16\" \
+                    "storage precision {:?} is not one of bank format 5.0's: \"f32\" or \"bfp16\" \
                      (16-bit mantissas, one exponent per block)",
                     p.get_ref()
                 ),
