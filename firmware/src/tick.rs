@@ -185,11 +185,11 @@ struct Blend {
 }
 
 /// Quadrature points of a patch being rebuilt that one tick locates on the surface
-/// ([`PatchBuild::locate`]): the 12 take three ticks, so a rebuild spreads over six (start,
-/// three of locating, merging and choosing the nodes, factoring) and no tick pays for a whole
+/// ([`PatchBuild::locate`]): the 12 take six ticks of a rebuild of about fourteen (start, six of
+/// locating, the merge, the node choice, the fill, the factor), so no tick pays for a whole
 /// patch. More ticks would make each cheaper but let the patch lag further behind a fast
-/// slide: at 58 mm/s (`tests/tests/loop_trajectories.rs`) ten ticks made the tangential
-/// force drop by 0.027 N in a tick at a swap, against the 0.02 N that test allows.
+/// slide (`tests/tests/loop_trajectories.rs`: at 58 mm/s each swap is a step in the force,
+/// which the swap's blend smooths).
 pub const POINTS_PER_TICK: usize = 2;
 
 /// Candidate nodes a rebuild examines per tick while choosing the patch's nodes (each one a scan
