@@ -28,10 +28,14 @@ use crate::tick::{HapticLoop, LoopInput, PhaseMarks};
 
 /// Telemetry goes out every this many ticks (100 Hz at 1 kHz).
 pub const TELEMETRY_EVERY_TICKS: u32 = 10;
-/// At most this many received link bytes are taken per tick, so a flood cannot stretch a tick
-/// (the rest wait in the queue: 128 bytes a millisecond is more than a 921,600-baud UART
-/// carries).
-pub const MAX_RX_BYTES_PER_TICK: usize = 128;
+/// At most this many received link bytes are taken per tick, so a burst or a flood cannot
+/// stretch a tick: a byte costs the tick about 50 instructions (COBS, CRC, decode, the
+/// command), so 32 bound it near 1,600. 32 bytes hold the largest command frame with an `Arm`
+/// (`SetMode` with constant currents is 20 bytes, `Arm` 7), so a host's command lands in the
+/// tick after it arrives; a backlog waits in the link queue ([`crate::link::RX_BYTES`]), which
+/// only fills under a flood. (At 128, bursts of queued bytes took up to 4,400 instructions of
+/// one SIL tick.)
+pub const MAX_RX_BYTES_PER_TICK: usize = 32;
 
 /// What one tick did, for the caller (the software-in-the-loop image reports it to its
 /// harness; a board ignores it).

@@ -338,65 +338,124 @@ pub struct SurfacePoint {
 }
 
 /// The rest-surface point under `p` (a point near the surface), by a walk from triangle
-/// `start` (nodes `start_nodes`): project `p` onto the current triangle's plane (its
-/// barycentric coordinates from the stored plane, `plane_bary`); if the
-/// projection lies inside, that is the point; otherwise cross the edge opposite the most
-/// negative barycentric coordinate into the neighbouring triangle and repeat, at most
-/// [`MAX_SLIDE_STEPS`] times. At a boundary edge of R, or when the walk would step straight back
-/// (over a ridge, where `p` projects outside both triangles), the answer is the closest point of
-/// the current triangle. A local search, about a hundred operations per step: it follows the
-/// surface around `start`, never jumping to a fold elsewhere.
+/// `start` (nodes `start_nodes`) run to its end: [`SurfaceWalk`] with the whole
+/// [`MAX_SLIDE_STEPS`] at once. `None` only for a bank whose indices do not hold.
 pub fn closest_surface_point(
     bank: &Bank,
     start: u32,
     start_nodes: [u16; 3],
     p: [f32; 3],
 ) -> Option<SurfacePoint> {
-    let positions = bank.positions();
-    let planes = bank.triangle_planes();
-    let mut cur = start;
-    let mut nodes = start_nodes;
-    let mut came_from: Option<u32> = None;
-    for _ in 0..MAX_SLIDE_STEPS {
-        let [a, b, c] = vertices(positions, nodes)?;
-        let k = plane_bary(a, b, c, planes.get(cur as usize)?.m, p);
-        let (i, low) =
-            k.iter().enumerate().fold(
-                (0, f32::INFINITY),
-                |m, (i, &v)| if v < m.1 { (i, v) } else { m },
-            );
-        if low >= -BARY_TOL {
-            let bary = normalise(k)?;
-            return Some(SurfacePoint {
-                triangle: cur,
-                nodes,
-                bary,
-                point: combine(a, b, c, bary),
-            });
-        }
-        // The edge opposite vertex i.
-        let [u, v] = match i {
-            0 => [nodes[1], nodes[2]],
-            1 => [nodes[2], nodes[0]],
-            _ => [nodes[0], nodes[1]],
-        };
-        match neighbour_across(bank, cur, u, v) {
-            Some((t, tri)) if Some(t) != came_from => {
-                came_from = Some(cur);
-                cur = t;
-                nodes = tri;
-            }
-            _ => break,
+    let mut budget = MAX_SLIDE_STEPS;
+    match SurfaceWalk::new(start, start_nodes).advance(bank, p, &mut budget) {
+        Walk::Landed(sp) => Some(sp),
+        Walk::Walking | Walk::Lost => None,
+    }
+}
+
+/// A walk across R's edges to the rest-surface point under a point `p` near the surface, which
+/// can stop and resume: each step projects `p` onto the current triangle's plane (its
+/// barycentric coordinates from the stored plane, `plane_bary`); if the projection lies inside,
+/// that is the point; otherwise the walk crosses the edge opposite the most negative
+/// barycentric coordinate into the neighbouring triangle. After [`MAX_SLIDE_STEPS`] steps in
+/// all, at a boundary edge of R, or when the walk would step straight back (over a ridge, where
+/// `p` projects outside both triangles), the answer is the closest point of the current
+/// triangle. A local search, about a hundred operations per step: it follows the surface
+/// around `start`, never jumping to a fold elsewhere. A caller with a per-tick budget
+/// ([`crate::patch::PatchBuild::locate`]) takes a few steps a tick; the point it lands on does
+/// not depend on how the steps were split.
+#[derive(Clone, Copy, Debug)]
+pub struct SurfaceWalk {
+    triangle: u32,
+    nodes: [u16; 3],
+    came_from: Option<u32>,
+    taken: u32,
+}
+
+/// Where a [`SurfaceWalk::advance`] ended.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Walk {
+    /// At the point.
+    Landed(SurfacePoint),
+    /// The budget ran out first: call `advance` again with the same `p`.
+    Walking,
+    /// The bank's indices do not hold (a triangle or node out of range).
+    Lost,
+}
+
+impl SurfaceWalk {
+    /// A walk starting on triangle `triangle` (nodes `nodes`).
+    pub fn new(triangle: u32, nodes: [u16; 3]) -> SurfaceWalk {
+        SurfaceWalk {
+            triangle,
+            nodes,
+            came_from: None,
+            taken: 0,
         }
     }
-    let [a, b, c] = vertices(positions, nodes)?;
-    let (point, bary, _) = closest_on_triangle(p, a, b, c)?;
-    Some(SurfacePoint {
-        triangle: cur,
-        nodes,
-        bary,
-        point,
-    })
+
+    /// Takes steps towards the point under `p` while `budget` lasts, one off it per step.
+    pub fn advance(&mut self, bank: &Bank, p: [f32; 3], budget: &mut u32) -> Walk {
+        let positions = bank.positions();
+        let planes = bank.triangle_planes();
+        while self.taken < MAX_SLIDE_STEPS {
+            if *budget == 0 {
+                return Walk::Walking;
+            }
+            *budget -= 1;
+            self.taken += 1;
+            let (Some([a, b, c]), Some(plane)) = (
+                vertices(positions, self.nodes),
+                planes.get(self.triangle as usize),
+            ) else {
+                return Walk::Lost;
+            };
+            let k = plane_bary(a, b, c, plane.m, p);
+            let (i, low) =
+                k.iter().enumerate().fold(
+                    (0, f32::INFINITY),
+                    |m, (i, &v)| if v < m.1 { (i, v) } else { m },
+                );
+            if low >= -BARY_TOL {
+                return match normalise(k) {
+                    Some(bary) => Walk::Landed(SurfacePoint {
+                        triangle: self.triangle,
+                        nodes: self.nodes,
+                        bary,
+                        point: combine(a, b, c, bary),
+                    }),
+                    None => Walk::Lost,
+                };
+            }
+            // The edge opposite vertex i.
+            let n = self.nodes;
+            let [u, v] = match i {
+                0 => [n[1], n[2]],
+                1 => [n[2], n[0]],
+                _ => [n[0], n[1]],
+            };
+            match neighbour_across(bank, self.triangle, u, v) {
+                Some((t, tri)) if Some(t) != self.came_from => {
+                    self.came_from = Some(self.triangle);
+                    self.triangle = t;
+                    self.nodes = tri;
+                }
+                _ => break,
+            }
+        }
+        let Some([a, b, c]) = vertices(positions, self.nodes) else {
+            return Walk::Lost;
+        };
+        match closest_on_triangle(p, a, b, c) {
+            Some((point, bary, _)) => Walk::Landed(SurfacePoint {
+                triangle: self.triangle,
+                nodes: self.nodes,
+                bary,
+                point,
+            }),
+            None => Walk::Lost,
+        }
+    }
 }
 
 /// The triangle other than `t` with edge `(u, v)`, if R has one.
@@ -983,6 +1042,46 @@ mod tests {
             tr.update(&bank, [0.036, 0.018, depth], [0.036, 0.018, 0.0001]),
             ContactState::Free
         );
+    }
+
+    /// A walk advanced one step a call lands where the whole walk does, after as many calls
+    /// as the whole walk takes steps; a walk stops at the overall cap either way.
+    #[test]
+    fn a_walk_resumed_step_by_step_lands_where_the_whole_walk_does() {
+        let bytes = patch();
+        let bank = Bank::parse(&bytes).unwrap();
+        let nodes = bank.triangles()[0];
+        for p in [
+            [0.036f32, 0.018, 0.0],
+            [0.031, 0.039, -0.001],
+            [0.001, 0.002, 0.0],
+        ] {
+            let whole = closest_surface_point(&bank, 0, nodes, p).unwrap();
+            let mut all = u32::MAX;
+            let Walk::Landed(same) = SurfaceWalk::new(0, nodes).advance(&bank, p, &mut all) else {
+                panic!("no landing at {p:?}");
+            };
+            assert_eq!(same, whole);
+            let taken = u32::MAX - all;
+            let mut walk = SurfaceWalk::new(0, nodes);
+            let mut calls = 0;
+            let landed = loop {
+                calls += 1;
+                let mut one = 1;
+                match walk.advance(&bank, p, &mut one) {
+                    Walk::Landed(sp) => break sp,
+                    Walk::Walking => assert_eq!(one, 0),
+                    Walk::Lost => panic!("lost at {p:?}"),
+                }
+            };
+            assert_eq!(landed, whole, "{p:?}");
+            assert_eq!(calls, taken, "{p:?}");
+            assert!(taken <= MAX_SLIDE_STEPS);
+        }
+        // Across the 5 x 5 patch from its first triangle: several steps.
+        let mut all = u32::MAX;
+        SurfaceWalk::new(0, nodes).advance(&bank, [0.036, 0.018, 0.0], &mut all);
+        assert!(u32::MAX - all >= 4, "{}", u32::MAX - all);
     }
 
     #[test]

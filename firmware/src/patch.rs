@@ -11,7 +11,7 @@
 //! pressure's consistent load `integral p phi_k dA` (P1 shape functions `phi_k`), by quadrature:
 //! [`QUADRATURE`] places 12 points on two rings in the contact triangle's plane (a Gauss rule
 //! in the radius for the weight `rho (1 - rho^2 / r^2)`, six angles per ring), each point is
-//! moved to the closest rest-surface point ([`closest_surface_point`], a walk across edges from the
+//! moved to the closest rest-surface point ([`SurfaceWalk`], a walk across edges from the
 //! contact triangle) and its weight is spread over that triangle's vertices by barycentric
 //! coordinates. When the tip is much smaller than the triangles every point falls in the
 //! contact triangle and the weights are the anchor's barycentric coordinates (the paper's
@@ -33,7 +33,7 @@
 
 use bank_format::Bank;
 
-use crate::contact::{BARY_TOL, closest_surface_point, normalise, plane_bary, vertices};
+use crate::contact::{BARY_TOL, SurfaceWalk, Walk, normalise, plane_bary, vertices};
 use crate::solve::MAX_CONTACT_NODES;
 use crate::vec3::{add, cross, dist2, dot, scale, sqrt, sub, unit};
 
@@ -117,7 +117,7 @@ pub fn tool_patch(
 ) -> Patch {
     let mut build = PatchBuild::new();
     build.start(bank, triangle, nodes, bary, anchor, radius_m);
-    while !build.locate(bank, QUADRATURE.len()) {}
+    while !build.locate(bank, QUADRATURE.len(), u32::MAX) {}
     build.finish(bank)
 }
 
@@ -152,6 +152,8 @@ pub struct PatchBuild {
     /// contact triangle landed on (the points go round their ring, so it is near), else the
     /// contact triangle.
     walk_from: (u32, [u16; 3]),
+    /// The walk of point `next`, when a [`PatchBuild::locate`] ran out of steps during it.
+    walk: Option<SurfaceWalk>,
     /// The node choice so far ([`PatchBuild::choose_step`]).
     choice: Choice,
 }
@@ -179,6 +181,7 @@ impl PatchBuild {
             in_contact: [0.0; 3],
             next: QUADRATURE.len(),
             walk_from: (0, [0; 3]),
+            walk: None,
             choice: Choice::new(0.0),
         }
     }
@@ -214,6 +217,7 @@ impl PatchBuild {
         self.in_contact = [0.0; 3];
         self.next = QUADRATURE.len();
         self.walk_from = (triangle, nodes);
+        self.walk = None;
         let Some((e1, e2)) = basis else {
             self.acc.add_bary(nodes, bary, 1.0);
             return;
@@ -230,49 +234,70 @@ impl PatchBuild {
         }
     }
 
-    /// Locates up to `points` more quadrature points; `true` once all are located. The points
-    /// lie in the contact triangle's plane, where the barycentric coordinates are affine: a
-    /// point inside the contact triangle costs six multiply-adds (its affine frame); only the
-    /// points outside it walk the surface ([`closest_surface_point`]), each from where the
-    /// last one landed.
-    pub fn locate(&mut self, bank: &Bank, points: usize) -> bool {
+    /// Locates up to `points` more quadrature points, taking at most `steps` surface-walk steps
+    /// in all; `true` once all are located. The points lie in the contact triangle's plane,
+    /// where the barycentric coordinates are affine: a point inside the contact triangle costs
+    /// six multiply-adds (its affine frame); only the points outside it walk the surface
+    /// ([`SurfaceWalk`]), each from where the last one landed. A walk the steps do not finish
+    /// resumes at the next call (before any new point), so a call costs at most `points` frame
+    /// tests and `steps` walk steps, wherever the points fall on the mesh.
+    pub fn locate(&mut self, bank: &Bank, points: usize, steps: u32) -> bool {
         let Some((e1, e2)) = self.basis else {
             return true;
         };
-        let end = (self.next + points).min(QUADRATURE.len());
-        let todo = QUADRATURE.iter().zip(&DIRECTIONS).take(end).skip(self.next);
-        for (&(s, w, _), &(c, sn)) in todo {
+        let mut begun = 0;
+        let mut steps = steps;
+        while let (Some(&(s, w, _)), Some(&(c, sn))) =
+            (QUADRATURE.get(self.next), DIRECTIONS.get(self.next))
+        {
             let (u, v) = (s * c, s * sn);
-            let inside = self.frame.and_then(|[k0, g1, g2]| {
-                let k = [
-                    k0[0] + u * g1[0] + v * g2[0],
-                    k0[1] + u * g1[1] + v * g2[1],
-                    k0[2] + u * g1[2] + v * g2[2],
-                ];
-                k.iter()
-                    .all(|&x| x >= -BARY_TOL)
-                    .then(|| normalise(k))
-                    .flatten()
-            });
-            if let Some(k) = inside {
-                for (acc, kv) in self.in_contact.iter_mut().zip(k) {
-                    *acc += w * kv;
+            if self.walk.is_none() {
+                if begun == points {
+                    break;
                 }
-                continue;
+                begun += 1;
+                if let Some(k) = self.inside(u, v) {
+                    for (acc, kv) in self.in_contact.iter_mut().zip(k) {
+                        *acc += w * kv;
+                    }
+                    self.next += 1;
+                    continue;
+                }
+                let (t, n) = self.walk_from;
+                self.walk = Some(SurfaceWalk::new(t, n));
             }
+            let Some(walk) = self.walk.as_mut() else {
+                break;
+            };
             let r = self.radius_m;
             let q = add(add(self.anchor, scale(e1, r * u)), scale(e2, r * v));
-            let (t, n) = self.walk_from;
-            match closest_surface_point(bank, t, n, q) {
-                Some(sp) => {
+            match walk.advance(bank, q, &mut steps) {
+                Walk::Walking => break,
+                Walk::Landed(sp) => {
                     self.quad.add_bary(sp.nodes, sp.bary, w);
                     self.walk_from = (sp.triangle, sp.nodes);
                 }
-                None => self.quad.add_bary(self.nodes, self.bary, w),
+                Walk::Lost => self.quad.add_bary(self.nodes, self.bary, w),
             }
+            self.walk = None;
+            self.next += 1;
         }
-        self.next = end;
         self.next >= QUADRATURE.len()
+    }
+
+    /// The barycentric coordinates of the point `(u, v)` (tip radii along the tangent basis
+    /// from the anchor) in the contact triangle, if it lies inside (its affine frame).
+    fn inside(&self, u: f32, v: f32) -> Option<[f32; 3]> {
+        let [k0, g1, g2] = self.frame?;
+        let k = [
+            k0[0] + u * g1[0] + v * g2[0],
+            k0[1] + u * g1[1] + v * g2[1],
+            k0[2] + u * g1[2] + v * g2[2],
+        ];
+        k.iter()
+            .all(|&x| x >= -BARY_TOL)
+            .then(|| normalise(k))
+            .flatten()
     }
 
     /// The last steps at once: [`PatchBuild::merge`], then [`PatchBuild::choose_step`] until
@@ -741,6 +766,55 @@ mod tests {
                 );
             }
             assert!((f64::from(p.dropped) - (1.0 - kept)).abs() < 1e-5, "{p:?}");
+        }
+    }
+
+    /// A build whose points' walks are cut into budgets of one, two or three steps a call
+    /// lands every point where the whole walks do: bit for bit [`tool_patch`]'s patch, on a
+    /// grid of sliver rows where a point's walk crosses many triangles.
+    #[test]
+    fn a_build_in_walk_budgets_is_the_whole_build() {
+        // 4 mm squares, and 20 rows 50 um apart above y = 8 mm: the tip (3 mm at (14, 6) mm)
+        // covers few nodes, so the quadrature carries the load, and its points above y = 8 mm
+        // walk across the sliver rows.
+        let xs: Vec<f64> = (0..9).map(|i| 0.004 * f64::from(i)).collect();
+        let mut ys: Vec<f64> = (0..3).map(|j| 0.004 * f64::from(j)).collect();
+        ys.extend((1..=20).map(|j| 0.008 + 0.000_05 * f64::from(j)));
+        ys.extend((3..9).map(|j| 0.004 * f64::from(j)));
+        let bytes = crate::fixtures::grid_patch_at(&xs, &ys, 0.04);
+        let bank = Bank::parse(bytes.as_slice()).unwrap();
+        let (x, y) = (0.014f32, 0.006f32);
+        let (t, nodes, bary) = bank
+            .triangles()
+            .iter()
+            .enumerate()
+            .find_map(|(t, &tri)| {
+                let [a, b, c] = vertices(bank.positions(), tri)?;
+                let m = bank.triangle_planes()[t].m;
+                let k = plane_bary(a, b, c, m, [x, y, 0.0]);
+                k.iter().all(|&v| v >= 0.0).then_some((t as u32, tri, k))
+            })
+            .unwrap();
+        let whole = tool_patch(&bank, t, nodes, bary, [x, y, 0.0], 0.003);
+        for (points, steps) in [(1, 1), (2, 1), (2, 2), (2, 3), (12, 1)] {
+            let mut build = PatchBuild::new();
+            build.start(&bank, t, nodes, bary, [x, y, 0.0], 0.003);
+            let mut calls = 0;
+            while !build.locate(&bank, points, steps) {
+                calls += 1;
+                assert!(calls < 1000);
+            }
+            let got = build.finish(&bank);
+            assert_eq!(got.nodes(), whole.nodes(), "{points} points, {steps} steps");
+            assert_eq!(
+                got.weights(),
+                whole.weights(),
+                "{points} points, {steps} steps"
+            );
+            if steps == 1 {
+                // Walks of several steps were cut: more calls than points to locate.
+                assert!(calls + 1 > 12usize.div_ceil(points) + 4, "{calls} calls");
+            }
         }
     }
 

@@ -192,6 +192,13 @@ struct Blend {
 /// which the swap's blend smooths).
 pub const POINTS_PER_TICK: usize = 2;
 
+/// Surface-walk steps (one plane test and at most one edge crossing each,
+/// [`crate::contact::SurfaceWalk`]) a rebuild takes per tick while locating its points: a
+/// point's walk that needs more goes on the next tick. Points 3 mm apart on the shipped liver's
+/// 7.7 mm triangles land in one or two steps; without the budget a tick's two points could
+/// take up to [`crate::contact::MAX_SLIDE_STEPS`] steps each on a mesh of slivers.
+pub const WALK_STEPS_PER_TICK: u32 = 4;
+
 /// Candidate nodes a rebuild examines per tick while choosing the patch's nodes (each one a scan
 /// of the loads and a coupling check against the nodes kept).
 pub const CHOICES_PER_TICK: usize = 3;
@@ -720,7 +727,9 @@ impl HapticLoop<'_> {
         };
         match p.stage {
             Stage::Locating => {
-                if p.build.locate(self.bank, POINTS_PER_TICK) {
+                if p.build
+                    .locate(self.bank, POINTS_PER_TICK, WALK_STEPS_PER_TICK)
+                {
                     p.stage = Stage::Located;
                 }
             }
