@@ -466,11 +466,11 @@ fn current_commands_over_the_limit_and_mode_changes_while_armed_fault() {
     assert_zero_from(&run, tick);
 }
 
-/// The seeded near-surface hand motion of
+/// A seeded near-surface hand motion of
 /// `a_recorded_near_surface_trajectory_replays_bit_identical_to_the_native_loop`, written as a
 /// CSV file in `dir`.
-fn near_surface_file(bank: &Bank, dir: &std::path::Path) -> std::path::PathBuf {
-    let mut state = 0x2545_f491_u64;
+fn near_surface_file(bank: &Bank, dir: &std::path::Path, seed: u64) -> std::path::PathBuf {
+    let mut state = seed;
     let mut uniform = move || {
         state = state
             .wrapping_mul(6_364_136_223_846_793_005)
@@ -491,7 +491,7 @@ fn near_surface_file(bank: &Bank, dir: &std::path::Path) -> std::path::PathBuf {
         let s = surface_insertion(bank, angles).unwrap() + depth;
         text.push_str(&format!("{t},{},{},{s}\n", angles[0], angles[1]));
     }
-    let file = dir.join("near-surface.csv");
+    let file = dir.join(format!("near-surface-{seed:x}.csv"));
     std::fs::write(&file, &text).unwrap();
     file
 }
@@ -549,30 +549,35 @@ fn a_recorded_near_surface_trajectory_replays_bit_identical_to_the_native_loop()
     let (setup, bytes) = setup();
     let bank = Bank::parse(&bytes).unwrap();
     let dir = tempfile::tempdir().unwrap();
-    let file = near_surface_file(&bank, dir.path());
-    let trajectory = Trajectory::from_csv(&bank, &file).unwrap();
-    let seconds = trajectory.recorded_end_s().unwrap() + 0.2;
-    let run = qemu(
-        &setup,
-        &Session::with_trajectory(&bank, trajectory, seconds).unwrap(),
-    );
-    assert_eq!(run.stopped, None);
-    assert_eq!(run.missed_plant_frames(), 0);
-    assert_eq!(run.overruns(), 0);
-    assert!(run.faults().is_empty(), "{:?}", run.faults());
-    assert!(assert_matches_native(&bank, &run) > 500);
-    let phases = Phases::of(&run.ticks);
-    for (name, p) in [
-        ("free", phases.free),
-        ("first contact", phases.first_contact),
-        ("contact", phases.contact),
-        ("release", phases.release),
-    ] {
-        assert!(p.ticks > 0, "no {name} tick: {phases:?}");
-        eprintln!(
-            "{name}: {} ticks, body max {}, whole tick max {}",
-            p.ticks, p.max_body_instructions, p.max_tick_instructions
+    // The first seed is the path the README's figures are for; the others are more of the
+    // same kind.
+    for seed in [0x2545_f491, 0x9e37_79b9, 0x85eb_ca6b] {
+        let file = near_surface_file(&bank, dir.path(), seed);
+        let trajectory = Trajectory::from_csv(&bank, &file).unwrap();
+        let seconds = trajectory.recorded_end_s().unwrap() + 0.2;
+        let run = qemu(
+            &setup,
+            &Session::with_trajectory(&bank, trajectory, seconds).unwrap(),
         );
+        assert_eq!(run.stopped, None);
+        assert_eq!(run.missed_plant_frames(), 0);
+        assert_eq!(run.overruns(), 0);
+        assert!(run.faults().is_empty(), "seed {seed:x}: {:?}", run.faults());
+        assert!(assert_matches_native(&bank, &run) > 500);
+        let phases = Phases::of(&run.ticks);
+        eprintln!("seed {seed:x}");
+        for (name, p) in [
+            ("free", phases.free),
+            ("first contact", phases.first_contact),
+            ("contact", phases.contact),
+            ("release", phases.release),
+        ] {
+            assert!(p.ticks > 0, "seed {seed:x}: no {name} tick: {phases:?}");
+            eprintln!(
+                "  {name}: {} ticks, body max {}, whole tick max {}",
+                p.ticks, p.max_body_instructions, p.max_tick_instructions
+            );
+        }
+        eprintln!("  code phases, max: {:?}", CodePhaseMax::of(&run.ticks));
     }
-    eprintln!("code phases, max: {:?}", CodePhaseMax::of(&run.ticks));
 }
