@@ -263,12 +263,9 @@ impl PatchBuild {
                     self.next += 1;
                     continue;
                 }
-                let (t, n) = self.walk_from;
-                self.walk = Some(SurfaceWalk::new(t, n));
             }
-            let Some(walk) = self.walk.as_mut() else {
-                break;
-            };
+            let (t, n) = self.walk_from;
+            let walk = self.walk.get_or_insert(SurfaceWalk::new(t, n));
             let r = self.radius_m;
             let q = add(add(self.anchor, scale(e1, r * u)), scale(e2, r * v));
             match walk.advance(bank, q, &mut steps) {
