@@ -29,14 +29,21 @@ apt_install() {
     "${as[@]}" env DEBIAN_FRONTEND=noninteractive apt-get install -y --no-install-recommends "$@"
 }
 
-# Installs Debian package $2 when command $1 is missing.
+# Installs Debian package $2 when command $1 is missing. A package that dpkg counts as
+# installed while its command is gone (files deleted by hand, a half-removed package) is a no-op
+# for a plain install, so that case reinstalls it.
 need() {
     if ! command -v "$1" >/dev/null; then
         step "installing $2 (for $1)"
         apt_install "$2"
+        if ! command -v "$1" >/dev/null; then
+            echo "$1 still missing after installing $2; reinstalling $2"
+            apt_install --reinstall "$2"
+        fi
     fi
     command -v "$1" >/dev/null || {
-        echo "error: $1 still missing after installing $2" >&2
+        echo "error: $1 still missing after installing $2 (PATH=$PATH)" >&2
+        dpkg -L "$2" 2>/dev/null | grep -E "/bin/$1\$" >&2 || true
         exit 1
     }
 }
