@@ -335,6 +335,23 @@ pub enum BankError {
         /// Which triangle.
         triangle: u32,
     },
+    /// The contact samples' lattice level is outside `1..=`[`crate::MAX_SAMPLE_LEVEL`], its
+    /// tip radius is negative or not finite, or its reserved words are not zero.
+    SampleHeader {
+        /// Level found.
+        level: u32,
+    },
+    /// A patch compliance sample is not symmetric positive definite (`SPEC.md`, check 15).
+    SampleNotSpd {
+        /// Which sample.
+        sample: u32,
+    },
+    /// Two triangles name different samples for a lattice point of their common edge or
+    /// vertex, so `W` would jump as a contact crosses it.
+    SampleDiscontinuous {
+        /// The triangle whose point differs from its neighbour's.
+        triangle: u32,
+    },
 }
 
 impl BankError {
@@ -389,6 +406,9 @@ impl BankError {
             BankError::GravityOutOfRange { .. } => 44,
             BankError::CklExponent { .. } => 45,
             BankError::TrianglePlane { .. } => 46,
+            BankError::SampleHeader { .. } => 47,
+            BankError::SampleNotSpd { .. } => 48,
+            BankError::SampleDiscontinuous { .. } => 49,
         }
     }
 }
@@ -501,6 +521,18 @@ impl fmt::Display for BankError {
                 f,
                 "triangle {triangle}: its stored plane is not the one of its positions (or it has \
                  zero area)"
+            ),
+            E::SampleHeader { level } => write!(
+                f,
+                "sample header: level {level} not in 1..={}, or a bad tip radius or reserved word",
+                crate::MAX_SAMPLE_LEVEL
+            ),
+            E::SampleNotSpd { sample } => {
+                write!(f, "patch compliance sample {sample} is not SPD")
+            }
+            E::SampleDiscontinuous { triangle } => write!(
+                f,
+                "triangle {triangle}: a sample of its edge or vertex differs from its neighbour's"
             ),
         }
     }

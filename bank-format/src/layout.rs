@@ -12,8 +12,10 @@ pub const MAGIC: [u8; 8] = *b"HAPTBANK";
 /// device record gained the speed thresholds; 3: the per-cell contact certificates (clearance
 /// and candidate triangles) became required sections; 4: each coupled pair's block stored once
 /// ([`SectionKind::CouplingStarts`]), narrower index arrays; 5: the per-triangle planes
-/// ([`SectionKind::TrianglePlanes`]) became a required section (`SPEC.md`, "Versioning").
-pub const VERSION_MAJOR: u16 = 5;
+/// ([`SectionKind::TrianglePlanes`]) became a required section; 6: the contact samples
+/// ([`SampleHeader`]: the tool's patch compliance `W(p)` sampled over the reachable surface), whose
+/// presence changes how the firmware renders a contact (`SPEC.md`, "Versioning").
+pub const VERSION_MAJOR: u16 = 6;
 /// Minor version this crate writes. Readers accept any minor version of their major version
 /// (minor versions only add optional sections, which older readers skip). 5.0 has the optional
 /// gravity section ([`SectionKind::Gravity`], added in 3.1).
@@ -46,6 +48,9 @@ pub const OCCUPIED_WIDEN_CELLS: f32 = 1.0 / 64.0;
 /// Longest path piece, Chebyshev norm, in cells, that the candidate lists cover (with margin
 /// for rounding and the clipping pad: [`CANDIDATE_WIDEN_CELLS`] is 0.516).
 pub const PIECE_CELLS: f32 = 0.45;
+/// Largest lattice level of the contact samples ([`SampleHeader::level`]): a triangle holds
+/// `(level + 1) (level + 2) / 2` samples.
+pub const MAX_SAMPLE_LEVEL: u32 = 8;
 /// Most coefficients a tissue law may have (Chebyshev degree <= 15).
 pub const MAX_LAW_COEFFS: usize = 16;
 
@@ -148,6 +153,16 @@ pub enum SectionKind {
     Device,
     /// [`GravityCompensation`], one element; optional (2.1): absent means no compensation.
     Gravity,
+    /// [`SampleHeader`], one element; optional (6.0), together with
+    /// [`SectionKind::TriangleSamples`] and [`SectionKind::PatchCompliance`]: present means the
+    /// firmware renders a contact from the sampled patch compliance.
+    SampleHeader,
+    /// Per triangle (in [`SectionKind::Triangles`]' order), the `u16` indices into
+    /// [`SectionKind::PatchCompliance`] of its lattice points (`SPEC.md`, "contact samples").
+    TriangleSamples,
+    /// Patch compliance samples `W`, `[f32; 6]` = xx, xy, xz, yy, yz, zz, m/N, each symmetric
+    /// positive definite.
+    PatchCompliance,
     /// A section of a later minor version that this reader does not know; skipped.
     Unknown(u32),
 }
@@ -203,7 +218,10 @@ impl SectionKind {
             19 => SectionKind::CouplingStarts,
             20 => SectionKind::NeighbourCkl16,
             21 => SectionKind::TrianglePlanes,
+            22 => SectionKind::SampleHeader,
+            23 => SectionKind::TriangleSamples,
             24 => SectionKind::Gravity,
+            25 => SectionKind::PatchCompliance,
             other => SectionKind::Unknown(other),
         }
     }
@@ -233,7 +251,10 @@ impl SectionKind {
             SectionKind::CouplingStarts => 19,
             SectionKind::NeighbourCkl16 => 20,
             SectionKind::TrianglePlanes => 21,
+            SectionKind::SampleHeader => 22,
+            SectionKind::TriangleSamples => 23,
             SectionKind::Gravity => 24,
+            SectionKind::PatchCompliance => 25,
             SectionKind::Unknown(code) => code,
         }
     }
@@ -265,6 +286,9 @@ impl SectionKind {
             SectionKind::TissueLaw => core::mem::size_of::<LawRecord>(),
             SectionKind::Device => core::mem::size_of::<DeviceCalibration>(),
             SectionKind::Gravity => core::mem::size_of::<GravityCompensation>(),
+            SectionKind::SampleHeader => core::mem::size_of::<SampleHeader>(),
+            SectionKind::TriangleSamples => 2,
+            SectionKind::PatchCompliance => 24,
         })
     }
 
@@ -294,6 +318,9 @@ impl SectionKind {
             SectionKind::TissueLaw => "tissue law",
             SectionKind::Device => "device",
             SectionKind::Gravity => "gravity",
+            SectionKind::SampleHeader => "sample header",
+            SectionKind::TriangleSamples => "triangle samples",
+            SectionKind::PatchCompliance => "patch compliance",
             SectionKind::Unknown(_) => "unknown",
         }
     }
@@ -306,6 +333,21 @@ impl core::fmt::Display for SectionKind {
             other => f.write_str(other.name()),
         }
     }
+}
+
+/// The contact samples' header (section [`SectionKind::SampleHeader`], `SPEC.md` "contact
+/// samples"): each triangle of R carries a lattice of `level` steps per side, whose points hold
+/// the patch compliance `W` of the scene's tool centred there.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, PartialEq, Pod, Zeroable)]
+pub struct SampleHeader {
+    /// Lattice steps per triangle side, `1..=`[`MAX_SAMPLE_LEVEL`].
+    pub level: u32,
+    /// The tool radius the samples were computed for, m (finite, `>= 0`; informative: the
+    /// firmware renders from the samples whatever the device record's radius).
+    pub tip_radius_m: f32,
+    /// Reserved, zero.
+    pub reserved: [u32; 2],
 }
 
 /// Bank-wide metadata (section [`SectionKind::Meta`]).

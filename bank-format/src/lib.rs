@@ -59,6 +59,7 @@ mod frame;
 mod law;
 mod layout;
 mod reader;
+mod samples;
 #[cfg(feature = "alloc")]
 mod writer;
 
@@ -84,14 +85,16 @@ pub use layout::{
     BANK_ALIGN, BankHeader, BankMeta, CANDIDATE_WIDEN_CELLS, CKL16_EXP_MAX, CKL16_EXP_MIN,
     CRC_OFFSET, CRC32, Ckl16, DeviceCalibration, GRAVITY_COEFF_MAX, GRAVITY_COEFFS,
     GravityCompensation, GridHeader, HEADER_LEN, LAW_CHEBYSHEV, LAW_LINEAR, LawRecord, MAGIC,
-    MAX_LAW_COEFFS, MAX_NODES, MAX_SECTIONS, MAX_TRIANGLES, OCCUPIED_WIDEN_CELLS, PIECE_CELLS,
-    PLANE_TOL, Precision, SECTION_ALIGN, SECTION_ENTRY_LEN, SectionEntry, SectionKind,
-    TrianglePlane, VERSION_MAJOR, VERSION_MINOR, bank_crc, reseal,
+    MAX_LAW_COEFFS, MAX_NODES, MAX_SAMPLE_LEVEL, MAX_SECTIONS, MAX_TRIANGLES, OCCUPIED_WIDEN_CELLS,
+    PIECE_CELLS, PLANE_TOL, Precision, SECTION_ALIGN, SECTION_ENTRY_LEN, SampleHeader,
+    SectionEntry, SectionKind, TrianglePlane, VERSION_MAJOR, VERSION_MINOR, bank_crc, reseal,
 };
 pub use reader::{Bank, Grid, SPD_PIVOT_REL, TRUNCATION_SLACK, UpperCouplings, validate_device};
+pub use samples::{Samples, lattice_bary, lattice_index, lattice_len};
 #[cfg(feature = "alloc")]
 pub use writer::{
-    AlignedBytes, BankBuilder, BuildError, INPUT_SYMMETRY_REL, encode_ckl16, triangle_plane,
+    AlignedBytes, BankBuilder, BuildError, ContactSamples, INPUT_SYMMETRY_REL, SharedLattice,
+    encode_ckl16, triangle_plane,
 };
 
 /// Every quantity crossing the host-device boundary is SI: metres, newtons, pascals, seconds,

@@ -6,10 +6,11 @@ use crate::law::TissueLaw;
 use crate::layout::{
     BANK_ALIGN, BankHeader, BankMeta, CANDIDATE_WIDEN_CELLS, CKL16_EXP_MAX, CKL16_EXP_MIN, Ckl16,
     DeviceCalibration, GRAVITY_COEFF_MAX, GravityCompensation, GridHeader, HEADER_LEN, MAGIC,
-    MAX_NODES, MAX_SECTIONS, MAX_TRIANGLES, OCCUPIED_WIDEN_CELLS, PLANE_TOL, Precision,
-    SECTION_ALIGN, SECTION_ENTRY_LEN, SectionEntry, SectionKind, TrianglePlane, VERSION_MAJOR,
-    bank_crc,
+    MAX_NODES, MAX_SAMPLE_LEVEL, MAX_SECTIONS, MAX_TRIANGLES, OCCUPIED_WIDEN_CELLS, PLANE_TOL,
+    Precision, SECTION_ALIGN, SECTION_ENTRY_LEN, SampleHeader, SectionEntry, SectionKind,
+    TrianglePlane, VERSION_MAJOR, bank_crc,
 };
+use crate::samples::{Samples, lattice_index, lattice_len};
 use bytemuck::Pod;
 use core::ops::Range;
 
@@ -43,6 +44,7 @@ pub struct Bank<'a> {
     law: TissueLaw,
     device: &'a DeviceCalibration,
     gravity: Option<&'a GravityCompensation>,
+    samples: Option<Samples<'a>>,
 }
 
 /// The coupling blocks, one per pair, in the bank's storage precision.
@@ -477,6 +479,113 @@ fn parse_gravity<'a>(
         });
     }
     Ok(Some(gravity))
+}
+
+/// `SPEC.md` "Validation" rule 15, contact samples: all three sections or none; the header
+/// (level, tip radius, reserved words); `t * lattice_len(level)` indices, each below the
+/// sample count; every sample finite and SPD (the `C_kk` test); and continuity: the triangles
+/// around a node name one sample for it, and the two triangles of an edge name the same samples
+/// along it.
+fn parse_samples<'a>(
+    sections: &Sections<'a>,
+    triangles: &'a [[u16; 3]],
+    node_tri_starts: &'a [u32],
+    node_tri_items: &'a [u16],
+) -> Result<Option<Samples<'a>>, BankError> {
+    let kinds = [
+        SectionKind::SampleHeader,
+        SectionKind::TriangleSamples,
+        SectionKind::PatchCompliance,
+    ];
+    if !kinds.iter().any(|&k| sections.has(k)) {
+        return Ok(None);
+    }
+    let header: &SampleHeader = sections.single(SectionKind::SampleHeader)?;
+    let ids: &[u16] = sections.slice(SectionKind::TriangleSamples)?;
+    let w: &[[f32; 6]] = sections.slice(SectionKind::PatchCompliance)?;
+    let level = header.level;
+    if !(1..=MAX_SAMPLE_LEVEL).contains(&level)
+        || !(header.tip_radius_m >= 0.0 && header.tip_radius_m.is_finite())
+        || header.reserved != [0; 2]
+    {
+        return Err(BankError::SampleHeader { level });
+    }
+    let len = lattice_len(level);
+    expect_count(
+        ids.len(),
+        triangles.len() * len,
+        SectionKind::TriangleSamples,
+    )?;
+    if let Some(e) = ids.iter().position(|&s| usize::from(s) >= w.len()) {
+        return Err(BankError::IndexOutOfRange {
+            section: SectionKind::TriangleSamples,
+            entry: e as u32,
+        });
+    }
+    for (s, c) in w.iter().enumerate() {
+        if !all_finite(c) {
+            return Err(BankError::NonFinite {
+                section: SectionKind::PatchCompliance,
+                entry: s as u32,
+            });
+        }
+        if !is_spd::<3>(&sym3(c)) {
+            return Err(BankError::SampleNotSpd { sample: s as u32 });
+        }
+    }
+    let samples = Samples { header, ids, w };
+    // Lattice point k steps from corner a towards corner b of a triangle (corners at lattice
+    // (0, 0), (level, 0), (0, level)).
+    let corner = |c: usize| match c {
+        1 => (level, 0),
+        2 => (0, level),
+        _ => (0, 0),
+    };
+    let along = |tri: &[u16], a: usize, b: usize, k: u32| -> Option<u16> {
+        let ((ia, ja), (ib, jb)) = (corner(a), corner(b));
+        let at = |x: u32, y: u32| (x * (level - k) + y * k) / level;
+        tri.get(lattice_index(at(ia, ib), at(ja, jb), level))
+            .copied()
+    };
+    for (t, tri) in triangles.iter().enumerate() {
+        let mine = samples.triangle_samples(t);
+        for a in 0..3 {
+            let b = (a + 1) % 3;
+            let (Some(&va), Some(&vb)) = (tri.get(a), tri.get(b)) else {
+                continue;
+            };
+            let row = csr_row(node_tri_starts, usize::from(va))
+                .and_then(|r| node_tri_items.get(r))
+                .unwrap_or(&[]);
+            for &u in row {
+                let Some(other) = triangles.get(usize::from(u)) else {
+                    continue;
+                };
+                if usize::from(u) == t {
+                    continue;
+                }
+                let (Some(oa), ob) = (
+                    other.iter().position(|&v| v == va),
+                    other.iter().position(|&v| v == vb),
+                ) else {
+                    continue;
+                };
+                let theirs = samples.triangle_samples(usize::from(u));
+                // The shared vertex, then the shared edge's points, if any.
+                let steps = if ob.is_some() { level } else { 0 };
+                for k in 0..=steps {
+                    let there = match ob {
+                        Some(ob) => along(theirs, oa, ob, k),
+                        None => along(theirs, oa, oa, 0),
+                    };
+                    if along(mine, a, b, k) != there {
+                        return Err(BankError::SampleDiscontinuous { triangle: t as u32 });
+                    }
+                }
+            }
+        }
+    }
+    Ok(Some(samples))
 }
 
 /// `SPEC.md` "Validation" rule 8, positions: 1 <= n <= 65535 nodes, all finite.
@@ -978,6 +1087,7 @@ impl<'a> Bank<'a> {
         let grid = parse_grid(&sections, positions, triangles)?;
         let ckk = parse_ckk(&sections, n)?;
         let (nb_starts, nb_index, nb_ckl, coupling_starts) = parse_neighbours(&sections, n)?;
+        let samples = parse_samples(&sections, triangles, node_tri_starts, node_tri_items)?;
         let bank = Bank {
             bytes: bank,
             header,
@@ -998,6 +1108,7 @@ impl<'a> Bank<'a> {
             law,
             device,
             gravity,
+            samples,
         };
         bank.check_couplings()?;
         bank.check_coverage()?;
@@ -1274,6 +1385,13 @@ impl<'a> Bank<'a> {
     /// compensated).
     pub fn gravity(&self) -> Option<&'a GravityCompensation> {
         self.gravity
+    }
+
+    /// The contact samples (`SPEC.md`, "contact samples"): the tool's patch compliance over the
+    /// reachable surface; `None` when the bank has none (the firmware then renders a contact
+    /// from the nodal compliance, the tool patch on the nodes).
+    pub fn samples(&self) -> Option<Samples<'a>> {
+        self.samples
     }
 
     /// The node nearest to `p` among the 27 buckets around `p`'s cell (clipped to the grid),

@@ -6,8 +6,8 @@ use crate::law::TissueLaw;
 use crate::layout::{
     BankHeader, BankMeta, CANDIDATE_WIDEN_CELLS, CKL16_EXP_MAX, CKL16_EXP_MIN, Ckl16,
     DeviceCalibration, GravityCompensation, GridHeader, HEADER_LEN, MAGIC, MAX_NODES,
-    MAX_TRIANGLES, OCCUPIED_WIDEN_CELLS, Precision, SECTION_ALIGN, SECTION_ENTRY_LEN, SectionEntry,
-    SectionKind, TrianglePlane, VERSION_MAJOR, VERSION_MINOR, reseal,
+    MAX_TRIANGLES, OCCUPIED_WIDEN_CELLS, Precision, SECTION_ALIGN, SECTION_ENTRY_LEN, SampleHeader,
+    SectionEntry, SectionKind, TrianglePlane, VERSION_MAJOR, VERSION_MINOR, reseal,
 };
 use crate::reader::{Bank, cell_of, triangle_cells};
 use alloc::collections::BTreeMap;
@@ -50,6 +50,25 @@ pub struct BankBuilder {
     /// Gravity compensation of the instrument's weight; `None` writes no gravity section (no
     /// compensation).
     pub gravity: Option<GravityCompensation>,
+    /// The tool's patch compliance sampled over R (`SPEC.md`, "contact samples"); `None`
+    /// writes none (the firmware then renders contacts from the nodal compliance).
+    pub samples: Option<ContactSamples>,
+}
+
+/// The contact samples a [`BankBuilder`] writes: per triangle a lattice of `level` steps per
+/// side ([`crate::lattice_index`] order), each point naming one of `w`; triangles that share
+/// an edge must name the same samples along it (the reader checks it).
+#[derive(Clone, Debug, PartialEq)]
+pub struct ContactSamples {
+    /// Lattice steps per triangle side, `1..=`[`crate::MAX_SAMPLE_LEVEL`].
+    pub level: u32,
+    /// The tool radius the samples were computed for, m.
+    pub tip_radius_m: f64,
+    /// Per triangle, in [`BankBuilder::triangles`]' order, [`crate::lattice_len`]`(level)`
+    /// indices into `w`.
+    pub triangle_samples: Vec<Vec<u32>>,
+    /// The patch compliance `W` of each sample, m/N, symmetric (stored symmetrised).
+    pub w: Vec<[[f64; 3]; 3]>,
 }
 
 /// Why [`BankBuilder::build`] refused its input.
@@ -102,6 +121,11 @@ pub enum BuildError {
         /// Items it would hold.
         count: usize,
     },
+    /// The contact samples do not fit the triangles (`what` says how).
+    Samples {
+        /// What is wrong.
+        what: &'static str,
+    },
     /// The output fails the reader's validation (the input breaks a format rule).
     Rejected(BankError),
 }
@@ -135,6 +159,7 @@ impl fmt::Display for BuildError {
                 f,
                 "{section}: {count} items, more than the 65535 its u16 starts can count"
             ),
+            BuildError::Samples { what } => write!(f, "contact samples: {what}"),
             BuildError::Rejected(e) => write!(f, "bank rejected by the reader: {e}"),
         }
     }
@@ -512,6 +537,12 @@ impl BankBuilder {
         if let Some(gravity) = &self.gravity {
             body.push(SectionKind::Gravity, bytemuck::bytes_of(gravity), 1)?;
         }
+        if let Some(samples) = &self.samples {
+            let (header, ids, w) = samples.sections(triangles.len())?;
+            body.push(SectionKind::SampleHeader, bytemuck::bytes_of(&header), 1)?;
+            body.push_slice(SectionKind::TriangleSamples, &ids)?;
+            body.push_slice(SectionKind::PatchCompliance, &w)?;
+        }
 
         let table_len = SECTION_ENTRY_LEN * body.table.len();
         let data_start = HEADER_LEN + table_len;
@@ -547,6 +578,98 @@ impl BankBuilder {
         let aligned = AlignedBytes::new(&out);
         Bank::parse(&aligned)?;
         Ok(out)
+    }
+}
+
+/// The lattice points of a triangle mesh at `level` steps per side, each point once: a point
+/// on an edge or a vertex that several triangles share gets one sample, so that the samples
+/// are continuous across edges (`SPEC.md`, "contact samples").
+#[derive(Clone, Debug, PartialEq)]
+pub struct SharedLattice {
+    /// Per triangle, [`crate::lattice_len`]`(level)` point indices, [`crate::lattice_index`]
+    /// order ([`ContactSamples::triangle_samples`]).
+    pub triangle_points: Vec<Vec<u32>>,
+    /// Per point, one triangle holding it and its barycentric coordinates there.
+    pub points: Vec<(usize, [f64; 3])>,
+}
+
+impl SharedLattice {
+    /// The shared lattice of `triangles` (node indices) at `level` steps per side.
+    pub fn new(triangles: &[[u32; 3]], level: u32) -> SharedLattice {
+        let level = level.max(1);
+        let mut ids: BTreeMap<[(u32, u32); 3], u32> = BTreeMap::new();
+        let mut points = Vec::new();
+        let mut triangle_points = Vec::with_capacity(triangles.len());
+        for (t, tri) in triangles.iter().enumerate() {
+            let mut mine = Vec::with_capacity(crate::lattice_len(level));
+            for j in 0..=level {
+                for i in 0..=level - j {
+                    // The point as integer weights on the mesh's vertices, sorted: the same
+                    // key from every triangle that holds it.
+                    let mut key = [(tri[0], level - i - j), (tri[1], i), (tri[2], j)]
+                        .map(|(v, w)| if w == 0 { (u32::MAX, 0) } else { (v, w) });
+                    key.sort_unstable();
+                    let next = ids.len() as u32;
+                    let id = *ids.entry(key).or_insert_with(|| {
+                        points.push((t, crate::lattice_bary(i, j, level)));
+                        next
+                    });
+                    mine.push(id);
+                }
+            }
+            triangle_points.push(mine);
+        }
+        SharedLattice {
+            triangle_points,
+            points,
+        }
+    }
+}
+
+impl ContactSamples {
+    /// The three sections' contents for `triangles` triangles: header, flat `u16` indices,
+    /// symmetrised f32 samples.
+    fn sections(
+        &self,
+        triangles: usize,
+    ) -> Result<(SampleHeader, Vec<u16>, Vec<[f32; 6]>), BuildError> {
+        let bad = |what| Err(BuildError::Samples { what });
+        if !(1..=crate::MAX_SAMPLE_LEVEL).contains(&self.level) {
+            return bad("level not in 1..=MAX_SAMPLE_LEVEL");
+        }
+        if self.triangle_samples.len() != triangles {
+            return bad("one lattice per triangle is needed");
+        }
+        if self.w.len() > usize::from(u16::MAX) + 1 {
+            return bad("more than 65536 samples");
+        }
+        let len = crate::lattice_len(self.level);
+        let mut ids = Vec::with_capacity(triangles * len);
+        for tri in &self.triangle_samples {
+            if tri.len() != len {
+                return bad("a triangle's lattice has the wrong number of points");
+            }
+            for &s in tri {
+                match u16::try_from(s) {
+                    Ok(s) if usize::from(s) < self.w.len() => ids.push(s),
+                    _ => return bad("a lattice point names a sample that does not exist"),
+                }
+            }
+        }
+        let mut w = Vec::with_capacity(self.w.len());
+        for c in &self.w {
+            if !close(c, &transpose(c)) {
+                return bad("a sample is not symmetric");
+            }
+            let s = |i: usize, j: usize| (0.5 * (c[i][j] + c[j][i])) as f32;
+            w.push([s(0, 0), s(0, 1), s(0, 2), s(1, 1), s(1, 2), s(2, 2)]);
+        }
+        let header = SampleHeader {
+            level: self.level,
+            tip_radius_m: self.tip_radius_m as f32,
+            reserved: [0; 2],
+        };
+        Ok((header, ids, w))
     }
 }
 

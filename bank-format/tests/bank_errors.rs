@@ -94,6 +94,14 @@ macro_rules! cases {
     };
 }
 
+/// `f` applied to a valid bank with contact samples, resealed, parsed.
+fn corrupt_sampled(f: impl FnOnce(&mut Vec<u8>)) -> Result<(), E> {
+    let mut bytes = sampled_builder().build().unwrap();
+    f(&mut bytes);
+    assert!(bank_format::reseal(&mut bytes));
+    parse(&bytes)
+}
+
 cases! {
     too_short_for_header: E::TooShort { needed: 32, got: 16 } => parse(&valid_bytes()[..16]);
     too_short_for_total_len: E::TooShort { .. } => {
@@ -114,8 +122,8 @@ cases! {
     };
     bad_magic: E::BadMagic => corrupt(|b| b[0] = b'X');
     // A bank of the previous major version (it has no triangle planes).
-    unsupported_version: E::UnsupportedVersion { major: 4, .. } => corrupt(|b| put_u16(b, 8, 4));
-    unsupported_later_version: E::UnsupportedVersion { major: 6, .. } => corrupt(|b| put_u16(b, 8, 6));
+    unsupported_version: E::UnsupportedVersion { major: 5, .. } => corrupt(|b| put_u16(b, 8, 5));
+    unsupported_later_version: E::UnsupportedVersion { major: 7, .. } => corrupt(|b| put_u16(b, 8, 7));
     bad_header_length: E::BadHeaderLength { header_len: 24 } => corrupt(|b| put_u16(b, 12, 24));
     too_many_sections: E::TooManySections { count: 33 } => corrupt(|b| put_u16(b, 14, 33));
     bad_total_length_unaligned: E::BadTotalLength { .. } => {
@@ -375,6 +383,72 @@ cases! {
         assert!(bank_format::reseal(&mut bytes));
         parse(&bytes)
     };
+    samples_incomplete: E::MissingSection { section: K::PatchCompliance } => corrupt_sampled(|b| {
+        let (i, ..) = section(b, K::PatchCompliance);
+        put_u32(b, entry_field(i, 0), 99);
+    });
+    sample_level_zero: E::SampleHeader { level: 0 } => corrupt_sampled(|b| {
+        let (_, off, ..) = section(b, K::SampleHeader);
+        put_u32(b, off, 0);
+    });
+    sample_level_too_high: E::SampleHeader { level: 9 } => corrupt_sampled(|b| {
+        let (_, off, ..) = section(b, K::SampleHeader);
+        put_u32(b, off, 9);
+    });
+    sample_radius_negative: E::SampleHeader { level: 2 } => corrupt_sampled(|b| {
+        let (_, off, ..) = section(b, K::SampleHeader);
+        put_f32(b, off + 4, -0.001);
+    });
+    sample_ids_count: E::CountMismatch { section: K::TriangleSamples } => corrupt_sampled(|b| {
+        let (i, ..) = section(b, K::TriangleSamples);
+        put_u32(b, entry_field(i, 3), 10);
+        put_u32(b, entry_field(i, 2), 20);
+    });
+    sample_id_out_of_range: E::IndexOutOfRange { section: K::TriangleSamples, entry: 4 } =>
+        corrupt_sampled(|b| {
+            let (_, off, ..) = section(b, K::TriangleSamples);
+            put_u16(b, off + 8, 500);
+        });
+    sample_not_finite: E::NonFinite { section: K::PatchCompliance, entry: 1 } =>
+        corrupt_sampled(|b| {
+            let (_, off, ..) = section(b, K::PatchCompliance);
+            put_f32(b, off + 24 + 4, f32::INFINITY);
+        });
+    sample_not_spd: E::SampleNotSpd { sample: 2 } => corrupt_sampled(|b| {
+        let (_, off, ..) = section(b, K::PatchCompliance);
+        put_f32(b, off + 48 + 12, -1.0e-3);
+    });
+    sample_discontinuous: E::SampleDiscontinuous { triangle: 0 } => corrupt_sampled(|b| {
+        // Triangle 0's lattice point (0, 1) (index 3) is the midpoint of the edge 0-2 it
+        // shares with triangle 1; make it name triangle 0's own point (1, 0) (the midpoint of
+        // its edge 0-1) instead.
+        let (_, off, ..) = section(b, K::TriangleSamples);
+        let other = u16::from_le_bytes([b[off + 2], b[off + 3]]);
+        put_u16(b, off + 2 * 3, other);
+    });
+}
+
+#[test]
+fn sampled_bank_round_trips() {
+    let b = sampled_builder();
+    let bytes = AlignedBytes::new(&b.build().unwrap());
+    let bank = Bank::parse(&bytes).unwrap();
+    let s = bank.samples().expect("samples");
+    assert_eq!(s.level(), 2);
+    // Two triangles of 6 lattice points sharing the 3 points of their common edge.
+    assert_eq!(s.count(), 9);
+    assert!(
+        Bank::parse(&AlignedBytes::new(&valid_bytes()))
+            .unwrap()
+            .samples()
+            .is_none()
+    );
+    // At a vertex, W is that vertex's C_kk (the samples mix the vertices' blocks).
+    let w = s.interpolate(0, [1.0, 0.0, 0.0]).unwrap();
+    let c = bank.c_kk(0).unwrap();
+    for (a, e) in w.iter().zip(&c) {
+        assert!((a - e).abs() <= 1e-6 * e.abs().max(1e-9), "{w:?} vs {c:?}");
+    }
 }
 
 #[test]
@@ -392,5 +466,6 @@ fn error_codes_are_distinct_and_stable() {
     );
     assert_eq!(E::GravityOutOfRange { coefficient: 0 }.code(), 44);
     assert_eq!(E::CklExponent { entry: 0 }.code(), 45);
-    assert_eq!(E::TrianglePlane { triangle: 0 }.code(), last_code());
+    assert_eq!(E::TrianglePlane { triangle: 0 }.code(), 46);
+    assert_eq!(E::SampleDiscontinuous { triangle: 0 }.code(), last_code());
 }

@@ -170,6 +170,7 @@ fn grid_bank(xs: &[f64], ys: &[f64], truncation_m: f64, device: DeviceCalibratio
         scene_id: 7,
         law: TissueLaw::chebyshev(&[2.6, 2.5, -0.1], [0.0, 5.0]).expect("valid law"),
         gravity: None,
+        samples: None,
         device,
     };
     AlignedBytes::new(&b.build().expect("valid fixture bank"))

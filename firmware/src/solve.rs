@@ -417,6 +417,21 @@ impl WeightedSolve {
         fill.factor()
     }
 
+    /// Factors a given patch compliance `M` (xx, xy, xz, yy, yz, zz, m/N; e.g. the bank's
+    /// sampled `W(p)`, [`bank_format::Samples::interpolate`]) for the contact spread over
+    /// `nodes` with `weights` (finite, `>= 0`, sum 1: the telemetry's node forces `w_a
+    /// f_tool`). The same checks and factor as [`WeightedFill::factor`].
+    pub fn from_compliance(
+        m: [f32; 6],
+        nodes: &[u16],
+        weights: &[f32],
+    ) -> Result<WeightedSolve, SolveError> {
+        let mut fill = WeightedFill::new(nodes, weights)?;
+        fill.m = m;
+        fill.next = fill.len;
+        fill.factor()
+    }
+
     /// The contact nodes.
     pub fn nodes(&self) -> &[u16] {
         self.nodes.get(..self.len).unwrap_or(&[])
@@ -695,6 +710,7 @@ mod tests {
             scene_id: 1,
             law: TissueLaw::chebyshev(&[2.6, 2.5, 0.1], [0.0, 5.0]).unwrap(),
             gravity: None,
+            samples: None,
             device: crate::fixtures::bench_device([0.005, 0.005, 0.1]),
         };
         AlignedBytes::new(&b.build().unwrap())

@@ -544,6 +544,24 @@ impl<'b> HapticLoop<'b> {
             self.detected = true;
             return Ok(None);
         }
+        if let Some(samples) = self.bank.samples() {
+            // The sampled patch compliance (`SPEC.md`, "contact samples"): `W` at the anchor,
+            // interpolated and factored every tick; no patch, no rebuild, no blend (`W` is
+            // continuous as the anchor slides).
+            let solve = sampled_solve(&samples, triangle, nodes, bary)?;
+            self.held = Some(Held {
+                origin: PatchOrigin {
+                    triangle,
+                    nodes,
+                    bary,
+                    anchor,
+                    radius_m: samples.tip_radius_m(),
+                },
+                solve,
+                dropped: 0.0,
+            });
+            return Ok(Some(displacement));
+        }
         if let Some(b) = &mut self.blend {
             b.left = b.left.saturating_sub(1);
             if b.left == 0 {
@@ -602,6 +620,39 @@ impl<'b> HapticLoop<'b> {
             Mode::Transparent | Mode::ConstantCurrent { .. } => Ok([0.0; 3]),
         }
     }
+}
+
+/// The sampled contact solve at barycentric point `bary` of `triangle`: the bank's patch
+/// compliance `W` there ([`bank_format::Samples::interpolate`]) factored, the tool force
+/// spread over the triangle's vertices with positive coordinates, weighted by them
+/// (normalised), for telemetry's node forces. The rendered force is `W^-1 d`: the paper's eq. 8
+/// for one rigid tool in compliance form.
+fn sampled_solve(
+    samples: &bank_format::Samples<'_>,
+    triangle: u32,
+    nodes: [u16; 3],
+    bary: [f32; 3],
+) -> Result<WeightedSolve, SolveError> {
+    let w = samples
+        .interpolate(triangle as usize, bary)
+        .ok_or(SolveError::NonFinite)?;
+    let (mut n, mut wt, mut len) = ([0u16; 3], [0.0f32; 3], 0);
+    for (&k, &b) in nodes.iter().zip(&bary) {
+        if b > 0.0
+            && let (Some(nk), Some(wk)) = (n.get_mut(len), wt.get_mut(len))
+        {
+            (*nk, *wk) = (k, b);
+            len += 1;
+        }
+    }
+    let kept: f32 = wt.iter().sum();
+    if len == 0 || !(kept > 0.0 && kept.is_finite()) {
+        return Err(SolveError::BadWeights);
+    }
+    for x in wt.iter_mut() {
+        *x /= kept;
+    }
+    WeightedSolve::from_compliance(w, n.get(..len).unwrap_or(&[]), wt.get(..len).unwrap_or(&[]))
 }
 
 /// The first tick's solve on the contact triangle alone: its vertices with a positive
@@ -1387,6 +1438,7 @@ mod tests {
             scene_id: 1,
             law: TissueLaw::chebyshev(&[2.6, 2.5, -0.1], [0.0, 5.0]).unwrap(),
             gravity: None,
+            samples: None,
             device: DeviceCalibration {
                 fulcrum_m: [0.01 / 3.0, 0.01 / 3.0, 0.1],
                 ..patch_device()
@@ -1445,6 +1497,7 @@ mod tests {
             scene_id: 3,
             law: TissueLaw::linear(0.0, 1.0, [0.0, 5.0]).unwrap(),
             gravity,
+            samples: None,
             device: crate::fixtures::bench_device([0.0, 0.0, 0.3]),
         };
         AlignedBytes::new(&b.build().unwrap())

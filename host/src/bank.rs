@@ -313,6 +313,7 @@ impl Prepared {
                 .map(|c| bank_format::GravityCompensation {
                     coeffs: c.map(|v| v as f32),
                 }),
+            samples: None,
             device: self.scene.device,
         };
         let bytes = builder

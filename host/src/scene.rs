@@ -76,6 +76,21 @@ struct RawScene {
     #[serde(default)]
     gravity: Option<RawGravity>,
     bank: RawBank,
+    #[serde(default)]
+    contact: Option<RawContact>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawContact {
+    #[serde(default)]
+    model: Option<Spanned<String>>,
+    #[serde(default)]
+    fem_mesh: Option<Spanned<String>>,
+    #[serde(default)]
+    fem_element: Option<Spanned<String>>,
+    #[serde(default)]
+    sample_level: Option<Spanned<u32>>,
 }
 
 /// `[gravity]`: the coefficients of the instrument's weight feed-forward (`bank-format`
@@ -234,6 +249,53 @@ pub enum Couplings {
     Tool,
 }
 
+/// How the firmware renders a contact (`[contact] model`).
+#[derive(Debug, Clone, PartialEq)]
+pub enum ContactModel {
+    /// The tool patch on the nodes of the scene's `mesh` (the bank's compliance blocks; the
+    /// force depends on that mesh's resolution): for comparison.
+    Nodal,
+    /// The patch compliance `W(p)` of the scene's tool computed on a separate FEM mesh and
+    /// sampled over the reachable surface (bank format 6, "contact samples"): the scene's
+    /// `mesh` is then only the collision surface.
+    Sampled(SampledContact),
+}
+
+/// The three resolutions of a sampled contact (`[contact]`): the FEM mesh and element the
+/// patch compliance is computed on, and the sample lattice over the collision surface (the
+/// scene's `mesh`).
+#[derive(Debug, Clone, PartialEq)]
+pub struct SampledContact {
+    /// The FEM mesh (`fem_mesh`, resolved against the scene file's directory).
+    pub fem_mesh: PathBuf,
+    /// The element the patch compliance is computed with (`fem_element`, default `p2`).
+    pub element: FemElement,
+    /// Lattice steps per collision triangle side (`sample_level`, 1..=8, default 2).
+    pub level: u32,
+}
+
+/// The element of a sampled contact's FEM mesh.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum FemElement {
+    /// A linear-displacement element on the mesh's vertices (P1 or ANP).
+    Linear(Element),
+    /// The 10-node quadratic tetrahedron ([`fem::elasticity::quadratic::QuadraticBody`]).
+    Quadratic,
+}
+
+impl FemElement {
+    /// The name a scene uses: "p1", "anp" or "p2".
+    pub fn name(self) -> &'static str {
+        match self {
+            FemElement::Linear(e) => e.name(),
+            FemElement::Quadratic => "p2",
+        }
+    }
+}
+
+/// Default `[contact] sample_level`.
+pub const DEFAULT_SAMPLE_LEVEL: u32 = 2;
+
 /// Bank options.
 #[derive(Debug, Clone, PartialEq)]
 pub struct BankOptions {
@@ -287,6 +349,8 @@ pub struct Scene {
     pub gravity: Option<[f64; bank_format::GRAVITY_COEFFS]>,
     /// Bank options.
     pub bank: BankOptions,
+    /// The contact model (`[contact]`; absent: [`ContactModel::Nodal`]).
+    pub contact: ContactModel,
     /// Identity of the scene: FNV-1a 64 of the scene file's bytes (the mesh is hashed in when
     /// the bank is built, see [`Scene::scene_id`]).
     pub text_hash: u64,
@@ -448,6 +512,19 @@ impl Scene {
             .map(|g| parse_gravity(&ctx, g))
             .transpose()?;
         let bank = parse_bank(&ctx, &raw.bank)?;
+        let contact = match &raw.contact {
+            Some(c) => parse_contact(&ctx, path, c)?,
+            None => ContactModel::Nodal,
+        };
+        if matches!(contact, ContactModel::Sampled(_)) && !fix_nodes.is_empty() {
+            let at = ctx.text.find("nodes").unwrap_or(0);
+            return Err(ctx.err(
+                at..at,
+                "fixed.nodes",
+                "node ids name nodes of `mesh`, not of [contact] fem_mesh: a sampled contact \
+                 takes its supports from fixed.boxes only",
+            ));
+        }
         Ok(Scene {
             path: path.to_path_buf(),
             mesh,
@@ -464,6 +541,7 @@ impl Scene {
             friction_offset,
             gravity,
             bank,
+            contact,
             text_hash: fnv1a(FNV_OFFSET, text.as_bytes()),
         })
     }
@@ -555,6 +633,92 @@ fn parse_mesh(ctx: &Ctx, path: &Path, mesh: &Spanned<String>) -> Result<MeshSour
         let dir = path.parent().unwrap_or(Path::new("."));
         Ok(MeshSource::File(dir.join(mesh.get_ref())))
     }
+}
+
+/// `[contact]`: `model` "sampled" (default) or "nodal"; with "sampled", `fem_mesh` (required: a
+/// path relative to the scene file), `fem_element` "p1", "anp" or "p2" (default), `sample_level`
+/// in `1..=`[`bank_format::MAX_SAMPLE_LEVEL`] (default [`DEFAULT_SAMPLE_LEVEL`]); with "nodal",
+/// none of them.
+fn parse_contact(ctx: &Ctx, path: &Path, c: &RawContact) -> Result<ContactModel, SceneError> {
+    let sampled = match &c.model {
+        None => true,
+        Some(m) => match m.get_ref().as_str() {
+            "sampled" => true,
+            "nodal" => false,
+            other => {
+                return Err(ctx.err(
+                    m.span(),
+                    "contact.model",
+                    format!("must be \"sampled\" or \"nodal\", got {other:?}"),
+                ));
+            }
+        },
+    };
+    if !sampled {
+        let extra = [
+            c.fem_mesh.as_ref().map(|v| (v.span(), "contact.fem_mesh")),
+            c.fem_element
+                .as_ref()
+                .map(|v| (v.span(), "contact.fem_element")),
+            c.sample_level
+                .as_ref()
+                .map(|v| (v.span(), "contact.sample_level")),
+        ];
+        if let Some((span, key)) = extra.into_iter().flatten().next() {
+            return Err(ctx.err(span, key, "only a sampled contact model takes this key"));
+        }
+        return Ok(ContactModel::Nodal);
+    }
+    let Some(mesh) = &c.fem_mesh else {
+        let at = ctx.text.find("[contact]").unwrap_or(0);
+        return Err(ctx.err(
+            at..at,
+            "contact.fem_mesh",
+            "missing: the sampled contact model needs the FEM mesh its patch compliance is \
+             computed on",
+        ));
+    };
+    if mesh.get_ref().starts_with("builtin:") {
+        return Err(ctx.err(
+            mesh.span(),
+            "contact.fem_mesh",
+            "must be a mesh file (a path relative to the scene file)",
+        ));
+    }
+    let dir = path.parent().unwrap_or(Path::new("."));
+    let element = match &c.fem_element {
+        None => FemElement::Quadratic,
+        Some(e) if e.get_ref() == "p2" => FemElement::Quadratic,
+        Some(e) => FemElement::Linear(e.get_ref().parse::<Element>().map_err(|why| {
+            ctx.err(
+                e.span(),
+                "contact.fem_element",
+                format!("{why}, or \"p2\" (the 10-node tetrahedron)"),
+            )
+        })?),
+    };
+    let level = match &c.sample_level {
+        None => DEFAULT_SAMPLE_LEVEL,
+        Some(l) => {
+            let v = *l.get_ref();
+            if !(1..=bank_format::MAX_SAMPLE_LEVEL).contains(&v) {
+                return Err(ctx.err(
+                    l.span(),
+                    "contact.sample_level",
+                    format!(
+                        "must lie in 1..={} (lattice steps per collision triangle side), got {v}",
+                        bank_format::MAX_SAMPLE_LEVEL
+                    ),
+                ));
+            }
+            v
+        }
+    };
+    Ok(ContactModel::Sampled(SampledContact {
+        fem_mesh: dir.join(mesh.get_ref()),
+        element,
+        level,
+    }))
 }
 
 /// `[material]`: `young_pa` in [`YOUNG_RANGE_PA`], `poisson` in (-1, 0.5) (for P1 at most

@@ -111,8 +111,41 @@ pub fn builder() -> BankBuilder {
         scene_id: 0x0123_4567_89ab_cdef,
         law: law(),
         gravity: None,
+        samples: None,
         device: device(),
     }
+}
+
+/// The valid bank with contact samples at lattice level 2 (`SPEC.md`, "contact samples"):
+/// each sample's `W` the barycentric mix of its triangle's vertices' `C_kk` (SPD), points of the
+/// shared edge 0-2 stored once.
+pub fn sampled_builder() -> BankBuilder {
+    let mut b = builder();
+    let lattice = bank_format::SharedLattice::new(&b.triangles, 2);
+    let w = lattice
+        .points
+        .iter()
+        .map(|&(t, bary)| {
+            let tri = b.triangles[t];
+            let mut m = [[0.0; 3]; 3];
+            for (v, wv) in tri.iter().zip(bary) {
+                let c = block(*v as usize, *v as usize);
+                for i in 0..3 {
+                    for j in 0..3 {
+                        m[i][j] += wv * c[i][j];
+                    }
+                }
+            }
+            m
+        })
+        .collect();
+    b.samples = Some(bank_format::ContactSamples {
+        level: 2,
+        tip_radius_m: 0.002,
+        triangle_samples: lattice.triangle_points,
+        w,
+    });
+    b
 }
 
 pub fn valid_bytes() -> Vec<u8> {
