@@ -16,7 +16,26 @@ cylinder-10k.msh       10,000      same cylinder, finer (binary)
 brain-specimen.msh     2,000       Miller & Chinzei's brain specimen: cylinder r = 0.015, h = 0.013
 beam.msh               1,500       cantilever beam [0, 0.1] x [-0.005, 0.005]^2 (unstructured)
 generated/liver-100k   100,000     liver, only with ``--only liver-100k`` (binary, git-ignored)
+liver-reach-4mm.msh    4,751       liver graded: 4 mm in the tool's reach, up to 8 mm elsewhere (binary)
+liver-reach-2.8mm.msh  11,667      same, 2.8 mm in the reach (binary)
+generated/...-2mm      27,742      same, 2 mm (6.5 MB, binary, git-ignored like all below)
+generated/...-1.4mm    71,605      same, 1.4 mm (17 MB)
+generated/...-1mm      177,760     same, 1 mm (44 MB; ~5.5 min, 0.8 GB)
 =====================  ==========  =======================================================
+
+The ``liver-reach-<h>mm`` family: FEM meshes for the patch-compliance samples of the
+default scene and its convergence study (fine in the tool's reach).  Same organ; mesh
+size h_fine in the *fine zone*, the points within ZONE_BAND = 10 mm of the boundary that
+are also within tip radius + reach margin + 10 mm (3 + 2 + 10 mm) of the tip's workspace
+of ``host/scenes/liver.toml`` (trocar at (0, 0, 0.16) m, shaft along -z at rest, pitch and
+yaw in [-0.35, 0.35] rad, insertion in [0.03, 0.14] m), measured as ``host/src/reach.rs``
+does (``sector_distance``).  Away from the zone the size grows by 0.3 mm per mm of
+distance from it, up to 8 mm.  Gmsh size fields: a ``Distance`` field to the boundary
+surfaces and a ``MathEval`` field of it and x, y, z (``_reach_size_field``).  No
+node-count target (the size is the parameter); Delaunay surface meshing (see
+``REACH_SURFACE_ALGORITHM``); binary when the ASCII file would exceed 0.5 MB.  The script
+prints, for each, the boundary edge lengths inside the fine zone (mean, min, max) and the
+number of free surface nodes in the reachable region.
 
 The liver-like organ is a smooth closed body about 0.14 x 0.09 x 0.07 m: a big
 right lobe (ellipsoid, +x side) fused with a smaller, thinner left lobe (ellipsoid,
@@ -42,27 +61,35 @@ and numpy::
     python3 scripts/gen_meshes.py --only liver-1k4     # one mesh
     python3 scripts/gen_meshes.py --only liver-100k    # -> host/meshes/generated/ (git-ignored)
     python3 scripts/gen_meshes.py --liver-nodes 30000  # -> host/meshes/generated/liver-30000.msh
+    python3 scripts/gen_meshes.py --reach-series       # the committed liver-reach-*mm meshes
+    python3 scripts/gen_meshes.py --reach-series all   # all of them (2, 1.4, 1 mm -> generated/)
+    python3 scripts/gen_meshes.py --only liver-reach-1mm   # one of them
+
+The default run (no option) generates the first six rows of the table above (not
+liver-100k, not the liver-reach family).
 
 Reproducibility
 ---------------
 Gmsh is pinned to 4.15.2 (a different version prints a warning and may give a
 different mesh), meshing runs single-threaded (``General.NumThreads = 1``) with
-a fixed ``Mesh.RandomSeed``, and the mesh size of each default file is pinned
-(the table in ``MESHES``).  With these settings, re-running the script gives
-byte-identical files.  If the pinned size does not give a node count within
-+-3 % of the target (e.g. another Gmsh version), the size is re-tuned
-deterministically, h <- h * (nodes / target)^(1/3), and the chosen size is
-printed.  The script then checks the node count (and for liver-1k4 the tet
-count) is within +-10 % of the target, that no tetrahedron has a non-positive
-volume, that every node is referenced, that no triangle face is shared by more
-than two tetrahedra, and re-reads each written file to compare counts,
-coordinates and orientation.
+a fixed ``Mesh.RandomSeed``, and the mesh size of each file is pinned (the table
+in ``MESHES``; ``REACH_SERIES`` for the graded livers).  With these settings,
+re-running the script gives byte-identical files.  If the pinned size does not
+give a node count within +-3 % of the target (e.g. another Gmsh version), the
+size is re-tuned deterministically, h <- h * (nodes / target)^(1/3), and the
+chosen size is printed (not for the graded livers: they have no target).  The
+script then checks the node count (and for liver-1k4 the tet count) is within
++-10 % of the target (again not for the graded livers), that no tetrahedron has
+a non-positive volume, that every node is referenced, that no triangle face is
+shared by more than two tetrahedra, and re-reads each written file to compare
+counts, coordinates and orientation.
 
-Meshing: Frontal-Delaunay surfaces (``Mesh.Algorithm = 6``), Delaunay volume
-(``Mesh.Algorithm3D = 1``) with Gmsh and Netgen optimisation
-(``Mesh.Optimize = 1``, ``Mesh.OptimizeNetgen = 1``), target size h (uniform, or
-graded for liver-1k4: see ``MESHES``).  Node coordinates are rounded to 1e-12 m.
-Takes ~30 s for the default set; liver-100k ~2 min and 0.5 GB.
+Meshing: Frontal-Delaunay surfaces (``Mesh.Algorithm = 6``; Delaunay, 5, for the
+liver-reach family), Delaunay volume (``Mesh.Algorithm3D = 1``) with Gmsh and Netgen
+optimisation (``Mesh.Optimize = 1``, ``Mesh.OptimizeNetgen = 1``), target size h
+(uniform, graded for liver-1k4: see ``MESHES``, or the liver-reach size field).  Node
+coordinates are rounded to 1e-12 m.  Takes ~30 s for the default set; liver-100k ~2 min
+and 0.5 GB; ``--reach-series`` ~15 s, ``--reach-series all`` ~7.5 min.
 """
 
 from __future__ import annotations
@@ -178,13 +205,127 @@ MESHES = {
 TUNE_TOL = 0.03  # re-tune the size when the node count is off by more than this
 CHECK_TOL = 0.10  # final acceptance
 
+# ---------------------------------------------------------------------------------------------
+# Graded livers "liver-reach-<h>mm": fine where the default scene's tool can reach.
+# ---------------------------------------------------------------------------------------------
+
+# The default scene's device and tool (host/scenes/liver.toml: [device], [tool]; the default
+# bank.reach_margin_m).  The shaft points along -z at rest; pitch about x (inner axis), yaw
+# about y (outer, ground-fixed).  Inverse kinematics as host/src/kinematics.rs: with
+# v = x - fulcrum, pitch = asin(v_y / |v|), yaw = atan2(v_x, -v_z) (up to sign; the ranges are
+# symmetric).
+REACH_FULCRUM = (0.0, 0.0, 0.16)
+REACH_PITCH_MAX = 0.35  # |pitch| <= this, rad
+REACH_YAW_MAX = 0.35  # |yaw| <= this, rad
+REACH_INSERTION = (0.03, 0.14)  # tip distance from the fulcrum, m
+REACH_TIP_RADIUS = 0.003  # m
+REACH_MARGIN = 0.002  # bank.reach_margin_m (default), m
+# Fine zone: within ZONE_BAND of the organ's boundary AND within REACH_TIP_RADIUS +
+# REACH_MARGIN + ZONE_WIDEN of the tip's sector (the reachable region widened by ZONE_WIDEN, so
+# that a tool patch at the edge of the reach and the organ around it are fine).
+ZONE_BAND = 0.010
+ZONE_WIDEN = 0.010
+ZONE_SECTOR_DIST = REACH_TIP_RADIUS + REACH_MARGIN + ZONE_WIDEN
+REACH_GRADIENT = 0.3  # size growth per unit distance from the fine zone
+REACH_H_FAR = 0.008  # size cap away from the fine zone, m
+ASCII_MAX_BYTES = 500_000  # the reach meshes are written binary when ASCII would be larger
+# Surface mesher of the reach meshes: Delaunay (5).  Frontal-Delaunay (6, the other meshes')
+# leaves a row of 1.5-3 h edges along the +y end of the crease fillet, which is in the reach
+# (at h = 2 mm, 66 fine-zone boundary edges over 1.5 h on that fillet, against 6 with Delaunay).
+REACH_SURFACE_ALGORITHM = 5
+
+# name -> (fine-zone size h_fine [m], committed?).  No node-count target: the size is the
+# parameter.  Only the files of at most ~4 MB are committed; the others (2 mm: 6.5 MB) go to
+# generated/ (git-ignored) and are made with --only or --reach-series all.
+REACH_SERIES = {
+    f"liver-reach-{h_mm:g}mm": (h_mm / 1000.0, committed)
+    for h_mm, committed in ((4.0, True), (2.8, True), (2.0, False), (1.4, False), (1.0, False))
+}
+
+
+def sector_distance(p):
+    """Approximate distance (m) of points p (N,3) from the tip's sector (the spherical-shell
+    sector swept by the tip over the joint ranges): the larger of the radial excess and
+    rho sin(angular excess).  ``sector_distance(x) <= m`` is exactly host/src/reach.rs's
+    ``Workspace::reaches(x, m)`` (for rho > m).  Like that test it takes the radial and the
+    angular excess separately, so near the sector's corners it under-estimates the true
+    distance (by up to a factor sqrt(2)); it is negative inside the shell."""
+    v = np.asarray(p, dtype=np.float64) - np.asarray(REACH_FULCRUM)
+    rho = np.sqrt(np.einsum("ij,ij->i", v, v))
+    pitch = np.arcsin(np.clip(v[:, 1] / rho, -1.0, 1.0))
+    yaw = np.arctan2(v[:, 0], -v[:, 2])
+    dp = np.maximum(np.abs(pitch) - REACH_PITCH_MAX, 0.0)
+    dy = np.maximum(np.abs(yaw) - REACH_YAW_MAX, 0.0) * np.cos(pitch)
+    d_ang = rho * np.sin(np.minimum(np.hypot(dp, dy), np.pi / 2))
+    d_rad = np.maximum(rho - REACH_INSERTION[1], REACH_INSERTION[0] - rho)
+    return np.maximum(d_rad, d_ang)
+
+
+def _sector_distance_expr() -> str:
+    """sector_distance() as a Gmsh MathEval expression in x, y, z (no atan2 in MathEval:
+    atan2(a, b) = 2 atan(a / (sqrt(a^2 + b^2) + b)), valid for b > 0 or a != 0)."""
+    fx, fy, fz = REACH_FULCRUM
+    vx, vy, vz = f"(x-({fx!r}))", f"(y-({fy!r}))", f"(z-({fz!r}))"
+    rho = f"sqrt({vx}*{vx}+{vy}*{vy}+{vz}*{vz})"
+    rxz = f"sqrt({vx}*{vx}+{vz}*{vz})"  # rho cos(pitch)
+    pitch = f"asin({vy}/{rho})"
+    yaw = f"(2*atan({vx}/({rxz}-{vz})))"
+    dp = f"max(abs({pitch})-{REACH_PITCH_MAX!r},0)"
+    dy = f"(max(abs({yaw})-{REACH_YAW_MAX!r},0)*{rxz}/{rho})"
+    d_ang = f"{rho}*sin(min(sqrt({dp}*{dp}+{dy}*{dy}),{np.pi / 2!r}))"
+    d_rad = f"max({rho}-{REACH_INSERTION[1]!r},{REACH_INSERTION[0]!r}-{rho})"
+    return f"max({d_rad},{d_ang})"
+
+
+def _reach_size_field(vol: int, h_fine: float) -> None:
+    """Background size: h_fine in the fine zone, growing by REACH_GRADIENT per unit distance
+    from it, capped at REACH_H_FAR.  The distance from the zone is taken as
+    max(depth - ZONE_BAND, sector distance - ZONE_SECTOR_DIST, 0) (a lower bound of the
+    distance to the intersection: never coarser than intended)."""
+    surfs = [t for _, t in gmsh.model.getBoundary([(3, vol)], combined=False, oriented=False)]
+    f = gmsh.model.mesh.field
+    dist = f.add("Distance")
+    f.setNumbers(dist, "SurfacesList", surfs)
+    f.setNumber(dist, "Sampling", 100)
+    size = f.add("MathEval")
+    f.setString(
+        size,
+        "F",
+        f"min({REACH_H_FAR!r},{h_fine!r}+{REACH_GRADIENT!r}*max(0,F{dist}-{ZONE_BAND!r},"
+        f"{_sector_distance_expr()}-{ZONE_SECTOR_DIST!r}))",
+    )
+    f.setAsBackgroundMesh(size)
+
+
+def boundary_faces(tets):
+    """Triangles bounding the tetrahedra (faces used once) and the faces' use counts."""
+    faces = np.sort(np.concatenate([tets[:, [1, 2, 3]], tets[:, [0, 3, 2]], tets[:, [0, 1, 3]], tets[:, [0, 2, 1]]]), axis=1)
+    uniq, counts = np.unique(faces, axis=0, return_counts=True)
+    return uniq[counts == 1], counts
+
+
+def reach_stats(nodes, tets):
+    """Boundary edge lengths (m) whose two ends lie in the fine zone (on the boundary the
+    depth is 0, so: within ZONE_SECTOR_DIST of the sector), and the number of surface nodes in
+    the reachable region R (within tip radius + margin of the sector, z > 0.01: the scene's bed
+    is fixed)."""
+    tris, _ = boundary_faces(tets)
+    edges = np.unique(np.sort(np.concatenate([tris[:, [0, 1]], tris[:, [1, 2]], tris[:, [2, 0]]]), axis=1), axis=0)
+    sd = sector_distance(nodes)
+    in_zone = sd <= ZONE_SECTOR_DIST
+    e = edges[in_zone[edges[:, 0]] & in_zone[edges[:, 1]]]
+    lengths = np.linalg.norm(nodes[e[:, 0]] - nodes[e[:, 1]], axis=1)
+    surf = np.unique(tris)
+    n_reach = int(np.sum((sd[surf] <= REACH_TIP_RADIUS + REACH_MARGIN) & (nodes[surf, 2] > 0.01)))
+    return lengths, n_reach
+
 
 # ---------------------------------------------------------------------------------------------
 # Meshing
 # ---------------------------------------------------------------------------------------------
 
 
-def _set_options(h: float, surface_factor: float) -> None:
+def _set_options(h: float, surface_factor: float, size_range=None) -> None:
     opt = gmsh.option.setNumber
     opt("General.Terminal", 0)
     opt("General.Verbosity", 2)
@@ -199,8 +340,9 @@ def _set_options(h: float, surface_factor: float) -> None:
     opt("Mesh.MeshSizeFromCurvature", 0)
     opt("Mesh.MeshSizeFromPoints", 0)
     opt("Mesh.MeshSizeExtendFromBoundary", 0)
-    opt("Mesh.MeshSizeMin", h * min(1.0, surface_factor))
-    opt("Mesh.MeshSizeMax", h * max(1.0, surface_factor))
+    lo, hi = size_range or (h * min(1.0, surface_factor), h * max(1.0, surface_factor))
+    opt("Mesh.MeshSizeMin", lo)
+    opt("Mesh.MeshSizeMax", hi)
 
 
 def _graded_size_field(vol: int, h: float, surface_factor: float) -> None:
@@ -219,13 +361,18 @@ def _graded_size_field(vol: int, h: float, surface_factor: float) -> None:
     f.setAsBackgroundMesh(thr)
 
 
-def mesh_once(builder, h: float, surface_factor: float):
-    """Mesh the geometry with size h; return (nodes (N,3) float64, tets (M,4) 0-based)."""
+def mesh_once(builder, h: float, surface_factor: float, reach: bool = False):
+    """Mesh the geometry with size h (reach: h in the fine zone, graded up to REACH_H_FAR
+    elsewhere); return (nodes (N,3) float64, tets (M,4) 0-based)."""
     gmsh.clear()
-    _set_options(h, surface_factor)
+    _set_options(h, surface_factor, (h, REACH_H_FAR) if reach else None)
+    if reach:
+        gmsh.option.setNumber("Mesh.Algorithm", REACH_SURFACE_ALGORITHM)
     gmsh.model.add("m")
     vol = builder()
-    if surface_factor != 1.0:
+    if reach:
+        _reach_size_field(vol, h)
+    elif surface_factor != 1.0:
         _graded_size_field(vol, h, surface_factor)
     gmsh.model.mesh.generate(3)
     node_tags, coords, _ = gmsh.model.mesh.getNodes()
@@ -279,12 +426,11 @@ def check_mesh(name, nodes, tets, target_nodes, target_tets):
         problems.append(f"{int((~referenced).sum())} unreferenced nodes")
     if np.any(np.sort(tets, axis=1)[:, 1:] == np.sort(tets, axis=1)[:, :-1]):
         problems.append("degenerate tetrahedron (repeated node)")
-    faces = np.sort(np.concatenate([tets[:, [1, 2, 3]], tets[:, [0, 3, 2]], tets[:, [0, 1, 3]], tets[:, [0, 2, 1]]]), axis=1)
-    _, counts = np.unique(faces, axis=0, return_counts=True)
+    _, counts = boundary_faces(tets)
     if np.any(counts > 2):
         problems.append(f"{int(np.sum(counts > 2))} faces shared by more than two tetrahedra")
     n_boundary_faces = int(np.sum(counts == 1))
-    if abs(len(nodes) / target_nodes - 1.0) > CHECK_TOL:
+    if target_nodes is not None and abs(len(nodes) / target_nodes - 1.0) > CHECK_TOL:
         problems.append(f"{len(nodes)} nodes, target {target_nodes} +-{CHECK_TOL:.0%}")
     if target_tets is not None and abs(len(tets) / target_tets - 1.0) > CHECK_TOL:
         problems.append(f"{len(tets)} tetrahedra, target {target_tets} +-{CHECK_TOL:.0%}")
@@ -320,21 +466,30 @@ def reread(path):
     return len(tags), len(conn) // 4, np.asarray(coords).reshape(-1, 3)
 
 
-def generate(name, builder, h0, sf, target_nodes, target_tets, binary, path):
+def generate(name, builder, h0, sf, target_nodes, target_tets, binary, path, reach=False):
+    """Mesh, check, write and re-read one file.  reach: a graded liver-reach mesh (h0 is the
+    fine-zone size; no node target, no re-tuning; binary None: binary when the ASCII file
+    would exceed ASCII_MAX_BYTES)."""
     t0 = time.perf_counter()
     h = h0
     tried = []
     for _ in range(8):
-        nodes, tets = mesh_once(builder, h, sf)
+        nodes, tets = mesh_once(builder, h, sf, reach)
         tried.append((h, len(nodes)))
-        if abs(len(nodes) / target_nodes - 1.0) <= TUNE_TOL:
+        if target_nodes is None or abs(len(nodes) / target_nodes - 1.0) <= TUNE_TOL:
             break
         h = float(f"{h * (len(nodes) / target_nodes) ** (1.0 / 3.0):.3g}")
     if len(tried) > 1:
         print(f"  {name}: re-tuned mesh size: " + ", ".join(f"h={a:g} -> {b} nodes" for a, b in tried))
     vols, n_bfaces = check_mesh(name, nodes, tets, target_nodes, target_tets)
     gamma = quality_gamma(nodes, tets)
-    write_msh(path, nodes, tets, binary)
+    if binary is None:
+        write_msh(path, nodes, tets, False)
+        binary = os.path.getsize(path) > ASCII_MAX_BYTES
+        if binary:
+            write_msh(path, nodes, tets, True)
+    else:
+        write_msh(path, nodes, tets, binary)
     n_read, m_read, coords_read = reread(path)
     if n_read != len(nodes) or m_read != len(tets):
         raise SystemExit(f"error: {path}: re-read {n_read} nodes / {m_read} tets, wrote {len(nodes)} / {len(tets)}")
@@ -352,6 +507,14 @@ def generate(name, builder, h0, sf, target_nodes, target_tets, binary, path):
         f"{'binary' if binary else 'ascii '} {size / 1e6:.2f} MB ({time.perf_counter() - t0:.1f} s)",
         flush=True,
     )
+    if reach:
+        lengths, n_reach = reach_stats(nodes, tets)
+        print(
+            f"  {name}: fine zone h={h * 1e3:g} mm: {len(lengths)} boundary edges, length mean "
+            f"{lengths.mean() * 1e3:.3f} mm, min {lengths.min() * 1e3:.3f}, max {lengths.max() * 1e3:.3f}; "
+            f"{n_reach} free surface nodes in the reachable region",
+            flush=True,
+        )
     return len(nodes), len(tets), size
 
 
@@ -359,7 +522,19 @@ def main(argv=None):
     here = os.path.dirname(os.path.abspath(__file__))
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--out", default=os.path.join(here, "..", "host", "meshes"), help="output directory (default host/meshes)")
-    ap.add_argument("--only", choices=sorted(MESHES), help="generate only this mesh (liver-100k is only generated this way)")
+    ap.add_argument(
+        "--only",
+        choices=sorted(MESHES) + list(REACH_SERIES),
+        help="generate only this mesh (liver-100k is only generated this way)",
+    )
+    ap.add_argument(
+        "--reach-series",
+        nargs="?",
+        const="committed",
+        choices=["committed", "all"],
+        help="generate only the graded livers liver-reach-*mm (fine in the default scene's reach): "
+        "the committed ones (default), or all of them (the others -> generated/)",
+    )
     ap.add_argument(
         "--liver-nodes",
         type=int,
@@ -367,8 +542,8 @@ def main(argv=None):
         help="generate only a liver with about N nodes (size auto-tuned) as <out>/generated/liver-N.msh",
     )
     args = ap.parse_args(argv)
-    if args.only and args.liver_nodes:
-        ap.error("--only and --liver-nodes are exclusive")
+    if sum(map(bool, (args.only, args.liver_nodes, args.reach_series))) > 1:
+        ap.error("--only, --liver-nodes and --reach-series are exclusive")
 
     gmsh.initialize(["gen_meshes"], readConfigFiles=False)
     gmsh.option.setNumber("General.Terminal", 0)
@@ -385,17 +560,22 @@ def main(argv=None):
             ap.error("--liver-nodes must be >= 200")
         # Scale the liver-1k4 size by the node ratio (nodes ~ h^-3), then tune.
         h = float(f"{MESHES['liver-10k'][1] * (10000 / n) ** (1 / 3):.3g}")
-        jobs.append((f"liver-{n}", build_liver, h, 1.0, n, None, n > 5000, os.path.join(gen, f"liver-{n}.msh")))
+        jobs.append((f"liver-{n}", build_liver, h, 1.0, n, None, n > 5000, os.path.join(gen, f"liver-{n}.msh"), {}))
+    elif args.reach_series or args.only in REACH_SERIES:
+        for name, (h, committed) in REACH_SERIES.items():
+            if args.reach_series == "all" or (args.reach_series and committed) or args.only == name:
+                d = out if committed else gen
+                jobs.append((name, build_liver, h, 1.0, None, None, None, os.path.join(d, name + ".msh"), {"reach": True}))
     else:
         for name, (builder, h, sf, tn, tt, binary, default) in MESHES.items():
             if (args.only is None and default) or args.only == name:
                 d = out if default else gen
-                jobs.append((name, builder, h, sf, tn, tt, binary, os.path.join(d, name + ".msh")))
+                jobs.append((name, builder, h, sf, tn, tt, binary, os.path.join(d, name + ".msh"), {}))
     try:
         total = 0
-        for job in jobs:
+        for *job, kw in jobs:
             os.makedirs(os.path.dirname(job[-1]), exist_ok=True)
-            total += generate(*job)[2]
+            total += generate(*job, **kw)[2]
         if len(jobs) > 1:
             print(f"total {total / 1e6:.2f} MB")
     finally:
