@@ -6,11 +6,13 @@
 //! writes the scene's bank. `host bank`, `host demo`, `host sil` and the tests all go through
 //! here.
 
+pub mod cache;
+pub mod sampled;
 pub mod sweep;
 
 use crate::kinematics::Workspace;
 use crate::reach::reachable;
-use crate::scene::{Couplings, Scene};
+use crate::scene::{ContactModel, Couplings, SampledContact, Scene, fnv1a};
 use anyhow::{Context, Result, bail};
 use bank_format::region::BANK_LEN;
 use bank_format::{AlignedBytes, Bank, BankBuilder};
@@ -30,6 +32,8 @@ pub struct BuiltBank {
     pub bytes: Vec<u8>,
     /// Coupled pairs `k < l` stored.
     pub pairs: usize,
+    /// What the contact sampling measured (a sampled scene's bank only).
+    pub sampled: Option<sampled::SampleStats>,
 }
 
 /// A scene with its mesh, supports, factorised compliance and reachable region.
@@ -251,6 +255,24 @@ impl Prepared {
         extra: Option<&BTreeSet<(usize, usize)>>,
         precision: bank_format::Precision,
     ) -> Result<BuiltBank> {
+        let (builder, pairs) = self.builder_in(rows, radius, extra)?;
+        let bytes = builder
+            .build_with_precision(precision)
+            .map_err(|e| anyhow::anyhow!("the bank writer refused the scene's data: {e}"))?;
+        Ok(BuiltBank {
+            bytes,
+            pairs,
+            sampled: None,
+        })
+    }
+
+    /// The writer's input for [`Prepared::bank_in`], and the number of coupled pairs.
+    fn builder_in(
+        &self,
+        rows: &[Vec<(usize, Block3)>],
+        radius: f64,
+        extra: Option<&BTreeSet<(usize, usize)>>,
+    ) -> Result<(BankBuilder, usize)> {
         let mut edges = self.edges();
         if let Some(extra) = extra {
             edges.extend(extra.iter().copied());
@@ -316,10 +338,7 @@ impl Prepared {
             samples: None,
             device: self.scene.device,
         };
-        let bytes = builder
-            .build_with_precision(precision)
-            .map_err(|e| anyhow::anyhow!("the bank writer refused the scene's data: {e}"))?;
-        Ok(BuiltBank { bytes, pairs })
+        Ok((builder, pairs))
     }
 }
 
@@ -419,6 +438,9 @@ impl Prepared {
     /// The scene's bank by its coupling rule (`bank.couplings`): the pairs within
     /// `bank.truncation_radius_m`, and with "tool" also [`Prepared::tool_pairs`].
     pub fn build_bank(&self, progress: Option<&dyn Progress>) -> Result<BuiltBank> {
+        if let ContactModel::Sampled(spec) = &self.scene.contact {
+            return self.sampled_bank(spec, progress);
+        }
         let radius = self.scene.bank.truncation_radius_m;
         match self.scene.bank.couplings {
             Couplings::Radius => {
@@ -431,6 +453,48 @@ impl Prepared {
                 self.bank_keeping(&rows, radius, Some(&pairs))
             }
         }
+    }
+
+    /// The bank of a sampled scene: R's collision data and nodal compliance with only the
+    /// triangle edges coupled (the nodal contact models' minimum, for comparison), plus the
+    /// contact samples computed on the scene's FEM mesh ([`sampled::contact_samples`]). The
+    /// scene id also covers the FEM mesh's bytes.
+    pub fn sampled_bank(
+        &self,
+        spec: &SampledContact,
+        progress: Option<&dyn Progress>,
+    ) -> Result<BuiltBank> {
+        let fem = sampled::SampledFem::new(&self.scene, spec)?;
+        self.sampled_bank_on(&fem, spec.level, progress)
+    }
+
+    /// [`Prepared::sampled_bank`] on an already factorised FEM body, at lattice level `level`.
+    pub fn sampled_bank_on(
+        &self,
+        fem: &sampled::SampledFem,
+        level: u32,
+        progress: Option<&dyn Progress>,
+    ) -> Result<BuiltBank> {
+        let rows = self.blocks(0.0, None)?;
+        let (mut builder, pairs) = self.builder_in(&rows, 0.0, None)?;
+        let (samples, stats) = sampled::contact_samples(
+            fem,
+            &self.positions,
+            &self.triangles,
+            level,
+            self.scene.tip_radius_m,
+            progress,
+        )?;
+        builder.samples = Some(samples);
+        builder.scene_id = fnv1a(self.scene_id, &fem.mesh_hash.to_le_bytes());
+        let bytes = builder
+            .build_with_precision(self.scene.bank.precision)
+            .map_err(|e| anyhow::anyhow!("the bank writer refused the scene's data: {e}"))?;
+        Ok(BuiltBank {
+            bytes,
+            pairs,
+            sampled: Some(stats),
+        })
     }
 
     /// [`Prepared::tool_pairs`] on the probe bank built from `rows` (computed for at least

@@ -27,6 +27,9 @@ enum Command {
     /// Firmware banks: build from a scene file, inspect, sweep the truncation radius.
     #[command(subcommand)]
     Bank(cmd::bank::BankCmd),
+    /// Contact at any point of the organ: the patch compliance W and the rendered force.
+    #[command(subcommand)]
+    Contact(cmd::contact::ContactCmd),
     /// Bench calibration: tissue law Q, display law P, motor torque constants.
     #[command(subcommand)]
     Calibrate(cmd::calibrate::Calibrate),
@@ -61,6 +64,7 @@ fn main() -> ExitCode {
         Command::Bench(bench) => cmd::bench::run(bench),
         Command::Calibrate(c) => cmd::calibrate::run(c),
         Command::Bank(bank) => cmd::bank::run(bank),
+        Command::Contact(c) => cmd::contact::run(c),
         Command::Sil(args) => cmd::sil::run(args),
         Command::Flash(args) => cmd::flash::run(args),
         Command::Device(c) => cmd::device::run(c),

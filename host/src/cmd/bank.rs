@@ -8,7 +8,7 @@ use host::bank::sweep::{self, SweepConfig};
 use host::bank::{BuiltBank, Prepared};
 use host::fsio::write_atomic;
 use host::progress::Bar;
-use host::scene::{Couplings, MeshSource};
+use host::scene::{ContactModel, Couplings, MeshSource};
 use std::path::PathBuf;
 use std::time::Instant;
 
@@ -113,71 +113,9 @@ fn candidate_stats(bank: &bank_format::Bank) -> (usize, f64) {
     )
 }
 
-fn section_table(bank: &Bank) -> Vec<(&'static str, u32, u32, u32)> {
-    bank.sections()
-        .iter()
-        .map(|e| {
-            (
-                SectionKind::from_code(e.kind).name(),
-                e.offset,
-                e.len,
-                e.count,
-            )
-        })
-        .collect()
-}
-
-fn build(args: BuildArgs) -> Result<()> {
-    let t = Instant::now();
-    let prep = Prepared::load(&args.scene)?;
-    prep.warnings.iter().for_each(|w| eprintln!("{w}"));
+/// What `bank build` prints of a nodal bank: its coupling rule and the tool patches it holds.
+fn print_nodal(prep: &Prepared, bank: &Bank, pairs: usize) {
     let radius = prep.scene.bank.truncation_radius_m;
-    let progress = Bar::new("supernodes");
-    let BuiltBank { bytes, pairs } = prep.build_bank(Some(&progress))?;
-    progress.finish();
-    if bytes.len() > args.region_bytes {
-        bail!(
-            "the bank would be {} bytes, more than the {} bytes of the bank region ({} nodes in \
-             R, {pairs} coupled pairs): lower bank.truncation_radius_m or narrow the device's \
-             ranges; nothing was written",
-            bytes.len(),
-            args.region_bytes,
-            prep.region.len()
-        );
-    }
-    let mut inputs = vec![args.scene.as_path()];
-    if let MeshSource::File(mesh) = &prep.scene.mesh {
-        inputs.push(mesh);
-    }
-    write_atomic(&args.out, &bytes, &inputs)?;
-    // Read back what was written.
-    let written = std::fs::read(&args.out)?;
-    let aligned = AlignedBytes::new(&written);
-    let bank = Bank::parse(&aligned).map_err(|e| {
-        anyhow::anyhow!("{}: written bank fails validation: {e}", args.out.display())
-    })?;
-    let (lo, hi) = prep.mesh.bounding_box();
-    println!(
-        "scene     {} ({}, {} nodes, {} surface nodes, box [{:.3}, {:.3}] x [{:.3}, {:.3}] x \
-         [{:.3}, {:.3}] m)",
-        args.scene.display(),
-        prep.mesh_name,
-        prep.mesh.nodes.len(),
-        prep.surface.nodes.len(),
-        lo[0],
-        hi[0],
-        lo[1],
-        hi[1],
-        lo[2],
-        hi[2]
-    );
-    println!(
-        "region R  {} reachable surface nodes, {} triangles (tip radius {} m, margin {} m)",
-        bank.node_count(),
-        bank.triangles().len(),
-        prep.scene.tip_radius_m,
-        prep.scene.bank.reach_margin_m
-    );
     let rule = match prep.scene.bank.couplings {
         Couplings::Radius => format!("truncation radius {radius} m, plus every triangle edge"),
         Couplings::Tool => format!(
@@ -222,6 +160,119 @@ fn build(args: BuildArgs) -> Result<()> {
             ""
         }
     );
+}
+
+fn section_table(bank: &Bank) -> Vec<(&'static str, u32, u32, u32)> {
+    bank.sections()
+        .iter()
+        .map(|e| {
+            (
+                SectionKind::from_code(e.kind).name(),
+                e.offset,
+                e.len,
+                e.count,
+            )
+        })
+        .collect()
+}
+
+fn build(args: BuildArgs) -> Result<()> {
+    let t = Instant::now();
+    let prep = Prepared::load(&args.scene)?;
+    prep.warnings.iter().for_each(|w| eprintln!("{w}"));
+    let progress = Bar::new(match prep.scene.contact {
+        ContactModel::Nodal => "supernodes",
+        ContactModel::Sampled(_) => "patch compliance chunks",
+    });
+    if let ContactModel::Sampled(spec) = &prep.scene.contact {
+        eprintln!(
+            "sampling the tool's patch compliance on {} ({}) ...",
+            spec.fem_mesh.display(),
+            spec.element.name()
+        );
+    }
+    let BuiltBank {
+        bytes,
+        pairs,
+        sampled,
+    } = prep.build_bank(Some(&progress))?;
+    progress.finish();
+    if bytes.len() > args.region_bytes {
+        bail!(
+            "the bank would be {} bytes, more than the {} bytes of the bank region ({} nodes in \
+             R, {pairs} coupled pairs): lower bank.truncation_radius_m or narrow the device's \
+             ranges; nothing was written",
+            bytes.len(),
+            args.region_bytes,
+            prep.region.len()
+        );
+    }
+    let mut inputs = vec![args.scene.as_path()];
+    if let MeshSource::File(mesh) = &prep.scene.mesh {
+        inputs.push(mesh);
+    }
+    if let ContactModel::Sampled(spec) = &prep.scene.contact {
+        inputs.push(&spec.fem_mesh);
+    }
+    write_atomic(&args.out, &bytes, &inputs)?;
+    // Read back what was written.
+    let written = std::fs::read(&args.out)?;
+    let aligned = AlignedBytes::new(&written);
+    let bank = Bank::parse(&aligned).map_err(|e| {
+        anyhow::anyhow!("{}: written bank fails validation: {e}", args.out.display())
+    })?;
+    let (lo, hi) = prep.mesh.bounding_box();
+    println!(
+        "scene     {} ({}, {} nodes, {} surface nodes, box [{:.3}, {:.3}] x [{:.3}, {:.3}] x \
+         [{:.3}, {:.3}] m)",
+        args.scene.display(),
+        prep.mesh_name,
+        prep.mesh.nodes.len(),
+        prep.surface.nodes.len(),
+        lo[0],
+        hi[0],
+        lo[1],
+        hi[1],
+        lo[2],
+        hi[2]
+    );
+    println!(
+        "region R  {} reachable surface nodes, {} triangles (tip radius {} m, margin {} m)",
+        bank.node_count(),
+        bank.triangles().len(),
+        prep.scene.tip_radius_m,
+        prep.scene.bank.reach_margin_m
+    );
+    match (&prep.scene.contact, sampled) {
+        (ContactModel::Sampled(spec), Some(st)) => {
+            println!(
+                "couplings {pairs} pairs kept (the triangle edges, for the nodal contact models; \
+                 the firmware renders from the samples)"
+            );
+            println!(
+                "contact   sampled patch compliance: {} samples (lattice level {}) computed on {} \
+                 ({}, {} vertices, {} nodes, nnz(L) {:.1} M; factor {:.1} s, W {:.1} s); \
+                 largest patch {} FEM nodes",
+                st.samples,
+                spec.level,
+                spec.fem_mesh.display(),
+                spec.element.name(),
+                st.fem_vertices,
+                st.fem_nodes,
+                st.factor.nnz_l as f64 / 1e6,
+                st.factor_s,
+                st.w_s,
+                st.max_patch_nodes,
+            );
+            println!(
+                "depth     the collision surface lies within {:.2} mm of the FEM surface at the \
+                 samples (mean {:.2} mm): a depth error of the rendered press",
+                1e3 * st.gap_max_m,
+                1e3 * st.gap_mean_m
+            );
+        }
+        _ => print_nodal(&prep, &bank, pairs),
+    }
     println!("sections  kind                  bytes   count");
     for (name, _, len, count) in section_table(&bank) {
         println!("          {name:<20} {len:>7} {count:>7}");

@@ -98,6 +98,7 @@ pub fn run(args: Args) -> Result<()> {
     let BuiltBank {
         bytes: bank_bytes,
         pairs,
+        ..
     } = prep.build_bank(None)?;
     eprintln!(
         "scene     {}: {} nodes, {} surface nodes; bank {} reachable nodes, {pairs} coupled \

@@ -1,0 +1,84 @@
+//! A cache of sampled banks, so that a command that needs a sampled scene's bank (`host demo`,
+//! `host contact probe`, `host sil`) pays the FEM precompute once per set of inputs.
+//!
+//! The key is FNV-1a 64 over the scene file's bytes, the collision mesh's and the FEM mesh's
+//! bytes (the bank's scene id already covers them), the bank format version and the running
+//! executable's own bytes, so a rebuilt `host` (a changed sampling rule) never reuses a bank.
+//! Files live in `$HAPTIC_CACHE_DIR`, else `$XDG_CACHE_HOME/haptic-host`, else
+//! `~/.cache/haptic-host`, named `bank-<key>.bin`, written atomically; a cached file is
+//! validated by the bank reader before use, and one that fails is rebuilt.
+
+use super::{BuiltBank, Prepared};
+use crate::scene::{ContactModel, FNV_OFFSET, fnv1a};
+use anyhow::Result;
+use bank_format::{AlignedBytes, Bank};
+use fem::progress::Progress;
+use std::path::PathBuf;
+use std::sync::OnceLock;
+
+/// The cache directory (module notes), `None` without a home directory.
+pub fn cache_dir() -> Option<PathBuf> {
+    if let Some(d) = std::env::var_os("HAPTIC_CACHE_DIR") {
+        return Some(PathBuf::from(d));
+    }
+    if let Some(d) = std::env::var_os("XDG_CACHE_HOME") {
+        return Some(PathBuf::from(d).join("haptic-host"));
+    }
+    std::env::var_os("HOME").map(|h| PathBuf::from(h).join(".cache").join("haptic-host"))
+}
+
+/// FNV-1a 64 of the running executable's bytes (0 when it cannot be read).
+fn exe_hash() -> u64 {
+    static HASH: OnceLock<u64> = OnceLock::new();
+    *HASH.get_or_init(|| {
+        std::env::current_exe()
+            .and_then(std::fs::read)
+            .map_or(0, |b| fnv1a(FNV_OFFSET, &b))
+    })
+}
+
+/// The scene's bank ([`Prepared::build_bank`]); a sampled scene's comes from the cache when
+/// its inputs are unchanged, and goes into it when built. The second value says whether it
+/// came from the cache.
+pub fn scene_bank_cached(
+    prep: &Prepared,
+    progress: Option<&dyn Progress>,
+) -> Result<(BuiltBank, bool)> {
+    let ContactModel::Sampled(spec) = &prep.scene.contact else {
+        return Ok((prep.build_bank(progress)?, false));
+    };
+    let fem_bytes = std::fs::read(&spec.fem_mesh).unwrap_or_default();
+    let mut key = fnv1a(prep.scene_id, &fnv1a(FNV_OFFSET, &fem_bytes).to_le_bytes());
+    key = fnv1a(key, &bank_format::VERSION_MAJOR.to_le_bytes());
+    key = fnv1a(key, &bank_format::VERSION_MINOR.to_le_bytes());
+    key = fnv1a(key, &exe_hash().to_le_bytes());
+    let file = cache_dir().map(|d| d.join(format!("bank-{key:016x}.bin")));
+    if let Some(f) = &file
+        && let Ok(bytes) = std::fs::read(f)
+        && let Ok(bank) = Bank::parse(&AlignedBytes::new(&bytes))
+    {
+        let pairs = bank.pair_count();
+        return Ok((
+            BuiltBank {
+                bytes,
+                pairs,
+                sampled: None,
+            },
+            true,
+        ));
+    }
+    let built = prep.build_bank(progress)?;
+    if let Some(f) = &file {
+        // A cache that cannot be written only costs the next run the precompute.
+        let written = f
+            .parent()
+            .map(std::fs::create_dir_all)
+            .transpose()
+            .ok()
+            .and_then(|_| crate::fsio::write_atomic(f, &built.bytes, &[]).ok());
+        if written.is_none() {
+            eprintln!("note: could not write the bank cache {}", f.display());
+        }
+    }
+    Ok((built, false))
+}

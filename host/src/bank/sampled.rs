@@ -1,0 +1,216 @@
+//! The sampled contact of a scene (`[contact] model = "sampled"`, bank format 6 "contact
+//! samples"): the tool's patch compliance `W(p) = B(p) C B(p)^T` computed on a FEM mesh of its
+//! own (any size, graded where the tool reaches; P1, ANP or P2) at the lattice points of the
+//! collision surface (the scene's `mesh`, R's triangles), so that the bank's size follows the
+//! reachable area and the lattice, not the FEM's resolution (the design notes' "three
+//! resolutions, not one").
+//!
+//! Per lattice point `q` of a collision triangle: the closest point `p` of the FEM mesh's
+//! surface (their distance is the collision surface's depth error, reported), the tool's
+//! parabolic pressure of the scene's tip radius centred at `p` as consistent nodal weights `B(p)`
+//! ([`fem::tool::ToolSurface::tool_weights`]), and `W(p)` from the kept factor
+//! ([`fem::compliance::Compliance::patch_compliances`]). The firmware interpolates `W` between
+//! lattice points ([`bank_format::Samples::interpolate`]) and renders `f = W^-1 d` (the paper's
+//! eq. 8 for one rigid tool, in compliance form), with Q on top.
+
+use crate::scene::{FemElement, SampledContact, Scene, fnv1a};
+use anyhow::{Context, Result, bail};
+use bank_format::{ContactSamples, SharedLattice};
+use fem::compliance::{Block3, Compliance, FactorStats};
+use fem::elasticity::quadratic::QuadraticBody;
+use fem::elasticity::{Elasticity, FixedSet};
+use fem::mesh::TetMesh;
+use fem::progress::Progress;
+use fem::tool::ToolSurface;
+use std::time::Instant;
+
+/// A FEM body for the patch compliance: its factor and its tool surface.
+pub struct SampledFem {
+    /// The FEM mesh's name for messages.
+    pub mesh_name: String,
+    /// FNV-1a 64 of the mesh file's bytes (part of the bank's scene id).
+    pub mesh_hash: u64,
+    /// Vertices of the FEM mesh.
+    pub vertices: usize,
+    /// Nodes of the body (vertices, and edge nodes for P2).
+    pub nodes: usize,
+    /// The element.
+    pub element: FemElement,
+    /// `K_ff` factorised with the scene's supports.
+    pub compliance: Compliance,
+    /// The body's boundary with its shape functions.
+    pub surface: ToolSurface,
+    /// Seconds to read, assemble and factorise.
+    pub factor_s: f64,
+}
+
+/// What the sampling measured besides the samples.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SampleStats {
+    /// Lattice points (distinct samples).
+    pub samples: usize,
+    /// Largest and mean distance from a lattice point of the collision surface to the FEM
+    /// mesh's surface, m (a depth error of the collision surface).
+    pub gap_max_m: f64,
+    /// Mean of the same, m.
+    pub gap_mean_m: f64,
+    /// Largest number of FEM nodes one patch loads.
+    pub max_patch_nodes: usize,
+    /// FEM vertices and body nodes.
+    pub fem_vertices: usize,
+    /// Nodes of the body (P2: vertices and edge nodes).
+    pub fem_nodes: usize,
+    /// Size figures of the FEM factor.
+    pub factor: FactorStats,
+    /// Seconds to read, assemble and factorise the FEM.
+    pub factor_s: f64,
+    /// Seconds for the tool weights and `W` of every sample.
+    pub w_s: f64,
+}
+
+impl SampledFem {
+    /// Reads the scene's FEM mesh, builds the body with the scene's material and fixed boxes,
+    /// and factorises it.
+    pub fn new(scene: &Scene, spec: &SampledContact) -> Result<SampledFem> {
+        let t0 = Instant::now();
+        let path = &spec.fem_mesh;
+        let bytes = std::fs::read(path).with_context(|| {
+            format!(
+                "{}: [contact] fem_mesh {}",
+                scene.path.display(),
+                path.display()
+            )
+        })?;
+        let mesh = fem::mesh::load(path)?;
+        let boundary = fem::mesh::boundary(&mesh)?;
+        let name = path.display().to_string();
+        let (compliance, surface, nodes) = match spec.element {
+            FemElement::Linear(element) => {
+                let fixed = scene.fixed_set(&mesh)?;
+                let body = Elasticity::with_element(&mesh, scene.material, element)?;
+                let c = Compliance::factorize(&body, &fixed)
+                    .with_context(|| format!("{}: [fixed] on {name}", scene.path.display()))?;
+                let s = ToolSurface::linear(&mesh, &boundary)?;
+                (c, s, mesh.nodes.len())
+            }
+            FemElement::Quadratic => {
+                let body = QuadraticBody::new(&mesh, scene.material)?;
+                // The supports act on every node of the body, edge nodes included.
+                let all = TetMesh {
+                    nodes: body.positions().to_vec(),
+                    tets: Vec::new(),
+                };
+                let fixed: FixedSet = scene.fixed_set(&all)?;
+                let c = Compliance::factorize(&body, &fixed)
+                    .with_context(|| format!("{}: [fixed] on {name}", scene.path.display()))?;
+                let s = ToolSurface::quadratic(&mesh, &boundary, &body)?;
+                (c, s, body.positions().len())
+            }
+        };
+        Ok(SampledFem {
+            mesh_name: name,
+            mesh_hash: fnv1a(crate::scene::FNV_OFFSET, &bytes),
+            vertices: mesh.nodes.len(),
+            nodes,
+            element: spec.element,
+            compliance,
+            surface,
+            factor_s: t0.elapsed().as_secs_f64(),
+        })
+    }
+
+    /// The patch compliance of a tool of radius `radius` pressed at the FEM surface point
+    /// closest to each of `points`, with that point and its distance.
+    pub fn patch_compliance(
+        &self,
+        points: &[[f64; 3]],
+        radius: f64,
+        progress: Option<&dyn Progress>,
+    ) -> Result<(Vec<Block3>, Vec<fem::tool::SurfacePoint>, usize)> {
+        let at: Vec<fem::tool::SurfacePoint> = points
+            .iter()
+            .map(|&q| self.surface.closest_point(q))
+            .collect();
+        let loads = at
+            .iter()
+            .map(|p| self.surface.tool_weights(p.point, radius))
+            .collect::<Result<Vec<_>, _>>()?;
+        let widest = loads.iter().map(Vec::len).max().unwrap_or(0);
+        let w = self.compliance.patch_compliances(&loads, progress)?;
+        Ok((w, at, widest))
+    }
+}
+
+/// The contact samples of `triangles` (R's, node indices into `positions`) for the scene's
+/// tool at lattice level `level`, computed on `fem`.
+pub fn contact_samples(
+    fem: &SampledFem,
+    positions: &[[f64; 3]],
+    triangles: &[[u32; 3]],
+    level: u32,
+    radius: f64,
+    progress: Option<&dyn Progress>,
+) -> Result<(ContactSamples, SampleStats)> {
+    let lattice = SharedLattice::new(triangles, level);
+    let points: Vec<[f64; 3]> = lattice
+        .points
+        .iter()
+        .map(|&(t, b)| {
+            let tri = triangles[t].map(|k| positions[k as usize]);
+            std::array::from_fn(|c| b[0] * tri[0][c] + b[1] * tri[1][c] + b[2] * tri[2][c])
+        })
+        .collect();
+    let t0 = Instant::now();
+    let (w, at, widest) = fem.patch_compliance(&points, radius, progress)?;
+    let total = t0.elapsed().as_secs_f64();
+    for (s, m) in w.iter().enumerate() {
+        if !spd(m) {
+            let p = points[s];
+            bail!(
+                "the patch compliance at [{:.4}, {:.4}, {:.4}] m is not positive definite (a \
+                 fixed region under the tool?)",
+                p[0],
+                p[1],
+                p[2]
+            );
+        }
+    }
+    let gaps: Vec<f64> = at.iter().map(|p| p.distance).collect();
+    let stats = SampleStats {
+        samples: points.len(),
+        gap_max_m: gaps.iter().copied().fold(0.0, f64::max),
+        gap_mean_m: gaps.iter().sum::<f64>() / gaps.len().max(1) as f64,
+        max_patch_nodes: widest,
+        fem_vertices: fem.vertices,
+        fem_nodes: fem.nodes,
+        factor: fem.compliance.stats(),
+        factor_s: fem.factor_s,
+        w_s: total,
+    };
+    let samples = ContactSamples {
+        level,
+        tip_radius_m: radius,
+        triangle_samples: lattice.triangle_points,
+        w,
+    };
+    Ok((samples, stats))
+}
+
+/// Whether a symmetric 3 x 3 block is positive definite (Cholesky pivots, relative to its
+/// largest diagonal entry, above the bank reader's [`bank_format::SPD_PIVOT_REL`]).
+fn spd(m: &Block3) -> bool {
+    let d = m[0][0].max(m[1][1]).max(m[2][2]);
+    let tol = bank_format::SPD_PIVOT_REL * d;
+    let l00 = m[0][0];
+    if !(l00 > tol) {
+        return false;
+    }
+    let (a, b) = (m[1][0] / l00, m[2][0] / l00);
+    let p1 = m[1][1] - a * m[1][0];
+    if !(p1 > tol) {
+        return false;
+    }
+    let c = (m[2][1] - b * m[1][0]) / p1;
+    let p2 = m[2][2] - b * m[2][0] - c * (m[2][1] - b * m[1][0]);
+    p2 > tol
+}

@@ -1,0 +1,126 @@
+//! `host contact`: what a scene's bank renders at a point of the organ (`probe`), and the
+//! convergence study of the patch compliance (`study`).
+
+use anyhow::{Context, Result, bail};
+use bank_format::{AlignedBytes, Bank};
+use host::bank::Prepared;
+use host::progress::Bar;
+use host::scene::Scene;
+use std::path::PathBuf;
+
+/// `host contact ...`.
+#[derive(clap::Subcommand, Debug)]
+pub enum ContactCmd {
+    /// The collision-surface point closest to a point, its normal, the patch compliance W the
+    /// firmware reads there and, with --depth, the force its tick renders for a normal press.
+    Probe(ProbeArgs),
+}
+
+/// Arguments of `host contact probe`.
+#[derive(clap::Args, Debug)]
+#[command(allow_negative_numbers = true)]
+pub struct ProbeArgs {
+    /// Scene file (default: the embedded default liver scene).
+    #[arg(long)]
+    scene: Option<PathBuf>,
+    /// The query point, m.
+    #[arg(long, value_name = "X,Y,Z", allow_hyphen_values = true)]
+    at: String,
+    /// Press depth along the inward normal, m: prints the force the firmware's tick renders.
+    #[arg(long, value_name = "M")]
+    depth: Option<f64>,
+    /// Render the force through the scene's tissue law Q (default: the linear model's force).
+    #[arg(long)]
+    law: bool,
+    /// One JSON object on stdout: point, normal, W (rows, m/N), nWn (m/N), force_n (N).
+    #[arg(long)]
+    json: bool,
+}
+
+/// Runs a `host contact` command.
+pub fn run(cmd: ContactCmd) -> Result<()> {
+    match cmd {
+        ContactCmd::Probe(args) => probe(args),
+    }
+}
+
+fn parse_point(s: &str) -> Result<[f64; 3]> {
+    let v: Vec<f64> = s
+        .split(',')
+        .map(|x| x.trim().parse::<f64>())
+        .collect::<Result<_, _>>()
+        .with_context(|| format!("--at {s:?}: expected three numbers X,Y,Z (m)"))?;
+    match v[..] {
+        [x, y, z] if v.iter().all(|c| c.is_finite()) => Ok([x, y, z]),
+        _ => bail!("--at {s:?}: expected three finite numbers X,Y,Z (m)"),
+    }
+}
+
+fn probe(args: ProbeArgs) -> Result<()> {
+    let at = parse_point(&args.at)?;
+    let scene = Scene::load_or_default(args.scene.as_deref())?;
+    let prep = Prepared::from_scene(scene)?;
+    let progress = Bar::new("patch compliance chunks");
+    let (built, _) = host::bank::cache::scene_bank_cached(&prep, Some(&progress))?;
+    progress.finish();
+    let aligned = AlignedBytes::new(&built.bytes);
+    let bank = Bank::parse(&aligned).map_err(|e| anyhow::anyhow!("built bank invalid: {e}"))?;
+    let p = host::probe::probe(
+        &bank,
+        (&prep.mesh.nodes, &prep.surface.triangles),
+        at,
+        args.depth,
+        args.law,
+    )?;
+    if args.json {
+        let mut o = serde_json::json!({
+            "point": p.point,
+            "normal": p.normal,
+            "W": p.w,
+            "nWn": p.nwn,
+            "triangle": p.triangle,
+            "model": if bank.samples().is_some() { "sampled" } else { "nodal" },
+        });
+        if let Some(f) = p.force_n {
+            o["force_n"] = serde_json::json!(f);
+        }
+        println!("{o}");
+        return Ok(());
+    }
+    let model = if bank.samples().is_some() {
+        "sampled patch compliance"
+    } else {
+        "tool patch on the nodes"
+    };
+    println!(
+        "point     [{:.5}, {:.5}, {:.5}] m on collision triangle {} ({model})",
+        p.point[0], p.point[1], p.point[2], p.triangle
+    );
+    println!(
+        "normal    [{:.4}, {:.4}, {:.4}]",
+        p.normal[0], p.normal[1], p.normal[2]
+    );
+    for (i, row) in p.w.iter().enumerate() {
+        println!(
+            "{}[{:+.4e}, {:+.4e}, {:+.4e}] m/N",
+            if i == 0 { "W         " } else { "          " },
+            row[0],
+            row[1],
+            row[2]
+        );
+    }
+    println!("n.W.n     {:.4e} m/N", p.nwn);
+    if let (Some(f), Some(d)) = (p.force_n, args.depth) {
+        let mag = (f[0] * f[0] + f[1] * f[1] + f[2] * f[2]).sqrt();
+        println!(
+            "force     [{:+.4}, {:+.4}, {:+.4}] N, |F| = {mag:.4} N on the tool for a {:.2} mm \
+             press ({})",
+            f[0],
+            f[1],
+            f[2],
+            1e3 * d,
+            if args.law { "law Q" } else { "linear model" }
+        );
+    }
+    Ok(())
+}

@@ -1,0 +1,254 @@
+//! `host contact probe`: what a bank renders at any point of the reachable surface.
+//!
+//! For a query point `X`: the collision-surface point `p` closest to `X` (R's triangles; an error
+//! when the organ's surface point closest to `X` is not reachable), the triangle's outward
+//! normal `n`, the patch compliance `W(p)` as the firmware reads it (a sampled bank: its
+//! interpolated samples, [`bank_format::Samples::interpolate`]; a nodal bank: `B C_SS B^T` of the
+//! firmware's tool patch at `p`), and, for a press depth `D`, the tool force that the firmware's
+//! own tick ([`firmware::tick::HapticLoop`]) renders when the device moves the tip from 5 mm
+//! outside `p` to `p - D n` along `-n` (0.2 mm a tick, then held), frictionless because the path
+//! is normal to the surface.
+
+use crate::kinematics::{Workspace, counts_for};
+use anyhow::{Result, bail};
+use bank_format::{Bank, Mode};
+use fem::vec3::{add, cross, dist2, dot, norm, scale, sub};
+use firmware::hal::Interlocks;
+use firmware::tick::{HapticLoop, LoopInput};
+
+/// What a probe found.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Probe {
+    /// The collision triangle (index into the bank's triangles).
+    pub triangle: u32,
+    /// Barycentric coordinates of `point` in it.
+    pub bary: [f64; 3],
+    /// The collision-surface point closest to the query, m.
+    pub point: [f64; 3],
+    /// The triangle's outward unit normal.
+    pub normal: [f64; 3],
+    /// `W(p)`, m/N, as the firmware reads it.
+    pub w: [[f64; 3]; 3],
+    /// `n . W n`, m/N: the normal compliance.
+    pub nwn: f64,
+    /// The force the firmware renders on the tool for the press, N (with a depth).
+    pub force_n: Option<[f64; 3]>,
+}
+
+/// Millimetres the pressing tip starts outside the surface.
+const START_M: f64 = 0.005;
+/// The pressing tip's step per tick, m (0.2 m/s: far below the overspeed threshold).
+const STEP_M: f64 = 0.0002;
+/// Ticks the tip is held at the press depth before the force is read.
+const HOLD_TICKS: usize = 10;
+
+/// The closest point of triangle `v` to `q`: (point, barycentric coordinates).
+pub fn closest_on_triangle(q: [f64; 3], v: [[f64; 3]; 3]) -> ([f64; 3], [f64; 3]) {
+    // Ericson, Real-Time Collision Detection, 5.1.5.
+    let (a, b, c) = (v[0], v[1], v[2]);
+    let (ab, ac, ap) = (sub(b, a), sub(c, a), sub(q, a));
+    let (d1, d2) = (dot(ab, ap), dot(ac, ap));
+    if d1 <= 0.0 && d2 <= 0.0 {
+        return (a, [1.0, 0.0, 0.0]);
+    }
+    let bp = sub(q, b);
+    let (d3, d4) = (dot(ab, bp), dot(ac, bp));
+    if d3 >= 0.0 && d4 <= d3 {
+        return (b, [0.0, 1.0, 0.0]);
+    }
+    let vc = d1 * d4 - d3 * d2;
+    if vc <= 0.0 && d1 >= 0.0 && d3 <= 0.0 {
+        let t = d1 / (d1 - d3);
+        return (add(a, scale(ab, t)), [1.0 - t, t, 0.0]);
+    }
+    let cp = sub(q, c);
+    let (d5, d6) = (dot(ab, cp), dot(ac, cp));
+    if d6 >= 0.0 && d5 <= d6 {
+        return (c, [0.0, 0.0, 1.0]);
+    }
+    let vb = d5 * d2 - d1 * d6;
+    if vb <= 0.0 && d2 >= 0.0 && d6 <= 0.0 {
+        let t = d2 / (d2 - d6);
+        return (add(a, scale(ac, t)), [1.0 - t, 0.0, t]);
+    }
+    let va = d3 * d6 - d5 * d4;
+    if va <= 0.0 && d4 - d3 >= 0.0 && d5 - d6 >= 0.0 {
+        let t = (d4 - d3) / ((d4 - d3) + (d5 - d6));
+        return (add(b, scale(sub(c, b), t)), [0.0, 1.0 - t, t]);
+    }
+    let den = 1.0 / (va + vb + vc);
+    let (s, t) = (vb * den, vc * den);
+    (add(a, add(scale(ab, s), scale(ac, t))), [1.0 - s - t, s, t])
+}
+
+/// The closest point to `q` over `triangles` of `positions`: (triangle, point, bary, squared
+/// distance); `None` without triangles.
+pub fn closest_point(
+    positions: &[[f64; 3]],
+    triangles: &[[usize; 3]],
+    q: [f64; 3],
+) -> Option<(usize, [f64; 3], [f64; 3], f64)> {
+    let mut best: Option<(usize, [f64; 3], [f64; 3], f64)> = None;
+    for (t, tri) in triangles.iter().enumerate() {
+        let v = tri.map(|k| positions[k]);
+        let (p, b) = closest_on_triangle(q, v);
+        let d = dist2(p, q);
+        if best.is_none_or(|x| d < x.3) {
+            best = Some((t, p, b, d));
+        }
+    }
+    best
+}
+
+/// Probes `bank` at `at` (m). `organ` is the collision mesh's whole boundary (positions and
+/// triangles), to tell a query whose closest surface point is not reachable. `depth` (m, > 0)
+/// asks for the rendered force of a press; `law` renders it through the bank's Q (else the
+/// linear model's force, the firmware's `LinearLaw` mode).
+pub fn probe(
+    bank: &Bank<'_>,
+    organ: (&[[f64; 3]], &[[usize; 3]]),
+    at: [f64; 3],
+    depth: Option<f64>,
+    law: bool,
+) -> Result<Probe> {
+    let name = format!("[{:.4}, {:.4}, {:.4}] m", at[0], at[1], at[2]);
+    if !at.iter().all(|x| x.is_finite()) {
+        bail!("--at {name}: not a finite point");
+    }
+    let positions: Vec<[f64; 3]> = bank.positions().iter().map(|p| p.map(f64::from)).collect();
+    let triangles: Vec<[usize; 3]> = bank
+        .triangles()
+        .iter()
+        .map(|t| t.map(usize::from))
+        .collect();
+    let Some((t, point, bary, d2)) = closest_point(&positions, &triangles, at) else {
+        bail!("the bank has no triangles");
+    };
+    // 1 um of slack: the bank's positions are f32.
+    if let Some((_, q, _, o2)) = closest_point(organ.0, organ.1, at)
+        && o2.sqrt() + 1e-6 < d2.sqrt()
+    {
+        bail!(
+            "--at {name}: the organ's surface point closest to it, [{:.4}, {:.4}, {:.4}] m, is \
+             outside the tool's reachable region (or on the fixed supports); the nearest \
+             reachable point is {:.1} mm away",
+            q[0],
+            q[1],
+            q[2],
+            1e3 * d2.sqrt()
+        );
+    }
+    let tri = bank.triangles()[t];
+    let v = tri.map(|k| positions[usize::from(k)]);
+    let nrm = cross(sub(v[1], v[0]), sub(v[2], v[0]));
+    let normal = scale(nrm, 1.0 / norm(nrm));
+    let b32 = bary.map(|x| x as f32);
+    let w6 = match bank.samples() {
+        Some(s) => s.interpolate(t, b32),
+        None => nodal_w(bank, t as u32, tri, b32, point.map(|x| x as f32)),
+    };
+    let Some(w6) = w6 else {
+        bail!("--at {name}: the bank gives no patch compliance there");
+    };
+    let w6 = w6.map(f64::from);
+    let w = [
+        [w6[0], w6[1], w6[2]],
+        [w6[1], w6[3], w6[4]],
+        [w6[2], w6[4], w6[5]],
+    ];
+    let wn: [f64; 3] = std::array::from_fn(|i| dot(w[i], normal));
+    let nwn = dot(normal, wn);
+    let force_n = depth
+        .map(|d| press(bank, point, normal, d, law, &name))
+        .transpose()?;
+    Ok(Probe {
+        triangle: t as u32,
+        bary,
+        point,
+        normal,
+        w,
+        nwn,
+        force_n,
+    })
+}
+
+/// `B C_SS B^T` of the firmware's tool patch at `point` on a nodal bank (upper triangle: xx,
+/// xy, xz, yy, yz, zz).
+fn nodal_w(
+    bank: &Bank<'_>,
+    t: u32,
+    tri: [u16; 3],
+    bary: [f32; 3],
+    p: [f32; 3],
+) -> Option<[f32; 6]> {
+    let r = bank.device().tip_radius_m;
+    let patch = firmware::patch::tool_patch(bank, t, tri, bary, p, r);
+    let mut m = [0.0f32; 6];
+    for (&a, &wa) in patch.nodes().iter().zip(patch.weights()) {
+        for (&b, &wb) in patch.nodes().iter().zip(patch.weights()) {
+            let c = bank.coupling(usize::from(a), usize::from(b))?;
+            let idx = [(0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2)];
+            for (o, (i, j)) in m.iter_mut().zip(idx) {
+                *o += wa * wb * c[i][j];
+            }
+        }
+    }
+    Some(m)
+}
+
+/// The firmware tick's tool force for a normal press of `depth` at `point`.
+fn press(
+    bank: &Bank<'_>,
+    point: [f64; 3],
+    normal: [f64; 3],
+    depth: f64,
+    law: bool,
+    name: &str,
+) -> Result<[f64; 3]> {
+    if !(depth > 0.0 && depth.is_finite() && depth <= 0.05) {
+        bail!("--depth {depth}: must lie in (0, 0.05] m");
+    }
+    let cal = *bank.device();
+    let ws = Workspace::from_device(&cal);
+    let mut lp = HapticLoop::new(bank);
+    if lp
+        .set_mode(if law { Mode::Render } else { Mode::LinearLaw })
+        .is_err()
+    {
+        bail!("internal: the loop refused the mode");
+    }
+    let steps = ((START_M + depth) / STEP_M).ceil() as usize;
+    let mut force = [0.0f32; 3];
+    for i in 0..=steps + HOLD_TICKS {
+        let s = START_M - (i.min(steps) as f64 / steps as f64) * (START_M + depth);
+        let tip = add(point, scale(normal, s));
+        let q = ws.joints_for_tip(tip);
+        let inside = (0..3).all(|j| {
+            (f64::from(cal.joint_min[j]) - 1e-9..=f64::from(cal.joint_max[j]) + 1e-9)
+                .contains(&q[j])
+        });
+        if !inside {
+            bail!(
+                "--at {name}: the device cannot put its tip at [{:.4}, {:.4}, {:.4}] m on the \
+                 press (pitch {:.3} rad, yaw {:.3} rad, insertion {:.4} m): outside its ranges",
+                tip[0],
+                tip[1],
+                tip[2],
+                q[0],
+                q[1],
+                q[2]
+            );
+        }
+        let out = lp.tick(LoopInput {
+            encoder_counts: counts_for(&cal, q),
+            overrun: false,
+            link_silence_ticks: 0,
+            interlocks: Interlocks::default(),
+        });
+        if let Some(e) = out.solve_error {
+            bail!("--at {name}: the firmware's solve failed on the press: {e}");
+        }
+        force = out.tool_force_n;
+    }
+    Ok(force.map(f64::from))
+}
