@@ -1087,7 +1087,6 @@ impl<'a> Bank<'a> {
         let grid = parse_grid(&sections, positions, triangles)?;
         let ckk = parse_ckk(&sections, n)?;
         let (nb_starts, nb_index, nb_ckl, coupling_starts) = parse_neighbours(&sections, n)?;
-        let samples = parse_samples(&sections, triangles, node_tri_starts, node_tri_items)?;
         let bank = Bank {
             bytes: bank,
             header,
@@ -1108,11 +1107,12 @@ impl<'a> Bank<'a> {
             law,
             device,
             gravity,
-            samples,
+            samples: None,
         };
         bank.check_couplings()?;
         bank.check_coverage()?;
-        Ok(bank)
+        let samples = parse_samples(&sections, triangles, node_tri_starts, node_tri_items)?;
+        Ok(Bank { samples, ..bank })
     }
 
     /// `SPEC.md` "Validation" rule 13: reciprocity and pairwise positive definiteness of the

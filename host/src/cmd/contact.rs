@@ -14,6 +14,28 @@ pub enum ContactCmd {
     /// The collision-surface point closest to a point, its normal, the patch compliance W the
     /// firmware reads there and, with --depth, the force its tick renders for a normal press.
     Probe(ProbeArgs),
+    /// Convergence study of W: the normal stiffness 1 / (n.W.n) at the study's sites on a
+    /// sequence of FEM meshes, and its Richardson extrapolation with the error it estimates.
+    Study(StudyArgs),
+}
+
+/// Arguments of `host contact study`.
+#[derive(clap::Args, Debug)]
+pub struct StudyArgs {
+    /// Scene file (default: the embedded default liver scene): material, supports, tool,
+    /// collision surface.
+    #[arg(long)]
+    scene: Option<PathBuf>,
+    /// A FEM mesh and its fine-zone size in m, coarse to fine (at least three for the
+    /// extrapolation, the last three sizes in one constant ratio).
+    #[arg(long = "mesh", value_name = "FILE:H", required = true)]
+    meshes: Vec<String>,
+    /// Element: p1, anp or p2.
+    #[arg(long, default_value = "p2")]
+    element: String,
+    /// Write the study (sites, every level's W, the reference) as JSON to this file.
+    #[arg(long)]
+    out: Option<PathBuf>,
 }
 
 /// Arguments of `host contact probe`.
@@ -41,6 +63,7 @@ pub struct ProbeArgs {
 pub fn run(cmd: ContactCmd) -> Result<()> {
     match cmd {
         ContactCmd::Probe(args) => probe(args),
+        ContactCmd::Study(args) => study(args),
     }
 }
 
@@ -121,6 +144,95 @@ fn probe(args: ProbeArgs) -> Result<()> {
             1e3 * d,
             if args.law { "law Q" } else { "linear model" }
         );
+    }
+    Ok(())
+}
+
+fn study(args: StudyArgs) -> Result<()> {
+    use host::scene::FemElement;
+    use host::study::{self, DEFAULT_SITES, normal_compliance};
+    let element = match args.element.as_str() {
+        "p2" => FemElement::Quadratic,
+        e => FemElement::Linear(
+            e.parse()
+                .map_err(|why: String| anyhow::anyhow!("--element: {why}, or p2"))?,
+        ),
+    };
+    let meshes = args
+        .meshes
+        .iter()
+        .map(|m| {
+            let (f, h) = m
+                .rsplit_once(':')
+                .with_context(|| format!("--mesh {m:?}: expected FILE:H"))?;
+            let h: f64 = h
+                .parse()
+                .ok()
+                .filter(|h: &f64| *h > 0.0 && h.is_finite())
+                .with_context(|| format!("--mesh {m:?}: H must be a size in m, > 0"))?;
+            Ok((PathBuf::from(f), h))
+        })
+        .collect::<Result<Vec<_>>>()?;
+    let scene = Scene::load_or_default(args.scene.as_deref())?;
+    let prep = Prepared::from_scene(scene)?;
+    let given: Vec<(String, [f64; 3])> = DEFAULT_SITES
+        .iter()
+        .map(|(n, p)| (n.to_string(), *p))
+        .collect();
+    let sites = study::sites(&prep, &given)?;
+    let mut levels = Vec::new();
+    for (mesh, h) in &meshes {
+        eprintln!("level {} ({}, h {} mm) ...", mesh.display(), args.element, 1e3 * h);
+        let l = study::level(&prep, &sites, mesh, *h, element)?;
+        eprintln!(
+            "  {} vertices, {} nodes, {} free dofs, nnz(L) {:.1} M, {:.1} s",
+            l.vertices,
+            l.nodes,
+            l.free_dofs,
+            l.nnz_l as f64 / 1e6,
+            l.seconds
+        );
+        levels.push(l);
+    }
+    let (reference_w, order, reference_error) = if levels.len() >= 3 {
+        study::extrapolate(&sites, &levels)?
+    } else {
+        eprintln!("note: fewer than three levels, no extrapolation");
+        (Vec::new(), Vec::new(), Vec::new())
+    };
+    print!("{:<28}", "normal stiffness (N/m)");
+    for l in &levels {
+        print!(" {:>9}", format!("{:.2}mm", 1e3 * l.h_m));
+    }
+    println!(" {:>9} {:>6} {:>8}", "limit", "order", "ref err");
+    for (s, site) in sites.iter().enumerate() {
+        print!("{:<28}", site.name);
+        for l in &levels {
+            print!(" {:>9.3}", 1.0 / normal_compliance(&l.w[s], site.normal));
+        }
+        if let Some(w) = reference_w.get(s) {
+            print!(
+                " {:>9.3} {:>6.2} {:>7.2}%",
+                1.0 / normal_compliance(w, site.normal),
+                order[s],
+                100.0 * reference_error[s]
+            );
+        }
+        println!();
+    }
+    if let Some(out) = &args.out {
+        let st = study::Study {
+            scene: prep.scene.path.display().to_string(),
+            tip_radius_m: prep.scene.tip_radius_m,
+            sites,
+            levels,
+            reference_w,
+            order,
+            reference_error,
+        };
+        let text = serde_json::to_string_pretty(&st)?;
+        host::fsio::write_atomic(out, text.as_bytes(), &[])?;
+        eprintln!("wrote {}", out.display());
     }
     Ok(())
 }

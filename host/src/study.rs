@@ -1,0 +1,213 @@
+//! The convergence study of the patch compliance (`host contact study`): `W(p)` of the scene's
+//! tool at named sites of the reachable surface, on a sequence of FEM meshes (finer and finer
+//! where the tool reaches), with one element, and its extrapolated limit.
+//!
+//! A site is a point near the organ; its contact point is the collision surface's point
+//! closest to it (as `host contact probe` finds it), and on each FEM mesh `W` is computed at
+//! that mesh's surface point closest to the contact point, exactly as a sampled bank's samples
+//! are ([`crate::bank::sampled`]). The figure of merit per site is the normal stiffness
+//! `k = 1 / (n . W n)` (N/m: the normal force per metre of a frictionless normal press, the
+//! linear model's), and the whole `W`.
+//!
+//! Extrapolation (Richardson): with the meshes' fine-zone sizes `h_1 > h_2 > h_3` and each
+//! entry's values `W_1, W_2, W_3`, the observed order of `n . W n` at the site is `q = ln((W_1 -
+//! W_2) / (W_2 - W_3)) / ln(h_1 / h_2)` (for a constant ratio `h_1 / h_2 = h_2 / h_3`), clamped to
+//! `[1, 4]` (and 2, the order of a smooth solution's energy with P1, when the differences do
+//! not shrink monotonically); `W_inf = W_3 + (W_3 - W_2) / ((h_2 / h_3)^q - 1)` entry by entry.
+//! The reference's own error is estimated as the size of that correction, `|W_inf - W_3|`
+//! relative (conservative when the sequence is in its asymptotic range: the true remainder is
+//! then a fraction of it).
+
+use crate::bank::Prepared;
+use crate::bank::sampled::SampledFem;
+use crate::probe::closest_point;
+use crate::scene::{FemElement, SampledContact};
+use anyhow::{Result, bail};
+use fem::compliance::Block3;
+use fem::vec3::{cross, dot, norm, scale, sub};
+use serde::{Deserialize, Serialize};
+use std::path::PathBuf;
+
+/// The study's default sites on the default liver (near-surface points, m): the right lobe's
+/// top and flanks, the crease between the lobes, the thinner left lobe, the edges of the reach.
+pub const DEFAULT_SITES: [(&str, [f64; 3]); 14] = [
+    ("right lobe top", [0.02, 0.0, 0.075]),
+    ("right lobe top, front", [0.02, -0.02, 0.072]),
+    ("right lobe top, back", [0.02, 0.02, 0.072]),
+    ("right lobe front flank", [0.015, -0.035, 0.06]),
+    ("right lobe back flank", [0.015, 0.035, 0.06]),
+    ("straight below the trocar", [0.0, 0.0, 0.075]),
+    ("crease", [-0.012, 0.0, 0.07]),
+    ("left lobe top", [-0.03, 0.01, 0.065]),
+    ("left lobe, thin end", [-0.038, 0.0, 0.06]),
+    ("left lobe front", [-0.025, -0.015, 0.06]),
+    ("reach edge, front", [0.0, -0.033, 0.065]),
+    ("reach edge, back left", [-0.025, 0.03, 0.06]),
+    ("reach edge, back right", [0.03, 0.03, 0.066]),
+    ("reach edge, front right", [0.035, -0.03, 0.06]),
+];
+
+/// A site's contact point on the collision surface.
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+pub struct Site {
+    /// Its name.
+    pub name: String,
+    /// The point given, m.
+    pub query: [f64; 3],
+    /// The collision surface's closest point, m.
+    pub point: [f64; 3],
+    /// That triangle's outward unit normal.
+    pub normal: [f64; 3],
+}
+
+/// One FEM mesh's results.
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+pub struct Level {
+    /// The mesh file.
+    pub mesh: String,
+    /// Its fine-zone mesh size, m (as given).
+    pub h_m: f64,
+    /// Element name.
+    pub element: String,
+    /// Vertices and body nodes.
+    pub vertices: usize,
+    /// Body nodes (P2: vertices and edge nodes).
+    pub nodes: usize,
+    /// Free dofs and entries of the factor.
+    pub free_dofs: usize,
+    /// Entries of the Cholesky factor.
+    pub nnz_l: usize,
+    /// Seconds to assemble and factorise, and for the sites' `W`.
+    pub seconds: f64,
+    /// `W` per site, m/N.
+    pub w: Vec<Block3>,
+}
+
+/// The study's result: sites, levels, and the extrapolated reference.
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+pub struct Study {
+    /// The scene file the study ran on.
+    pub scene: String,
+    /// The tool radius, m.
+    pub tip_radius_m: f64,
+    /// The sites.
+    pub sites: Vec<Site>,
+    /// The levels, coarse to fine.
+    pub levels: Vec<Level>,
+    /// Extrapolated `W` per site (from the last three levels), m/N.
+    pub reference_w: Vec<Block3>,
+    /// Observed order per site.
+    pub order: Vec<f64>,
+    /// Estimated relative error of the reference's `n . W n` per site.
+    pub reference_error: Vec<f64>,
+}
+
+/// `n . W n`.
+pub fn normal_compliance(w: &Block3, n: [f64; 3]) -> f64 {
+    let wn: [f64; 3] = std::array::from_fn(|i| dot(w[i], n));
+    dot(n, wn)
+}
+
+/// The sites' contact points on the scene's collision surface (R's triangles).
+pub fn sites(prep: &Prepared, given: &[(String, [f64; 3])]) -> Result<Vec<Site>> {
+    let triangles: Vec<[usize; 3]> = prep
+        .triangles
+        .iter()
+        .map(|t| t.map(|k| k as usize))
+        .collect();
+    given
+        .iter()
+        .map(|(name, q)| {
+            let Some((t, point, _, d2)) = closest_point(&prep.positions, &triangles, *q) else {
+                bail!("the scene's reachable region has no triangles");
+            };
+            if let Some((_, _, _, o2)) =
+                closest_point(&prep.mesh.nodes, &prep.surface.triangles, *q)
+                && o2.sqrt() + 1e-9 < d2.sqrt()
+            {
+                bail!(
+                    "site {name:?} at [{:.4}, {:.4}, {:.4}] m: its closest surface point is \
+                     outside the reachable region",
+                    q[0],
+                    q[1],
+                    q[2]
+                );
+            }
+            let v = triangles[t].map(|k| prep.positions[k]);
+            let n = cross(sub(v[1], v[0]), sub(v[2], v[0]));
+            Ok(Site {
+                name: name.clone(),
+                query: *q,
+                point,
+                normal: scale(n, 1.0 / norm(n)),
+            })
+        })
+        .collect()
+}
+
+/// `W` at the sites on one FEM mesh of size `h_m` with `element`.
+pub fn level(
+    prep: &Prepared,
+    sites: &[Site],
+    mesh: &PathBuf,
+    h_m: f64,
+    element: FemElement,
+) -> Result<Level> {
+    let t0 = std::time::Instant::now();
+    let spec = SampledContact {
+        fem_mesh: mesh.clone(),
+        element,
+        level: 1,
+    };
+    let fem = SampledFem::new(&prep.scene, &spec)?;
+    let points: Vec<[f64; 3]> = sites.iter().map(|s| s.point).collect();
+    let (w, _, _) = fem.patch_compliance(&points, prep.scene.tip_radius_m, None)?;
+    let stats = fem.compliance.stats();
+    Ok(Level {
+        mesh: mesh.display().to_string(),
+        h_m,
+        element: element.name().to_string(),
+        vertices: fem.vertices,
+        nodes: fem.nodes,
+        free_dofs: stats.free_dofs,
+        nnz_l: stats.nnz_l,
+        seconds: t0.elapsed().as_secs_f64(),
+        w,
+    })
+}
+
+/// Richardson extrapolation of the last three levels (module notes): `(W_inf, order, relative
+/// error of n . W n)` per site.
+pub fn extrapolate(sites: &[Site], levels: &[Level]) -> Result<(Vec<Block3>, Vec<f64>, Vec<f64>)> {
+    let [.., a, b, c] = levels else {
+        bail!("the extrapolation needs at least three levels");
+    };
+    let r = b.h_m / c.h_m;
+    if !(r > 1.0) || ((a.h_m / b.h_m) / r - 1.0).abs() > 0.05 {
+        bail!(
+            "the last three mesh sizes must shrink by one constant ratio (got {} / {} / {} m)",
+            a.h_m,
+            b.h_m,
+            c.h_m
+        );
+    }
+    let mut out = (Vec::new(), Vec::new(), Vec::new());
+    for (s, site) in sites.iter().enumerate() {
+        let [k1, k2, k3] = [a, b, c].map(|l| normal_compliance(&l.w[s], site.normal));
+        let ratio = (k1 - k2) / (k2 - k3);
+        let q = if ratio > 1.0 && ratio.is_finite() {
+            (ratio.ln() / r.ln()).clamp(1.0, 4.0)
+        } else {
+            2.0
+        };
+        let f = 1.0 / (r.powf(q) - 1.0);
+        let w: Block3 = std::array::from_fn(|i| {
+            std::array::from_fn(|j| c.w[s][i][j] + (c.w[s][i][j] - b.w[s][i][j]) * f)
+        });
+        let kinf = normal_compliance(&w, site.normal);
+        out.0.push(w);
+        out.1.push(q);
+        out.2.push(((kinf - k3) / kinf).abs());
+    }
+    Ok(out)
+}
