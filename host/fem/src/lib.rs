@@ -14,8 +14,11 @@
 //!    `C_nk = (K_ff^-1)_nk` (the paper's "elementary deformations", section 4-1, in compliance
 //!    form) for the nodes a scene needs, and the imposed-displacement solve of eq. 2 /
 //!    appendix A (`f_S = C_SS^-1 u*_S`);
-//! 5. [`reference`](mod@reference): the reference problems of the locking study (a flat punch on the liver,
-//!    uniform refinement), solved with any element or the 10-node
+//! 5. [`tool`]: the load of a rigid tool tip on the surface (a parabolic pressure spread over the
+//!    nodes by the surface shape functions, P1 or P2), the nodal weights of
+//!    [`compliance::Compliance::patch_compliances`];
+//! 6. [`reference`](mod@reference): the reference problems of the locking study (a flat punch
+//!    on the liver, uniform refinement), solved with any element or the 10-node
 //!    [`elasticity::quadratic::QuadraticBody`].
 //!
 //! ```
@@ -43,4 +46,5 @@ pub mod mesh;
 pub mod ordering;
 pub mod progress;
 pub mod reference;
+pub mod tool;
 pub mod vec3;

@@ -93,7 +93,7 @@ enum Source {
 }
 
 /// Parallelism for a dense kernel of about `flops` operations.
-fn par_for(flops: f64) -> Par {
+pub(super) fn par_for(flops: f64) -> Par {
     if flops > 2e6 { Par::rayon(0) } else { Par::Seq }
 }
 

@@ -7,9 +7,14 @@
 //!
 //! One sparse Cholesky factorisation of `K_ff` (nested-dissection ordering, supernodal) replaces
 //! the paper's `3m` conjugate-gradient solves; a sparse forward substitution restricted to the
-//! contact candidates then gives all their blocks at once (module `gram`).
+//! contact candidates then gives all their blocks at once (module `gram`). A tool load spread
+//! over several nodes has the patch compliance `B K_ff^-1 B^T` ([`Compliance::patch_compliances`],
+//! module `patch`).
 
 mod gram;
+mod patch;
+
+pub use patch::CHUNK_BYTES;
 
 use crate::elasticity::{DofMap, Elasticity, FemError, FixedSet, Stiffness};
 use crate::ordering::{DofPermutation, Ordering, permutation};
@@ -51,6 +56,14 @@ pub enum ComplianceError {
     /// Two contact nodes given twice, or a singular `C_SS`.
     #[error("the contact set is degenerate: {0}")]
     DegenerateContact(String),
+    /// A patch load with no node, or a non-finite weight.
+    #[error("patch load {load} is invalid: {reason}")]
+    BadLoad {
+        /// Index of the load in the request.
+        load: usize,
+        /// What is wrong with it.
+        reason: String,
+    },
 }
 
 /// Size and cost figures of a factorisation, for reports and benchmarks.
