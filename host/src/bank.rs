@@ -465,7 +465,47 @@ impl Prepared {
         progress: Option<&dyn Progress>,
     ) -> Result<BuiltBank> {
         let fem = sampled::SampledFem::new(&self.scene, spec)?;
-        self.sampled_bank_on(&fem, spec.level, progress)
+        let Some(rich) = &spec.richardson else {
+            return self.sampled_bank_on(&fem, spec.level, progress);
+        };
+        // W on the fine mesh, then (its factor dropped first) on the coarse one.
+        let (lattice, points) =
+            sampled::lattice_points(&self.positions, &self.triangles, spec.level);
+        let r = self.scene.tip_radius_m;
+        let t0 = std::time::Instant::now();
+        let (w_fine, at, widest) = fem.patch_compliance(&points, r, progress)?;
+        let fine_s = t0.elapsed().as_secs_f64();
+        let (mut samples, mut stats) = sampled::samples_from(
+            lattice, &points, w_fine, &at, widest, &fem, spec.level, r, fine_s,
+        )?;
+        let fem_hash = fem.mesh_hash;
+        drop(fem);
+        let coarse = sampled::SampledFem::load(&self.scene, &rich.mesh, spec.element)?;
+        let t1 = std::time::Instant::now();
+        let (w_coarse, ..) = coarse.patch_compliance(&points, r, progress)?;
+        samples.w = sampled::extrapolated(&samples.w, &w_coarse, rich.factor());
+        if let Some(s) = samples.w.iter().position(|w| !sampled::spd(w)) {
+            let p = points[s];
+            bail!(
+                "the Richardson-extrapolated patch compliance at [{:.4}, {:.4}, {:.4}] m is not \
+                 positive definite: {} and {} disagree too much there (lower \
+                 contact.richardson_order, or drop the extrapolation)",
+                p[0],
+                p[1],
+                p[2],
+                spec.fem_mesh.display(),
+                rich.mesh.display()
+            );
+        }
+        stats.factor_s += coarse.factor_s;
+        stats.w_s += t1.elapsed().as_secs_f64();
+        let coarse_hash = coarse.mesh_hash;
+        drop(coarse);
+        let id = fnv1a(
+            fnv1a(self.scene_id, &fem_hash.to_le_bytes()),
+            &coarse_hash.to_le_bytes(),
+        );
+        self.sampled_bank_with(samples, stats, id)
     }
 
     /// [`Prepared::sampled_bank`] on an already factorised FEM body, at lattice level `level`.
@@ -475,8 +515,6 @@ impl Prepared {
         level: u32,
         progress: Option<&dyn Progress>,
     ) -> Result<BuiltBank> {
-        let rows = self.blocks(0.0, None)?;
-        let (mut builder, pairs) = self.builder_in(&rows, 0.0, None)?;
         let (samples, stats) = sampled::contact_samples(
             fem,
             &self.positions,
@@ -485,8 +523,22 @@ impl Prepared {
             self.scene.tip_radius_m,
             progress,
         )?;
+        let id = fnv1a(self.scene_id, &fem.mesh_hash.to_le_bytes());
+        self.sampled_bank_with(samples, stats, id)
+    }
+
+    /// The sampled bank from its samples: R's collision data, the nodal compliance with the
+    /// triangle edges coupled, the samples, scene id `scene_id`.
+    fn sampled_bank_with(
+        &self,
+        samples: bank_format::ContactSamples,
+        stats: sampled::SampleStats,
+        scene_id: u64,
+    ) -> Result<BuiltBank> {
+        let rows = self.blocks(0.0, None)?;
+        let (mut builder, pairs) = self.builder_in(&rows, 0.0, None)?;
         builder.samples = Some(samples);
-        builder.scene_id = fnv1a(self.scene_id, &fem.mesh_hash.to_le_bytes());
+        builder.scene_id = scene_id;
         let bytes = builder
             .build_with_precision(self.scene.bank.precision)
             .map_err(|e| anyhow::anyhow!("the bank writer refused the scene's data: {e}"))?;
@@ -510,8 +562,11 @@ impl Prepared {
 
 /// The bank of the scene file at `scene` (what `host bank build` writes), refused when it does
 /// not fit the device's bank region ([`BANK_LEN`]).
+/// A sampled scene's bank comes from the cache ([`cache::scene_bank_cached`]) when its inputs
+/// are unchanged.
 pub fn scene_bank(scene: &Path) -> Result<Vec<u8>> {
-    let bytes = Prepared::load(scene)?.build_bank(None)?.bytes;
+    let prep = Prepared::load(scene)?;
+    let bytes = cache::scene_bank_cached(&prep, None)?.0.bytes;
     if bytes.len() > BANK_LEN {
         bail!(
             "{}: the bank would be {} bytes, more than the {BANK_LEN} bytes of the bank region",

@@ -25,6 +25,6 @@ pub mod report;
 pub mod scene;
 pub mod script;
 pub mod sil;
-pub mod study;
 pub mod source;
+pub mod study;
 pub mod virtual_device;

@@ -91,6 +91,12 @@ struct RawContact {
     fem_element: Option<Spanned<String>>,
     #[serde(default)]
     sample_level: Option<Spanned<u32>>,
+    #[serde(default)]
+    richardson_mesh: Option<Spanned<String>>,
+    #[serde(default)]
+    richardson_ratio: Option<Spanned<f64>>,
+    #[serde(default)]
+    richardson_order: Option<Spanned<f64>>,
 }
 
 /// `[gravity]`: the coefficients of the instrument's weight feed-forward (`bank-format`
@@ -272,6 +278,29 @@ pub struct SampledContact {
     pub element: FemElement,
     /// Lattice steps per collision triangle side (`sample_level`, 1..=8, default 2).
     pub level: u32,
+    /// Richardson extrapolation of the samples, if any (`richardson_mesh`,
+    /// `richardson_ratio`, `richardson_order`).
+    pub richardson: Option<Richardson>,
+}
+
+/// Richardson extrapolation of the sampled `W` towards the continuum: `W = W_f + (W_f - W_c)
+/// / (ratio^order - 1)` from `W_f` on `fem_mesh` and `W_c` on a coarser mesh of the same organ
+/// whose size is `ratio` times `fem_mesh`'s where the tool reaches.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Richardson {
+    /// The coarser FEM mesh (resolved against the scene file's directory).
+    pub mesh: PathBuf,
+    /// Its mesh size over `fem_mesh`'s, > 1.
+    pub ratio: f64,
+    /// The assumed order of convergence, in [0.5, 4].
+    pub order: f64,
+}
+
+impl Richardson {
+    /// The factor of `W_f - W_c`: `1 / (ratio^order - 1)`.
+    pub fn factor(&self) -> f64 {
+        1.0 / (self.ratio.powf(self.order) - 1.0)
+    }
 }
 
 /// The element of a sampled contact's FEM mesh.
@@ -466,8 +495,13 @@ impl Scene {
     pub fn load_or_default(path: Option<&Path>) -> Result<Scene, SceneError> {
         match path {
             Some(p) => Scene::load(p),
+            // Named in the source tree, so that its relative FEM meshes resolve from any
+            // working directory.
             None => Scene::parse(
-                Path::new("host/scenes/liver.toml (embedded)"),
+                Path::new(concat!(
+                    env!("CARGO_MANIFEST_DIR"),
+                    "/scenes/liver.toml (embedded)"
+                )),
                 DEFAULT_SCENE,
             ),
         }
@@ -714,10 +748,52 @@ fn parse_contact(ctx: &Ctx, path: &Path, c: &RawContact) -> Result<ContactModel,
             v
         }
     };
+    let richardson = match (&c.richardson_mesh, &c.richardson_ratio, &c.richardson_order) {
+        (None, None, None) => None,
+        (Some(m), Some(r), order) => {
+            let ratio = *r.get_ref();
+            if !(ratio > 1.01 && ratio <= 4.0) {
+                return Err(ctx.err(
+                    r.span(),
+                    "contact.richardson_ratio",
+                    format!("must lie in (1.01, 4] (coarse mesh size / fine), got {ratio}"),
+                ));
+            }
+            let order = match order {
+                None => 2.0,
+                Some(o) => {
+                    let v = *o.get_ref();
+                    if !(0.5..=4.0).contains(&v) {
+                        return Err(ctx.err(
+                            o.span(),
+                            "contact.richardson_order",
+                            format!("must lie in [0.5, 4], got {v}"),
+                        ));
+                    }
+                    v
+                }
+            };
+            Some(Richardson {
+                mesh: dir.join(m.get_ref()),
+                ratio,
+                order,
+            })
+        }
+        _ => {
+            let at = ctx.text.find("richardson").unwrap_or(0);
+            return Err(ctx.err(
+                at..at,
+                "contact.richardson_mesh",
+                "richardson_mesh and richardson_ratio go together (richardson_order is \
+                 optional, default 2)",
+            ));
+        }
+    };
     Ok(ContactModel::Sampled(SampledContact {
         fem_mesh: dir.join(mesh.get_ref()),
         element,
         level,
+        richardson,
     }))
 }
 

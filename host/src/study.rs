@@ -39,7 +39,7 @@ pub const DEFAULT_SITES: [(&str, [f64; 3]); 14] = [
     ("straight below the trocar", [0.0, 0.0, 0.075]),
     ("crease", [-0.012, 0.0, 0.07]),
     ("left lobe top", [-0.03, 0.01, 0.065]),
-    ("left lobe, thin end", [-0.038, 0.0, 0.06]),
+    ("left lobe, thin end", [-0.034, 0.0, 0.062]),
     ("left lobe front", [-0.025, -0.015, 0.06]),
     ("reach edge, front", [0.0, -0.033, 0.065]),
     ("reach edge, back left", [-0.025, 0.03, 0.06]),
@@ -158,6 +158,7 @@ pub fn level(
         fem_mesh: mesh.clone(),
         element,
         level: 1,
+        richardson: None,
     };
     let fem = SampledFem::new(&prep.scene, &spec)?;
     let points: Vec<[f64; 3]> = sites.iter().map(|s| s.point).collect();

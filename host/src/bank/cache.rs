@@ -2,8 +2,10 @@
 //! `host contact probe`, `host sil`) pays the FEM precompute once per set of inputs.
 //!
 //! The key is FNV-1a 64 over the scene file's bytes, the collision mesh's and the FEM mesh's
-//! bytes (the bank's scene id already covers them), the bank format version and the running
-//! executable's own bytes, so a rebuilt `host` (a changed sampling rule) never reuses a bank.
+//! bytes (the bank's scene id already covers them), the bank format version and the source
+//! text of the code that computes and writes the samples ([`SAMPLING_SOURCES`], compiled in),
+//! so a build whose sampling differs never reuses another's bank, while every binary of one
+//! source tree (the CLI, each test) shares it.
 //! Files live in `$HAPTIC_CACHE_DIR`, else `$XDG_CACHE_HOME/haptic-host`, else
 //! `~/.cache/haptic-host`, named `bank-<key>.bin`, written atomically; a cached file is
 //! validated by the bank reader before use, and one that fails is rebuilt.
@@ -27,13 +29,25 @@ pub fn cache_dir() -> Option<PathBuf> {
     std::env::var_os("HOME").map(|h| PathBuf::from(h).join(".cache").join("haptic-host"))
 }
 
-/// FNV-1a 64 of the running executable's bytes (0 when it cannot be read).
-fn exe_hash() -> u64 {
+/// The source files whose text decides a sampled bank's bytes besides its inputs: the tool
+/// load and patch compliance (`fem`), the sampling stage, the bank writer and reader.
+pub const SAMPLING_SOURCES: [&str; 7] = [
+    include_str!("../../fem/src/tool.rs"),
+    include_str!("../../fem/src/compliance/patch.rs"),
+    include_str!("../../fem/src/elasticity/quadratic.rs"),
+    include_str!("sampled.rs"),
+    include_str!("../bank.rs"),
+    include_str!("../../../bank-format/src/writer.rs"),
+    include_str!("../../../bank-format/src/samples.rs"),
+];
+
+/// FNV-1a 64 over [`SAMPLING_SOURCES`].
+fn code_hash() -> u64 {
     static HASH: OnceLock<u64> = OnceLock::new();
     *HASH.get_or_init(|| {
-        std::env::current_exe()
-            .and_then(std::fs::read)
-            .map_or(0, |b| fnv1a(FNV_OFFSET, &b))
+        SAMPLING_SOURCES
+            .iter()
+            .fold(FNV_OFFSET, |h, s| fnv1a(h, s.as_bytes()))
     })
 }
 
@@ -51,7 +65,7 @@ pub fn scene_bank_cached(
     let mut key = fnv1a(prep.scene_id, &fnv1a(FNV_OFFSET, &fem_bytes).to_le_bytes());
     key = fnv1a(key, &bank_format::VERSION_MAJOR.to_le_bytes());
     key = fnv1a(key, &bank_format::VERSION_MINOR.to_le_bytes());
-    key = fnv1a(key, &exe_hash().to_le_bytes());
+    key = fnv1a(key, &code_hash().to_le_bytes());
     let file = cache_dir().map(|d| d.join(format!("bank-{key:016x}.bin")));
     if let Some(f) = &file
         && let Ok(bytes) = std::fs::read(f)

@@ -22,6 +22,7 @@ use fem::elasticity::{Elasticity, FixedSet};
 use fem::mesh::TetMesh;
 use fem::progress::Progress;
 use fem::tool::ToolSurface;
+use std::path::Path;
 use std::time::Instant;
 
 /// A FEM body for the patch compliance: its factor and its tool surface.
@@ -72,8 +73,12 @@ impl SampledFem {
     /// Reads the scene's FEM mesh, builds the body with the scene's material and fixed boxes,
     /// and factorises it.
     pub fn new(scene: &Scene, spec: &SampledContact) -> Result<SampledFem> {
+        SampledFem::load(scene, &spec.fem_mesh, spec.element)
+    }
+
+    /// [`SampledFem::new`] on the mesh file `path` with `element`.
+    pub fn load(scene: &Scene, path: &Path, element: FemElement) -> Result<SampledFem> {
         let t0 = Instant::now();
-        let path = &spec.fem_mesh;
         let bytes = std::fs::read(path).with_context(|| {
             format!(
                 "{}: [contact] fem_mesh {}",
@@ -84,7 +89,7 @@ impl SampledFem {
         let mesh = fem::mesh::load(path)?;
         let boundary = fem::mesh::boundary(&mesh)?;
         let name = path.display().to_string();
-        let (compliance, surface, nodes) = match spec.element {
+        let (compliance, surface, nodes) = match element {
             FemElement::Linear(element) => {
                 let fixed = scene.fixed_set(&mesh)?;
                 let body = Elasticity::with_element(&mesh, scene.material, element)?;
@@ -112,7 +117,7 @@ impl SampledFem {
             mesh_hash: fnv1a(crate::scene::FNV_OFFSET, &bytes),
             vertices: mesh.nodes.len(),
             nodes,
-            element: spec.element,
+            element,
             compliance,
             surface,
             factor_s: t0.elapsed().as_secs_f64(),
@@ -141,8 +146,39 @@ impl SampledFem {
     }
 }
 
+/// The lattice of `triangles` (R's, node indices into `positions`) at `level` and its points'
+/// positions.
+pub fn lattice_points(
+    positions: &[[f64; 3]],
+    triangles: &[[u32; 3]],
+    level: u32,
+) -> (SharedLattice, Vec<[f64; 3]>) {
+    let lattice = SharedLattice::new(triangles, level);
+    let points = lattice
+        .points
+        .iter()
+        .map(|&(t, b)| {
+            let tri = triangles[t].map(|k| positions[k as usize]);
+            std::array::from_fn(|c| b[0] * tri[0][c] + b[1] * tri[1][c] + b[2] * tri[2][c])
+        })
+        .collect();
+    (lattice, points)
+}
+
+/// `W_f + factor (W_f - W_c)` entry by entry (Richardson extrapolation,
+/// [`crate::scene::Richardson`]).
+pub fn extrapolated(fine: &[Block3], coarse: &[Block3], factor: f64) -> Vec<Block3> {
+    fine.iter()
+        .zip(coarse)
+        .map(|(f, c)| {
+            std::array::from_fn(|i| std::array::from_fn(|j| f[i][j] + factor * (f[i][j] - c[i][j])))
+        })
+        .collect()
+}
+
 /// The contact samples of `triangles` (R's, node indices into `positions`) for the scene's
-/// tool at lattice level `level`, computed on `fem`.
+/// tool at lattice level `level`, computed on `fem`; with `coarse`, Richardson-extrapolated
+/// with `W` computed on that body too (the pair's [`crate::scene::Richardson::factor`]).
 pub fn contact_samples(
     fem: &SampledFem,
     positions: &[[f64; 3]],
@@ -151,18 +187,26 @@ pub fn contact_samples(
     radius: f64,
     progress: Option<&dyn Progress>,
 ) -> Result<(ContactSamples, SampleStats)> {
-    let lattice = SharedLattice::new(triangles, level);
-    let points: Vec<[f64; 3]> = lattice
-        .points
-        .iter()
-        .map(|&(t, b)| {
-            let tri = triangles[t].map(|k| positions[k as usize]);
-            std::array::from_fn(|c| b[0] * tri[0][c] + b[1] * tri[1][c] + b[2] * tri[2][c])
-        })
-        .collect();
+    let (lattice, points) = lattice_points(positions, triangles, level);
     let t0 = Instant::now();
     let (w, at, widest) = fem.patch_compliance(&points, radius, progress)?;
     let total = t0.elapsed().as_secs_f64();
+    samples_from(lattice, &points, w, &at, widest, fem, level, radius, total)
+}
+
+/// The samples and their statistics from `W` at the lattice's points.
+#[allow(clippy::too_many_arguments)]
+pub fn samples_from(
+    lattice: SharedLattice,
+    points: &[[f64; 3]],
+    w: Vec<Block3>,
+    at: &[fem::tool::SurfacePoint],
+    widest: usize,
+    fem: &SampledFem,
+    level: u32,
+    radius: f64,
+    total: f64,
+) -> Result<(ContactSamples, SampleStats)> {
     for (s, m) in w.iter().enumerate() {
         if !spd(m) {
             let p = points[s];
@@ -198,7 +242,7 @@ pub fn contact_samples(
 
 /// Whether a symmetric 3 x 3 block is positive definite (Cholesky pivots, relative to its
 /// largest diagonal entry, above the bank reader's [`bank_format::SPD_PIVOT_REL`]).
-fn spd(m: &Block3) -> bool {
+pub fn spd(m: &Block3) -> bool {
     let d = m[0][0].max(m[1][1]).max(m[2][2]);
     let tol = bank_format::SPD_PIVOT_REL * d;
     let l00 = m[0][0];

@@ -45,6 +45,10 @@ pub struct ProbeArgs {
     /// Scene file (default: the embedded default liver scene).
     #[arg(long)]
     scene: Option<PathBuf>,
+    /// Probe this bank file instead of the scene's own bank (the scene still gives the organ's
+    /// surface, to tell an unreachable point).
+    #[arg(long)]
+    bank: Option<PathBuf>,
     /// The query point, m.
     #[arg(long, value_name = "X,Y,Z", allow_hyphen_values = true)]
     at: String,
@@ -83,10 +87,16 @@ fn probe(args: ProbeArgs) -> Result<()> {
     let at = parse_point(&args.at)?;
     let scene = Scene::load_or_default(args.scene.as_deref())?;
     let prep = Prepared::from_scene(scene)?;
-    let progress = Bar::new("patch compliance chunks");
-    let (built, _) = host::bank::cache::scene_bank_cached(&prep, Some(&progress))?;
-    progress.finish();
-    let aligned = AlignedBytes::new(&built.bytes);
+    let bytes = match &args.bank {
+        Some(file) => std::fs::read(file).with_context(|| format!("--bank {}", file.display()))?,
+        None => {
+            let progress = Bar::new("patch compliance chunks");
+            let (built, _) = host::bank::cache::scene_bank_cached(&prep, Some(&progress))?;
+            progress.finish();
+            built.bytes
+        }
+    };
+    let aligned = AlignedBytes::new(&bytes);
     let bank = Bank::parse(&aligned).map_err(|e| anyhow::anyhow!("built bank invalid: {e}"))?;
     let p = host::probe::probe(
         &bank,
@@ -182,7 +192,12 @@ fn study(args: StudyArgs) -> Result<()> {
     let sites = study::sites(&prep, &given)?;
     let mut levels = Vec::new();
     for (mesh, h) in &meshes {
-        eprintln!("level {} ({}, h {} mm) ...", mesh.display(), args.element, 1e3 * h);
+        eprintln!(
+            "level {} ({}, h {} mm) ...",
+            mesh.display(),
+            args.element,
+            1e3 * h
+        );
         let l = study::level(&prep, &sites, mesh, *h, element)?;
         eprintln!(
             "  {} vertices, {} nodes, {} free dofs, nnz(L) {:.1} M, {:.1} s",

@@ -92,22 +92,34 @@ pub fn run(args: Args) -> Result<()> {
         scene.mesh = MeshSource::File(m.clone());
     }
     let t = Instant::now();
-    eprintln!("preparing the scene (compliance factorisation, bank) ...");
+    eprintln!(
+        "preparing the scene (compliance factorisation, bank; a sampled scene's first run computes its \
+         patch compliance, about a minute, then it is cached) ..."
+    );
     let prep = Prepared::from_scene(scene)?;
     prep.warnings.iter().for_each(|w| eprintln!("{w}"));
-    let BuiltBank {
-        bytes: bank_bytes,
-        pairs,
-        ..
-    } = prep.build_bank(None)?;
+    let (
+        BuiltBank {
+            bytes: bank_bytes,
+            pairs,
+            ..
+        },
+        cached,
+    ) = {
+        let progress = host::progress::Bar::new("patch compliance chunks");
+        let built = host::bank::cache::scene_bank_cached(&prep, Some(&progress))?;
+        progress.finish();
+        built
+    };
     eprintln!(
         "scene     {}: {} nodes, {} surface nodes; bank {} reachable nodes, {pairs} coupled \
-         pairs, {:.1} KiB, built in {:.2} s",
+         pairs, {:.1} KiB, {} in {:.2} s",
         prep.mesh_name,
         prep.mesh.nodes.len(),
         prep.surface.nodes.len(),
         prep.region.len(),
         bank_bytes.len() as f64 / 1024.0,
+        if cached { "from the cache" } else { "built" },
         t.elapsed().as_secs_f64()
     );
     if bank_bytes.len() > bank_format::region::BANK_LEN {
