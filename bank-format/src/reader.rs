@@ -504,10 +504,8 @@ fn parse_samples<'a>(
     let ids: &[u16] = sections.slice(SectionKind::TriangleSamples)?;
     let w: &[[f32; 6]] = sections.slice(SectionKind::PatchCompliance)?;
     let level = header.level;
-    if !(1..=MAX_SAMPLE_LEVEL).contains(&level)
-        || !(header.tip_radius_m >= 0.0 && header.tip_radius_m.is_finite())
-        || header.reserved != [0; 2]
-    {
+    let radius_ok = header.tip_radius_m >= 0.0 && header.tip_radius_m.is_finite();
+    if !((1..=MAX_SAMPLE_LEVEL).contains(&level) && radius_ok) || header.reserved != [0; 2] {
         return Err(BankError::SampleHeader { level });
     }
     let len = lattice_len(level);

@@ -626,13 +626,13 @@ impl SharedLattice {
     }
 }
 
+/// The contact samples' three sections: header, flat sample indices, samples.
+type SampleSections = (SampleHeader, Vec<u16>, Vec<[f32; 6]>);
+
 impl ContactSamples {
     /// The three sections' contents for `triangles` triangles: header, flat `u16` indices,
     /// symmetrised f32 samples.
-    fn sections(
-        &self,
-        triangles: usize,
-    ) -> Result<(SampleHeader, Vec<u16>, Vec<[f32; 6]>), BuildError> {
+    fn sections(&self, triangles: usize) -> Result<SampleSections, BuildError> {
         let bad = |what| Err(BuildError::Samples { what });
         if !(1..=crate::MAX_SAMPLE_LEVEL).contains(&self.level) {
             return bad("level not in 1..=MAX_SAMPLE_LEVEL");

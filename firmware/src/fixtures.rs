@@ -125,7 +125,55 @@ pub fn grid_patch_at(xs: &[f64], ys: &[f64], truncation_m: f64) -> AlignedBytes 
     grid_bank(xs, ys, truncation_m, patch_device())
 }
 
+/// The patch compliance of [`sampled_patch`]'s samples at point `x` (m): a linear field, so
+/// that the firmware's interpolation reproduces it exactly, SPD on the patch (m/N).
+pub fn sampled_w(x: [f64; 3]) -> [[f64; 3]; 3] {
+    let a = 0.05 + 0.4 * x[0] + 0.2 * x[1];
+    [
+        [a, 0.002, 0.001],
+        [0.002, 1.1 * a, 0.003 + 0.05 * x[0]],
+        [0.001, 0.003 + 0.05 * x[0], 0.6 * a],
+    ]
+}
+
+/// [`flat_patch`] with contact samples (bank format 6) at lattice level 2: each sample's `W` is
+/// [`sampled_w`] at its point.
+pub fn sampled_patch() -> AlignedBytes {
+    let xs: Vec<f64> = (0..PATCH_SIDE)
+        .map(|i| PATCH_SPACING_M * i as f64)
+        .collect();
+    let mut b = grid_builder(&xs, &xs, 0.06, patch_device());
+    let lattice = bank_format::SharedLattice::new(&b.triangles, 2);
+    let w = lattice
+        .points
+        .iter()
+        .map(|&(t, bary)| {
+            let tri = b.triangles[t].map(|k| b.positions_m[k as usize]);
+            sampled_w(core::array::from_fn(|c| {
+                bary[0] * tri[0][c] + bary[1] * tri[1][c] + bary[2] * tri[2][c]
+            }))
+        })
+        .collect();
+    b.samples = Some(bank_format::ContactSamples {
+        level: 2,
+        tip_radius_m: 0.003,
+        triangle_samples: lattice.triangle_points,
+        w,
+    });
+    AlignedBytes::new(&b.build().expect("valid fixture bank"))
+}
+
 fn grid_bank(xs: &[f64], ys: &[f64], truncation_m: f64, device: DeviceCalibration) -> AlignedBytes {
+    let b = grid_builder(xs, ys, truncation_m, device);
+    AlignedBytes::new(&b.build().expect("valid fixture bank"))
+}
+
+fn grid_builder(
+    xs: &[f64],
+    ys: &[f64],
+    truncation_m: f64,
+    device: DeviceCalibration,
+) -> BankBuilder {
     let (nx, ny) = (xs.len(), ys.len());
     let mut p = Vec::new();
     for &y in ys {
@@ -159,7 +207,7 @@ fn grid_bank(xs: &[f64], ys: &[f64], truncation_m: f64, device: DeviceCalibratio
             }
         }
     }
-    let b = BankBuilder {
+    BankBuilder {
         c_kk: (0..n).map(|k| kernel_block(&p, k, k)).collect(),
         couplings,
         mesh_ids: (0..n as u32).collect(),
@@ -172,8 +220,7 @@ fn grid_bank(xs: &[f64], ys: &[f64], truncation_m: f64, device: DeviceCalibratio
         gravity: None,
         samples: None,
         device,
-    };
-    AlignedBytes::new(&b.build().expect("valid fixture bank"))
+    }
 }
 
 /// Gaussian elimination with partial pivoting in f64: the independent reference the f32 solves

@@ -8,7 +8,14 @@
 //! 2. contact update on the segment `[previous tip, tip]` ([`ContactTracker::update`]; the
 //!    first tick, and the first after zeroing the encoders, use a zero-length segment, so a
 //!    pose jump is never swept for contacts);
-//! 3. when touching: the weighted patch under the tool tip ([`tool_patch`](crate::patch::tool_patch), radius from the
+//! 3. when touching, on a bank with contact samples (bank format 6, `SPEC.md` "contact
+//!    samples", the shipped scene's): the tool's patch compliance `W` at the anchor,
+//!    interpolated from the samples ([`bank_format::Samples::interpolate`]) and factored every
+//!    tick, the tool force `W^-1 d` (the paper's eq. 8 for one rigid tool) spread over the
+//!    contact triangle's vertices by their barycentric weights for telemetry; no patch, no
+//!    rebuild, no blend (`W` is continuous as the anchor slides). On a bank without samples
+//!    (the nodal model):
+//!    the weighted patch under the tool tip ([`tool_patch`](crate::patch::tool_patch), radius from the
 //!    bank's device calibration; the contact triangle's barycentric coordinates when the radius
 //!    is zero or smaller than the triangles) and the **energy-minimal** solve on it
 //!    ([`WeightedSolve`]): `f_tool = (B C_SS B^T)^-1 d` with `B = [w_1 I, ..., w_n I]`,
@@ -915,6 +922,68 @@ mod tests {
                 assert_eq!(a, b);
             }
         }
+    }
+
+    /// On a bank with contact samples the tick renders `W(anchor)^-1 d` every contact tick
+    /// (after the detecting one), whatever the anchor: checked in f64 against the fixture's `W`
+    /// field along a press and slide, with the node forces the contact triangle's barycentric
+    /// shares of it.
+    #[test]
+    fn a_sampled_bank_renders_w_inverse_d_at_the_anchor() {
+        let bytes = crate::fixtures::sampled_patch();
+        let bank = Bank::parse(bytes.as_slice()).unwrap();
+        assert!(bank.samples().is_some());
+        let mut lp = HapticLoop::new(&bank);
+        lp.set_mode(Mode::LinearLaw).unwrap();
+        let dev = *lp.device();
+        let ws = |s: f32| counts_for_insertion(&dev, s);
+        let mut checked = 0;
+        for t in 0..=400 {
+            let s = 0.095 + 0.03e-3 * t.min(300) as f32;
+            let mut counts = ws(s);
+            // Slide sideways once in.
+            counts[0] += (t.max(250) - 250) * 3;
+            let out = lp.tick(input(counts));
+            let (
+                ContactState::Touching {
+                    anchor,
+                    displacement,
+                    bary,
+                    ..
+                },
+                Some(origin),
+            ) = (out.contact, out.patch)
+            else {
+                continue;
+            };
+            if out.contacts.is_empty() {
+                continue;
+            }
+            assert_eq!(origin.anchor, anchor);
+            let w = crate::fixtures::sampled_w(anchor.map(f64::from));
+            let want = crate::fixtures::gauss(
+                w.iter().map(|r| r.to_vec()).collect(),
+                displacement.iter().map(|&v| f64::from(v)).collect(),
+            );
+            // The force on the tool is minus the force on the tissue.
+            let got = out.tool_force_n.map(|f| -f);
+            let err = crate::fixtures::rel_err(&[got], &want);
+            assert!(err < 1e-4, "tick {t}: {got:?} vs {want:?} ({err})");
+            let mut sum = [0.0f32; 3];
+            for c in &out.contacts {
+                let k = bank.triangles()[origin.triangle as usize]
+                    .iter()
+                    .position(|&v| v == c.node)
+                    .unwrap();
+                for i in 0..3 {
+                    sum[i] += c.force_n[i];
+                    assert!((c.force_n[i] - bary[k] * -out.tool_force_n[i]).abs() < 1e-6);
+                }
+            }
+            assert!(crate::fixtures::rel_err(&[sum], &want) < 1e-4);
+            checked += 1;
+        }
+        assert!(checked > 150, "{checked} contact ticks");
     }
 
     #[test]

@@ -214,7 +214,8 @@ impl Prepared {
         Ok(self.compliance.blocks_within(
             &self.region,
             &self.positions,
-            radius.max(self.longest_edge()),
+            // Widened by a hair: the longest edge itself must pass the squared-distance test.
+            radius.max(self.longest_edge() * (1.0 + 1e-9)),
             progress,
         )?)
     }

@@ -26,7 +26,7 @@ use anyhow::{Result, bail};
 use fem::compliance::Block3;
 use fem::vec3::{cross, dot, norm, scale, sub};
 use serde::{Deserialize, Serialize};
-use std::path::PathBuf;
+use std::path::Path;
 
 /// The study's default sites on the default liver (near-surface points, m): the right lobe's
 /// top and flanks, the crease between the lobes, the thinner left lobe, the edges of the reach.
@@ -149,13 +149,13 @@ pub fn sites(prep: &Prepared, given: &[(String, [f64; 3])]) -> Result<Vec<Site>>
 pub fn level(
     prep: &Prepared,
     sites: &[Site],
-    mesh: &PathBuf,
+    mesh: &Path,
     h_m: f64,
     element: FemElement,
 ) -> Result<Level> {
     let t0 = std::time::Instant::now();
     let spec = SampledContact {
-        fem_mesh: mesh.clone(),
+        fem_mesh: mesh.to_path_buf(),
         element,
         level: 1,
         richardson: None,
@@ -184,7 +184,7 @@ pub fn extrapolate(sites: &[Site], levels: &[Level]) -> Result<(Vec<Block3>, Vec
         bail!("the extrapolation needs at least three levels");
     };
     let r = b.h_m / c.h_m;
-    if !(r > 1.0) || ((a.h_m / b.h_m) / r - 1.0).abs() > 0.05 {
+    if r <= 1.0 || r.is_nan() || ((a.h_m / b.h_m) / r - 1.0).abs() > 0.05 {
         bail!(
             "the last three mesh sizes must shrink by one constant ratio (got {} / {} / {} m)",
             a.h_m,

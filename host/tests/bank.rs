@@ -13,7 +13,7 @@ fn host(args: &[&str]) -> Output {
 }
 
 fn scene() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/liver.toml")
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/liver-nodal.toml")
 }
 
 fn s(p: &Path) -> &str {
@@ -65,7 +65,7 @@ fn shipped_scene_builds_a_valid_bank_and_inspect_refuses_damaged_copies() {
 
     // The scene's speed thresholds, the cell certificates, pairs stored once and the triangle
     // planes (format 5).
-    assert_eq!(bank.version().0, 5);
+    assert_eq!(bank.version().0, 6);
     assert_eq!(bank.triangle_planes().len(), bank.triangles().len());
     assert_eq!(bank.device().max_tip_speed_m_s, 1.0);
     assert_eq!(bank.device().max_joint_speed, [10.0, 10.0, 1.0]);

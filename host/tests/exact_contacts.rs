@@ -1,4 +1,4 @@
-//! The shipped bank, the tool's pairs (host/scenes/liver.toml, `bank.couplings = "tool"`), fits
+//! The nodal bank, the tool's pairs (host/scenes/liver-nodal.toml, `bank.couplings = "tool"`), fits
 //! the demo's 128 KiB and is exact, up to its storage precision,
 //! on every contact the tool can make: at 1,200 contact sites spread over the reachable surface (area-uniform,
 //! anchors off the lattice the bank's pairs were sampled on), the firmware's force (f32, its own
@@ -21,7 +21,7 @@ use std::path::Path;
 
 #[test]
 fn the_tool_bank_is_exact_on_every_contact_the_tool_can_make() {
-    let scene = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/liver.toml");
+    let scene = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/liver-nodal.toml");
     let prep = Prepared::load(&scene).unwrap();
     assert_eq!(prep.scene.bank.couplings, host::scene::Couplings::Tool);
     let built = prep.build_bank(None).unwrap();
@@ -88,7 +88,7 @@ fn the_tool_bank_is_exact_on_every_contact_the_tool_can_make() {
 /// assertion adds twice the worst error the same sites show on the f32 bank.
 #[test]
 fn bfp16_blocks_stay_within_their_rounding_bound() {
-    let scene = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/liver.toml");
+    let scene = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/liver-nodal.toml");
     let prep = Prepared::load(&scene).unwrap();
     let rows = prep.blocks(prep.probe_radius(), None).unwrap();
     let probe_bytes = sweep::probe_bytes(&prep, &rows).unwrap();

@@ -76,7 +76,7 @@ fn calibrate_gravity(csv: &Path, scene: &Path, extra: &[&str]) -> (bool, String,
 fn cli_fits_held_poses_into_the_scene() {
     let dir = tempfile::tempdir().unwrap();
     let scene_path = dir.path().join("scene.toml");
-    std::fs::copy(manifest("scenes/liver.toml"), &scene_path).unwrap();
+    std::fs::copy(manifest("scenes/liver-nodal.toml"), &scene_path).unwrap();
     let scene = Scene::load(&scene_path).unwrap();
     assert_eq!(scene.gravity, None);
     let csv = dir.path().join("gravity.csv");
@@ -106,7 +106,7 @@ fn cli_fits_held_poses_into_the_scene() {
     for (c, w) in carried.iter().zip(got) {
         assert_eq!(*c, w as f32);
     }
-    let plain = host::bank::scene_bank(&manifest("scenes/liver.toml")).unwrap();
+    let plain = host::bank::scene_bank(&manifest("scenes/liver-nodal.toml")).unwrap();
     let plain = bank_format::AlignedBytes::new(&plain);
     assert_eq!(
         bank_format::Bank::parse(plain.as_slice())
@@ -116,7 +116,7 @@ fn cli_fits_held_poses_into_the_scene() {
     );
 
     // --out leaves the input alone and writes the calibrated copy.
-    let orig = std::fs::read_to_string(manifest("scenes/liver.toml")).unwrap();
+    let orig = std::fs::read_to_string(manifest("scenes/liver-nodal.toml")).unwrap();
     let src = dir.path().join("src.toml");
     std::fs::write(&src, &orig).unwrap();
     let out_path = dir.path().join("out.toml");
@@ -131,7 +131,7 @@ fn cli_fits_held_poses_into_the_scene() {
 fn bad_or_degenerate_csvs_are_refused_and_leave_the_scene_alone() {
     let dir = tempfile::tempdir().unwrap();
     let scene_path = dir.path().join("scene.toml");
-    let original = std::fs::read_to_string(manifest("scenes/liver.toml")).unwrap();
+    let original = std::fs::read_to_string(manifest("scenes/liver-nodal.toml")).unwrap();
     std::fs::write(&scene_path, &original).unwrap();
     let scene = Scene::load(&scene_path).unwrap();
     let good = rows(&scene, &TRUE, &grid());

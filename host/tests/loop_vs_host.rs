@@ -23,7 +23,7 @@ struct Liver {
 
 impl Liver {
     fn build() -> Liver {
-        let shipped = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/liver.toml");
+        let shipped = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/liver-nodal.toml");
         let text = std::fs::read_to_string(&shipped).unwrap();
         let edited = text.replacen("precision = \"bfp16\"", "precision = \"f32\"", 1);
         assert_ne!(edited, text, "the scene's precision line changed");

@@ -42,7 +42,9 @@ fn quick_report_renders_every_plot_and_agrees_with_the_references() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("report");
     let run = Command::new(env!("CARGO_BIN_EXE_host"))
-        .args(["report", "--quick", "--out"])
+        .args(["report", "--quick", "--scene"])
+        .arg(Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/liver-nodal.toml"))
+        .arg("--out")
         .arg(&out)
         .output()
         .unwrap();
@@ -191,7 +193,7 @@ fn quick_report_renders_every_plot_and_agrees_with_the_references() {
     assert!(code_worst.iter().all(|&w| w > 0.0), "{code_worst:?}");
     assert!(code_worst[6] < worst_tick, "{code_worst:?} {worst_tick}");
     // The scene's bank on the plot is the one `host bank build` writes.
-    let scene = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/liver.toml");
+    let scene = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/liver-nodal.toml");
     let bank = dir.path().join("liver.bank");
     let built = Command::new(env!("CARGO_BIN_EXE_host"))
         .args(["bank", "build"])

@@ -447,7 +447,7 @@ fn current_commands_over_the_limit_and_mode_changes_while_armed_fault() {
     // request exceeds 1.25 x the limit as soon as the tool presses, which is a fault.
     let dir = tempfile::tempdir().unwrap();
     setup.bank = dir.path().join("low-limit.bank");
-    std::fs::write(&setup.bank, with_current_limit(&bytes, 0.005)).unwrap();
+    std::fs::write(&setup.bank, with_current_limit(&bytes, 0.002)).unwrap();
     let run = qemu(&setup, &Session::new(&bank, Script::Press, 1.5).unwrap());
     let faults = run.faults();
     assert_eq!(faults.len(), 1, "{faults:?}");

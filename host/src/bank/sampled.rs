@@ -246,15 +246,17 @@ pub fn spd(m: &Block3) -> bool {
     let d = m[0][0].max(m[1][1]).max(m[2][2]);
     let tol = bank_format::SPD_PIVOT_REL * d;
     let l00 = m[0][0];
-    if !(l00 > tol) {
+    // A NaN pivot compares as none: not positive definite.
+    let above = |x: f64| x.partial_cmp(&tol) == Some(std::cmp::Ordering::Greater);
+    if !above(l00) {
         return false;
     }
     let (a, b) = (m[1][0] / l00, m[2][0] / l00);
     let p1 = m[1][1] - a * m[1][0];
-    if !(p1 > tol) {
+    if !above(p1) {
         return false;
     }
     let c = (m[2][1] - b * m[1][0]) / p1;
     let p2 = m[2][2] - b * m[2][0] - c * (m[2][1] - b * m[1][0]);
-    p2 > tol
+    above(p2)
 }

@@ -137,7 +137,7 @@ fn print_nodal(prep: &Prepared, bank: &Bank, pairs: usize) {
         let v = tri.map(|k| p[usize::from(k)]);
         let centroid = std::array::from_fn(|i| (v[0][i] + v[1][i] + v[2][i]) / 3.0);
         let patch = tool_patch(
-            &bank,
+            bank,
             t as u32,
             *tri,
             [1.0 / 3.0; 3],
