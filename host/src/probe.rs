@@ -12,6 +12,7 @@
 use crate::kinematics::{Workspace, counts_for};
 use anyhow::{Result, bail};
 use bank_format::{Bank, Mode};
+use fem::tool::closest_on_triangle;
 use fem::vec3::{add, cross, dist2, dot, norm, scale, sub};
 use firmware::hal::Interlocks;
 use firmware::tick::{HapticLoop, LoopInput};
@@ -41,45 +42,6 @@ const START_M: f64 = 0.005;
 const STEP_M: f64 = 0.0002;
 /// Ticks the tip is held at the press depth before the force is read.
 const HOLD_TICKS: usize = 10;
-
-/// The closest point of triangle `v` to `q`: (point, barycentric coordinates).
-pub fn closest_on_triangle(q: [f64; 3], v: [[f64; 3]; 3]) -> ([f64; 3], [f64; 3]) {
-    // Ericson, Real-Time Collision Detection, 5.1.5.
-    let (a, b, c) = (v[0], v[1], v[2]);
-    let (ab, ac, ap) = (sub(b, a), sub(c, a), sub(q, a));
-    let (d1, d2) = (dot(ab, ap), dot(ac, ap));
-    if d1 <= 0.0 && d2 <= 0.0 {
-        return (a, [1.0, 0.0, 0.0]);
-    }
-    let bp = sub(q, b);
-    let (d3, d4) = (dot(ab, bp), dot(ac, bp));
-    if d3 >= 0.0 && d4 <= d3 {
-        return (b, [0.0, 1.0, 0.0]);
-    }
-    let vc = d1 * d4 - d3 * d2;
-    if vc <= 0.0 && d1 >= 0.0 && d3 <= 0.0 {
-        let t = d1 / (d1 - d3);
-        return (add(a, scale(ab, t)), [1.0 - t, t, 0.0]);
-    }
-    let cp = sub(q, c);
-    let (d5, d6) = (dot(ab, cp), dot(ac, cp));
-    if d6 >= 0.0 && d5 <= d6 {
-        return (c, [0.0, 0.0, 1.0]);
-    }
-    let vb = d5 * d2 - d1 * d6;
-    if vb <= 0.0 && d2 >= 0.0 && d6 <= 0.0 {
-        let t = d2 / (d2 - d6);
-        return (add(a, scale(ac, t)), [1.0 - t, 0.0, t]);
-    }
-    let va = d3 * d6 - d5 * d4;
-    if va <= 0.0 && d4 - d3 >= 0.0 && d5 - d6 >= 0.0 {
-        let t = (d4 - d3) / ((d4 - d3) + (d5 - d6));
-        return (add(b, scale(sub(c, b), t)), [0.0, 1.0 - t, t]);
-    }
-    let den = 1.0 / (va + vb + vc);
-    let (s, t) = (vb * den, vc * den);
-    (add(a, add(scale(ab, s), scale(ac, t))), [1.0 - s - t, s, t])
-}
 
 /// The closest point to `q` over `triangles` of `positions`: (triangle, point, bary, squared
 /// distance); `None` without triangles.

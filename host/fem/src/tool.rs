@@ -663,7 +663,7 @@ impl Piece<'_> {
 
 /// The closest point of triangle `t` to `q` and its barycentric coordinates (Ericson, *Real-Time
 /// Collision Detection*, 5.1.5: Voronoi regions of the vertices, then the edges, then the face).
-fn closest_on_triangle(q: [f64; 3], t: [[f64; 3]; 3]) -> ([f64; 3], [f64; 3]) {
+pub fn closest_on_triangle(q: [f64; 3], t: [[f64; 3]; 3]) -> ([f64; 3], [f64; 3]) {
     let [a, b, c] = t;
     let ab = sub(b, a);
     let ac = sub(c, a);
