@@ -10,7 +10,7 @@
 //! is normal to the surface.
 
 use crate::kinematics::{Workspace, counts_for};
-use anyhow::{Result, bail};
+use anyhow::{Context, Result, bail};
 use bank_format::{Bank, Mode};
 use fem::tool::closest_on_triangle;
 use fem::vec3::{add, cross, dist2, dot, norm, scale, sub};
@@ -62,6 +62,54 @@ pub fn closest_point(
     best
 }
 
+/// A point of the reachable surface (R's triangles).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ReachablePoint {
+    /// Index of its triangle.
+    pub triangle: usize,
+    /// The point, m.
+    pub point: [f64; 3],
+    /// Its barycentric coordinates in the triangle.
+    pub bary: [f64; 3],
+    /// The triangle's outward unit normal.
+    pub normal: [f64; 3],
+}
+
+/// The point of the reachable triangles (`triangles` of `positions`) closest to `q`; an error
+/// when the organ's surface point closest to `q` (`organ`: the whole boundary's positions and
+/// triangles) is not reachable, with 1 um of slack (a bank's positions are f32).
+pub fn closest_reachable(
+    positions: &[[f64; 3]],
+    triangles: &[[usize; 3]],
+    organ: (&[[f64; 3]], &[[usize; 3]]),
+    q: [f64; 3],
+) -> Result<ReachablePoint> {
+    let Some((t, point, bary, d2)) = closest_point(positions, triangles, q) else {
+        bail!("the reachable region has no triangles");
+    };
+    if let Some((_, o, _, o2)) = closest_point(organ.0, organ.1, q)
+        && o2.sqrt() + 1e-6 < d2.sqrt()
+    {
+        bail!(
+            "the organ's surface point closest to it, [{:.4}, {:.4}, {:.4}] m, is outside the \
+             tool's reachable region (or on the fixed supports); the nearest reachable point is \
+             {:.1} mm away",
+            o[0],
+            o[1],
+            o[2],
+            1e3 * d2.sqrt()
+        );
+    }
+    let v = triangles[t].map(|k| positions[k]);
+    let n = cross(sub(v[1], v[0]), sub(v[2], v[0]));
+    Ok(ReachablePoint {
+        triangle: t,
+        point,
+        bary,
+        normal: scale(n, 1.0 / norm(n)),
+    })
+}
+
 /// Probes `bank` at `at` (m). `organ` is the collision mesh's whole boundary (positions and
 /// triangles), to tell a query whose closest surface point is not reachable. `depth` (m, > 0)
 /// asks for the rendered force of a press; `law` renders it through the bank's Q (else the
@@ -83,27 +131,14 @@ pub fn probe(
         .iter()
         .map(|t| t.map(usize::from))
         .collect();
-    let Some((t, point, bary, d2)) = closest_point(&positions, &triangles, at) else {
-        bail!("the bank has no triangles");
-    };
-    // 1 um of slack: the bank's positions are f32.
-    if let Some((_, q, _, o2)) = closest_point(organ.0, organ.1, at)
-        && o2.sqrt() + 1e-6 < d2.sqrt()
-    {
-        bail!(
-            "--at {name}: the organ's surface point closest to it, [{:.4}, {:.4}, {:.4}] m, is \
-             outside the tool's reachable region (or on the fixed supports); the nearest \
-             reachable point is {:.1} mm away",
-            q[0],
-            q[1],
-            q[2],
-            1e3 * d2.sqrt()
-        );
-    }
+    let ReachablePoint {
+        triangle: t,
+        point,
+        bary,
+        normal,
+    } = closest_reachable(&positions, &triangles, organ, at)
+        .with_context(|| format!("--at {name}"))?;
     let tri = bank.triangles()[t];
-    let v = tri.map(|k| positions[usize::from(k)]);
-    let nrm = cross(sub(v[1], v[0]), sub(v[2], v[0]));
-    let normal = scale(nrm, 1.0 / norm(nrm));
     let b32 = bary.map(|x| x as f32);
     let w6 = match bank.samples() {
         Some(s) => s.interpolate(t, b32),

@@ -20,11 +20,11 @@
 
 use crate::bank::Prepared;
 use crate::bank::sampled::SampledFem;
-use crate::probe::closest_point;
+use crate::probe::closest_reachable;
 use crate::scene::{FemElement, SampledContact};
-use anyhow::{Result, bail};
+use anyhow::{Context, Result, bail};
 use fem::compliance::Block3;
-use fem::vec3::{cross, dot, norm, scale, sub};
+use fem::vec3::dot;
 use serde::{Deserialize, Serialize};
 use std::path::Path;
 
@@ -118,28 +118,16 @@ pub fn sites(prep: &Prepared, given: &[(String, [f64; 3])]) -> Result<Vec<Site>>
     given
         .iter()
         .map(|(name, q)| {
-            let Some((t, point, _, d2)) = closest_point(&prep.positions, &triangles, *q) else {
-                bail!("the scene's reachable region has no triangles");
-            };
-            if let Some((_, _, _, o2)) =
-                closest_point(&prep.mesh.nodes, &prep.surface.triangles, *q)
-                && o2.sqrt() + 1e-9 < d2.sqrt()
-            {
-                bail!(
-                    "site {name:?} at [{:.4}, {:.4}, {:.4}] m: its closest surface point is \
-                     outside the reachable region",
-                    q[0],
-                    q[1],
-                    q[2]
-                );
-            }
-            let v = triangles[t].map(|k| prep.positions[k]);
-            let n = cross(sub(v[1], v[0]), sub(v[2], v[0]));
+            let organ = (&prep.mesh.nodes[..], &prep.surface.triangles[..]);
+            let p =
+                closest_reachable(&prep.positions, &triangles, organ, *q).with_context(|| {
+                    format!("site {name:?} at [{:.4}, {:.4}, {:.4}] m", q[0], q[1], q[2])
+                })?;
             Ok(Site {
                 name: name.clone(),
                 query: *q,
-                point,
-                normal: scale(n, 1.0 / norm(n)),
+                point: p.point,
+                normal: p.normal,
             })
         })
         .collect()

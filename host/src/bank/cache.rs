@@ -1,8 +1,8 @@
 //! A cache of sampled banks, so that a command that needs a sampled scene's bank (`host demo`,
 //! `host contact probe`, `host sil`) pays the FEM precompute once per set of inputs.
 //!
-//! The key is FNV-1a 64 over the scene file's bytes, the collision mesh's and the FEM mesh's
-//! bytes (the bank's scene id already covers them), the bank format version and the source
+//! The key is FNV-1a 64 over the scene file's bytes, the collision mesh's, the FEM mesh's and
+//! the Richardson mesh's bytes (the bank's scene id already covers them), the bank format version and the source
 //! text of the code that computes and writes the samples ([`SAMPLING_SOURCES`], compiled in),
 //! so a build whose sampling differs never reuses another's bank, while every binary of one
 //! source tree (the CLI, each test) shares it.
@@ -61,8 +61,12 @@ pub fn scene_bank_cached(
     let ContactModel::Sampled(spec) = &prep.scene.contact else {
         return Ok((prep.build_bank(progress)?, false));
     };
-    let fem_bytes = std::fs::read(&spec.fem_mesh).unwrap_or_default();
-    let mut key = fnv1a(prep.scene_id, &fnv1a(FNV_OFFSET, &fem_bytes).to_le_bytes());
+    let mut key = prep.scene_id;
+    let meshes = std::iter::once(&spec.fem_mesh).chain(spec.richardson.as_ref().map(|r| &r.mesh));
+    for mesh in meshes {
+        let bytes = std::fs::read(mesh).unwrap_or_default();
+        key = fnv1a(key, &fnv1a(FNV_OFFSET, &bytes).to_le_bytes());
+    }
     key = fnv1a(key, &bank_format::VERSION_MAJOR.to_le_bytes());
     key = fnv1a(key, &bank_format::VERSION_MINOR.to_le_bytes());
     key = fnv1a(key, &code_hash().to_le_bytes());
