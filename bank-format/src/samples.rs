@@ -87,7 +87,9 @@ impl<'a> Samples<'a> {
         let ids = self.triangle_samples(t);
         let level = self.header.level;
         let n = level as f32;
-        let (mut b1, mut b2) = (bary[1].max(0.0), bary[2].max(0.0));
+        // Comparisons, not `f32::max`: a libm call on the M4F (both are finite here).
+        let positive = |b: f32| if b > 0.0 { b } else { 0.0 };
+        let (mut b1, mut b2) = (positive(bary[1]), positive(bary[2]));
         let s = b1 + b2;
         if s > 1.0 {
             (b1, b2) = (b1 / s, b2 / s);

@@ -189,7 +189,7 @@ impl<'b, 'q> App<'b, 'q> {
                     currents_a: out.currents_a,
                     force_n: out.tool_force_n,
                     state: out.state.wire(),
-                    contact_nodes: out.contacts.len() as u8,
+                    contact_nodes: out.contact_nodes as u8,
                     body_cycles: 0,
                     tick_cycles: self.last_tick_cycles,
                     phase_cycles: PhaseCycles::default(),

@@ -175,18 +175,26 @@ impl<const D: usize> Factor<D> {
             return Err(SolveError::NonFinite);
         }
         let active = active.min(D);
-        let max_diag = a
-            .iter()
-            .enumerate()
-            .take(active)
-            .filter_map(|(i, r)| r.get(i))
-            .fold(0.0f32, |m, &x| m.max(x));
+        // Comparisons, not `f32::max` / `min`: those are libm calls on the M4F (no VMAXNM),
+        // and the entries and pivots here are finite (checked above and below).
+        let mut max_diag = 0.0f32;
+        for (i, r) in a.iter().enumerate().take(active) {
+            if let Some(&x) = r.get(i)
+                && x > max_diag
+            {
+                max_diag = x;
+            }
+        }
         let chol = Cholesky::new(&a).ok_or(SolveError::NotPositiveDefinite)?;
         let (mut min_pivot, mut max_pivot) = (f32::INFINITY, 0.0f32);
         for &l in chol.diagonal().iter().take(active) {
             let p = l * l;
-            min_pivot = min_pivot.min(p);
-            max_pivot = max_pivot.max(p);
+            if p < min_pivot {
+                min_pivot = p;
+            }
+            if p > max_pivot {
+                max_pivot = p;
+            }
         }
         if !(min_pivot > 0.0 && max_pivot.is_finite() && max_diag > 0.0) {
             return Err(SolveError::NotPositiveDefinite);
@@ -363,6 +371,25 @@ pub fn solve_point(bank: &Bank, node: u16, d_m: [f32; 3]) -> Result<ContactForce
 }
 
 /// Weights must be finite, non-negative and sum to 1 within [`WEIGHT_SUM_TOL`].
+/// A contact set for [`WeightedSolve`]: 1 ..= [`MAX_CONTACT_NODES`] distinct nodes, as many
+/// weights ([`check_weights`]).
+fn check_contact(nodes: &[u16], weights: &[f32]) -> Result<(), SolveError> {
+    check_count(nodes, MAX_CONTACT_NODES)?;
+    if weights.len() != nodes.len() {
+        return Err(SolveError::LengthMismatch {
+            nodes: nodes.len(),
+            imposed: weights.len(),
+        });
+    }
+    check_weights(weights)?;
+    for (a, &k) in nodes.iter().enumerate() {
+        if nodes.get(..a).is_some_and(|before| before.contains(&k)) {
+            return Err(SolveError::DuplicateNode { node: k });
+        }
+    }
+    Ok(())
+}
+
 fn check_weights(w: &[f32]) -> Result<(), SolveError> {
     if !w.iter().all(|v| v.is_finite()) {
         return Err(SolveError::NonFinite);
@@ -421,20 +448,61 @@ impl WeightedSolve {
     /// sampled `W(p)`, [`bank_format::Samples::interpolate`]) for the contact spread over
     /// `nodes` with `weights` (finite, `>= 0`, sum 1: the telemetry's node forces `w_a
     /// f_tool`). The same checks and factor as [`WeightedFill::factor`].
+    /// Unlike [`WeightedFill::new`] the nodes are kept in the order given (no sort: no sum
+    /// over them follows).
     pub fn from_compliance(
         m: [f32; 6],
         nodes: &[u16],
         weights: &[f32],
     ) -> Result<WeightedSolve, SolveError> {
-        let mut fill = WeightedFill::new(nodes, weights)?;
-        fill.m = m;
-        fill.next = fill.len;
-        fill.factor()
+        check_contact(nodes, weights)?;
+        let mut out = WeightedSolve {
+            nodes: [0; MAX_CONTACT_NODES],
+            weights: [0.0; MAX_CONTACT_NODES],
+            len: 0,
+            factor: factor_compliance(m)?,
+        };
+        out.set_contact(nodes, weights);
+        Ok(out)
+    }
+
+    /// [`WeightedSolve::from_compliance`] in place, for a loop that factors a new `M` every
+    /// tick (the sampled `W`): the solve is a few hundred bytes, which a returned value would
+    /// copy twice. On an error `self` is unchanged.
+    pub fn refactor(
+        &mut self,
+        m: [f32; 6],
+        nodes: &[u16],
+        weights: &[f32],
+    ) -> Result<(), SolveError> {
+        check_contact(nodes, weights)?;
+        self.factor = factor_compliance(m)?;
+        self.set_contact(nodes, weights);
+        Ok(())
+    }
+
+    /// Copies a contact set [`check_contact`] accepted.
+    fn set_contact(&mut self, nodes: &[u16], weights: &[f32]) {
+        self.len = nodes.len();
+        for (a, (&k, &w)) in nodes.iter().zip(weights).enumerate() {
+            if let (Some(n), Some(wv)) = (self.nodes.get_mut(a), self.weights.get_mut(a)) {
+                (*n, *wv) = (k, w);
+            }
+        }
     }
 
     /// The contact nodes.
     pub fn nodes(&self) -> &[u16] {
         self.nodes.get(..self.len).unwrap_or(&[])
+    }
+
+    /// The contact nodes with their weights `w_a` (the share of the tool force each carries).
+    pub fn shares(&self) -> impl Iterator<Item = (u16, f32)> + '_ {
+        self.nodes
+            .iter()
+            .copied()
+            .zip(self.weights.iter().copied())
+            .take(self.len)
     }
 
     /// Condition estimate ([`Factor::condition`]) of `M`.
@@ -575,22 +643,24 @@ impl WeightedFill {
     /// Factors M once every row is in ([`WeightedFill::step`] returned `true`); an
     /// ill-conditioned or non-finite M is an error.
     pub fn factor(&self) -> Result<WeightedSolve, SolveError> {
-        let [xx, xy, xz, yy, yz, zz] = self.m;
-        let m = [[xx, xy, xz], [xy, yy, yz], [xz, yz, zz]];
-        // A NaN or infinite compliance entry reaches M (a zero weight turns an infinity
-        // into NaN): one check on the sum.
-        if !m.iter().flatten().all(|v| v.is_finite()) {
-            return Err(SolveError::NonFinite);
-        }
-        let factor = Factor::new(m, 3)?;
-        factor.check()?;
         Ok(WeightedSolve {
             nodes: self.nodes,
             weights: self.weights,
             len: self.len,
-            factor,
+            factor: factor_compliance(self.m)?,
         })
     }
+}
+
+/// The checked factor of a 3 x 3 compliance given by its upper triangle (xx, xy, xz, yy, yz,
+/// zz): a NaN or infinite entry (a zero weight turns an infinity into NaN) is
+/// [`SolveError::NonFinite`] (checked by [`Factor::new`]), a pivot under [`MIN_PIVOT_REL`] an
+/// error.
+fn factor_compliance(m: [f32; 6]) -> Result<Factor<3>, SolveError> {
+    let [xx, xy, xz, yy, yz, zz] = m;
+    let factor = Factor::new([[xx, xy, xz], [xy, yy, yz], [xz, yz, zz]], 3)?;
+    factor.check()?;
+    Ok(factor)
 }
 
 /// Weighted contact, energy-minimal form: [`WeightedSolve::new`] then

@@ -101,9 +101,9 @@ pub struct LoopOutput {
     pub tip_m: [f32; 3],
     /// The contact tracker's state this tick.
     pub contact: ContactState,
-    /// Contact nodes and the (linear-model) forces on the tissue at them, N; empty when free or
-    /// when the solve failed.
-    pub contacts: Contacts,
+    /// How many contact nodes carry a force ([`HapticLoop::contacts`]); 0 when free or when
+    /// the solve failed.
+    pub contact_nodes: usize,
     /// The force rendered on the tool (what the user feels when armed), N: opposite to the
     /// force on the tissue, after the law Q and [`Device::limit_force`]. The motors produce it
     /// only when `state` is `Armed`; zero after a solve error.
@@ -428,24 +428,31 @@ impl<'b> HapticLoop<'b> {
         let touching = self.contact_solve(&contact);
         let patch = clock.cycles();
         // The solve to render is the held one (`contact_solve` has just kept or replaced it).
+        // The node forces go straight into `last.contacts` (telemetry's): no copy of the set.
+        self.last.contacts.clear();
         let linear = touching.and_then(|d| match (d, &self.held) {
-            (Some(d), Some(held)) => node_forces(&held.solve, self.blend.as_ref(), d).map(Some),
+            (Some(d), Some(held)) => {
+                let tool = tool_force(&held.solve, self.blend.as_ref(), d)?;
+                Ok(Some((
+                    node_forces(&held.solve, tool, &mut self.last.contacts),
+                    d,
+                )))
+            }
             _ => Ok(None),
         });
         let solved = clock.cycles();
         let rendered = linear.and_then(|l| match l {
-            None => Ok((Contacts::new(), [0.0; 3])),
-            Some((contacts, f, d)) => self.law(f, d).map(|on_tissue| (contacts, on_tissue)),
+            None => Ok([0.0; 3]),
+            Some((f, d)) => self.law(f, d),
         });
-        let (contacts, force_on_tool, solve_error) = match rendered {
-            Ok((contacts, on_tissue)) => (
-                contacts,
-                self.device.limit_force(on_tissue.map(|f| -f)),
-                None,
-            ),
-            Err(e) => (Contacts::new(), [0.0; 3], Some(e)),
+        let (force_on_tool, solve_error) = match rendered {
+            Ok(on_tissue) => (self.device.limit_force(on_tissue.map(|f| -f)), None),
+            Err(e) => {
+                self.last.contacts.clear();
+                ([0.0; 3], Some(e))
+            }
         };
-        let dropped_load = match self.held {
+        let dropped_load = match &self.held {
             Some(h) if solve_error.is_none() => h.dropped,
             _ => 0.0,
         };
@@ -478,13 +485,10 @@ impl<'b> HapticLoop<'b> {
             interlocks: input.interlocks,
         });
 
-        self.last = Last {
-            tip_m: tip,
-            contacts: contacts.clone(),
-            currents_a: out.currents_a,
-            tool_force_n: force_on_tool,
-            dropped_load,
-        };
+        self.last.tip_m = tip;
+        self.last.currents_a = out.currents_a;
+        self.last.tool_force_n = force_on_tool;
+        self.last.dropped_load = dropped_load;
         let output = LoopOutput {
             tick: self.tick,
             currents_a: out.currents_a,
@@ -492,12 +496,12 @@ impl<'b> HapticLoop<'b> {
             state: out.state,
             tip_m: tip,
             contact,
-            contacts,
+            contact_nodes: self.last.contacts.len(),
             tool_force_n: force_on_tool,
             fault: self.supervisor.fault(),
             new_fault: out.new_fault,
             solve_error,
-            patch: self.held.map(|h| h.origin),
+            patch: self.held.as_ref().map(|h| h.origin),
             dropped_load,
         };
         let marks = PhaseMarks {
@@ -508,6 +512,12 @@ impl<'b> HapticLoop<'b> {
             law,
         };
         (output, marks)
+    }
+
+    /// The last tick's contact nodes and the (linear-model) forces on the tissue at them, N;
+    /// empty when free or when the solve failed.
+    pub fn contacts(&self) -> &Contacts {
+        &self.last.contacts
     }
 
     /// Telemetry of the last tick (for decimated sending).
@@ -555,18 +565,29 @@ impl<'b> HapticLoop<'b> {
             // The sampled patch compliance (`SPEC.md`, "contact samples"): `W` at the anchor,
             // interpolated and factored every tick; no patch, no rebuild, no blend (`W` is
             // continuous as the anchor slides).
-            let solve = sampled_solve(&samples, triangle, nodes, bary)?;
-            self.held = Some(Held {
-                origin: PatchOrigin {
-                    triangle,
-                    nodes,
-                    bary,
-                    anchor,
-                    radius_m: samples.tip_radius_m(),
-                },
-                solve,
-                dropped: 0.0,
-            });
+            let origin = PatchOrigin {
+                triangle,
+                nodes,
+                bary,
+                anchor,
+                radius_m: samples.tip_radius_m(),
+            };
+            // Refactored in place: the held solve is a few hundred bytes to move.
+            let (w, shares) = sampled_compliance(&samples, triangle, nodes, bary)?;
+            let (n, wt) = shares.split();
+            match &mut self.held {
+                Some(h) => {
+                    h.solve.refactor(w, n, wt)?;
+                    h.origin = origin;
+                }
+                None => {
+                    self.held = Some(Held {
+                        origin,
+                        solve: WeightedSolve::from_compliance(w, n, wt)?,
+                        dropped: 0.0,
+                    });
+                }
+            }
             return Ok(Some(displacement));
         }
         if let Some(b) = &mut self.blend {
@@ -629,37 +650,62 @@ impl<'b> HapticLoop<'b> {
     }
 }
 
-/// The sampled contact solve at barycentric point `bary` of `triangle`: the bank's patch
-/// compliance `W` there ([`bank_format::Samples::interpolate`]) factored, the tool force
-/// spread over the triangle's vertices with positive coordinates, weighted by them
-/// (normalised), for telemetry's node forces. The rendered force is `W^-1 d`: the paper's eq. 8
-/// for one rigid tool in compliance form.
-fn sampled_solve(
+/// The sampled contact at barycentric point `bary` of `triangle`: the bank's patch compliance
+/// `W` there ([`bank_format::Samples::interpolate`]), and the triangle's vertices with positive
+/// coordinates, weighted by them (normalised), to spread the tool force over for telemetry's
+/// node forces. The rendered force is `W^-1 d`: the paper's eq. 8 for one rigid tool in
+/// compliance form.
+fn sampled_compliance(
     samples: &bank_format::Samples<'_>,
     triangle: u32,
     nodes: [u16; 3],
     bary: [f32; 3],
-) -> Result<WeightedSolve, SolveError> {
+) -> Result<([f32; 6], TriangleShares), SolveError> {
     let w = samples
         .interpolate(triangle as usize, bary)
         .ok_or(SolveError::NonFinite)?;
-    let (mut n, mut wt, mut len) = ([0u16; 3], [0.0f32; 3], 0);
+    let mut shares = TriangleShares {
+        nodes: [0; 3],
+        weights: [0.0; 3],
+        len: 0,
+    };
     for (&k, &b) in nodes.iter().zip(&bary) {
         if b > 0.0
-            && let (Some(nk), Some(wk)) = (n.get_mut(len), wt.get_mut(len))
+            && let (Some(nk), Some(wk)) = (
+                shares.nodes.get_mut(shares.len),
+                shares.weights.get_mut(shares.len),
+            )
         {
             (*nk, *wk) = (k, b);
-            len += 1;
+            shares.len += 1;
         }
     }
-    let kept: f32 = wt.iter().sum();
-    if len == 0 || !(kept > 0.0 && kept.is_finite()) {
+    let kept: f32 = shares.weights.iter().sum();
+    if shares.len == 0 || !(kept > 0.0 && kept.is_finite()) {
         return Err(SolveError::BadWeights);
     }
-    for x in wt.iter_mut() {
+    for x in shares.weights.iter_mut() {
         *x /= kept;
     }
-    WeightedSolve::from_compliance(w, n.get(..len).unwrap_or(&[]), wt.get(..len).unwrap_or(&[]))
+    Ok((w, shares))
+}
+
+/// A contact triangle's vertices with a positive barycentric coordinate and their shares of
+/// the tool force ([`sampled_compliance`]).
+struct TriangleShares {
+    nodes: [u16; 3],
+    weights: [f32; 3],
+    len: usize,
+}
+
+impl TriangleShares {
+    /// The kept vertices and their weights.
+    fn split(&self) -> (&[u16], &[f32]) {
+        (
+            self.nodes.get(..self.len).unwrap_or(&[]),
+            self.weights.get(..self.len).unwrap_or(&[]),
+        )
+    }
 }
 
 /// The first tick's solve on the contact triangle alone: its vertices with a positive
@@ -689,13 +735,12 @@ fn triangle_solve(bank: &Bank, nodes: [u16; 3], bary: [f32; 3]) -> Option<Weight
 }
 
 /// The solve phase: the tool force of `solve` at displacement `d` (blended with the outgoing
-/// patch's, `Blend`), the node forces `f_k = w_k f_tool` on `solve`'s nodes as telemetry's
-/// contact set, the linear model's tool force, and `d` (for the law).
-fn node_forces(
+/// patch's, `Blend`), the linear model's.
+fn tool_force(
     solve: &WeightedSolve,
     blend: Option<&Blend>,
     d: [f32; 3],
-) -> Result<(Contacts, [f32; 3], [f32; 3]), SolveError> {
+) -> Result<[f32; 3], SolveError> {
     let mut tool = solve.tool_force(d)?;
     if let Some(b) = blend {
         let old = b.solve.tool_force(d)?;
@@ -704,15 +749,24 @@ fn node_forces(
             *t += s * (o - *t);
         }
     }
-    let forces = solve.distribute(tool);
-    let mut contacts = Contacts::new();
-    for (&node, &force_n) in forces.nodes().iter().zip(forces.forces()) {
+    Ok(tool)
+}
+
+/// The node forces `f_k = w_k tool` on `solve`'s nodes into `contacts` (telemetry's contact
+/// set, empty on entry), returning their sum: the linear model's force on the tissue.
+fn node_forces(solve: &WeightedSolve, tool: [f32; 3], contacts: &mut Contacts) -> [f32; 3] {
+    let mut sum = [0.0f32; 3];
+    for (node, w) in solve.shares() {
+        let force_n = tool.map(|t| w * t);
+        for (s, f) in sum.iter_mut().zip(force_n) {
+            *s += f;
+        }
         // MAX_CONTACTS == MAX_CONTACT_NODES: never full.
         if contacts.push(Contact { node, force_n }).is_err() {
             break;
         }
     }
-    Ok((contacts, forces.tool_force_n, d))
+    sum
 }
 
 /// Counter readings at the ends of a tick's first five phases
@@ -956,7 +1010,7 @@ mod tests {
             else {
                 continue;
             };
-            if out.contacts.is_empty() {
+            if out.contact_nodes == 0 {
                 continue;
             }
             assert_eq!(origin.anchor, anchor);
@@ -970,7 +1024,7 @@ mod tests {
             let err = crate::fixtures::rel_err(&[got], &want);
             assert!(err < 1e-4, "tick {t}: {got:?} vs {want:?} ({err})");
             let mut sum = [0.0f32; 3];
-            for c in &out.contacts {
+            for c in lp.contacts() {
                 let k = bank.triangles()[origin.triangle as usize]
                     .iter()
                     .position(|&v| v == c.node)
@@ -1011,7 +1065,7 @@ mod tests {
                 // Pressed at a node of the 1 cm grid with a 3 mm tip: the node and its ring of
                 // six carry it, once the patch is built (under 16 ticks, 0.8 mm, after
                 // contact; the contact triangle carries it before).
-                let n = out.contacts.len();
+                let n = out.contact_nodes;
                 assert!(n == 7 || (n <= 3 && depth < 0.8e-3), "{out:?}");
                 // The tool is pushed back up, out of the tissue.
                 assert!(out.tool_force_n[2] > 0.0, "{out:?}");
@@ -1022,7 +1076,7 @@ mod tests {
                 assert_eq!(out.contact, ContactState::Free);
                 assert_eq!(out.tool_force_n, [0.0; 3]);
                 assert_eq!(out.currents_a, [0.0; 3]);
-                assert!(out.contacts.is_empty());
+                assert!(out.contact_nodes == 0);
             }
             fz.push(out.tool_force_n[2]);
         }
@@ -1054,6 +1108,7 @@ mod tests {
         }
         let s = counts_for_insertion(&dev, 0.102);
         let render = lp.tick(input(s));
+        let render_contacts = lp.contacts().clone();
         // The mode is set while disarmed.
         assert!(lp.disarm());
         lp.set_mode(Mode::LinearLaw).unwrap();
@@ -1061,14 +1116,14 @@ mod tests {
         let linear = lp.tick(input(s));
         // The node forces (linear model) sum to minus the linear tool force.
         let sum: [f32; 3] =
-            core::array::from_fn(|i| linear.contacts.iter().map(|c| c.force_n[i]).sum());
+            core::array::from_fn(|i| lp.contacts().iter().map(|c| c.force_n[i]).sum());
         for i in 0..3 {
             assert!(
                 (sum[i] + linear.tool_force_n[i]).abs() < 1e-4,
                 "{sum:?} {linear:?}"
             );
         }
-        assert_eq!(render.contacts, linear.contacts);
+        assert_eq!(&render_contacts, lp.contacts());
         assert!((render.tool_force_n[2] - linear.tool_force_n[2]).abs() > 1e-3);
         // The mode is set while disarmed.
         assert!(lp.disarm());
@@ -1076,7 +1131,7 @@ mod tests {
         lp.arm().unwrap();
         let out = lp.tick(input(s));
         assert_eq!(out.currents_a, [0.0; 3]);
-        assert_eq!(out.contacts.len(), 7);
+        assert_eq!(out.contact_nodes, 7);
     }
 
     /// A host's `ConstantCurrent` command reaches the supervisor as sent: a current over its
@@ -1195,12 +1250,12 @@ mod tests {
                 first += 1;
                 continue;
             }
-            assert_eq!(out.contacts.len(), MAX_CONTACTS);
+            assert_eq!(out.contact_nodes, MAX_CONTACTS);
             assert!(out.dropped_load > 0.2 && out.dropped_load < 1.0, "{out:?}");
             capped += 1;
             // Linear law: the node forces on the tissue sum to minus the tool force.
             for i in 0..3 {
-                let sum: f32 = out.contacts.iter().map(|c| c.force_n[i]).sum();
+                let sum: f32 = lp.contacts().iter().map(|c| c.force_n[i]).sum();
                 assert!(
                     (sum + out.tool_force_n[i]).abs() <= 1e-5 * norm(out.tool_force_n),
                     "{out:?}"
@@ -1529,7 +1584,7 @@ mod tests {
             if matches!(out.contact, ContactState::Touching { .. }) {
                 assert_eq!(out.tool_force_n, [0.0; 3]);
                 assert_eq!(out.currents_a, [0.0; 3]);
-                assert!(out.contacts.is_empty());
+                assert!(out.contact_nodes == 0);
                 fault = fault.or(out.new_fault.map(|f| (f, out.solve_error)));
             }
         }

@@ -197,7 +197,7 @@ fn run(bytes: &AlignedBytes, shared: &Shared, home: [f64; 3]) {
             state: out.state.wire(),
             fault: out.fault.map(|f| f.reason),
             tip_m: out.tip_m,
-            contacts: out.contacts,
+            contacts: haptic.contacts().clone(),
             tool_force_n: out.tool_force_n,
             mode: haptic.mode(),
             currents_a: out.currents_a,

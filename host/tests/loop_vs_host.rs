@@ -196,8 +196,8 @@ fn full_tick_forces_match_the_host_f64_reference_on_the_liver_bank() {
         };
         let free = |k: usize| (0..3).all(|c| !fixed.is_fixed(k, c));
         let patch = surface.tool_patch(&hit, f64::from(origin.radius_m), free);
-        let got: Vec<(usize, [f32; 3])> = out
-            .contacts
+        let got: Vec<(usize, [f32; 3])> = lp
+            .contacts()
             .iter()
             .map(|c| (ids[usize::from(c.node)], c.force_n))
             .collect();
@@ -231,7 +231,7 @@ fn full_tick_forces_match_the_host_f64_reference_on_the_liver_bank() {
         let trunc = norm(std::array::from_fn(|c| {
             f64::from(out.tool_force_n[c]) + f_full[c]
         })) / norm(f_full);
-        let key: Vec<u16> = out.contacts.iter().map(|c| c.node).collect();
+        let key: Vec<u16> = lp.contacts().iter().map(|c| c.node).collect();
         let dropped = patch.len() - got.len();
         match sets.iter_mut().find(|s| s.0 == key) {
             Some(s) => {

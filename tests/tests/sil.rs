@@ -83,7 +83,7 @@ fn assert_matches_native(bank: &Bank, run: &Run) -> usize {
             rec.tick
         );
         assert_eq!(
-            out.contacts.len(),
+            out.contact_nodes,
             usize::from(rec.contact_nodes),
             "tick {}",
             rec.tick

@@ -363,7 +363,7 @@ fn region_edge(p: &Prepared, bank: &Bank) -> Result<HardCase> {
                      patch's load dropped (nodes outside R or uncoupled), rendered {:.3} N \
                      against {full_n:.3} N for the whole patch: {:.1} % off",
                     1e3 * norm(*displacement),
-                    out.contacts.len(),
+                    out.contact_nodes,
                     100.0 * f64::from(out.dropped_load),
                     norm(out.tool_force_n),
                     100.0 * err
