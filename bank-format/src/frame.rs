@@ -12,11 +12,11 @@ use serde::de::DeserializeOwned;
 use serde::{Deserialize, Serialize};
 
 /// Version of the message set below; the device reports it in [`DeviceToHost::Hello`].
-pub const PROTOCOL_VERSION: u16 = 5;
+pub const PROTOCOL_VERSION: u16 = 6;
 /// Most contact nodes one telemetry message carries.
 pub const MAX_CONTACTS: usize = 8;
 /// Upper bound on a postcard-encoded message, bytes (the largest, a full telemetry message, is
-/// at most 218).
+/// at most 236).
 pub const MAX_MESSAGE: usize = 256;
 /// Bytes of CRC after the message.
 pub const FRAME_CRC_LEN: usize = 4;
@@ -106,6 +106,18 @@ pub struct Contact {
     pub force_n: [f32; 3],
 }
 
+/// Where the tool touches the collision surface (protocol 6): the bank triangle (`Bank::
+/// triangles`, the sampled contact's lattice numbering) and the barycentric coordinates of the
+/// contact point in it (sum 1). A display evaluates the fine mesh's surface displacement there
+/// (`u = U(p) F`, `F` the sum of the contact forces) without a solve.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ContactPoint {
+    /// Triangle index in the bank.
+    pub triangle: u32,
+    /// Barycentric coordinates of the contact point in the triangle.
+    pub bary: [f32; 3],
+}
+
 /// Device-side counters, all wrapping.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 pub struct Counters {
@@ -141,6 +153,9 @@ pub struct Telemetry {
     pub tip_m: [f32; 3],
     /// The contact set S and f_S (empty without contact).
     pub contacts: heapless::Vec<Contact, MAX_CONTACTS>,
+    /// Where the contact is on the collision surface (protocol 6), `None` without a rendered
+    /// contact.
+    pub contact_point: Option<ContactPoint>,
     /// Motor currents commanded this tick, A.
     pub currents_a: [f32; 3],
     /// The force rendered on the tool this tick, N (protocol 4): after the law Q and the

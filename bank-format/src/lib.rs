@@ -72,7 +72,7 @@ pub mod region {
 
 pub use error::{BankError, DeviceField};
 pub use frame::{
-    Contact, Counters, DeviceToHost, FRAME_CRC_LEN, FaultReason, FeedIter, FrameDecoder,
+    Contact, ContactPoint, Counters, DeviceToHost, FRAME_CRC_LEN, FaultReason, FeedIter, FrameDecoder,
     FrameError, FrameStats, HostToDevice, MAX_CONTACTS, MAX_FRAME, MAX_MESSAGE, Mode,
     PROTOCOL_VERSION, PhaseCycles, State, Telemetry, cobs_max_len, decode_frame, decode_plant,
     encode_frame, encode_plant,

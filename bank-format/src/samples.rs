@@ -75,12 +75,28 @@ impl<'a> Samples<'a> {
     }
 
     /// The patch compliance at barycentric point `bary` of triangle `t` (xx, xy, xz, yy, yz,
-    /// zz, m/N): the barycentric interpolation of the three samples around it (module notes).
-    /// `bary` is clamped into the triangle (negative coordinates to 0, then the second and
-    /// third scaled so that they sum to at most 1); `None` for a triangle out of range or a
-    /// coordinate that is not finite. A few dozen f32 operations, no division but the
-    /// clamp's, no loop over the lattice.
+    /// zz, m/N): the barycentric interpolation of the three samples around it ([`Self::corners`],
+    /// module notes). `None` for a triangle out of range or a coordinate that is not finite. A
+    /// few dozen f32 operations, no loop over the lattice.
     pub fn interpolate(&self, t: usize, bary: [f32; 3]) -> Option<[f32; 6]> {
+        let (ids, weights) = self.corners(t, bary)?;
+        let mut out = [0.0f32; 6];
+        for (&s, &wt) in ids.iter().zip(&weights) {
+            let w = self.w.get(usize::from(s))?;
+            for (o, v) in out.iter_mut().zip(w) {
+                *o += wt * v;
+            }
+        }
+        Some(out)
+    }
+
+    /// The three samples around barycentric point `bary` of triangle `t` (the corners of the
+    /// small lattice triangle that holds it) and their barycentric weights (sum 1): any field
+    /// given per sample (`W` here; a display's surface displacement fields on the host) is
+    /// interpolated with them. `bary` is clamped into the triangle (negative coordinates to 0,
+    /// then the second and third scaled so that they sum to at most 1); `None` for a triangle
+    /// out of range or a coordinate that is not finite. No division but the clamp's.
+    pub fn corners(&self, t: usize, bary: [f32; 3]) -> Option<([u16; 3], [f32; 3])> {
         if !(bary[1].is_finite() && bary[2].is_finite()) {
             return None;
         }
@@ -111,15 +127,11 @@ impl<'a> Samples<'a> {
                 [fx + fy - 1.0, 1.0 - fx, 1.0 - fy],
             )
         };
-        let mut out = [0.0f32; 6];
-        for (&(i, j), &wt) in corners.iter().zip(&weights) {
-            let s = *ids.get(lattice_index(i, j, level))?;
-            let w = self.w.get(usize::from(s))?;
-            for (o, v) in out.iter_mut().zip(w) {
-                *o += wt * v;
-            }
+        let mut out = [0u16; 3];
+        for (o, &(i, j)) in out.iter_mut().zip(&corners) {
+            *o = *ids.get(lattice_index(i, j, level))?;
         }
-        Some(out)
+        Some((out, weights))
     }
 }
 

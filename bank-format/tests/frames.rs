@@ -1,7 +1,7 @@
 //! Link frames: round trip of every message variant, corruption, truncation, oversize, resync.
 
 use bank_format::{
-    CRC32, Contact, Counters, DeviceToHost, FaultReason, FrameDecoder, FrameError, FrameStats,
+    CRC32, Contact, ContactPoint, Counters, DeviceToHost, FaultReason, FrameDecoder, FrameError, FrameStats,
     HostToDevice, MAX_CONTACTS, MAX_FRAME, MAX_MESSAGE, Mode, PROTOCOL_VERSION, State, Telemetry,
     decode_frame, encode_frame,
 };
@@ -25,6 +25,10 @@ fn full_telemetry() -> Telemetry {
         fault: Some(FaultReason::SolveFailed),
         tip_m: [0.01, -0.02, 0.03],
         contacts,
+        contact_point: Some(ContactPoint {
+            triangle: u32::MAX,
+            bary: [0.25, 0.5, 0.25],
+        }),
         currents_a: [0.1, 0.2, -0.3],
         tool_force_n: [0.5, -0.25, 4.0],
         dropped_load: 0.125,
@@ -166,7 +170,7 @@ fn fault_reasons_keep_their_wire_indices() {
         let bytes = postcard::to_slice(&reason, &mut [0u8; 8]).unwrap().to_vec();
         assert_eq!(bytes, [index as u8], "{reason:?}");
     }
-    assert_eq!(PROTOCOL_VERSION, 5);
+    assert_eq!(PROTOCOL_VERSION, 6);
 }
 
 #[test]
@@ -174,7 +178,7 @@ fn the_largest_message_fits_max_message_and_max_frame() {
     let msg = DeviceToHost::Telemetry(full_telemetry());
     let body = postcard::to_slice(&msg, &mut [0u8; 1024]).unwrap().len();
     assert!(
-        body <= 218,
+        body <= 236,
         "telemetry grew to {body} bytes: update MAX_MESSAGE docs"
     );
     assert!(body <= MAX_MESSAGE);

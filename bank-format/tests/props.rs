@@ -5,7 +5,7 @@
 mod common;
 
 use bank_format::{
-    AlignedBytes, Bank, BankBuilder, Contact, Counters, DeviceToHost, FaultReason, FrameDecoder,
+    AlignedBytes, Bank, BankBuilder, Contact, ContactPoint, Counters, DeviceToHost, FaultReason, FrameDecoder,
     HostToDevice, MAGIC, MAX_CONTACTS, MAX_FRAME, Mode, State, Telemetry, decode_frame,
     encode_frame, reseal,
 };
@@ -347,6 +347,7 @@ fn device_msg() -> impl Strategy<Value = DeviceToHost> {
         proptest::option::of(fault()),
         proptest::array::uniform3(f32_finite()),
         contacts,
+        proptest::option::of((any::<u32>(), proptest::array::uniform3(f32_finite()))),
         proptest::array::uniform3(f32_finite()),
         proptest::array::uniform3(f32_finite()),
         f32_finite(),
@@ -360,6 +361,7 @@ fn device_msg() -> impl Strategy<Value = DeviceToHost> {
                 fault,
                 tip_m,
                 contacts,
+                point,
                 currents_a,
                 tool_force_n,
                 dropped_load,
@@ -375,6 +377,7 @@ fn device_msg() -> impl Strategy<Value = DeviceToHost> {
                         .into_iter()
                         .map(|(node, force_n)| Contact { node, force_n })
                         .collect(),
+                    contact_point: point.map(|(triangle, bary)| ContactPoint { triangle, bary }),
                     currents_a,
                     tool_force_n,
                     dropped_load,

@@ -304,6 +304,7 @@ impl<'b, 'q> App<'b, 'q> {
                 fault: supervisor.state().fault(),
                 tip_m: [0.0; 3],
                 contacts: heapless::Vec::new(),
+                contact_point: None,
                 currents_a: [0.0; 3],
                 tool_force_n: [0.0; 3],
                 dropped_load: 0.0,

@@ -129,6 +129,7 @@ pub struct LoopOutput {
 struct Last {
     tip_m: [f32; 3],
     contacts: Contacts,
+    contact_point: Option<bank_format::ContactPoint>,
     currents_a: [f32; 3],
     tool_force_n: [f32; 3],
     dropped_load: f32,
@@ -284,6 +285,7 @@ impl<'b> HapticLoop<'b> {
             last: Last {
                 tip_m: [0.0; 3],
                 contacts: Contacts::new(),
+                contact_point: None,
                 currents_a: [0.0; 3],
                 tool_force_n: [0.0; 3],
                 dropped_load: 0.0,
@@ -486,6 +488,12 @@ impl<'b> HapticLoop<'b> {
         });
 
         self.last.tip_m = tip;
+        self.last.contact_point = match contact {
+            ContactState::Touching { triangle, bary, .. } if !self.last.contacts.is_empty() => {
+                Some(bank_format::ContactPoint { triangle, bary })
+            }
+            _ => None,
+        };
         self.last.currents_a = out.currents_a;
         self.last.tool_force_n = force_on_tool;
         self.last.dropped_load = dropped_load;
@@ -520,6 +528,12 @@ impl<'b> HapticLoop<'b> {
         &self.last.contacts
     }
 
+    /// Where the last tick's rendered contact is on the collision surface (telemetry's
+    /// `contact_point`); `None` without one.
+    pub fn contact_point(&self) -> Option<bank_format::ContactPoint> {
+        self.last.contact_point
+    }
+
     /// Telemetry of the last tick (for decimated sending).
     pub fn telemetry(&self) -> Telemetry {
         Telemetry {
@@ -529,6 +543,7 @@ impl<'b> HapticLoop<'b> {
             fault: self.supervisor.state().fault(),
             tip_m: self.last.tip_m,
             contacts: self.last.contacts.clone(),
+            contact_point: self.last.contact_point,
             currents_a: self.last.currents_a,
             tool_force_n: self.last.tool_force_n,
             dropped_load: self.last.dropped_load,
@@ -1014,6 +1029,14 @@ mod tests {
                 continue;
             }
             assert_eq!(origin.anchor, anchor);
+            // Telemetry names the contact point for a display's fields.
+            assert_eq!(
+                lp.telemetry().contact_point,
+                Some(bank_format::ContactPoint {
+                    triangle: origin.triangle,
+                    bary
+                })
+            );
             let w = crate::fixtures::sampled_w(anchor.map(f64::from));
             let want = crate::fixtures::gauss(
                 w.iter().map(|r| r.to_vec()).collect(),

@@ -32,6 +32,9 @@ pub struct Sample {
     pub tip_m: [f32; 3],
     /// Contact set S (bank node indices) and the forces on the tissue `f_S`, N.
     pub contacts: Contacts,
+    /// Where the contact is on the bank's collision surface (protocol 6), for a sampled
+    /// scene's display fields.
+    pub contact_point: Option<bank_format::ContactPoint>,
     /// Force rendered on the tool, N.
     pub tool_force_n: [f32; 3],
     /// Rendering mode.
@@ -459,6 +462,7 @@ impl Absorber {
                     fault: t.fault,
                     tip_m: t.tip_m,
                     contacts: t.contacts,
+                    contact_point: t.contact_point,
                     tool_force_n,
                     mode: t.mode,
                     currents_a: t.currents_a,

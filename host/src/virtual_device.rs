@@ -198,6 +198,7 @@ fn run(bytes: &AlignedBytes, shared: &Shared, home: [f64; 3]) {
             fault: out.fault.map(|f| f.reason),
             tip_m: out.tip_m,
             contacts: haptic.contacts().clone(),
+            contact_point: haptic.contact_point(),
             tool_force_n: out.tool_force_n,
             mode: haptic.mode(),
             currents_a: out.currents_a,

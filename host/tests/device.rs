@@ -139,6 +139,7 @@ fn device(
                     fault,
                     tip_m: tip,
                     contacts: Default::default(),
+                    contact_point: None,
                     currents_a,
                     tool_force_n: [0.0; 3],
                     dropped_load: 0.0,
@@ -240,6 +241,10 @@ fn serial_source_decodes_telemetry_and_sends_heartbeats() {
         fault: None,
         tip_m: [0.01, 0.02, 0.05],
         contacts: contacts.clone(),
+        contact_point: Some(bank_format::ContactPoint {
+            triangle: 17,
+            bary: [0.5, 0.25, 0.25],
+        }),
         currents_a: [0.1, 0.0, -0.2],
         // Not what the contacts would give under any law: the sample must take it as sent.
         tool_force_n: [0.05, -0.1, 0.7],
@@ -260,6 +265,13 @@ fn serial_source_decodes_telemetry_and_sends_heartbeats() {
         (500, State::Armed, [0.01, 0.02, 0.05])
     );
     assert_eq!(s.contacts, contacts);
+    assert_eq!(
+        s.contact_point,
+        Some(bank_format::ContactPoint {
+            triangle: 17,
+            bary: [0.5, 0.25, 0.25]
+        })
+    );
     assert_eq!(s.tool_force_n, [0.05, -0.1, 0.7]);
     // The host keeps the link alive.
     let mut rx: FrameDecoder<HostToDevice> = FrameDecoder::new();
