@@ -72,8 +72,8 @@ pub mod region {
 
 pub use error::{BankError, DeviceField};
 pub use frame::{
-    Contact, ContactPoint, Counters, DeviceToHost, FRAME_CRC_LEN, FaultReason, FeedIter, FrameDecoder,
-    FrameError, FrameStats, HostToDevice, MAX_CONTACTS, MAX_FRAME, MAX_MESSAGE, Mode,
+    Contact, ContactPoint, Counters, DeviceToHost, FRAME_CRC_LEN, FaultReason, FeedIter,
+    FrameDecoder, FrameError, FrameStats, HostToDevice, MAX_CONTACTS, MAX_FRAME, MAX_MESSAGE, Mode,
     PROTOCOL_VERSION, PhaseCycles, State, Telemetry, cobs_max_len, decode_frame, decode_plant,
     encode_frame, encode_plant,
 };
@@ -90,7 +90,7 @@ pub use layout::{
     SectionEntry, SectionKind, TrianglePlane, VERSION_MAJOR, VERSION_MINOR, bank_crc, reseal,
 };
 pub use reader::{Bank, Grid, SPD_PIVOT_REL, TRUNCATION_SLACK, UpperCouplings, validate_device};
-pub use samples::{Samples, lattice_bary, lattice_index, lattice_len};
+pub use samples::{Samples, lattice_bary, lattice_corners, lattice_index, lattice_len};
 #[cfg(feature = "alloc")]
 pub use writer::{
     AlignedBytes, BankBuilder, BuildError, ContactSamples, INPUT_SYMMETRY_REL, SharedLattice,

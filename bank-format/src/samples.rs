@@ -97,42 +97,46 @@ impl<'a> Samples<'a> {
     /// then the second and third scaled so that they sum to at most 1); `None` for a triangle
     /// out of range or a coordinate that is not finite. No division but the clamp's.
     pub fn corners(&self, t: usize, bary: [f32; 3]) -> Option<([u16; 3], [f32; 3])> {
-        if !(bary[1].is_finite() && bary[2].is_finite()) {
-            return None;
-        }
-        let ids = self.triangle_samples(t);
-        let level = self.header.level;
-        let n = level as f32;
-        // Comparisons, not `f32::max`: a libm call on the M4F (both are finite here).
-        let positive = |b: f32| if b > 0.0 { b } else { 0.0 };
-        let (mut b1, mut b2) = (positive(bary[1]), positive(bary[2]));
-        let s = b1 + b2;
-        if s > 1.0 {
-            (b1, b2) = (b1 / s, b2 / s);
-        }
-        let (x, y) = (b1 * n, b2 * n);
-        // The small triangle's lower-left lattice point (i0, j0), i0 + j0 <= level - 1.
-        let top = level.saturating_sub(1);
-        let i0 = (x as u32).min(top);
-        let j0 = (y as u32).min(top - i0);
-        let (fx, fy) = (x - i0 as f32, y - j0 as f32);
-        let (corners, weights) = if fx + fy <= 1.0 {
-            (
-                [(i0, j0), (i0 + 1, j0), (i0, j0 + 1)],
-                [1.0 - fx - fy, fx, fy],
-            )
-        } else {
-            (
-                [(i0 + 1, j0 + 1), (i0, j0 + 1), (i0 + 1, j0)],
-                [fx + fy - 1.0, 1.0 - fx, 1.0 - fy],
-            )
-        };
-        let mut out = [0u16; 3];
-        for (o, &(i, j)) in out.iter_mut().zip(&corners) {
-            *o = *ids.get(lattice_index(i, j, level))?;
-        }
-        Some((out, weights))
+        lattice_corners(self.triangle_samples(t), self.header.level, bary)
     }
+}
+
+/// [`Samples::corners`] on one triangle's sample ids `ids` ([`lattice_index`] order) at
+/// `level`, for a host that holds the ids itself.
+pub fn lattice_corners(ids: &[u16], level: u32, bary: [f32; 3]) -> Option<([u16; 3], [f32; 3])> {
+    if !(bary[1].is_finite() && bary[2].is_finite()) {
+        return None;
+    }
+    let n = level as f32;
+    // Comparisons, not `f32::max`: a libm call on the M4F (both are finite here).
+    let positive = |b: f32| if b > 0.0 { b } else { 0.0 };
+    let (mut b1, mut b2) = (positive(bary[1]), positive(bary[2]));
+    let s = b1 + b2;
+    if s > 1.0 {
+        (b1, b2) = (b1 / s, b2 / s);
+    }
+    let (x, y) = (b1 * n, b2 * n);
+    // The small triangle's lower-left lattice point (i0, j0), i0 + j0 <= level - 1.
+    let top = level.saturating_sub(1);
+    let i0 = (x as u32).min(top);
+    let j0 = (y as u32).min(top - i0);
+    let (fx, fy) = (x - i0 as f32, y - j0 as f32);
+    let (corners, weights) = if fx + fy <= 1.0 {
+        (
+            [(i0, j0), (i0 + 1, j0), (i0, j0 + 1)],
+            [1.0 - fx - fy, fx, fy],
+        )
+    } else {
+        (
+            [(i0 + 1, j0 + 1), (i0, j0 + 1), (i0 + 1, j0)],
+            [fx + fy - 1.0, 1.0 - fx, 1.0 - fy],
+        )
+    };
+    let mut out = [0u16; 3];
+    for (o, &(i, j)) in out.iter_mut().zip(&corners) {
+        *o = *ids.get(lattice_index(i, j, level))?;
+    }
+    Some((out, weights))
 }
 
 #[cfg(test)]

@@ -1,9 +1,9 @@
 //! Link frames: round trip of every message variant, corruption, truncation, oversize, resync.
 
 use bank_format::{
-    CRC32, Contact, ContactPoint, Counters, DeviceToHost, FaultReason, FrameDecoder, FrameError, FrameStats,
-    HostToDevice, MAX_CONTACTS, MAX_FRAME, MAX_MESSAGE, Mode, PROTOCOL_VERSION, State, Telemetry,
-    decode_frame, encode_frame,
+    CRC32, Contact, ContactPoint, Counters, DeviceToHost, FaultReason, FrameDecoder, FrameError,
+    FrameStats, HostToDevice, MAX_CONTACTS, MAX_FRAME, MAX_MESSAGE, Mode, PROTOCOL_VERSION, State,
+    Telemetry, decode_frame, encode_frame,
 };
 
 fn full_telemetry() -> Telemetry {

@@ -5,9 +5,9 @@
 mod common;
 
 use bank_format::{
-    AlignedBytes, Bank, BankBuilder, Contact, ContactPoint, Counters, DeviceToHost, FaultReason, FrameDecoder,
-    HostToDevice, MAGIC, MAX_CONTACTS, MAX_FRAME, Mode, State, Telemetry, decode_frame,
-    encode_frame, reseal,
+    AlignedBytes, Bank, BankBuilder, Contact, ContactPoint, Counters, DeviceToHost, FaultReason,
+    FrameDecoder, HostToDevice, MAGIC, MAX_CONTACTS, MAX_FRAME, Mode, State, Telemetry,
+    decode_frame, encode_frame, reseal,
 };
 use common::*;
 use proptest::prelude::*;

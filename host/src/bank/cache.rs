@@ -8,9 +8,12 @@
 //! source tree (the CLI, each test) shares it.
 //! Files live in `$HAPTIC_CACHE_DIR`, else `$XDG_CACHE_HOME/haptic-host`, else
 //! `~/.cache/haptic-host`, named `bank-<key>.bin`, written atomically; a cached file is
-//! validated by the bank reader before use, and one that fails is rebuilt.
+//! validated by the bank reader before use, and one that fails is rebuilt. A sampled scene's
+//! display fields ([`DisplayFields`]) go beside it as `fields-<key>.bin`, keyed by the bank's
+//! key, the bank's CRC and the text of the code that computes them.
 
 use super::{BuiltBank, Prepared};
+use crate::display::fields::DisplayFields;
 use crate::scene::{ContactModel, FNV_OFFSET, fnv1a};
 use anyhow::Result;
 use bank_format::{AlignedBytes, Bank};
@@ -51,6 +54,19 @@ fn code_hash() -> u64 {
     })
 }
 
+/// The cache key of a sampled scene's bank (module notes).
+fn bank_key(prep: &Prepared, spec: &crate::scene::SampledContact) -> u64 {
+    let mut key = prep.scene_id;
+    let meshes = std::iter::once(&spec.fem_mesh).chain(spec.richardson.as_ref().map(|r| &r.mesh));
+    for mesh in meshes {
+        let bytes = std::fs::read(mesh).unwrap_or_default();
+        key = fnv1a(key, &fnv1a(FNV_OFFSET, &bytes).to_le_bytes());
+    }
+    key = fnv1a(key, &bank_format::VERSION_MAJOR.to_le_bytes());
+    key = fnv1a(key, &bank_format::VERSION_MINOR.to_le_bytes());
+    fnv1a(key, &code_hash().to_le_bytes())
+}
+
 /// The scene's bank ([`Prepared::build_bank`]); a sampled scene's comes from the cache when
 /// its inputs are unchanged, and goes into it when built. The second value says whether it
 /// came from the cache.
@@ -61,15 +77,7 @@ pub fn scene_bank_cached(
     let ContactModel::Sampled(spec) = &prep.scene.contact else {
         return Ok((prep.build_bank(progress)?, false));
     };
-    let mut key = prep.scene_id;
-    let meshes = std::iter::once(&spec.fem_mesh).chain(spec.richardson.as_ref().map(|r| &r.mesh));
-    for mesh in meshes {
-        let bytes = std::fs::read(mesh).unwrap_or_default();
-        key = fnv1a(key, &fnv1a(FNV_OFFSET, &bytes).to_le_bytes());
-    }
-    key = fnv1a(key, &bank_format::VERSION_MAJOR.to_le_bytes());
-    key = fnv1a(key, &bank_format::VERSION_MINOR.to_le_bytes());
-    key = fnv1a(key, &code_hash().to_le_bytes());
+    let key = bank_key(prep, spec);
     let file = cache_dir().map(|d| d.join(format!("bank-{key:016x}.bin")));
     if let Some(f) = &file
         && let Ok(bytes) = std::fs::read(f)
@@ -87,16 +95,63 @@ pub fn scene_bank_cached(
     }
     let built = prep.build_bank(progress)?;
     if let Some(f) = &file {
-        // A cache that cannot be written only costs the next run the precompute.
-        let written = f
-            .parent()
-            .map(std::fs::create_dir_all)
-            .transpose()
-            .ok()
-            .and_then(|_| crate::fsio::write_atomic(f, &built.bytes, &[]).ok());
-        if written.is_none() {
-            eprintln!("note: could not write the bank cache {}", f.display());
-        }
+        store(f, &built.bytes);
     }
     Ok((built, false))
+}
+
+/// The source files whose text decides the display fields besides the bank's inputs.
+const FIELDS_SOURCES: [&str; 2] = [
+    include_str!("../display/fields.rs"),
+    include_str!("../../fem/src/elasticity/mod.rs"),
+];
+
+/// A sampled scene's display fields ([`DisplayFields::compute`] for `bank`, the scene's bank)
+/// from the cache, or computed and cached; `None` for a nodal scene. The second value says
+/// whether they came from the cache.
+pub fn display_fields_cached(
+    prep: &Prepared,
+    bank: &Bank,
+    progress: Option<&dyn Progress>,
+) -> Result<Option<(DisplayFields, bool)>> {
+    let (ContactModel::Sampled(spec), Some(samples)) = (&prep.scene.contact, bank.samples()) else {
+        return Ok(None);
+    };
+    let key = FIELDS_SOURCES.iter().fold(
+        fnv1a(bank_key(prep, spec), &bank.crc().to_le_bytes()),
+        |h, s| fnv1a(h, s.as_bytes()),
+    );
+    let file = cache_dir().map(|d| d.join(format!("fields-{key:016x}.bin")));
+    if let Some(f) = &file
+        && let Ok(bytes) = std::fs::read(f)
+        && let Ok(fields) = DisplayFields::decode(&bytes)
+    {
+        return Ok(Some((fields, true)));
+    }
+    let (_, points) = super::sampled::lattice_points(&prep.positions, &prep.triangles, spec.level);
+    let fields = DisplayFields::compute(
+        &prep.scene,
+        &spec.fem_mesh,
+        &samples,
+        prep.triangles.len(),
+        &points,
+        progress,
+    )?;
+    if let Some(f) = &file {
+        store(f, &fields.encode());
+    }
+    Ok(Some((fields, false)))
+}
+
+/// Writes a cache file; one that cannot be written only costs the next run the precompute.
+fn store(f: &std::path::Path, bytes: &[u8]) {
+    let written = f
+        .parent()
+        .map(std::fs::create_dir_all)
+        .transpose()
+        .ok()
+        .and_then(|_| crate::fsio::write_atomic(f, bytes, &[]).ok());
+    if written.is_none() {
+        eprintln!("note: could not write the cache file {}", f.display());
+    }
 }

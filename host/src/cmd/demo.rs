@@ -12,7 +12,7 @@ use bank_format::{AlignedBytes, Bank};
 use host::bank::{BuiltBank, Prepared};
 use host::deform::Deformer;
 use host::display::server::{Server, SteerFn};
-use host::display::{DisplayMesh, DisplayStats, Pipeline};
+use host::display::{DisplayMesh, DisplayStats, Pipeline, SurfaceModel};
 use host::kinematics::Workspace;
 use host::record::Recorder;
 use host::scene::{MeshSource, Scene};
@@ -134,6 +134,33 @@ pub fn run(args: Args) -> Result<()> {
     let cal = *bank.device();
     let workspace = Workspace::from_device(&cal);
 
+    // A sampled scene shows its fine FEM surface under precomputed fields; a nodal one its
+    // collision mesh with columns solved on demand.
+    let fields = {
+        let progress = host::progress::Bar::new("display field chunks");
+        let t = Instant::now();
+        let fields = host::bank::cache::display_fields_cached(&prep, &bank, Some(&progress))?;
+        progress.finish();
+        if let Some((f, cached)) = &fields {
+            eprintln!(
+                "display   {} surface nodes of {}, {} fields ({:.1} MiB), {} in {:.2} s",
+                f.mesh.rest.len(),
+                match &prep.scene.contact {
+                    host::scene::ContactModel::Sampled(spec) => spec.fem_mesh.display().to_string(),
+                    host::scene::ContactModel::Nodal => String::new(),
+                },
+                f.samples(),
+                f.bytes() as f64 / (1 << 20) as f64,
+                if *cached {
+                    "from the cache"
+                } else {
+                    "computed"
+                },
+                t.elapsed().as_secs_f64()
+            );
+        }
+        fields.map(|(f, _)| Arc::new(f))
+    };
     let Prepared {
         mesh,
         mesh_name,
@@ -141,7 +168,10 @@ pub fn run(args: Args) -> Result<()> {
         compliance,
         ..
     } = prep;
-    let (display, neighbours) = display_mesh(&mesh.nodes, &surface);
+    let (display, neighbours) = match &fields {
+        Some(f) => (f.mesh.clone(), HashMap::new()),
+        None => display_mesh(&mesh.nodes, &surface),
+    };
     let aim = press_point(&mesh.nodes, &surface.triangles)
         .context("the organ's surface has no point under its top centre")?;
 
@@ -202,6 +232,7 @@ pub fn run(args: Args) -> Result<()> {
         });
         f
     });
+    let display_nodes = display.rest.len();
     let mesh_bytes = Arc::new(display);
     let port = args.port.unwrap_or(if args.headless { 0 } else { 8080 });
     let server = Server::start(port, mesh_bytes.encode(), info, steer_fn)?;
@@ -245,18 +276,23 @@ pub fn run(args: Args) -> Result<()> {
         )?),
         None => None,
     };
-    let deformer = Deformer::new(
-        Arc::clone(&compliance),
-        &mesh.nodes,
-        surface.nodes.clone(),
-        args.cache_nodes,
-    );
+    let surface_model = match fields {
+        Some(f) => SurfaceModel::Sampled(f),
+        None => SurfaceModel::Nodal {
+            deformer: Box::new(Deformer::new(
+                Arc::clone(&compliance),
+                &mesh.nodes,
+                surface.nodes.clone(),
+                args.cache_nodes,
+            )),
+            neighbours,
+        },
+    };
     let mut pipeline = Pipeline {
         source: source.as_mut(),
-        deformer,
+        surface: surface_model,
         mesh: mesh_bytes,
         bank_to_mesh,
-        neighbours,
         hub: server.hub.clone(),
         fps: args.fps,
     };
@@ -275,13 +311,7 @@ pub fn run(args: Args) -> Result<()> {
         Some(r) => Some(r.finish()?),
         None => None,
     };
-    report(
-        &args,
-        &display_stats,
-        &loop_stats,
-        recorded,
-        mesh.nodes.len(),
-    );
+    report(&args, &display_stats, &loop_stats, recorded, display_nodes);
     Ok(())
 }
 
@@ -297,7 +327,7 @@ fn report(args: &Args, d: &DisplayStats, l: &LoopStats, recorded: Option<usize>,
             "column_batches": d.columns.batches, "column_nodes": d.columns.nodes,
             "column_batch_mean_ms": mean_batch_ms(d),
             "column_batch_max_ms": d.columns.max_seconds * 1e3,
-            "mesh_nodes": nodes, "recorded_frames": recorded,
+            "display_nodes": nodes, "recorded_frames": recorded,
         });
         println!("{v}");
         return;
@@ -315,7 +345,7 @@ fn report(args: &Args, d: &DisplayStats, l: &LoopStats, recorded: Option<usize>,
         l.peak_force_n
     );
     println!(
-        "display   {:.1} frames/s ({} frames of {nodes}-node organ, {:.2} ms mean, {:.2} ms max \
+        "display   {:.1} frames/s ({} frames of a {nodes}-node surface, {:.2} ms mean, {:.2} ms max \
          per frame, {} while columns were being solved)",
         d.display_fps, d.frames, d.mean_frame_ms, d.max_frame_ms, d.approximate_frames
     );

@@ -1,7 +1,8 @@
 //! The host display: from telemetry samples to deformed-surface frames for the browser viewer.
 //!
 //! [`Pipeline::run`] takes the newest [`Sample`] of a [`Source`] at a fixed frame rate, maps its
-//! contact set to mesh nodes, computes the surface displacement ([`Deformer`]), and publishes
+//! contact set to mesh nodes, computes the surface displacement ([`SurfaceModel`]: the nodal
+//! [`Deformer`], or a sampled scene's precomputed fields on its fine mesh), and publishes
 //! one binary frame ([`encode_frame`]) to the [`server`], which hands each viewer only the newest
 //! frame (a slow or vanished browser drops frames; the loop thread never waits for anyone).
 //! Optionally every frame is also offered to a recorder (ParaView series, [`crate::record`]).
@@ -10,6 +11,7 @@
 //! f32 rest[3 nodes], u32 tri[3 triangles]`; and per frame over the WebSocket `/ws`:
 //! [`FRAME_HEADER_BYTES`] of header (see [`encode_frame`]) then `f32 positions[3 nodes]`.
 
+pub mod fields;
 pub mod server;
 
 use crate::deform::{Coverage, Deformer, SolveStats};
@@ -25,7 +27,7 @@ pub const FRAME_MAGIC: u32 = u32::from_le_bytes(*b"HFR1");
 pub const FRAME_HEADER_BYTES: usize = 64;
 
 /// The displayed surface: rest positions and triangles over the display nodes.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct DisplayMesh {
     /// Rest positions of the display nodes, m.
     pub rest: Vec<[f32; 3]>,
@@ -128,18 +130,31 @@ pub trait FrameSink {
     fn frame(&mut self, info: &FrameInfo, contacts: &[(usize, [f32; 3])], u: &[[f32; 3]]);
 }
 
+/// How a frame's surface displacement is computed.
+pub enum SurfaceModel {
+    /// `u = C[:, S] f_S` on the collision mesh's surface, columns solved on demand.
+    Nodal {
+        /// The column cache and its solver.
+        deformer: Box<Deformer>,
+        /// Surface neighbours of each mesh node (for prefetching columns); empty lists
+        /// allowed.
+        neighbours: std::collections::HashMap<usize, Vec<usize>>,
+    },
+    /// `u = U(p) F` on a sampled scene's fine FEM surface, from precomputed fields: no solve
+    /// after a contact ([`fields::DisplayFields`]).
+    Sampled(Arc<fields::DisplayFields>),
+}
+
 /// The frame loop (see the module notes).
 pub struct Pipeline<'a> {
     /// The telemetry source.
     pub source: &'a mut dyn Source,
     /// Surface displacement.
-    pub deformer: Deformer,
+    pub surface: SurfaceModel,
     /// The displayed surface.
     pub mesh: Arc<DisplayMesh>,
     /// Mesh node id of each bank node (the bank's `mesh_ids`).
     pub bank_to_mesh: Vec<usize>,
-    /// Surface neighbours of each mesh node (for prefetching columns); empty lists allowed.
-    pub neighbours: std::collections::HashMap<usize, Vec<usize>>,
     /// Where frames go.
     pub hub: server::Hub,
     /// Target frame rate, Hz.
@@ -187,16 +202,38 @@ impl Pipeline<'_> {
                     Some((*self.bank_to_mesh.get(usize::from(c.node))?, c.force_n))
                 }),
             );
-            let coverage = self.deformer.displacement(&contacts, &mut u);
-            if coverage == Coverage::Approximate {
-                stats.approximate_frames += 1;
-            } else {
-                let ring: Vec<usize> = contacts
-                    .iter()
-                    .flat_map(|c| self.neighbours.get(&c.0).into_iter().flatten().copied())
-                    .collect();
-                self.deformer.prefetch(&ring);
-            }
+            let coverage = match &mut self.surface {
+                SurfaceModel::Nodal {
+                    deformer,
+                    neighbours,
+                } => {
+                    let coverage = deformer.displacement(&contacts, &mut u);
+                    if coverage == Coverage::Approximate {
+                        stats.approximate_frames += 1;
+                    } else {
+                        let ring: Vec<usize> = contacts
+                            .iter()
+                            .flat_map(|c| neighbours.get(&c.0).into_iter().flatten().copied())
+                            .collect();
+                        deformer.prefetch(&ring);
+                    }
+                    coverage
+                }
+                SurfaceModel::Sampled(fields) => {
+                    // The linear tool force on the tissue: the contact forces' sum.
+                    let force = sample.contacts.iter().fold([0.0f32; 3], |a, c| {
+                        std::array::from_fn(|i| a[i] + c.force_n[i])
+                    });
+                    match sample.contact_point {
+                        Some(p) => fields.displacement(p.triangle, p.bary, force, &mut u),
+                        None => {
+                            u.clear();
+                            u.resize(self.mesh.rest.len(), [0.0; 3]);
+                        }
+                    }
+                    Coverage::Exact
+                }
+            };
             positions.clear();
             positions.extend(
                 self.mesh
@@ -233,7 +270,9 @@ impl Pipeline<'_> {
             busy += spent;
             stats.max_frame_ms = stats.max_frame_ms.max(spent.as_secs_f64() * 1e3);
         }
-        stats.columns = self.deformer.solve_stats();
+        if let SurfaceModel::Nodal { deformer, .. } = &self.surface {
+            stats.columns = deformer.solve_stats();
+        }
         let elapsed = start.elapsed().as_secs_f64();
         if stats.frames > 0 {
             stats.display_fps = stats.frames as f64 / elapsed;
