@@ -7,6 +7,7 @@
 //! here.
 
 pub mod cache;
+pub mod precompute;
 pub mod sampled;
 pub mod sweep;
 

@@ -22,6 +22,7 @@ pub mod progress;
 pub mod reach;
 pub mod record;
 pub mod report;
+pub mod rss;
 pub mod scene;
 pub mod script;
 pub mod sil;

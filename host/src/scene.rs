@@ -312,6 +312,21 @@ pub enum FemElement {
     Quadratic,
 }
 
+impl std::str::FromStr for FemElement {
+    type Err = String;
+
+    /// "p2", or a linear element's name ([`Element`]).
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s {
+            "p2" => Ok(FemElement::Quadratic),
+            e => e
+                .parse::<Element>()
+                .map(FemElement::Linear)
+                .map_err(|why| format!("{why}, or \"p2\" (the 10-node tetrahedron)")),
+        }
+    }
+}
+
 impl FemElement {
     /// The name a scene uses: "p1", "anp" or "p2".
     pub fn name(self) -> &'static str {
@@ -722,14 +737,10 @@ fn parse_contact(ctx: &Ctx, path: &Path, c: &RawContact) -> Result<ContactModel,
     let dir = path.parent().unwrap_or(Path::new("."));
     let element = match &c.fem_element {
         None => FemElement::Quadratic,
-        Some(e) if e.get_ref() == "p2" => FemElement::Quadratic,
-        Some(e) => FemElement::Linear(e.get_ref().parse::<Element>().map_err(|why| {
-            ctx.err(
-                e.span(),
-                "contact.fem_element",
-                format!("{why}, or \"p2\" (the 10-node tetrahedron)"),
-            )
-        })?),
+        Some(e) => e
+            .get_ref()
+            .parse::<FemElement>()
+            .map_err(|why| ctx.err(e.span(), "contact.fem_element", why))?,
     };
     let level = match &c.sample_level {
         None => DEFAULT_SAMPLE_LEVEL,

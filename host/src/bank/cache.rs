@@ -114,7 +114,7 @@ pub fn display_fields_cached(
     bank: &Bank,
     progress: Option<&dyn Progress>,
 ) -> Result<Option<(DisplayFields, bool)>> {
-    let (ContactModel::Sampled(spec), Some(samples)) = (&prep.scene.contact, bank.samples()) else {
+    let (ContactModel::Sampled(spec), Some(_)) = (&prep.scene.contact, bank.samples()) else {
         return Ok(None);
     };
     let key = FIELDS_SOURCES.iter().fold(
@@ -128,15 +128,9 @@ pub fn display_fields_cached(
     {
         return Ok(Some((fields, true)));
     }
-    let (_, points) = super::sampled::lattice_points(&prep.positions, &prep.triangles, spec.level);
-    let fields = DisplayFields::compute(
-        &prep.scene,
-        &spec.fem_mesh,
-        &samples,
-        prep.triangles.len(),
-        &points,
-        progress,
-    )?;
+    let Some(fields) = DisplayFields::for_bank(prep, bank, progress)? else {
+        return Ok(None);
+    };
     if let Some(f) = &file {
         store(f, &fields.encode());
     }

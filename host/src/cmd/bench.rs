@@ -33,6 +33,31 @@ pub enum Bench {
     /// memory.x (e.g. the board image,
     /// firmware/board/target/thumbv7em-none-eabihf/release/firmware-board).
     Image(ImageArgs),
+    /// A sampled scene's precompute without the cache (bank: FEM factors and the patch
+    /// compliance at every sample; the display fields) with its peak memory, and the start of
+    /// a run that finds both in the cache.
+    Precompute(PrecomputeArgs),
+}
+
+/// Arguments of `host bench precompute`.
+#[derive(clap::Args, Debug)]
+pub struct PrecomputeArgs {
+    /// Scene file; default: the embedded default scene.
+    #[arg(long)]
+    scene: Option<PathBuf>,
+    /// Compute the samples and fields on this FEM mesh instead of the scene's `fem_mesh`
+    /// (e.g. host/meshes/generated/liver-100k.msh).
+    #[arg(long)]
+    fem_mesh: Option<PathBuf>,
+    /// The element for the samples: p1, anp or p2 (default: the scene's).
+    #[arg(long)]
+    element: Option<String>,
+    /// Drop the scene's Richardson extrapolation.
+    #[arg(long)]
+    no_richardson: bool,
+    /// Print one JSON object instead of text.
+    #[arg(long)]
+    json: bool,
 }
 
 /// Arguments of `host bench image`.
@@ -124,7 +149,65 @@ pub fn run(bench: Bench) -> Result<()> {
         Bench::Sil(args) => sil(args),
         Bench::Law(args) => super::bench_law::run(args),
         Bench::Image(args) => image(args),
+        Bench::Precompute(args) => precompute(args),
     }
+}
+
+fn precompute(args: PrecomputeArgs) -> Result<()> {
+    let scene = host::scene::Scene::load_or_default(args.scene.as_deref())?;
+    let element = args
+        .element
+        .as_deref()
+        .map(str::parse::<host::scene::FemElement>)
+        .transpose()
+        .map_err(|why| anyhow::anyhow!("--element: {why}"))?;
+    let overrides = host::bank::precompute::Overrides {
+        fem_mesh: args.fem_mesh,
+        element,
+        no_richardson: args.no_richardson,
+    };
+    let progress = host::progress::Bar::new("chunks (patch compliance, then display fields)");
+    let f = host::bank::precompute::measure(scene, &overrides, Some(&progress))?;
+    progress.finish();
+    if args.json {
+        println!("{}", serde_json::to_string(&f)?);
+        return Ok(());
+    }
+    let total = f.prepare_s + f.bank_s + f.fields_s;
+    println!(
+        "fem       {} ({}, {} vertices, {} nodes){}",
+        f.fem_mesh,
+        f.element,
+        f.fem_vertices,
+        f.fem_nodes,
+        f.richardson_mesh
+            .as_ref()
+            .map_or(String::new(), |m| format!(", Richardson with {m}"))
+    );
+    println!(
+        "bank      {} samples, {} B, {:.1} s (scene prepared in {:.1} s)",
+        f.samples, f.bank_bytes, f.bank_s, f.prepare_s
+    );
+    println!(
+        "display   {} surface nodes, fields {:.1} MiB (f16), {:.1} s",
+        f.display_nodes,
+        f.fields_bytes as f64 / f64::from(1 << 20),
+        f.fields_s
+    );
+    println!(
+        "total     {total:.1} s, peak memory {:.2} GiB; cached start {:.2} s",
+        f.peak_rss_mib / 1024.0,
+        f.cached_start_s
+    );
+    println!(
+        "goal      default scene: precompute <= 60 s and <= 4 GiB, cached start <= 3 s: {}",
+        if total <= 60.0 && f.peak_rss_mib <= 4096.0 && f.cached_start_s <= 3.0 {
+            "met"
+        } else {
+            "not met"
+        }
+    );
+    Ok(())
 }
 
 fn compliance(args: ComplianceArgs) -> Result<()> {
@@ -202,7 +285,7 @@ fn measure(path: &Path, material: Material, args: &ComplianceArgs) -> Result<Rep
     candidates.sort_by(|&a, &b| dist(a).total_cmp(&dist(b)));
     candidates.truncate(args.max_nodes);
 
-    reset_peak_rss();
+    host::rss::reset_peak();
     let t = Instant::now();
     let body = Elasticity::with_element(&mesh, material, args.element)?;
     body.check_rigid_motions(&fixed)?;
@@ -215,7 +298,7 @@ fn measure(path: &Path, material: Material, args: &ComplianceArgs) -> Result<Rep
     let c = Compliance::factorize_matrix(dofs, &k, perm.as_ref())?;
     drop((k, perm));
     let factor_s = t.elapsed().as_secs_f64();
-    let factor_peak_rss_mib = peak_rss_mib();
+    let factor_peak_rss_mib = host::rss::peak_mib();
 
     let bar = host::progress::Bar::new("supernodes");
     let t = Instant::now();
@@ -249,26 +332,9 @@ fn measure(path: &Path, material: Material, args: &ComplianceArgs) -> Result<Rep
         columns_s,
         nnz_k: stats.nnz_k,
         nnz_l: stats.nnz_l,
-        peak_rss_mib: peak_rss_mib(),
+        peak_rss_mib: host::rss::peak_mib(),
         factor_peak_rss_mib,
     })
-}
-
-/// Resets the kernel's peak-RSS mark of this process (Linux; ignored elsewhere).
-fn reset_peak_rss() {
-    let _ = std::fs::write("/proc/self/clear_refs", "5");
-}
-
-/// Peak resident set size since the last reset, in MiB (0 where unavailable).
-fn peak_rss_mib() -> f64 {
-    std::fs::read_to_string("/proc/self/status")
-        .ok()
-        .and_then(|s| {
-            s.lines()
-                .find(|l| l.starts_with("VmHWM:"))
-                .and_then(|l| l.split_whitespace().nth(1)?.parse::<f64>().ok())
-        })
-        .map_or(0.0, |kib| kib / 1024.0)
 }
 
 fn tick(args: TickArgs) -> Result<()> {

@@ -161,13 +161,10 @@ fn probe(args: ProbeArgs) -> Result<()> {
 fn study(args: StudyArgs) -> Result<()> {
     use host::scene::FemElement;
     use host::study::{self, DEFAULT_SITES, normal_compliance};
-    let element = match args.element.as_str() {
-        "p2" => FemElement::Quadratic,
-        e => FemElement::Linear(
-            e.parse()
-                .map_err(|why: String| anyhow::anyhow!("--element: {why}, or p2"))?,
-        ),
-    };
+    let element: FemElement = args
+        .element
+        .parse()
+        .map_err(|why: String| anyhow::anyhow!("--element: {why}"))?;
     let meshes = args
         .meshes
         .iter()

@@ -173,6 +173,31 @@ impl DisplayFields {
         })
     }
 
+    /// The fields of `prep`'s scene for `bank` (built from it); `None` for a nodal scene or a
+    /// bank without samples.
+    pub fn for_bank(
+        prep: &crate::bank::Prepared,
+        bank: &bank_format::Bank<'_>,
+        progress: Option<&dyn Progress>,
+    ) -> Result<Option<DisplayFields>> {
+        let (crate::scene::ContactModel::Sampled(spec), Some(samples)) =
+            (&prep.scene.contact, bank.samples())
+        else {
+            return Ok(None);
+        };
+        let (_, points) =
+            crate::bank::sampled::lattice_points(&prep.positions, &prep.triangles, spec.level);
+        DisplayFields::compute(
+            &prep.scene,
+            &spec.fem_mesh,
+            &samples,
+            prep.triangles.len(),
+            &points,
+            progress,
+        )
+        .map(Some)
+    }
+
     /// Bytes held in memory (positions, triangles, lattice ids, fields).
     pub fn bytes(&self) -> usize {
         12 * self.mesh.rest.len()
