@@ -531,7 +531,7 @@ impl Prepared {
 
     /// The sampled bank from its samples: R's collision data, the nodal compliance with the
     /// triangle edges coupled, the samples, scene id `scene_id`.
-    fn sampled_bank_with(
+    pub fn sampled_bank_with(
         &self,
         samples: bank_format::ContactSamples,
         stats: sampled::SampleStats,

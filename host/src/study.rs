@@ -102,6 +102,24 @@ pub struct Study {
     pub reference_error: Vec<f64>,
 }
 
+/// `W^-1 d` (Cramer's rule): the tool force of a patch compliance `W` (m/N) at displacement
+/// `d` (m), N.
+pub fn solve3(w: &Block3, d: [f64; 3]) -> [f64; 3] {
+    let det = |m: [[f64; 3]; 3]| {
+        m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1])
+            - m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0])
+            + m[0][2] * (m[1][0] * m[2][1] - m[1][1] * m[2][0])
+    };
+    let whole = det(*w);
+    std::array::from_fn(|c| {
+        let mut m = *w;
+        for (r, row) in m.iter_mut().enumerate() {
+            row[c] = d[r];
+        }
+        det(m) / whole
+    })
+}
+
 /// `n . W n`.
 pub fn normal_compliance(w: &Block3, n: [f64; 3]) -> f64 {
     let wn: [f64; 3] = std::array::from_fn(|i| dot(w[i], n));

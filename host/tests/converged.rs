@@ -30,22 +30,6 @@ fn study(name: &str) -> Study {
 }
 
 /// `W^-1 v` for a symmetric positive definite 3 x 3 `W` (Cramer's rule, f64).
-fn solve(w: &[[f64; 3]; 3], v: [f64; 3]) -> [f64; 3] {
-    let det = |m: [[f64; 3]; 3]| {
-        m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1])
-            - m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0])
-            + m[0][2] * (m[1][0] * m[2][1] - m[1][1] * m[2][0])
-    };
-    let d = det(*w);
-    std::array::from_fn(|c| {
-        let mut m = *w;
-        for r in 0..3 {
-            m[r][c] = v[r];
-        }
-        det(m) / d
-    })
-}
-
 #[test]
 fn the_p1_and_p2_limits_agree_within_their_error_estimates() {
     let (p2, p1) = (study("patch-study-p2.json"), study("patch-study-p1.json"));
@@ -110,7 +94,7 @@ fn the_shipped_bank_renders_the_converged_force() {
             )
             .unwrap();
             let f = p.force_n.unwrap();
-            let want = solve(&st.reference_w[s], site.normal.map(|x| depth * x));
+            let want = host::study::solve3(&st.reference_w[s], site.normal.map(|x| depth * x));
             let diff: f64 = (0..3).map(|c| (f[c] - want[c]).powi(2)).sum::<f64>().sqrt();
             let size: f64 = want.iter().map(|x| x * x).sum::<f64>().sqrt();
             let err = diff / size;

@@ -13,22 +13,6 @@ use host::display::fields::DisplayFields;
 use host::scene::ContactModel;
 use std::path::Path;
 
-fn solve3(a: [[f64; 3]; 3], b: [f64; 3]) -> [f64; 3] {
-    let det = |m: [[f64; 3]; 3]| {
-        m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1])
-            - m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0])
-            + m[0][2] * (m[1][0] * m[2][1] - m[1][1] * m[2][0])
-    };
-    let d = det(a);
-    std::array::from_fn(|c| {
-        let mut m = a;
-        for r in 0..3 {
-            m[r][c] = b[r];
-        }
-        det(m) / d
-    })
-}
-
 #[test]
 fn fields_match_direct_solves_and_put_the_tool_at_w_f() {
     let scene = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/liver.toml");
@@ -105,7 +89,7 @@ fn fields_match_direct_solves_and_put_the_tool_at_w_f() {
                 row[k] = load.iter().map(|&(n, wt)| wt * x[3 * n + r]).sum();
             }
         }
-        let direct = under(solve3(w_p1, d));
+        let direct = under(host::study::solve3(&w_p1, d));
         let (mut worst, mut peak) = (0.0f64, 0.0f64);
         for (i, &n) in boundary.nodes.iter().enumerate() {
             for r in 0..3 {

@@ -50,16 +50,11 @@ pub fn run(args: Args) -> Result<()> {
     let started = Instant::now();
     let step = |what: &str| eprintln!("[{:>6.1} s] {what}", started.elapsed().as_secs_f64());
     let mut scene = Scene::load_or_default(args.scene.as_deref())?;
-    // The report's knobs are the nodal contact model's (mesh, couplings, precision, contact
-    // models); a sampled scene is measured with its nodal model, and the sampled model's
-    // accuracy comes from `host contact study` (README, "The converged force").
-    if matches!(scene.contact, host::scene::ContactModel::Sampled(_)) {
-        eprintln!(
-            "note: the report measures the scene's nodal contact model; the sampled patch \
-             compliance is not one of its knobs yet"
-        );
-        scene.contact = host::scene::ContactModel::Nodal;
-    }
+    // A sampled scene: its own knobs (section `sampled`), and everything else measured on the
+    // nodal model of the same scene (the nodal knobs, and the comparison point).
+    let sampled_scene =
+        matches!(scene.contact, host::scene::ContactModel::Sampled(_)).then(|| scene.clone());
+    scene.contact = host::scene::ContactModel::Nodal;
     let (organ, organ_name, _) = scene.load_mesh()?;
     let mut knobs = Vec::new();
     let mut cases = Vec::new();
@@ -206,6 +201,89 @@ pub fn run(args: Args) -> Result<()> {
         }
     };
     let instructions = |nodes: usize| groups.as_ref().and_then(|g| firmware::body_worst(g, nodes));
+
+    if let Some(sampled_scene) = &sampled_scene {
+        let mut variants = report::sampled::measure(sampled_scene, args.quick, &step)?;
+        if let Ok(image) = &image {
+            let chosen_fem = variants.iter().find(|v| v.chosen).map(|v| v.fem.clone());
+            let mut by_level = std::collections::BTreeMap::new();
+            for v in variants
+                .iter()
+                .filter(|v| Some(&v.fem) == chosen_fem.as_ref())
+            {
+                step(&format!("firmware on the sampled level-{} bank", v.level));
+                let aligned = bank_format::AlignedBytes::new(&v.bank);
+                let parsed = bank_format::Bank::parse(&aligned)
+                    .map_err(|e| anyhow::anyhow!("internal: a sampled bank does not parse: {e}"))?;
+                let (setup, _dir) = image.with_bank(&v.bank)?;
+                let sil = firmware::measure(&setup, &parsed, seconds, &|_: &str| {})?;
+                let worst = sil.by_contact_nodes().values().map(|g| g.body_max).max();
+                by_level.insert(v.level, worst.map(f64::from));
+            }
+            for v in &mut variants {
+                v.instructions = by_level.get(&v.level).copied().flatten();
+            }
+        }
+        let study = report::sampled::reference()?;
+        let depths: &[f64] = if args.quick {
+            &[0.005]
+        } else {
+            &[0.002, 0.005, 0.008]
+        };
+        // The nodal banks on the same axis: every swept bank run on the image (else the
+        // scene's own); a bank whose patch the probe cannot form (couplings truncated away)
+        // is left out.
+        let mut nodal = Vec::new();
+        let own = [(
+            format!("{} bank (scene)", prepared.scene.bank.precision.name()),
+            built.bytes.clone(),
+            groups.clone(),
+        )];
+        let swept_banks: Vec<_> = run_banks
+            .iter()
+            .map(|b| {
+                (
+                    format!(
+                        "{} {:.0} mm {}",
+                        b.row.rule,
+                        b.row.radius_m * 1e3,
+                        b.row.precision
+                    ),
+                    b.row.bank.clone(),
+                    Some(b.costs.clone()),
+                )
+            })
+            .collect();
+        let nodal_banks = if swept_banks.is_empty() {
+            &own[..]
+        } else {
+            &swept_banks[..]
+        };
+        for (name, bytes, costs) in nodal_banks {
+            let aligned = bank_format::AlignedBytes::new(bytes);
+            let parsed = bank_format::Bank::parse(&aligned)
+                .map_err(|e| anyhow::anyhow!("internal: a nodal bank does not parse: {e}"))?;
+            if let Ok(error) = report::sampled::force_error(&prepared, &parsed, &study, depths) {
+                nodal.push(report::sampled::NodalPoint {
+                    name: format!("nodal tool patch on {organ_name}, {name}"),
+                    bytes: bytes.len(),
+                    error,
+                    instructions: costs
+                        .as_ref()
+                        .and_then(|g| g.values().map(|c| c.body_max).max())
+                        .map(f64::from),
+                });
+            }
+        }
+        let (knob, rows) = report::sampled::section(&variants, &nodal);
+        knobs.push(knob);
+        cases.extend(rows);
+        cases.extend(report::sampled::refinement_case(&study));
+    } else {
+        not_measured.push(
+            "the sampled patch compliance's knobs (the scene's contact model is nodal)".into(),
+        );
+    }
 
     // Mesh size: contact models, bank size, display.
     let ray = scale::press_ray(&prepared);

@@ -19,7 +19,9 @@
 //! - [`firmware`]: instructions per tick of the QEMU image over the SIL scripts;
 //! - [`scale`]: contact models under refinement, bank size and display cost per mesh;
 //! - [`loops`]: the force loop's hard cases, through the firmware's own code;
-//! - [`pareto`]: the combinations no other beats on error, bytes and instructions.
+//! - [`pareto`]: the combinations no other beats on error, bytes and instructions;
+//! - [`sampled`]: the sampled patch compliance's FEM and sample spacing against the converged
+//!   reference, with the nodal bank on the same axis and their Pareto front.
 
 pub mod bank;
 pub mod firmware;
@@ -31,6 +33,7 @@ pub mod loops;
 pub mod mesh;
 pub mod pareto;
 pub mod precision;
+pub mod sampled;
 pub mod scale;
 
 use serde::Serialize;

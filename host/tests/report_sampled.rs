@@ -1,0 +1,100 @@
+//! `host report`'s sampled-contact section (issue 26) on the default scene: the variants it
+//! builds include the shipped bank (same samples), their force errors against the converged
+//! reference are the ones `converged.rs` holds the shipped bank to, the nodal model is far
+//! off on the same axis, and the knob marks the scene's choice on its Pareto front.
+
+use bank_format::{AlignedBytes, Bank};
+use host::bank::Prepared;
+use host::report::sampled::{self, NodalPoint};
+use host::scene::Scene;
+use std::path::Path;
+
+#[test]
+fn sampled_knobs_measure_the_shipped_bank_against_the_converged_reference() {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let scene = Scene::load(&dir.join("scenes/liver.toml")).unwrap();
+    let mut variants = sampled::measure(&scene, true, &|s: &str| eprintln!("{s}")).unwrap();
+    // Three FEMs (the scene's, its Richardson partner, the extrapolation) x levels 1..3.
+    assert_eq!(variants.len(), 9);
+    let chosen: Vec<_> = variants.iter().filter(|v| v.chosen).collect();
+    assert_eq!(chosen.len(), 1);
+    let chosen = chosen[0].clone();
+    assert_eq!(chosen.level, 2);
+    assert!(chosen.fem.contains("Richardson"), "{}", chosen.fem);
+
+    // The chosen variant is the shipped bank: same size, same samples to f32 rounding.
+    let shipped = host::bank::scene_bank(&dir.join("scenes/liver.toml")).unwrap();
+    assert_eq!(chosen.bank.len(), shipped.len());
+    let (a, b) = (AlignedBytes::new(&chosen.bank), AlignedBytes::new(&shipped));
+    let (a, b) = (Bank::parse(&a).unwrap(), Bank::parse(&b).unwrap());
+    let (sa, sb) = (a.samples().unwrap(), b.samples().unwrap());
+    assert_eq!(sa.count(), sb.count());
+    for s in 0..sa.count() {
+        let (x, y) = (sa.sample(s).unwrap(), sb.sample(s).unwrap());
+        let scale = y.iter().fold(0.0f32, |m, v| m.max(v.abs()));
+        for (p, q) in x.iter().zip(&y) {
+            assert!((p - q).abs() <= 1e-5 * scale, "sample {s}: {x:?} vs {y:?}");
+        }
+    }
+    // converged.rs: the shipped bank's mean error is under 3 %; the coarse FEM alone is worse.
+    assert!(chosen.error.0 < 0.03, "{:?}", chosen.error);
+    let coarse = variants
+        .iter()
+        .find(|v| v.fem.contains("4mm") && !v.fem.contains("Richardson") && v.level == 2)
+        .unwrap();
+    assert!(coarse.error.0 > chosen.error.0, "{:?}", coarse.error);
+
+    // The nodal scene's bank on the same axis renders well over twice the force.
+    let nodal_scene = dir.join("scenes/liver-nodal.toml");
+    let prep = Prepared::load(&nodal_scene).unwrap();
+    let bytes = host::bank::scene_bank(&nodal_scene).unwrap();
+    let aligned = AlignedBytes::new(&bytes);
+    let bank = Bank::parse(&aligned).unwrap();
+    let study = sampled::reference().unwrap();
+    let error = sampled::force_error(&prep, &bank, &study, &[0.005]).unwrap();
+    assert!(error.0 > 1.0, "nodal mean error {:?}", error);
+
+    // With instructions (as the report measures them on the image; equal here), the front is
+    // the variants no other beats on mean error and bytes: the most accurate one is on it,
+    // and the finding says whether the scene's choice is (it is not today: level 1 is 0.3
+    // points better on the mean at 20 KB less; README, "The converged force").
+    for v in &mut variants {
+        v.instructions = Some(2800.0);
+    }
+    let nodal = [NodalPoint {
+        name: "nodal".into(),
+        bytes: bytes.len(),
+        error,
+        instructions: Some(3600.0),
+    }];
+    let (knob, rows) = sampled::section(&variants, &nodal);
+    let best = variants
+        .iter()
+        .min_by(|a, b| a.error.0.total_cmp(&b.error.0))
+        .unwrap();
+    let front = knob.finding.split("The front: ").nth(1).unwrap();
+    let front = front.split(". The scene's choice").next().unwrap();
+    assert!(
+        front.contains(&format!("{} level {}", best.fem, best.level)),
+        "{}",
+        knob.finding
+    );
+    let on_front = front.contains(&format!("{} level {}:", chosen.fem, chosen.level));
+    assert_eq!(
+        knob.finding.contains("it is on the front"),
+        on_front,
+        "{}",
+        knob.finding
+    );
+    assert!(knob.chosen.is_some());
+    let per_fem: Vec<_> = knob
+        .series
+        .iter()
+        .filter(|s| s.name.starts_with("sampled W"))
+        .collect();
+    assert_eq!(per_fem.len(), 3);
+    assert!(per_fem.iter().all(|s| s.points.len() == 3));
+    assert_eq!(rows.len(), 1);
+    let row = sampled::refinement_case(&study).unwrap();
+    assert_eq!(row.verdict, host::report::Verdict::Bounded, "{row:?}");
+}
