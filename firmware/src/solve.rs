@@ -370,10 +370,9 @@ pub fn solve_point(bank: &Bank, node: u16, d_m: [f32; 3]) -> Result<ContactForce
     solve_imposed(bank, &[node], &[d_m])
 }
 
-/// Weights must be finite, non-negative and sum to 1 within [`WEIGHT_SUM_TOL`].
-/// A contact set for [`WeightedSolve`]: 1 ..= [`MAX_CONTACT_NODES`] distinct nodes, as many
-/// weights ([`check_weights`]).
-fn check_contact(nodes: &[u16], weights: &[f32]) -> Result<(), SolveError> {
+/// A contact set for [`WeightedSolve`]: 1 ..= [`MAX_CONTACT_NODES`] nodes, as many weights
+/// ([`check_weights`]); not checked for repeated nodes.
+fn check_lengths(nodes: &[u16], weights: &[f32]) -> Result<(), SolveError> {
     check_count(nodes, MAX_CONTACT_NODES)?;
     if weights.len() != nodes.len() {
         return Err(SolveError::LengthMismatch {
@@ -381,7 +380,12 @@ fn check_contact(nodes: &[u16], weights: &[f32]) -> Result<(), SolveError> {
             imposed: weights.len(),
         });
     }
-    check_weights(weights)?;
+    check_weights(weights)
+}
+
+/// [`check_lengths`], and the nodes distinct.
+fn check_contact(nodes: &[u16], weights: &[f32]) -> Result<(), SolveError> {
+    check_lengths(nodes, weights)?;
     for (a, &k) in nodes.iter().enumerate() {
         if nodes.get(..a).is_some_and(|before| before.contains(&k)) {
             return Err(SolveError::DuplicateNode { node: k });
@@ -390,6 +394,7 @@ fn check_contact(nodes: &[u16], weights: &[f32]) -> Result<(), SolveError> {
     Ok(())
 }
 
+/// Weights must be finite, non-negative and sum to 1 within [`WEIGHT_SUM_TOL`].
 fn check_weights(w: &[f32]) -> Result<(), SolveError> {
     if !w.iter().all(|v| v.is_finite()) {
         return Err(SolveError::NonFinite);
@@ -568,14 +573,8 @@ impl WeightedFill {
     /// Starts the assembly for `nodes` (1 ..= [`MAX_CONTACT_NODES`], distinct) with `weights`
     /// (finite, `>= 0`, sum 1).
     pub fn new(nodes: &[u16], weights: &[f32]) -> Result<WeightedFill, SolveError> {
-        check_count(nodes, MAX_CONTACT_NODES)?;
-        if weights.len() != nodes.len() {
-            return Err(SolveError::LengthMismatch {
-                nodes: nodes.len(),
-                imposed: weights.len(),
-            });
-        }
-        check_weights(weights)?;
+        // Repeated nodes are found by the insertion below.
+        check_lengths(nodes, weights)?;
         let mut out = WeightedFill {
             order: [(0, 0.0); MAX_CONTACT_NODES],
             nodes: [0; MAX_CONTACT_NODES],
@@ -812,6 +811,37 @@ mod tests {
     /// budget gives `WeightedSolve::new`'s factor bit for bit (the same sums in the same
     /// order), and both match the f64 `B C_SS B^T` solve; a missing pair or a repeated node is
     /// an error naming it.
+    /// A given compliance: the solve renders `W^-1 d`; a refactor that fails (repeated node,
+    /// weights not summing to 1, a singular `W`) leaves the held solve as it was.
+    #[test]
+    fn refactor_in_place_keeps_the_solve_on_error() {
+        let w = [2.0e-3, 1.0e-4, 0.0, 1.5e-3, 2.0e-4, 1.0e-3];
+        let mut s = WeightedSolve::from_compliance(w, &[4, 7], &[0.25, 0.75]).unwrap();
+        let d = [1.0e-3, -2.0e-3, 5.0e-3];
+        let before = s.tool_force(d).unwrap();
+        // W f = d.
+        let m = [[w[0], w[1], w[2]], [w[1], w[3], w[4]], [w[2], w[4], w[5]]];
+        for (r, row) in m.iter().enumerate() {
+            let got: f32 = row.iter().zip(before).map(|(a, f)| a * f).sum();
+            assert!((got - d[r]).abs() < 1e-6, "{before:?}");
+        }
+        assert_eq!(
+            s.refactor(w, &[4, 4], &[0.5, 0.5]),
+            Err(SolveError::DuplicateNode { node: 4 })
+        );
+        assert_eq!(s.refactor(w, &[4], &[0.5]), Err(SolveError::BadWeights));
+        let singular = [1.0e-3, 1.0e-3, 0.0, 1.0e-3, 0.0, 1.0e-3];
+        assert!(s.refactor(singular, &[4], &[1.0]).is_err());
+        assert_eq!(s.tool_force(d).unwrap(), before);
+        assert_eq!(s.shares().collect::<Vec<_>>(), [(4, 0.25), (7, 0.75)]);
+        // A good one replaces it.
+        s.refactor([1.0e-3, 0.0, 0.0, 1.0e-3, 0.0, 1.0e-3], &[9], &[1.0])
+            .unwrap();
+        assert_eq!(s.shares().collect::<Vec<_>>(), [(9, 1.0)]);
+        let f = s.tool_force(d).unwrap();
+        assert!((0..3).all(|i| (f[i] - 1.0e3 * d[i]).abs() < 1e-3), "{f:?}");
+    }
+
     #[test]
     fn weighted_fill_in_steps_equals_the_one_go_solve_and_f64() {
         let p: Vec<[f64; 3]> = (0..8)
