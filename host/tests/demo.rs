@@ -287,9 +287,11 @@ fn covered(image: &image::Rgb) -> usize {
 }
 
 /// Screenshot of `url` (1000 x 700) by headless Chromium with software WebGL.
-fn screenshot(url: &str, out: &Path) -> image::Rgb {
+/// A screenshot of `url` into `out`; `None` when Chromium wrote none or did not finish within
+/// 90 s (it was then killed).
+fn screenshot(url: &str, out: &Path) -> Option<image::Rgb> {
     let profile = tempfile::tempdir().unwrap();
-    let status = Command::new(chromium())
+    let mut child = Command::new(chromium())
         .args([
             "--headless",
             "--no-sandbox",
@@ -309,10 +311,22 @@ fn screenshot(url: &str, out: &Path) -> image::Rgb {
         .arg(url)
         .stdout(Stdio::null())
         .stderr(Stdio::null())
-        .status()
+        .spawn()
         .unwrap();
+    let started = std::time::Instant::now();
+    let status = loop {
+        if let Some(status) = child.try_wait().unwrap() {
+            break status;
+        }
+        if started.elapsed() > Duration::from_secs(90) {
+            let _ = child.kill();
+            let _ = child.wait();
+            return None;
+        }
+        std::thread::sleep(Duration::from_millis(100));
+    };
     assert!(status.success(), "chromium failed on {url}");
-    image::Rgb::read(out)
+    out.exists().then(|| image::Rgb::read(out))
 }
 
 mod image {
@@ -349,10 +363,12 @@ mod image {
 #[test]
 fn viewer_renders_the_liver_and_the_press_deforms_it_under_the_tool() {
     let _turn = one_at_a_time();
+    // The demo's stderr goes to a file, so that a demo that stops early says why.
+    let log = tempfile::NamedTempFile::new().unwrap();
     let mut child = host()
         .args(["demo", "--port", "0", "--seconds", "180"])
         .stdout(Stdio::piped())
-        .stderr(Stdio::null())
+        .stderr(log.reopen().unwrap())
         .spawn()
         .unwrap();
     let stdout = child.stdout.take().unwrap();
@@ -392,7 +408,10 @@ fn viewer_renders_the_liver_and_the_press_deforms_it_under_the_tool() {
         for attempt in 0..6 {
             let tag = format!("{name}-{attempt}");
             let png = dir.path().join(format!("{tag}.png"));
-            let image = screenshot(&format!("{url}?tool=0&tag={tag}"), &png);
+            let Some(image) = screenshot(&format!("{url}?tool=0&tag={tag}"), &png) else {
+                // Chromium hung (a loaded machine) or wrote no picture: retake.
+                continue;
+            };
             let report = status(&addr)["report"].clone();
             if report["tag"] == tag.as_str()
                 && covered(&image) * 20 > image.pixels.len()
@@ -402,7 +421,11 @@ fn viewer_renders_the_liver_and_the_press_deforms_it_under_the_tool() {
                 return (image, report);
             }
         }
-        panic!("the page never showed received frames in a screenshot ({name})");
+        panic!(
+            "the page never showed received frames in a screenshot ({name}); the demo's \
+             stderr:\n{}",
+            std::fs::read_to_string(log.path()).unwrap_or_default()
+        );
     };
     let (before, _) = shot("before", false);
 
