@@ -6,9 +6,10 @@ use crate::law::TissueLaw;
 use crate::layout::{
     BANK_ALIGN, BankHeader, BankMeta, CANDIDATE_WIDEN_CELLS, CKL16_EXP_MAX, CKL16_EXP_MIN, Ckl16,
     DeviceCalibration, GRAVITY_COEFF_MAX, GravityCompensation, GridHeader, HEADER_LEN, MAGIC,
-    MAX_NODES, MAX_SAMPLE_LEVEL, MAX_SECTIONS, MAX_TRIANGLES, OCCUPIED_WIDEN_CELLS, PLANE_TOL,
-    Precision, SECTION_ALIGN, SECTION_ENTRY_LEN, SampleHeader, SectionEntry, SectionKind,
-    TrianglePlane, VERSION_MAJOR, bank_crc,
+    MAX_CELL_CANDIDATES, MAX_NODE_NEIGHBOURS, MAX_NODE_TRIANGLES, MAX_NODES, MAX_SAMPLE_LEVEL,
+    MAX_SECTIONS, MAX_TRIANGLES, OCCUPIED_WIDEN_CELLS, PLANE_TOL, Precision, SECTION_ALIGN,
+    SECTION_ENTRY_LEN, SampleHeader, SectionEntry, SectionKind, TrianglePlane, VERSION_MAJOR,
+    bank_crc,
 };
 use crate::samples::{Samples, lattice_index, lattice_len};
 use bytemuck::Pod;
@@ -656,6 +657,12 @@ fn parse_node_triangles<'a>(
                 entry: k as u32,
             });
         };
+        if row.len() > MAX_NODE_TRIANGLES {
+            return Err(BankError::TooManyTriangles {
+                node: k as u32,
+                count: row.len() as u32,
+            });
+        }
         let mut prev: Option<u16> = None;
         for (offset, &t) in row.iter().enumerate() {
             let Some(tri) = triangles.get(usize::from(t)) else {
@@ -799,6 +806,12 @@ fn check_cell_candidates(
                 entry: c as u32,
             });
         };
+        if range.len() > MAX_CELL_CANDIDATES {
+            return Err(BankError::TooManyCandidates {
+                cell: c as u32,
+                count: range.len() as u32,
+            });
+        }
         let cell = cell_coords(g, c);
         let mut prev: Option<u16> = None;
         for e in range {
@@ -1032,6 +1045,12 @@ fn parse_neighbours<'a>(
     }
     for k in 0..n {
         let range = csr_row(starts, k).unwrap_or(0..0);
+        if range.len() > MAX_NODE_NEIGHBOURS {
+            return Err(BankError::TooManyNeighbours {
+                node: k as u32,
+                count: range.len() as u32,
+            });
+        }
         let mut prev: Option<u16> = None;
         for e in range {
             let l = index.get(e).copied().unwrap_or(u16::MAX);

@@ -53,9 +53,19 @@ fn norm(v: [f32; 3]) -> f32 {
 
 /// Replays the encoder counts QEMU was fed through the native portable loop, arming it at the
 /// tick the image armed, and checks currents, forces, state and contact set are bit-identical.
+/// The image was homed (`ZeroEncoders` at the harness's `HOME_TICK`) with the hand at rest at
+/// the home pose, encoder zero: the native loop is homed there too.
 /// Returns the number of ticks with a nonzero current.
 fn assert_matches_native(bank: &Bank, run: &Run) -> usize {
+    let homed_at = harness::HOME_TICK as usize;
+    assert!(
+        run.ticks[..homed_at]
+            .iter()
+            .all(|t| t.encoder_counts == [0; 3]),
+        "the hand left home before the image was homed"
+    );
     let mut native = HapticLoop::new(bank);
+    native.zero_encoders();
     let mut driven = 0;
     for rec in &run.ticks {
         if rec.state == State::Armed && native.state() != firmware::safety::State::Armed {
