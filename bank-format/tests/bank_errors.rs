@@ -150,6 +150,10 @@ fn finish_hostile(b: bank_format::BankBuilder) -> Result<(), E> {
 /// A fan: node 0 at the centre of `count` triangles, the rim nodes on a 5 mm circle; edges
 /// coupled, 5 mm cells.
 fn fan(count: usize) -> Result<(), E> {
+    finish_hostile(fan_builder(count))
+}
+
+fn fan_builder(count: usize) -> bank_format::BankBuilder {
     let c = 1.0e-3;
     let diag = |v: f64| -> [[f64; 3]; 3] {
         std::array::from_fn(|i| std::array::from_fn(|j| if i == j { v } else { 0.0 }))
@@ -167,7 +171,7 @@ fn fan(count: usize) -> Result<(), E> {
         let (a, b) = (rim(i), rim(i + 1));
         couplings.push((a.min(b), a.max(b), diag(0.05 * c)));
     }
-    finish_hostile(bank_format::BankBuilder {
+    bank_format::BankBuilder {
         c_kk: vec![diag(c); count + 1],
         couplings,
         mesh_ids: (0..=count as u32).collect(),
@@ -176,7 +180,7 @@ fn fan(count: usize) -> Result<(), E> {
         grid_cell_size_m: 0.005,
         truncation_radius_m: 0.0,
         ..builder()
-    })
+    }
 }
 
 /// The tick's limits hold for banks just inside them: 16 triangles about a node, a cell of
@@ -186,8 +190,31 @@ fn banks_at_the_ticks_limits_are_valid() {
     assert_eq!(fan(bank_format::MAX_NODE_TRIANGLES), Ok(()));
     // 8 x 8 nodes, 98 triangles, in one 2 cm cell (and its neighbours' margins).
     assert_eq!(hostile_grid(8, 0.001, 0.0, 0.02), Ok(()));
-    // 11 x 11 nodes at 1 mm, every pair within 6.4 mm coupled: at most 128 neighbours.
+    // 12 x 12 nodes at 1 mm, every pair within 6.4 mm coupled: at most 118 neighbours.
     assert_eq!(hostile_grid(12, 0.001, 0.0064, 0.002), Ok(()));
+}
+
+/// A bank over the tick's limits is refused by `Bank::parse` (the firmware's) only:
+/// `Bank::parse_unbounded` and `BankBuilder::build_unbounded`, for the host's own banks (the
+/// tool-coupling probe), take it, with every other rule checked.
+#[test]
+fn the_unbounded_reader_takes_what_only_the_limits_refuse() {
+    let b = fan_builder(17);
+    let bytes = b.build_unbounded(bank_format::Precision::F32).unwrap();
+    let aligned = AlignedBytes::new(&bytes);
+    assert_eq!(
+        Bank::parse(&aligned).map(|_| ()),
+        Err(E::TooManyTriangles { node: 0, count: 17 })
+    );
+    let bank = Bank::parse_unbounded(&aligned).unwrap();
+    assert_eq!(bank.node_triangles(0).len(), 17);
+    // Still everything else: a flipped byte fails the CRC.
+    let mut bad = bytes.clone();
+    bad[40] ^= 1;
+    assert!(matches!(
+        Bank::parse_unbounded(&AlignedBytes::new(&bad)),
+        Err(E::CrcMismatch { .. })
+    ));
 }
 
 /// `f` applied to a valid bank with contact samples, resealed, parsed.

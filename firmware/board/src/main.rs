@@ -2,8 +2,10 @@
 //! current-mode servo amplifiers (`board.rs` says what is wired where).
 //!
 //! - Boot: the amplifier enables become outputs at their off level before anything else
-//!   ([`safe`]), then the clocks (8 MHz HSE -> 168 MHz, 48 MHz USB) and the board
-//!   ([`board::take`]). The bank is not compiled in: the bank region of the flash (`BANK` in
+//!   ([`safe`]), then the clocks (8 MHz HSE -> 168 MHz, 48 MHz USB), the flash accelerator and
+//!   the clock security system ([`board::enable_accelerator_and_css`]) and the board
+//!   ([`board::take`]). The reset cause is read and reported, the amplifiers' range checked
+//!   against the bank's current limits. The bank is not compiled in: the bank region of the flash (`BANK` in
 //!   the top-level `memory.x`, flashed separately) is validated with [`Bank::parse`]; an
 //!   invalid bank leaves the motors off and the reason on the link ([`firmware::app`]).
 //! - The 1 kHz tick ([`haptic`]) runs in an embassy `InterruptExecutor` at high priority on an
@@ -187,6 +189,7 @@ async fn led(mut led: Output<'static>) {
 fn main() -> ! {
     safe::hold_enables_off_at_boot();
     let p = embassy_stm32::init(board::clocks());
+    board::enable_accelerator_and_css();
     let Ok(parts) = board::take(p) else {
         safe::stop()
     };
@@ -204,6 +207,7 @@ fn main() -> ! {
     let (tick_end, driver_end) = LINK.init(Link::new()).split();
     let mut app = App::new(bank.as_ref().map_err(|e| *e), tick_end, LINK_GRACE_TICKS);
     app.reset(take_reset_cause());
+    app.check_amplifiers(&BOARD.amplifiers);
     let plant = BoardPlant::new(parts.hardware);
 
     let tick_spawner = board::start_tick_executor();
