@@ -352,6 +352,30 @@ pub enum BankError {
         /// The triangle whose point differs from its neighbour's.
         triangle: u32,
     },
+    /// A grid cell lists more than [`crate::MAX_CELL_CANDIDATES`] candidate triangles: the
+    /// firmware's detection cost per tick is bounded by that limit (use smaller cells).
+    TooManyCandidates {
+        /// Linear cell index.
+        cell: u32,
+        /// Candidates it lists.
+        count: u32,
+    },
+    /// A node has more than [`crate::MAX_NODE_NEIGHBOURS`] neighbour entries: the patch's
+    /// quadrature and assembly per tick are bounded by that limit (couple fewer pairs).
+    TooManyNeighbours {
+        /// Which node.
+        node: u32,
+        /// Neighbours it lists.
+        count: u32,
+    },
+    /// A node belongs to more than [`crate::MAX_NODE_TRIANGLES`] triangles: a surface walk's
+    /// step per tick is bounded by that limit (remesh the surface).
+    TooManyTriangles {
+        /// Which node.
+        node: u32,
+        /// Triangles it belongs to.
+        count: u32,
+    },
 }
 
 impl BankError {
@@ -409,6 +433,9 @@ impl BankError {
             BankError::SampleHeader { .. } => 47,
             BankError::SampleNotSpd { .. } => 48,
             BankError::SampleDiscontinuous { .. } => 49,
+            BankError::TooManyCandidates { .. } => 50,
+            BankError::TooManyNeighbours { .. } => 51,
+            BankError::TooManyTriangles { .. } => 52,
         }
     }
 }
@@ -533,6 +560,23 @@ impl fmt::Display for BankError {
             E::SampleDiscontinuous { triangle } => write!(
                 f,
                 "triangle {triangle}: a sample of its edge or vertex differs from its neighbour's"
+            ),
+            E::TooManyCandidates { cell, count } => write!(
+                f,
+                "grid cell {cell} lists {count} candidate triangles, more than the firmware's \
+                 {} (use smaller grid cells)",
+                crate::MAX_CELL_CANDIDATES
+            ),
+            E::TooManyNeighbours { node, count } => write!(
+                f,
+                "node {node} has {count} neighbours, more than the firmware's {} (couple fewer \
+                 pairs)",
+                crate::MAX_NODE_NEIGHBOURS
+            ),
+            E::TooManyTriangles { node, count } => write!(
+                f,
+                "node {node} belongs to {count} triangles, more than the firmware's {}",
+                crate::MAX_NODE_TRIANGLES
             ),
         }
     }

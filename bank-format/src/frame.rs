@@ -16,7 +16,7 @@ pub const PROTOCOL_VERSION: u16 = 6;
 /// Most contact nodes one telemetry message carries.
 pub const MAX_CONTACTS: usize = 8;
 /// Upper bound on a postcard-encoded message, bytes (the largest, a full telemetry message, is
-/// at most 236).
+/// at most 241).
 pub const MAX_MESSAGE: usize = 256;
 /// Bytes of CRC after the message.
 pub const FRAME_CRC_LEN: usize = 4;
@@ -95,6 +95,39 @@ pub enum FaultReason {
     /// (e.g. a stack overflow). Latched at boot, so a device that reset mid-session cannot be
     /// re-armed without an explicit `ClearFault`.
     WatchdogReset,
+    /// `Arm` refused: the encoders have not been referenced since the chip started (added in
+    /// protocol 6). Only `ZeroEncoders` at the home pose references them; every reset (and an
+    /// `EncoderJump`) loses the reference, since the counters restart from wherever the
+    /// mechanism then stands.
+    NotReferenced,
+    /// A motor's current limit in the bank is outside what its amplifier's set-value range
+    /// can deliver (added in protocol 6; `detail` = motor): checked at boot, every `Arm`
+    /// refused with it, since the amplifier would clamp such a current silently.
+    AmplifierRange,
+}
+
+/// Why the chip last started, as its reset flags tell it (added in protocol 6; on the STM32F4
+/// RCC_CSR, read and cleared at boot). One cause per boot: the flags a reset sets as a side
+/// effect (the pin flag of every internal reset, the brown-out flag of a power-on reset) yield
+/// to the cause itself.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub enum ResetCause {
+    /// Power-on or power-down reset (POR/PDR).
+    PowerOn,
+    /// The reset pin (NRST: a reset button, a debug probe).
+    Pin,
+    /// The supply dipped below the brown-out threshold (BOR).
+    BrownOut,
+    /// Software reset (`SYSRESETREQ`, e.g. after flashing).
+    Software,
+    /// The independent watchdog (a hung tick, a locked-up core).
+    IndependentWatchdog,
+    /// The window watchdog.
+    WindowWatchdog,
+    /// Low-power management reset (entering Standby or Stop with the option bytes' reset).
+    LowPower,
+    /// No flag set (or no reset-flag register, as under QEMU).
+    Unknown,
 }
 
 /// One contact node and the force on it.
@@ -136,6 +169,9 @@ pub struct Counters {
     /// Ticks whose contact patch dropped load (protocol 4): nodes beyond the
     /// [`MAX_CONTACTS`] the solve carries, or not coupled in the bank.
     pub capped_ticks: u32,
+    /// Background patch rebuilds dropped because a step failed (protocol 6): the held patch
+    /// kept rendering instead of faulting `SolveFailed`.
+    pub rebuilds_failed: u32,
 }
 
 /// Periodic device status.
@@ -254,6 +290,12 @@ pub enum DeviceToHost {
         reason: FaultReason,
         /// Reason-specific detail (bank error code, joint or motor index), else 0.
         detail: u32,
+    },
+    /// Why the chip last started (protocol 6): sent after the boot `Hello` and after every
+    /// `Hello` reply.
+    Reset {
+        /// The reset cause.
+        cause: ResetCause,
     },
 }
 

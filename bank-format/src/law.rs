@@ -45,6 +45,8 @@ pub struct TissueLaw {
     /// `(f_min + f_max) / 2` and `2 / (f_max - f_min)`: `x = (f - mid) scale`.
     mid: f32,
     scale: f32,
+    /// Q(0): `c0` of a linear law, the series or its continuation at 0 for a Chebyshev one.
+    at_zero: f32,
 }
 
 impl TissueLaw {
@@ -127,6 +129,7 @@ impl TissueLaw {
             rev_len: 0,
             mid: ((f64::from(a) + f64::from(b)) / 2.0) as f32,
             scale: (2.0 / (f64::from(b) - f64::from(a))) as f32,
+            at_zero: 0.0,
         };
         let degree = len.saturating_sub(1);
         law.rev_len = degree.div_ceil(UNROLL) * UNROLL;
@@ -174,6 +177,10 @@ impl TissueLaw {
                 }
             }
         }
+        law.at_zero = law.eval(0.0);
+        if !law.at_zero.is_finite() {
+            return Err(BankError::NonFinite { section, entry: 0 });
+        }
         Ok(law)
     }
 
@@ -203,6 +210,14 @@ impl TissueLaw {
     /// The fitted domain `[f_min, f_max]`, N.
     pub fn domain(&self) -> [f32; 2] {
         self.domain
+    }
+
+    /// Q(0), N ([`TissueLaw::eval`] at 0, kept from validation): what the law alone would
+    /// render at zero penetration. A linear law's offset, or a fit continued below its domain,
+    /// can make it positive; the firmware blends that out near zero
+    /// (`firmware::solve::apply_tissue_law`), so the rendered force is 0 at the surface.
+    pub fn at_zero(&self) -> f32 {
+        self.at_zero
     }
 
     /// Q(f) in N for a linear-model force magnitude `f` in N. Inside the domain: Clenshaw in

@@ -48,6 +48,22 @@ pub const OCCUPIED_WIDEN_CELLS: f32 = 1.0 / 64.0;
 /// Longest path piece, Chebyshev norm, in cells, that the candidate lists cover (with margin
 /// for rounding and the clipping pad: [`CANDIDATE_WIDEN_CELLS`] is 0.516).
 pub const PIECE_CELLS: f32 = 0.45;
+/// Most candidate triangles one grid cell may list (`SPEC.md`, check 10, `TooManyCandidates`).
+/// The firmware's detection tests a path piece's cell's candidates, and a tick cuts its path
+/// into at most `firmware::contact::MAX_DETECT_PIECES` pieces, so this bounds the detection
+/// of any tick; the firmware's tick budget is derived from it (`SPEC.md`, "Limits the tick's
+/// cost rests on"). The shipped liver's 6 mm cells list at most 28.
+pub const MAX_CELL_CANDIDATES: usize = 128;
+/// Most neighbour entries (coupled nodes) of one node (`SPEC.md`, check 12,
+/// `TooManyNeighbours`): the nodal patch's quadrature scans the nearest node's row, the
+/// assembly of `B C_SS B^T` walks each patch node's stored row. The shipped nodal liver's
+/// "tool" couplings reach 34.
+pub const MAX_NODE_NEIGHBOURS: usize = 128;
+/// Most triangles one node belongs to (`SPEC.md`, check 9, `TooManyTriangles`): each step of a
+/// surface walk (the contact's slide, the patch's quadrature points) finds the triangle across
+/// an edge in a vertex's list. A surface mesh's vertices have about 6; the shipped liver at
+/// most 10.
+pub const MAX_NODE_TRIANGLES: usize = 16;
 /// Largest lattice level of the contact samples ([`SampleHeader::level`]): a triangle holds
 /// `(level + 1) (level + 2) / 2` samples.
 pub const MAX_SAMPLE_LEVEL: u32 = 8;

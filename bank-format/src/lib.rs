@@ -74,8 +74,8 @@ pub use error::{BankError, DeviceField};
 pub use frame::{
     Contact, ContactPoint, Counters, DeviceToHost, FRAME_CRC_LEN, FaultReason, FeedIter,
     FrameDecoder, FrameError, FrameStats, HostToDevice, MAX_CONTACTS, MAX_FRAME, MAX_MESSAGE, Mode,
-    PROTOCOL_VERSION, PhaseCycles, State, Telemetry, cobs_max_len, decode_frame, decode_plant,
-    encode_frame, encode_plant,
+    PROTOCOL_VERSION, PhaseCycles, ResetCause, State, Telemetry, cobs_max_len, decode_frame,
+    decode_plant, encode_frame, encode_plant,
 };
 /// The `heapless` crate the message types use (telemetry's contact list), re-exported so the
 /// firmware and host build `Telemetry` with the same version.
@@ -85,9 +85,10 @@ pub use layout::{
     BANK_ALIGN, BankHeader, BankMeta, CANDIDATE_WIDEN_CELLS, CKL16_EXP_MAX, CKL16_EXP_MIN,
     CRC_OFFSET, CRC32, Ckl16, DeviceCalibration, GRAVITY_COEFF_MAX, GRAVITY_COEFFS,
     GravityCompensation, GridHeader, HEADER_LEN, LAW_CHEBYSHEV, LAW_LINEAR, LawRecord, MAGIC,
-    MAX_LAW_COEFFS, MAX_NODES, MAX_SAMPLE_LEVEL, MAX_SECTIONS, MAX_TRIANGLES, OCCUPIED_WIDEN_CELLS,
-    PIECE_CELLS, PLANE_TOL, Precision, SECTION_ALIGN, SECTION_ENTRY_LEN, SampleHeader,
-    SectionEntry, SectionKind, TrianglePlane, VERSION_MAJOR, VERSION_MINOR, bank_crc, reseal,
+    MAX_CELL_CANDIDATES, MAX_LAW_COEFFS, MAX_NODE_NEIGHBOURS, MAX_NODE_TRIANGLES, MAX_NODES,
+    MAX_SAMPLE_LEVEL, MAX_SECTIONS, MAX_TRIANGLES, OCCUPIED_WIDEN_CELLS, PIECE_CELLS, PLANE_TOL,
+    Precision, SECTION_ALIGN, SECTION_ENTRY_LEN, SampleHeader, SectionEntry, SectionKind,
+    TrianglePlane, VERSION_MAJOR, VERSION_MINOR, bank_crc, reseal,
 };
 pub use reader::{Bank, Grid, SPD_PIVOT_REL, TRUNCATION_SLACK, UpperCouplings, validate_device};
 pub use samples::{Samples, lattice_bary, lattice_corners, lattice_index, lattice_len};

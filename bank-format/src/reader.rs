@@ -6,9 +6,10 @@ use crate::law::TissueLaw;
 use crate::layout::{
     BANK_ALIGN, BankHeader, BankMeta, CANDIDATE_WIDEN_CELLS, CKL16_EXP_MAX, CKL16_EXP_MIN, Ckl16,
     DeviceCalibration, GRAVITY_COEFF_MAX, GravityCompensation, GridHeader, HEADER_LEN, MAGIC,
-    MAX_NODES, MAX_SAMPLE_LEVEL, MAX_SECTIONS, MAX_TRIANGLES, OCCUPIED_WIDEN_CELLS, PLANE_TOL,
-    Precision, SECTION_ALIGN, SECTION_ENTRY_LEN, SampleHeader, SectionEntry, SectionKind,
-    TrianglePlane, VERSION_MAJOR, bank_crc,
+    MAX_CELL_CANDIDATES, MAX_NODE_NEIGHBOURS, MAX_NODE_TRIANGLES, MAX_NODES, MAX_SAMPLE_LEVEL,
+    MAX_SECTIONS, MAX_TRIANGLES, OCCUPIED_WIDEN_CELLS, PLANE_TOL, Precision, SECTION_ALIGN,
+    SECTION_ENTRY_LEN, SampleHeader, SectionEntry, SectionKind, TrianglePlane, VERSION_MAJOR,
+    bank_crc,
 };
 use crate::samples::{Samples, lattice_index, lattice_len};
 use bytemuck::Pod;
@@ -638,6 +639,7 @@ fn parse_node_triangles<'a>(
     sections: &Sections<'a>,
     triangles: &[[u16; 3]],
     n: usize,
+    tick_limits: bool,
 ) -> Result<(&'a [u32], &'a [u16]), BankError> {
     let starts: &[u32] = sections.slice(SectionKind::NodeTriStarts)?;
     let items: &[u16] = sections.slice(SectionKind::NodeTriItems)?;
@@ -656,6 +658,12 @@ fn parse_node_triangles<'a>(
                 entry: k as u32,
             });
         };
+        if tick_limits && row.len() > MAX_NODE_TRIANGLES {
+            return Err(BankError::TooManyTriangles {
+                node: k as u32,
+                count: row.len() as u32,
+            });
+        }
         let mut prev: Option<u16> = None;
         for (offset, &t) in row.iter().enumerate() {
             let Some(tri) = triangles.get(usize::from(t)) else {
@@ -754,6 +762,7 @@ fn parse_grid<'a>(
     sections: &Sections<'a>,
     positions: &[[f32; 3]],
     triangles: &[[u16; 3]],
+    tick_limits: bool,
 ) -> Result<Grid<'a>, BankError> {
     let header: &GridHeader = sections.single(SectionKind::Grid)?;
     let cells = check_grid_geometry(header)?;
@@ -777,7 +786,7 @@ fn parse_grid<'a>(
         tri_items,
     };
     check_grid_buckets(&grid, positions, cells)?;
-    check_cell_candidates(&grid, positions, triangles, cells)?;
+    check_cell_candidates(&grid, positions, triangles, cells, tick_limits)?;
     check_cell_clearance(&grid, positions, triangles)?;
     Ok(grid)
 }
@@ -790,6 +799,7 @@ fn check_cell_candidates(
     positions: &[[f32; 3]],
     triangles: &[[u16; 3]],
     cells: usize,
+    tick_limits: bool,
 ) -> Result<(), BankError> {
     let g = grid.header;
     for c in 0..cells {
@@ -799,6 +809,12 @@ fn check_cell_candidates(
                 entry: c as u32,
             });
         };
+        if tick_limits && range.len() > MAX_CELL_CANDIDATES {
+            return Err(BankError::TooManyCandidates {
+                cell: c as u32,
+                count: range.len() as u32,
+            });
+        }
         let cell = cell_coords(g, c);
         let mut prev: Option<u16> = None;
         for e in range {
@@ -999,6 +1015,7 @@ type NeighbourLists<'a> = (&'a [u32], &'a [u16], Blocks<'a>, &'a [u32]);
 fn parse_neighbours<'a>(
     sections: &Sections<'a>,
     n: usize,
+    tick_limits: bool,
 ) -> Result<NeighbourLists<'a>, BankError> {
     let starts: &[u32] = sections.slice(SectionKind::NeighbourStarts)?;
     let index: &[u16] = sections.slice(SectionKind::NeighbourIndex)?;
@@ -1032,6 +1049,12 @@ fn parse_neighbours<'a>(
     }
     for k in 0..n {
         let range = csr_row(starts, k).unwrap_or(0..0);
+        if tick_limits && range.len() > MAX_NODE_NEIGHBOURS {
+            return Err(BankError::TooManyNeighbours {
+                node: k as u32,
+                count: range.len() as u32,
+            });
+        }
         let mut prev: Option<u16> = None;
         for e in range {
             let l = index.get(e).copied().unwrap_or(u16::MAX);
@@ -1066,7 +1089,21 @@ impl<'a> Bank<'a> {
     /// hold at least the header's `total_len` bytes; anything after that is ignored (a flash
     /// region may be larger than the bank). See `SPEC.md` for every rule and its order: the
     /// stages below run its "Validation" rules 1 to 14 in turn, each reporting its first failure.
+    /// The limits the firmware's tick budget rests on ([`crate::MAX_CELL_CANDIDATES`],
+    /// [`crate::MAX_NODE_NEIGHBOURS`], [`crate::MAX_NODE_TRIANGLES`]) are part of them.
     pub fn parse(bytes: &'a [u8]) -> Result<Bank<'a>, BankError> {
+        Bank::parse_with(bytes, true)
+    }
+
+    /// [`Bank::parse`] without the tick's limits (rules 9, 10 and 12's counts): for banks the
+    /// firmware never reads, built by the host as a means to an end (the tool-coupling probe,
+    /// which couples every pair one patch can load, however many). Everything else is checked,
+    /// so every accessor is as safe as on a parsed bank.
+    pub fn parse_unbounded(bytes: &'a [u8]) -> Result<Bank<'a>, BankError> {
+        Bank::parse_with(bytes, false)
+    }
+
+    fn parse_with(bytes: &'a [u8], tick_limits: bool) -> Result<Bank<'a>, BankError> {
         let (header, bank) = check_header(bytes)?;
         check_crc(header, bank)?;
         check_header_reserved(header)?;
@@ -1080,11 +1117,13 @@ impl<'a> Bank<'a> {
         let n = positions.len();
         let mesh_ids = parse_mesh_ids(&sections, n)?;
         let triangles = parse_triangles(&sections, n)?;
-        let (node_tri_starts, node_tri_items) = parse_node_triangles(&sections, triangles, n)?;
+        let (node_tri_starts, node_tri_items) =
+            parse_node_triangles(&sections, triangles, n, tick_limits)?;
         let planes = parse_planes(&sections, positions, triangles)?;
-        let grid = parse_grid(&sections, positions, triangles)?;
+        let grid = parse_grid(&sections, positions, triangles, tick_limits)?;
         let ckk = parse_ckk(&sections, n)?;
-        let (nb_starts, nb_index, nb_ckl, coupling_starts) = parse_neighbours(&sections, n)?;
+        let (nb_starts, nb_index, nb_ckl, coupling_starts) =
+            parse_neighbours(&sections, n, tick_limits)?;
         let bank = Bank {
             bytes: bank,
             header,

@@ -325,6 +325,20 @@ impl BankBuilder {
     /// Write the bank, its coupling blocks in `precision` (`C_kk` is always f32). Fails on
     /// malformed input, and on any input the reader rejects.
     pub fn build_with_precision(&self, precision: Precision) -> Result<Vec<u8>, BuildError> {
+        self.build_checked(precision, true)
+    }
+
+    /// [`BankBuilder::build_with_precision`] checked by [`Bank::parse_unbounded`]: a bank for
+    /// the host's own use that may exceed the firmware's tick limits (the tool-coupling probe).
+    pub fn build_unbounded(&self, precision: Precision) -> Result<Vec<u8>, BuildError> {
+        self.build_checked(precision, false)
+    }
+
+    fn build_checked(
+        &self,
+        precision: Precision,
+        tick_limits: bool,
+    ) -> Result<Vec<u8>, BuildError> {
         let n = self.positions_m.len();
         if self.mesh_ids.len() != n {
             return Err(BuildError::LengthMismatch { field: "mesh_ids" });
@@ -576,7 +590,11 @@ impl BankBuilder {
 
         // The writer's output must satisfy the reader.
         let aligned = AlignedBytes::new(&out);
-        Bank::parse(&aligned)?;
+        if tick_limits {
+            Bank::parse(&aligned)?;
+        } else {
+            Bank::parse_unbounded(&aligned)?;
+        }
         Ok(out)
     }
 }

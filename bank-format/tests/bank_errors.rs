@@ -94,6 +94,129 @@ macro_rules! cases {
     };
 }
 
+/// A flat `n` x `n` grid at `spacing` (m), two triangles a square, `C_kk = c I`; every pair
+/// closer than `truncation` (m) coupled by `0.05 c I` (each pair's compliance SPD), grid cells
+/// of `cell` (m). Valid in every rule but the tick's limits (`SPEC.md`, "Limits the tick's cost
+/// rests on"), which the callers break; built, so that the writer's own run of the reader
+/// refuses it.
+fn hostile_grid(n: usize, spacing: f64, truncation: f64, cell: f64) -> Result<(), E> {
+    let c = 1.0e-3;
+    let diag = |v: f64| -> [[f64; 3]; 3] {
+        std::array::from_fn(|i| std::array::from_fn(|j| if i == j { v } else { 0.0 }))
+    };
+    let positions_m: Vec<[f64; 3]> = (0..n * n)
+        .map(|k| [spacing * (k % n) as f64, spacing * (k / n) as f64, 0.0])
+        .collect();
+    let id = |i: usize, j: usize| (i + n * j) as u32;
+    let mut triangles = Vec::new();
+    for j in 0..n - 1 {
+        for i in 0..n - 1 {
+            triangles.push([id(i, j), id(i + 1, j), id(i + 1, j + 1)]);
+            triangles.push([id(i, j), id(i + 1, j + 1), id(i, j + 1)]);
+        }
+    }
+    let mut couplings = Vec::new();
+    for k in 0..n * n {
+        for l in k + 1..n * n {
+            let (a, b) = (positions_m[k], positions_m[l]);
+            let d = ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2)).sqrt();
+            // Triangle edges always (check 13), the rest within the radius.
+            if d < truncation || d < spacing * 1.5 {
+                couplings.push((k as u32, l as u32, diag(0.05 * c)));
+            }
+        }
+    }
+    finish_hostile(bank_format::BankBuilder {
+        c_kk: vec![diag(c); n * n],
+        couplings,
+        mesh_ids: (0..(n * n) as u32).collect(),
+        triangles,
+        positions_m,
+        grid_cell_size_m: cell,
+        truncation_radius_m: truncation,
+        ..builder()
+    })
+}
+
+/// `b` built: `Ok` when valid, else the reader's error (the writer runs it on its output).
+fn finish_hostile(b: bank_format::BankBuilder) -> Result<(), E> {
+    match b.build() {
+        Ok(bytes) => parse(&bytes),
+        Err(BuildError::Rejected(e)) => Err(e),
+        Err(other) => panic!("{other:?}"),
+    }
+}
+
+/// A fan: node 0 at the centre of `count` triangles, the rim nodes on a 5 mm circle; edges
+/// coupled, 5 mm cells.
+fn fan(count: usize) -> Result<(), E> {
+    finish_hostile(fan_builder(count))
+}
+
+fn fan_builder(count: usize) -> bank_format::BankBuilder {
+    let c = 1.0e-3;
+    let diag = |v: f64| -> [[f64; 3]; 3] {
+        std::array::from_fn(|i| std::array::from_fn(|j| if i == j { v } else { 0.0 }))
+    };
+    let mut positions_m = vec![[0.0, 0.0, 0.0]];
+    for i in 0..count {
+        let a = std::f64::consts::TAU * i as f64 / count as f64;
+        positions_m.push([0.005 * a.cos(), 0.005 * a.sin(), 0.0]);
+    }
+    let rim = |i: usize| (1 + i % count) as u32;
+    let triangles: Vec<[u32; 3]> = (0..count).map(|i| [0, rim(i), rim(i + 1)]).collect();
+    let mut couplings = Vec::new();
+    for i in 0..count {
+        couplings.push((0, rim(i), diag(0.05 * c)));
+        let (a, b) = (rim(i), rim(i + 1));
+        couplings.push((a.min(b), a.max(b), diag(0.05 * c)));
+    }
+    bank_format::BankBuilder {
+        c_kk: vec![diag(c); count + 1],
+        couplings,
+        mesh_ids: (0..=count as u32).collect(),
+        triangles,
+        positions_m,
+        grid_cell_size_m: 0.005,
+        truncation_radius_m: 0.0,
+        ..builder()
+    }
+}
+
+/// The tick's limits hold for banks just inside them: 16 triangles about a node, a cell of
+/// 128 candidates, 128 neighbours.
+#[test]
+fn banks_at_the_ticks_limits_are_valid() {
+    assert_eq!(fan(bank_format::MAX_NODE_TRIANGLES), Ok(()));
+    // 8 x 8 nodes, 98 triangles, in one 2 cm cell (and its neighbours' margins).
+    assert_eq!(hostile_grid(8, 0.001, 0.0, 0.02), Ok(()));
+    // 12 x 12 nodes at 1 mm, every pair within 6.4 mm coupled: at most 118 neighbours.
+    assert_eq!(hostile_grid(12, 0.001, 0.0064, 0.002), Ok(()));
+}
+
+/// A bank over the tick's limits is refused by `Bank::parse` (the firmware's) only:
+/// `Bank::parse_unbounded` and `BankBuilder::build_unbounded`, for the host's own banks (the
+/// tool-coupling probe), take it, with every other rule checked.
+#[test]
+fn the_unbounded_reader_takes_what_only_the_limits_refuse() {
+    let b = fan_builder(17);
+    let bytes = b.build_unbounded(bank_format::Precision::F32).unwrap();
+    let aligned = AlignedBytes::new(&bytes);
+    assert_eq!(
+        Bank::parse(&aligned).map(|_| ()),
+        Err(E::TooManyTriangles { node: 0, count: 17 })
+    );
+    let bank = Bank::parse_unbounded(&aligned).unwrap();
+    assert_eq!(bank.node_triangles(0).len(), 17);
+    // Still everything else: a flipped byte fails the CRC.
+    let mut bad = bytes.clone();
+    bad[40] ^= 1;
+    assert!(matches!(
+        Bank::parse_unbounded(&AlignedBytes::new(&bad)),
+        Err(E::CrcMismatch { .. })
+    ));
+}
+
 /// `f` applied to a valid bank with contact samples, resealed, parsed.
 fn corrupt_sampled(f: impl FnOnce(&mut Vec<u8>)) -> Result<(), E> {
     let mut bytes = sampled_builder().build().unwrap();
@@ -418,6 +541,13 @@ cases! {
         let (_, off, ..) = section(b, K::PatchCompliance);
         put_f32(b, off + 48 + 12, -1.0e-3);
     });
+    // The tick's limits (`SPEC.md`, "Limits the tick's cost rests on"): hostile but otherwise
+    // valid banks, refused.
+    too_many_candidates: E::TooManyCandidates { cell: 0, count: 162 } =>
+        hostile_grid(10, 0.0005, 0.0, 0.02);
+    too_many_neighbours: E::TooManyNeighbours { count: 143, .. } =>
+        hostile_grid(12, 0.001, 0.02, 0.002);
+    too_many_triangles: E::TooManyTriangles { node: 0, count: 17 } => fan(17);
     sample_discontinuous: E::SampleDiscontinuous { triangle: 0 } => corrupt_sampled(|b| {
         // Triangle 0's lattice point (0, 1) (index 3) is the midpoint of the edge 0-2 it
         // shares with triangle 1; make it name triangle 0's own point (1, 0) (the midpoint of
@@ -467,5 +597,11 @@ fn error_codes_are_distinct_and_stable() {
     assert_eq!(E::GravityOutOfRange { coefficient: 0 }.code(), 44);
     assert_eq!(E::CklExponent { entry: 0 }.code(), 45);
     assert_eq!(E::TrianglePlane { triangle: 0 }.code(), 46);
-    assert_eq!(E::SampleDiscontinuous { triangle: 0 }.code(), last_code());
+    assert_eq!(E::SampleDiscontinuous { triangle: 0 }.code(), 49);
+    assert_eq!(E::TooManyCandidates { cell: 0, count: 0 }.code(), 50);
+    assert_eq!(E::TooManyNeighbours { node: 0, count: 0 }.code(), 51);
+    assert_eq!(
+        E::TooManyTriangles { node: 0, count: 0 }.code(),
+        last_code()
+    );
 }

@@ -6,7 +6,7 @@ mod common;
 
 use bank_format::{
     AlignedBytes, Bank, BankBuilder, Contact, ContactPoint, Counters, DeviceToHost, FaultReason,
-    FrameDecoder, HostToDevice, MAGIC, MAX_CONTACTS, MAX_FRAME, Mode, State, Telemetry,
+    FrameDecoder, HostToDevice, MAGIC, MAX_CONTACTS, MAX_FRAME, Mode, ResetCause, State, Telemetry,
     decode_frame, encode_frame, reseal,
 };
 use common::*;
@@ -327,6 +327,9 @@ fn fault() -> impl Strategy<Value = FaultReason> {
         Just(FaultReason::AmplifierFault),
         Just(FaultReason::Overspeed),
         Just(FaultReason::BadCommand),
+        Just(FaultReason::WatchdogReset),
+        Just(FaultReason::NotReferenced),
+        Just(FaultReason::AmplifierRange),
     ]
 }
 
@@ -351,7 +354,7 @@ fn device_msg() -> impl Strategy<Value = DeviceToHost> {
         proptest::array::uniform3(f32_finite()),
         proptest::array::uniform3(f32_finite()),
         f32_finite(),
-        proptest::array::uniform7(any::<u32>()),
+        proptest::array::uniform8(any::<u32>()),
     )
         .prop_map(
             |(
@@ -389,6 +392,7 @@ fn device_msg() -> impl Strategy<Value = DeviceToHost> {
                         tx_dropped: c[4],
                         rx_dropped: c[5],
                         capped_ticks: c[6],
+                        rebuilds_failed: c[7],
                     },
                 })
             },
@@ -456,6 +460,17 @@ fn device_msg() -> impl Strategy<Value = DeviceToHost> {
                 detail,
             }
         }),
+        prop_oneof![
+            Just(ResetCause::PowerOn),
+            Just(ResetCause::Pin),
+            Just(ResetCause::BrownOut),
+            Just(ResetCause::Software),
+            Just(ResetCause::IndependentWatchdog),
+            Just(ResetCause::WindowWatchdog),
+            Just(ResetCause::LowPower),
+            Just(ResetCause::Unknown),
+        ]
+        .prop_map(|cause| DeviceToHost::Reset { cause }),
     ]
 }
 

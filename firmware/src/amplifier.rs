@@ -51,6 +51,21 @@ impl Setpoint {
     }
 }
 
+/// The first motor whose current limit (`limits_a`, the bank's `current_limit_a`) its amplifier
+/// cannot deliver: over the amplifier's `max_current_a` (or a range that is not positive and
+/// finite, which is never driven). Such a limit would let the supervisor pass currents the
+/// amplifier clamps silently, while telemetry reports them as applied.
+pub fn out_of_range(amplifiers: &[Amplifier; 3], limits_a: [f32; 3]) -> Option<u32> {
+    (0..3u32)
+        .zip(amplifiers.iter().zip(limits_a))
+        .find(|(_, (amp, limit))| {
+            let max = amp.max_current_a;
+            // Written so that NaN counts as out of range.
+            !(max.is_finite() && max > 0.0 && *limit <= max)
+        })
+        .map(|(motor, _)| motor)
+}
+
 impl Amplifier {
     /// ESCON's default scaling: 10 % = `-max_current_a`, 90 % = `+max_current_a`.
     pub const fn escon(max_current_a: f32, inverted: bool) -> Amplifier {
@@ -90,6 +105,22 @@ mod tests {
 
     fn close(a: f32, b: f32) -> bool {
         (a - b).abs() <= 1e-6
+    }
+
+    #[test]
+    fn a_limit_over_the_amplifier_range_is_found() {
+        let amps = [
+            Amplifier::escon(3.0, false),
+            Amplifier::escon(3.0, true),
+            Amplifier::escon(2.0, false),
+        ];
+        assert_eq!(out_of_range(&amps, [3.0, 3.0, 2.0]), None);
+        assert_eq!(out_of_range(&amps, [0.5, 1.0, 1.5]), None);
+        assert_eq!(out_of_range(&amps, [3.0, 3.0, 2.5]), Some(2));
+        assert_eq!(out_of_range(&amps, [20.0, 3.0, 2.5]), Some(0));
+        assert_eq!(out_of_range(&amps, [1.0, f32::NAN, 1.0]), Some(1));
+        let broken = [amps[0], Amplifier::escon(f32::NAN, false), amps[2]];
+        assert_eq!(out_of_range(&broken, [1.0, 1.0, 1.0]), Some(1));
     }
 
     #[test]

@@ -18,11 +18,11 @@
 
 use bank_format::{
     Bank, BankError, Counters, DeviceToHost, FaultReason, FrameDecoder, HostToDevice, Mode,
-    PROTOCOL_VERSION, PhaseCycles, State, Telemetry, heapless,
+    PROTOCOL_VERSION, PhaseCycles, ResetCause, State, Telemetry, heapless,
 };
 
 use crate::hal::{CycleCounter, Plant};
-use crate::link::TickEnd;
+use crate::link::{MAX_COMMAND_FRAME, TickEnd};
 use crate::safety::{ArmRefused, Fault, SafetyConfig, Supervisor, TickInput};
 use crate::tick::{HapticLoop, LoopInput, PhaseMarks};
 
@@ -33,8 +33,10 @@ pub const TELEMETRY_EVERY_TICKS: u32 = 10;
 /// command), so 32 bound it near 1,600. 32 bytes hold the largest command frame with an `Arm`
 /// (`SetMode` with constant currents is 20 bytes, `Arm` 7), so a host's command lands in the
 /// tick after it arrives; a backlog waits in the link queue ([`crate::link::RX_BYTES`]), which
-/// only fills under a flood. (At 128, bursts of queued bytes took up to 4,400 instructions of
-/// one SIL tick.)
+/// only fills under a flood. The decoder holds at most [`MAX_COMMAND_FRAME`] bytes, so the
+/// decoding at a delimiter never covers more than a tick's bytes (a 263-byte buffer would let
+/// bytes of earlier ticks be decoded all at once). (At 128, bursts of queued bytes took up to
+/// 4,400 instructions of one SIL tick.)
 pub const MAX_RX_BYTES_PER_TICK: usize = 32;
 
 /// What one tick did, for the caller (the software-in-the-loop image reports it to its
@@ -77,11 +79,15 @@ enum Core<'b> {
 pub struct App<'b, 'q> {
     core: Core<'b>,
     link: TickEnd<'q>,
-    rx: FrameDecoder<HostToDevice>,
+    rx: FrameDecoder<HostToDevice, MAX_COMMAND_FRAME>,
     ticks_since_host_frame: u32,
     ticks_since_host_byte: u32,
     link_grace_ticks: u32,
     last_tick_cycles: u32,
+    reset_cause: Option<ResetCause>,
+    /// A fault of the hardware's configuration found at boot ([`App::check_amplifiers`]):
+    /// every arm is refused with it.
+    configuration: Option<Fault>,
 }
 
 impl<'b, 'q> App<'b, 'q> {
@@ -116,17 +122,26 @@ impl<'b, 'q> App<'b, 'q> {
             ticks_since_host_byte: 0,
             link_grace_ticks,
             last_tick_cycles: 0,
+            reset_cause: None,
+            configuration: None,
         };
         app.queue(app.hello());
         app
     }
 
-    /// The chip restarted from a watchdog reset (`detail` as
-    /// [`FaultReason::WatchdogReset`]'s): latch it and report it once, before the first tick,
-    /// so a device that hung or locked up mid-session stays at zero current until the host
-    /// clears the fault explicitly. Call right after [`App::new`].
-    pub fn watchdog_reset(&mut self, detail: u32) {
-        let reason = FaultReason::WatchdogReset;
+    /// Why the chip started ([`crate::reset::cause_from_rcc_csr`] on a board): reported now,
+    /// after the boot `Hello`, and again after every `Hello` reply, so a host that connects
+    /// later still learns it. A watchdog reset is also latched as
+    /// [`FaultReason::WatchdogReset`] ([`crate::reset::latched_fault`]) and reported once,
+    /// before the first tick, so a device that hung or locked up mid-session stays at zero
+    /// current until the host clears the fault explicitly. Whatever the cause, the encoders
+    /// start unreferenced ([`HapticLoop::zero_encoders`]). Call right after [`App::new`].
+    pub fn reset(&mut self, cause: ResetCause) {
+        self.reset_cause = Some(cause);
+        self.queue(DeviceToHost::Reset { cause });
+        let Some((reason, detail)) = crate::reset::latched_fault(cause) else {
+            return;
+        };
         let latched = match &mut self.core {
             Core::Loop(lp) => lp.raise(reason, detail),
             Core::NoBank { supervisor, .. } => supervisor.raise(reason, detail),
@@ -136,6 +151,35 @@ impl<'b, 'q> App<'b, 'q> {
                 tick: self.tick_count(),
                 reason,
                 detail,
+            });
+        }
+    }
+
+    /// Check at boot that the amplifiers can deliver the bank's current limits
+    /// ([`crate::amplifier::out_of_range`]); if a motor's cannot, latch and report
+    /// [`FaultReason::AmplifierRange`] (detail the motor) and refuse every arm with it, however
+    /// often the fault is cleared: the bank (`current_limit_a`) or the amplifier's scaling (and
+    /// the board file that mirrors it) must change. Without a valid bank there is nothing to
+    /// check (nothing is ever driven). Call right after [`App::new`].
+    pub fn check_amplifiers(&mut self, amplifiers: &[crate::amplifier::Amplifier; 3]) {
+        let Core::Loop(lp) = &mut self.core else {
+            return;
+        };
+        let Some(motor) =
+            crate::amplifier::out_of_range(amplifiers, lp.bank().device().current_limit_a)
+        else {
+            return;
+        };
+        let fault = Fault {
+            reason: FaultReason::AmplifierRange,
+            detail: motor,
+        };
+        self.configuration = Some(fault);
+        if lp.raise(fault.reason, fault.detail) {
+            self.queue(DeviceToHost::Fault {
+                tick: self.tick_count(),
+                reason: fault.reason,
+                detail: fault.detail,
             });
         }
     }
@@ -258,7 +302,10 @@ impl<'b, 'q> App<'b, 'q> {
             });
         }
         if out.tick.is_multiple_of(TELEMETRY_EVERY_TICKS) {
-            self.queue(DeviceToHost::Telemetry(self.telemetry()));
+            // Periodic: it leaves room for faults when the host has stopped reading.
+            let _ = self
+                .link
+                .send_periodic(DeviceToHost::Telemetry(self.telemetry()));
         }
         Ok(out)
     }
@@ -368,7 +415,12 @@ impl<'b, 'q> App<'b, 'q> {
 
     fn command(&mut self, cmd: HostToDevice) {
         match cmd {
-            HostToDevice::Hello => self.queue(self.hello()),
+            HostToDevice::Hello => {
+                self.queue(self.hello());
+                if let Some(cause) = self.reset_cause {
+                    self.queue(DeviceToHost::Reset { cause });
+                }
+            }
             HostToDevice::Arm => self.arm(),
             HostToDevice::Disarm => {
                 if let Core::Loop(lp) = &mut self.core {
@@ -405,21 +457,30 @@ impl<'b, 'q> App<'b, 'q> {
         }
     }
 
-    /// Arm, or say why not: a refusal re-sends the latched fault (the invalid bank's code), or
-    /// the fault of the interlock that is still active.
+    /// Arm, or say why not: a refusal re-sends the latched fault (the invalid bank's code, the
+    /// amplifier range), or the fault of the interlock that is still active.
     fn arm(&mut self) {
         let tick = self.tick_count();
-        let refused = match &mut self.core {
-            Core::Loop(lp) => match lp.arm() {
+        let configuration = self.configuration;
+        let refused = match (&mut self.core, configuration) {
+            (Core::Loop(lp), Some(f)) => {
+                // Latched again if cleared: the motors stay off.
+                lp.raise(f.reason, f.detail);
+                Some(f)
+            }
+            (Core::Loop(lp), None) => match lp.arm() {
                 Ok(()) => None,
                 Err(ArmRefused::Interlock(f)) => Some(f),
                 Err(_) => lp.supervisor().fault(),
             },
-            Core::NoBank {
-                supervisor, code, ..
-            } => {
+            (
+                Core::NoBank {
+                    supervisor, code, ..
+                },
+                _,
+            ) => {
                 // Always refused (`bank_valid: false`); the reason is the bank.
-                let _ = supervisor.arm(false);
+                let _ = supervisor.arm(false, false);
                 Some(Fault {
                     reason: FaultReason::InvalidBank,
                     detail: *code,
@@ -565,6 +626,15 @@ mod tests {
         FakeClock(core::cell::Cell::new(0))
     }
 
+    /// References the encoders at encoder zero, as a host's `ZeroEncoders` taken before the
+    /// first tick would (sent over the link, its bytes would push a test's other commands past
+    /// the first tick's share, [`MAX_RX_BYTES_PER_TICK`]). No loop without a bank.
+    fn home(app: &mut App) {
+        if let Core::Loop(lp) = &mut app.core {
+            assert!(lp.zero_encoders());
+        }
+    }
+
     #[test]
     fn commands_arm_and_telemetry_flows() {
         let bytes = flat_patch();
@@ -578,6 +648,7 @@ mod tests {
         host.send(&HostToDevice::SetMode(Mode::Transparent));
         // A corrupt frame between them is dropped and counted.
         host.driver.put_rx(&[0x03, 0x11, 0x22, 0x00]);
+        home(&mut app);
         host.send(&HostToDevice::Arm);
         let mut reports = Vec::new();
         for _ in 0..20 {
@@ -630,6 +701,7 @@ mod tests {
         let mut app = App::new(Ok(&bank), tick_end, 0);
         let mut host = FakeHost::new(driver);
         let (mut plant, clock) = (plant(), clock());
+        host.send(&HostToDevice::ZeroEncoders);
         host.send(&HostToDevice::Arm);
         let mut reports = Vec::new();
         for _ in 0..30 {
@@ -676,6 +748,7 @@ mod tests {
         host.send(&HostToDevice::SetMode(Mode::ConstantCurrent {
             currents_a: drive,
         }));
+        home(&mut app);
         host.send(&HostToDevice::Arm);
         let mut reports = Vec::new();
         let step = |app: &mut App, plant: &mut FakePlant, host: &mut FakeHost| {
@@ -742,6 +815,7 @@ mod tests {
         let mut app = App::new(Ok(&bank), tick_end, 0);
         let mut host = FakeHost::new(driver);
         let (mut plant, clock) = (plant(), clock());
+        host.send(&HostToDevice::ZeroEncoders);
         host.send(&HostToDevice::Arm);
         for _ in 0..5 {
             assert_eq!(
@@ -776,7 +850,8 @@ mod tests {
     }
 
     /// After a watchdog reset the device boots latched in `WatchdogReset`, reported once
-    /// after the boot `Hello`: arming is refused (zero current) until `ClearFault`.
+    /// after the boot `Hello` and its reset cause: arming is refused (zero current) until
+    /// `ClearFault`.
     #[test]
     fn a_watchdog_reset_is_latched_until_cleared() {
         let bytes = flat_patch();
@@ -784,9 +859,10 @@ mod tests {
         let mut link = Link::new();
         let (tick_end, driver) = link.split();
         let mut app = App::new(Ok(&bank), tick_end, 0);
-        app.watchdog_reset(0);
+        app.reset(ResetCause::IndependentWatchdog);
         let mut host = FakeHost::new(driver);
         let (mut plant, clock) = (plant(), clock());
+        host.send(&HostToDevice::ZeroEncoders);
         host.send(&HostToDevice::Arm);
         for _ in 0..3 {
             let r = app.tick(&mut plant, &clock, false).unwrap();
@@ -808,7 +884,13 @@ mod tests {
             .filter(|m| matches!(m, DeviceToHost::Fault { .. }))
             .cloned()
             .collect();
-        assert_eq!(host.sent[1], watchdog);
+        assert_eq!(
+            host.sent[1],
+            DeviceToHost::Reset {
+                cause: ResetCause::IndependentWatchdog
+            }
+        );
+        assert_eq!(host.sent[2], watchdog);
         assert_eq!(faults, [watchdog.clone(), watchdog]);
         assert_eq!(app.telemetry().fault, Some(FaultReason::WatchdogReset));
         host.send(&HostToDevice::ClearFault);
@@ -829,6 +911,7 @@ mod tests {
             let mut app = App::new(bank, tick_end, 0);
             let mut host = FakeHost::new(driver);
             let (mut plant, clock) = (plant(), clock());
+            home(&mut app);
             plant.interlocks.amplifier_fault = [false, false, true];
             host.send(&HostToDevice::Arm);
             let r = app.tick(&mut plant, &clock, false).unwrap();
@@ -859,6 +942,7 @@ mod tests {
         let mut app = App::new(Ok(&bank), tick_end, GRACE);
         let (mut plant, clock) = (plant(), clock());
         let mut buf = [0u8; MAX_FRAME];
+        driver.put_rx(encode_frame(&HostToDevice::ZeroEncoders, &mut buf).unwrap());
         driver.put_rx(encode_frame(&HostToDevice::Arm, &mut buf).unwrap());
         app.tick(&mut plant, &clock, false).unwrap();
         // Heartbeats trickled one byte per tick: never 10 ticks without a byte.
@@ -908,6 +992,7 @@ mod tests {
             let mut app = App::new(Ok(&bank), tick_end, 0);
             let (mut plant, clock) = (plant(), clock());
             let mut buf = [0u8; MAX_FRAME];
+            driver.put_rx(encode_frame(&HostToDevice::ZeroEncoders, &mut buf).unwrap());
             driver.put_rx(encode_frame(&HostToDevice::Arm, &mut buf).unwrap());
             assert_eq!(
                 app.tick(&mut plant, &clock, false).unwrap().state,
@@ -948,6 +1033,7 @@ mod tests {
             let mut host = FakeHost::new(driver);
             host.per_tick = per_tick;
             let (mut plant, clock) = (plant(), clock());
+            host.send(&HostToDevice::ZeroEncoders);
             host.send(&HostToDevice::Arm);
             let mut reports = Vec::new();
             for t in 0..3000 {
@@ -982,6 +1068,242 @@ mod tests {
                 .skip(1)
                 .all(|m| matches!(m, DeviceToHost::Telemetry(_)))
         );
+    }
+
+    /// A frame longer than any command is dropped as oversize without being decoded: the
+    /// decoder holds the largest command frame, not the 263 bytes of the largest telemetry
+    /// frame, so a tick's bytes bound the work at a delimiter.
+    #[test]
+    fn a_frame_longer_than_any_command_is_dropped_undecoded() {
+        let bytes = flat_patch();
+        let bank = Bank::parse(bytes.as_slice()).unwrap();
+        let mut link = Link::new();
+        let (tick_end, mut driver) = link.split();
+        let mut app = App::new(Ok(&bank), tick_end, 0);
+        let (mut plant, clock) = (plant(), clock());
+        let mut garbage = [0x5Au8; 41];
+        garbage[40] = 0;
+        driver.put_rx(&garbage);
+        for _ in 0..3 {
+            app.tick(&mut plant, &clock, false).unwrap();
+        }
+        assert_eq!(app.rx.stats().oversize, 1, "{:?}", app.rx.stats());
+        assert_eq!(app.telemetry().counters.rx_errors, 1);
+        // A command after it still decodes.
+        let mut buf = [0u8; MAX_FRAME];
+        driver.put_rx(encode_frame(&HostToDevice::Heartbeat, &mut buf).unwrap());
+        app.tick(&mut plant, &clock, false).unwrap();
+        assert_eq!(app.telemetry().counters.rx_frames, 1);
+    }
+
+    /// A host that stopped reading lets telemetry fill the outgoing queue; a fault raised
+    /// meanwhile still reaches it once it reads again.
+    #[test]
+    fn a_fault_raised_while_the_host_is_not_reading_is_not_lost() {
+        let bytes = flat_patch();
+        let bank = Bank::parse(bytes.as_slice()).unwrap();
+        let mut link = Link::new();
+        let (tick_end, driver) = link.split();
+        let mut app = App::new(Ok(&bank), tick_end, 0);
+        let mut host = FakeHost::new(driver);
+        let (mut plant, clock) = (plant(), clock());
+        host.send(&HostToDevice::ZeroEncoders);
+        host.send(&HostToDevice::Arm);
+        // 200 ticks unread (the host's commands still arrive: the incoming side is apart).
+        for _ in 0..200 {
+            host.send(&HostToDevice::Heartbeat);
+            app.tick(&mut plant, &clock, false).unwrap();
+        }
+        assert!(app.telemetry().counters.tx_dropped > 10);
+        plant.interlocks.estop = true;
+        let r = app.tick(&mut plant, &clock, false).unwrap();
+        assert_eq!(r.state, WireState::Fault);
+        host.pump();
+        let e_stop = DeviceToHost::Fault {
+            tick: r.tick,
+            reason: FaultReason::EStop,
+            detail: 0,
+        };
+        assert!(host.sent.contains(&e_stop), "{:?}", host.sent);
+    }
+
+    /// The board's tick sequence (`firmware/board/src/main.rs`, `haptic`): wait for the
+    /// ticker, `TickWatch::begin`, `App::tick` with the last tick's overrun, `TickWatch::end`,
+    /// and on an overrun the ticker restarted from now (`Ticker::reset`, modelled here). One
+    /// wake 1.2 periods late among on-time ticks is exactly one overrun: the armed device
+    /// faults `Overrun` once, and after `ClearFault` and `Arm` it stays armed.
+    #[test]
+    fn the_boards_tick_sequence_recovers_from_one_late_wake() {
+        use crate::deadline::TickWatch;
+        const P: u32 = 168_000;
+        /// A cycle counter the test sets.
+        struct Counter(core::cell::Cell<u32>);
+        impl CycleCounter for Counter {
+            fn cycles(&self) -> u32 {
+                self.0.get()
+            }
+        }
+        let bytes = flat_patch();
+        let bank = Bank::parse(bytes.as_slice()).unwrap();
+        let mut link = Link::new();
+        let (tick_end, driver) = link.split();
+        let mut app = App::new(Ok(&bank), tick_end, 0);
+        let mut host = FakeHost::new(driver);
+        let mut plant = plant();
+        let clock = Counter(core::cell::Cell::new(0));
+        host.send(&HostToDevice::ZeroEncoders);
+        host.send(&HostToDevice::Arm);
+        let mut watch = TickWatch::new(P);
+        let (mut expiry, mut overrun) = (u32::MAX - 500 * P, false);
+        let mut states = Vec::new();
+        for k in 0..3_000u32 {
+            let latency = if k == 1_000 { 6 * P / 5 } else { 40 };
+            let wake = expiry.wrapping_add(latency);
+            clock.0.set(wake);
+            watch.begin(clock.cycles());
+            states.push(app.tick(&mut plant, &clock, overrun).unwrap().state);
+            let end = wake.wrapping_add(20_000);
+            clock.0.set(end);
+            let timing = watch.end(clock.cycles());
+            app.record_tick_cycles(timing.cycles);
+            overrun = timing.overrun;
+            expiry = expiry.wrapping_add(P);
+            if overrun {
+                expiry = end.wrapping_add(30 + P);
+            }
+            host.pump();
+            host.send(&HostToDevice::Heartbeat);
+            if k == 1_500 {
+                host.send(&HostToDevice::ClearFault);
+                host.send(&HostToDevice::Arm);
+            }
+        }
+        assert_eq!(app.telemetry().counters.overruns, 1);
+        // Tick 1,001 woke late; tick 1,002 is told and faults; from tick 1,502 (after the
+        // commands sent at tick 1,501) it runs armed again.
+        assert!(states[..1_001].iter().all(|&s| s == WireState::Armed));
+        assert!(states[1_001..1_501].iter().all(|&s| s == WireState::Fault));
+        assert!(states[1_501..].iter().all(|&s| s == WireState::Armed));
+        let faults: Vec<_> = host
+            .sent
+            .iter()
+            .filter(|m| matches!(m, DeviceToHost::Fault { .. }))
+            .collect();
+        assert_eq!(
+            faults,
+            [&DeviceToHost::Fault {
+                tick: 1_002,
+                reason: FaultReason::Overrun,
+                detail: 0
+            }]
+        );
+    }
+
+    /// `Arm` before any `ZeroEncoders` is refused with `NotReferenced` (latched, reported,
+    /// zero current); after homing, `ClearFault` and `Arm`, the motors are driven. Every reset
+    /// cause is reported after the boot `Hello` and after each `Hello` reply; only the
+    /// watchdogs latch a fault.
+    #[test]
+    fn arming_needs_homing_and_every_reset_cause_is_reported() {
+        let bytes = flat_patch();
+        let bank = Bank::parse(bytes.as_slice()).unwrap();
+        let mut link = Link::new();
+        let (tick_end, driver) = link.split();
+        let mut app = App::new(Ok(&bank), tick_end, 0);
+        app.reset(ResetCause::BrownOut);
+        let mut host = FakeHost::new(driver);
+        let (mut plant, clock) = (plant(), clock());
+        let drive = [0.5, -0.25, 0.0];
+        host.send(&HostToDevice::SetMode(Mode::ConstantCurrent {
+            currents_a: drive,
+        }));
+        host.send(&HostToDevice::Arm);
+        let mut step = |app: &mut App, host: &mut FakeHost| {
+            let r = app.tick(&mut plant, &clock, false).unwrap();
+            host.pump();
+            host.send(&HostToDevice::Heartbeat);
+            r
+        };
+        for _ in 0..3 {
+            let r = step(&mut app, &mut host);
+            assert_eq!((r.state, r.currents_a), (WireState::Fault, [0.0; 3]));
+        }
+        let reset = DeviceToHost::Reset {
+            cause: ResetCause::BrownOut,
+        };
+        assert!(matches!(host.sent[0], DeviceToHost::Hello { .. }));
+        assert_eq!(host.sent[1], reset);
+        assert_eq!(
+            host.sent[2],
+            DeviceToHost::Fault {
+                tick: 0,
+                reason: FaultReason::NotReferenced,
+                detail: 0
+            }
+        );
+        assert_eq!(app.telemetry().fault, Some(FaultReason::NotReferenced));
+        host.send(&HostToDevice::Hello);
+        step(&mut app, &mut host);
+        let n = host.sent.len();
+        assert!(matches!(host.sent[n - 2], DeviceToHost::Hello { .. }));
+        assert_eq!(host.sent[n - 1], reset);
+        host.send(&HostToDevice::ClearFault);
+        host.send(&HostToDevice::ZeroEncoders);
+        host.send(&HostToDevice::Arm);
+        let r = step(&mut app, &mut host);
+        assert_eq!((r.state, r.currents_a), (WireState::Armed, drive));
+    }
+
+    /// A bank whose current limit the board's amplifiers cannot deliver (2 A against an
+    /// amplifier scaled to 1.5 A on motor 2): `AmplifierRange` naming the motor at boot, and
+    /// every arm refused with it, cleared or not; amplifiers that can deliver it arm.
+    #[test]
+    fn a_current_limit_over_the_amplifier_range_refuses_to_arm() {
+        use crate::amplifier::Amplifier;
+        let bytes = flat_patch();
+        let bank = Bank::parse(bytes.as_slice()).unwrap();
+        assert_eq!(bank.device().current_limit_a, [2.0; 3]);
+        let amps = |last: f32| {
+            [
+                Amplifier::escon(3.0, false),
+                Amplifier::escon(3.0, false),
+                Amplifier::escon(last, false),
+            ]
+        };
+        let mut link = Link::new();
+        let (tick_end, driver) = link.split();
+        let mut app = App::new(Ok(&bank), tick_end, 0);
+        app.check_amplifiers(&amps(1.5));
+        home(&mut app);
+        let mut host = FakeHost::new(driver);
+        let (mut plant, clock) = (plant(), clock());
+        let range = |tick| DeviceToHost::Fault {
+            tick,
+            reason: FaultReason::AmplifierRange,
+            detail: 2,
+        };
+        host.pump();
+        assert_eq!(host.sent[1], range(0));
+        for _ in 0..3 {
+            host.send(&HostToDevice::ClearFault);
+            host.send(&HostToDevice::Arm);
+            let r = app.tick(&mut plant, &clock, false).unwrap();
+            assert_eq!((r.state, r.currents_a), (WireState::Fault, [0.0; 3]));
+            host.pump();
+            assert_eq!(host.sent.last(), Some(&range(r.tick - 1)));
+        }
+        assert!(plant.driven.iter().all(Option::is_none));
+        assert_eq!(app.telemetry().fault, Some(FaultReason::AmplifierRange));
+
+        let mut link = Link::new();
+        let (tick_end, driver) = link.split();
+        let mut app = App::new(Ok(&bank), tick_end, 0);
+        app.check_amplifiers(&amps(2.0));
+        home(&mut app);
+        let mut host = FakeHost::new(driver);
+        host.send(&HostToDevice::Arm);
+        let r = app.tick(&mut plant, &clock, false).unwrap();
+        assert_eq!(r.state, WireState::Armed);
     }
 
     #[test]

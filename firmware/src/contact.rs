@@ -57,6 +57,43 @@ pub const PARALLEL_TOL: f32 = 1.0e-4;
 pub const BARY_TOL: f32 = 1.0e-5;
 /// Cap on the triangle-to-triangle steps of one slide.
 pub const MAX_SLIDE_STEPS: u32 = 32;
+/// Most path pieces [`detect`] cuts a tick's path into: the loop shortens a longer path to its
+/// last [`max_path_m`] before detecting ([`path_tail`]). With at most
+/// [`bank_format::MAX_CELL_CANDIDATES`] candidates a cell (`Bank::parse` refuses more), a
+/// tick's detection tests at most `MAX_DETECT_PIECES * MAX_CELL_CANDIDATES` = 384 candidates,
+/// whatever the bank and the motion: see `SPEC.md`, "Limits the tick's cost rests on", for the
+/// budget derived from it. Three pieces are 1.35 cells: the whole tick of a tip at the
+/// overspeed threshold (1 mm at 1 m/s) is swept on any grid of cells from 0.75 mm.
+pub const MAX_DETECT_PIECES: u32 = 3;
+
+/// The longest tip path (m) a tick sweeps for contacts on `bank`, for a tip-speed threshold of
+/// `max_tip_speed_m_s` over ticks of `tick_s`: what the overspeed check lets through while
+/// armed (a longer step is an `Overspeed` fault that very tick, with zero current), and at
+/// most [`MAX_DETECT_PIECES`] pieces of the bank's grid (so a bank with a huge threshold or
+/// tiny cells cannot raise the cost).
+pub fn max_path_m(bank: &Bank, max_tip_speed_m_s: f32, tick_s: f32) -> f32 {
+    // 0.99: the pieces' count is `floor(length / piece) + 1`.
+    let pieces = 0.99 * MAX_DETECT_PIECES as f32 * PIECE_CELLS * bank.grid().cell_size_m();
+    let speed = max_tip_speed_m_s * tick_s;
+    // A NaN threshold falls back to the pieces (`min` returns the number).
+    speed.min(pieces)
+}
+
+/// The part of the tick's path `[prev_tip, tip]` that detection sweeps: all of it when at most
+/// `max_m` long ([`max_path_m`]), else its last `max_m`, ending at `tip`. A longer step is
+/// faster than the armed device may move (it faults `Overspeed`) or a move while disarmed; a
+/// surface crossing before its last `max_m` is missed as after a pose jump (the tip is then
+/// under the surface untracked, and renders nothing until it leaves and enters again).
+pub fn path_tail(prev_tip: [f32; 3], tip: [f32; 3], max_m: f32) -> [f32; 3] {
+    let d = sub(tip, prev_tip);
+    let l2 = dot(d, d);
+    // Written so that NaN keeps the path (detection refuses a non-finite one).
+    if !(l2 > max_m * max_m) {
+        return prev_tip;
+    }
+    sub(tip, scale(d, max_m / sqrt(l2)))
+}
+
 /// The stick cone: while touching, the tangential displacement may reach this many times the
 /// normal displacement before the contact slides (about the friction coefficient of an
 /// instrument on wet tissue).

@@ -168,7 +168,10 @@ fn grid_bank(xs: &[f64], ys: &[f64], truncation_m: f64, device: DeviceCalibratio
     AlignedBytes::new(&b.build().expect("valid fixture bank"))
 }
 
-fn grid_builder(
+/// The builder of a flat grid bank (z = 0, nodes at `xs` x `ys`, two triangles a square,
+/// every pair within `truncation_m` coupled by a smooth SPD kernel), for a test to alter
+/// before building.
+pub fn grid_builder(
     xs: &[f64],
     ys: &[f64],
     truncation_m: f64,

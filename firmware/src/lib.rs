@@ -11,8 +11,9 @@
 //! Around the loop, [`app`] is the device application (link commands, faults, telemetry) and
 //! [`hal`] the trait boundary an image implements for its hardware; the QEMU
 //! software-in-the-loop image lives in `firmware/qemu/`, the STM32F405 board image in
-//! `firmware/board/`. For the images: [`deadline`] (tick overruns on a cycle counter) and
-//! [`stm32_gpio`] (GPIO register words for the panic path).
+//! `firmware/board/`. For the images: [`deadline`] (tick overruns on a cycle counter),
+//! [`reset`] (the reset cause from the reset flags) and [`stm32_gpio`] (GPIO register words
+//! for the panic path).
 #![no_std]
 // No panic paths in the firmware: every module the tick calls is checked (tests may unwrap).
 #![cfg_attr(
@@ -46,6 +47,7 @@ pub mod fixtures;
 pub mod hal;
 pub mod link;
 pub mod patch;
+pub mod reset;
 pub mod safety;
 pub mod solve;
 pub mod stm32_gpio;

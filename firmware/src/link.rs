@@ -13,6 +13,9 @@
 //!   message once queued goes out as one whole frame, so the host never sees a torn frame (a
 //!   message that would not encode, which the bounded message set cannot produce, is dropped
 //!   and counted the same way);
+//! - periodic telemetry ([`TickEnd::send_periodic`]) leaves the last [`TX_RESERVED`] slots
+//!   free, so a host that stops reading fills the queue with telemetry but a fault raised
+//!   meanwhile (or a reply) still finds room and reaches the host once it reads again;
 //! - received bytes that find the incoming queue full are dropped and counted
 //!   ([`DriverEnd::rx_dropped`]); the frame they belonged to then fails its CRC on the device
 //!   and is counted there as an `rx_error`.
@@ -22,7 +25,7 @@
 //! frame buffers out of the tick: the tick only moves the message (a few hundred bytes) into
 //! its queue slot.
 
-use bank_format::{DeviceToHost, MAX_FRAME, encode_frame};
+use bank_format::{DeviceToHost, FRAME_CRC_LEN, MAX_FRAME, cobs_max_len, encode_frame};
 use core::sync::atomic::{AtomicU32, Ordering};
 use heapless::spsc::{Consumer, Producer, Queue};
 
@@ -31,6 +34,20 @@ use heapless::spsc::{Consumer, Producer, Queue};
 pub const TX_FRAMES: usize = 8;
 /// Incoming bytes the queue holds (minus one).
 pub const RX_BYTES: usize = 512;
+/// Outgoing slots periodic telemetry never takes ([`TickEnd::send_periodic`]): room for a
+/// latched fault and a reply (an arm refusal, a `Hello`) while a host that stopped reading has
+/// let telemetry fill the rest.
+pub const TX_RESERVED: usize = 2;
+/// The largest host-to-device message, postcard bytes: `Plant { tick, encoder_counts }`, a
+/// variant index and four varints of at most 5 bytes (`SetMode(ConstantCurrent)`, the largest
+/// command, is 14).
+pub const MAX_COMMAND_MESSAGE: usize = 21;
+/// The largest host-to-device frame, its 0x00 included: what the device's decoder holds
+/// ([`crate::app::App`]). A longer frame is dropped as oversize without being decoded, so the
+/// decoding work at a delimiter is bounded by this, not by [`MAX_FRAME`] (263): the
+/// [`crate::app::MAX_RX_BYTES_PER_TICK`] bytes a tick takes cost at most that many bytes of
+/// decoding, whatever their content.
+pub const MAX_COMMAND_FRAME: usize = cobs_max_len(MAX_COMMAND_MESSAGE + FRAME_CRC_LEN) + 1;
 
 /// The link's queues; [`Link::split`] hands out the two ends.
 pub struct Link {
@@ -99,6 +116,17 @@ impl TickEnd<'_> {
             self.tx_dropped.fetch_add(1, Ordering::Relaxed);
         }
         queued
+    }
+
+    /// Queue periodic `msg` (telemetry) whole, leaving the last [`TX_RESERVED`] slots to
+    /// [`TickEnd::send`]; `false` (dropped and counted like a full queue's) when only those
+    /// are left.
+    pub fn send_periodic(&mut self, msg: DeviceToHost) -> bool {
+        if self.tx.len() + TX_RESERVED >= self.tx.capacity() {
+            self.tx_dropped.fetch_add(1, Ordering::Relaxed);
+            return false;
+        }
+        self.send(msg)
     }
 
     /// The next received byte, if any.
@@ -237,6 +265,77 @@ mod tests {
         assert_eq!(got, want);
         assert!(!driver.has_tx());
         assert_eq!(tick.tx_dropped(), 1);
+    }
+
+    /// Telemetry stops at the reserve; what must not be lost still finds room, and every
+    /// refusal is counted.
+    #[test]
+    fn periodic_messages_leave_the_reserve_to_faults() {
+        let mut link = Link::new();
+        let (mut tick, mut driver) = link.split();
+        let telemetry = || DeviceToHost::Hello {
+            protocol: 0,
+            bank_crc: None,
+            scene_id: 0,
+            node_count: 0,
+        };
+        let periodic = (0..20).filter(|_| tick.send_periodic(telemetry())).count();
+        assert_eq!(periodic, TX_FRAMES - 1 - TX_RESERVED);
+        assert_eq!(tick.tx_dropped(), 20 - periodic as u32);
+        let fault = DeviceToHost::Fault {
+            tick: 7,
+            reason: bank_format::FaultReason::EStop,
+            detail: 0,
+        };
+        for _ in 0..TX_RESERVED {
+            assert!(tick.send(fault.clone()));
+        }
+        assert!(!tick.send(fault.clone()), "the queue is full now");
+        let mut rx = bank_format::FrameDecoder::<DeviceToHost>::new();
+        let mut buf = [0u8; 64];
+        let mut got = Vec::new();
+        loop {
+            let n = driver.take_tx(&mut buf);
+            if n == 0 {
+                break;
+            }
+            got.extend(rx.feed_slice(&buf[..n]).map(Result::unwrap));
+        }
+        assert_eq!(got.len(), TX_FRAMES - 1);
+        assert_eq!(got[TX_FRAMES - 2], fault);
+    }
+
+    /// Every host message, at its largest, fits the command decoder, and a tick's share of
+    /// received bytes holds the largest frame.
+    #[test]
+    fn every_host_message_fits_the_command_frame() {
+        use bank_format::{HostToDevice, Mode};
+        let largest = [
+            HostToDevice::Plant {
+                tick: u32::MAX,
+                encoder_counts: [i32::MIN, i32::MAX, i32::MIN],
+            },
+            HostToDevice::SetMode(Mode::ConstantCurrent {
+                currents_a: [f32::MAX; 3],
+            }),
+            HostToDevice::ClearFault,
+        ];
+        for msg in &largest {
+            let body = postcard_len(msg);
+            assert!(body <= MAX_COMMAND_MESSAGE, "{msg:?}: {body}");
+            let mut buf = [0u8; MAX_FRAME];
+            let frame = encode_frame(msg, &mut buf).unwrap();
+            assert!(frame.len() <= MAX_COMMAND_FRAME, "{msg:?}: {}", frame.len());
+        }
+        assert_eq!(postcard_len(&largest[0]), MAX_COMMAND_MESSAGE);
+        const { assert!(MAX_COMMAND_FRAME <= crate::app::MAX_RX_BYTES_PER_TICK) };
+    }
+
+    fn postcard_len(msg: &bank_format::HostToDevice) -> usize {
+        let mut frame = [0u8; MAX_FRAME];
+        let encoded = encode_frame(msg, &mut frame).unwrap().len();
+        // COBS adds one byte (below 254), the delimiter one, the CRC four.
+        encoded - 2 - FRAME_CRC_LEN
     }
 
     #[test]

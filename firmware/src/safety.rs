@@ -267,6 +267,9 @@ pub enum ArmRefused {
     InvalidBank,
     /// A hardware interlock was active at the last tick (the fault it raises).
     Interlock(Fault),
+    /// The encoders were not referenced since the chip started (no `ZeroEncoders` at the
+    /// home pose): latched as [`FaultReason::NotReferenced`].
+    NotReferenced,
 }
 
 /// What the last tick measured, for the encoder-jump and overspeed checks.
@@ -317,9 +320,12 @@ impl Supervisor {
         })
     }
 
-    /// Arm: only from `Disarmed`, with no interlock active at the last tick, and with a valid
-    /// bank.
-    pub fn arm(&mut self, bank_valid: bool) -> Result<(), ArmRefused> {
+    /// Arm: only from `Disarmed`, with no interlock active at the last tick, with a valid
+    /// bank and with the encoders `referenced` (homed since the chip started: the pose, the
+    /// organ, the joint limits and the gravity feed-forward all rest on it). The last refusal
+    /// latches [`FaultReason::NotReferenced`], so the host sees why in the fault report and in
+    /// telemetry.
+    pub fn arm(&mut self, bank_valid: bool, referenced: bool) -> Result<(), ArmRefused> {
         if self.state != State::Disarmed {
             return Err(ArmRefused::NotDisarmed(self.state));
         }
@@ -328,6 +334,10 @@ impl Supervisor {
         }
         if !bank_valid {
             return Err(ArmRefused::InvalidBank);
+        }
+        if !referenced {
+            self.raise(FaultReason::NotReferenced, 0);
+            return Err(ArmRefused::NotReferenced);
         }
         self.state = State::Armed;
         Ok(())
@@ -371,6 +381,20 @@ impl Supervisor {
         self.state = State::Fault(reason);
         self.detail = detail;
         true
+    }
+
+    /// The first joint whose encoder moved more than `max_counts_per_tick` since the last
+    /// tick's `counts`, if any: what the tick's `EncoderJump` check finds. The loop asks before
+    /// any geometry, so that a glitch is never swept for contacts.
+    pub fn encoder_jump(&self, counts: &[i32; 3]) -> Option<u32> {
+        let prev = self.previous.as_ref()?;
+        (0..3u32)
+            .zip(prev.counts.iter().zip(counts))
+            .find(|(j, (p, n))| {
+                let max = self.config.max_counts_per_tick.get(*j as usize);
+                max.is_none_or(|&m| n.abs_diff(**p) > m)
+            })
+            .map(|(j, _)| j)
     }
 
     /// Run the checks for one tick and decide the currents (see the module notes).
@@ -418,16 +442,8 @@ impl Supervisor {
         if armed && input.link_silence_ticks > self.config.link_timeout_ticks {
             return fault(FaultReason::LinkSilent, input.link_silence_ticks);
         }
-        if let Some(prev) = &self.previous {
-            let jump = (0..3u32)
-                .zip(prev.counts.iter().zip(&input.counts))
-                .find(|(j, (p, n))| {
-                    let max = self.config.max_counts_per_tick.get(*j as usize);
-                    max.is_none_or(|&m| n.abs_diff(**p) > m)
-                });
-            if let Some((j, _)) = jump {
-                return fault(FaultReason::EncoderJump, j);
-            }
+        if let Some(j) = self.encoder_jump(&input.counts) {
+            return fault(FaultReason::EncoderJump, j);
         }
         if input.host_currents {
             // Written so that NaN (in the request or the limit) counts as over.
@@ -539,7 +555,7 @@ mod tests {
             ..ok_tick()
         };
         assert_eq!(s.tick(&at).state, State::Disarmed);
-        assert_eq!(s.arm(true), Ok(()));
+        assert_eq!(s.arm(true, true), Ok(()));
         let out = s.tick(&at);
         assert_eq!(out.state, State::Armed);
         s
@@ -582,15 +598,18 @@ mod tests {
             (State::Disarmed, [0.0; 3], None)
         );
         // Arm refused with an invalid bank.
-        assert_eq!(s.arm(false), Err(ArmRefused::InvalidBank));
+        assert_eq!(s.arm(false, true), Err(ArmRefused::InvalidBank));
         assert_eq!(s.state(), State::Disarmed);
         // Disarmed -> Armed: the requested currents are applied.
-        assert_eq!(s.arm(true), Ok(()));
+        assert_eq!(s.arm(true, true), Ok(()));
         let out = s.tick(&ok_tick());
         assert_eq!(out.state, State::Armed);
         assert_eq!(out.currents_a, [0.5, -0.5, 1.0]);
         // Arm again: refused, still armed.
-        assert_eq!(s.arm(true), Err(ArmRefused::NotDisarmed(State::Armed)));
+        assert_eq!(
+            s.arm(true, true),
+            Err(ArmRefused::NotDisarmed(State::Armed))
+        );
         // Armed -> Disarmed.
         assert!(s.disarm());
         assert!(!s.disarm());
@@ -598,7 +617,7 @@ mod tests {
         // Clear without a fault does nothing.
         assert!(!s.clear_fault());
         // Armed -> Fault -> (disarm and arm refused) -> clear -> Disarmed -> Armed.
-        s.arm(true).unwrap();
+        s.arm(true, true).unwrap();
         let out = s.tick(&TickInput {
             overrun: true,
             ..ok_tick()
@@ -606,16 +625,38 @@ mod tests {
         assert_eq!(out.state, State::Fault(FaultReason::Overrun));
         assert!(!s.disarm());
         assert_eq!(
-            s.arm(true),
+            s.arm(true, true),
             Err(ArmRefused::NotDisarmed(State::Fault(FaultReason::Overrun)))
         );
         assert_eq!(s.state().wire(), bank_format::State::Fault);
         assert!(s.clear_fault());
         assert_eq!(s.state(), State::Disarmed);
         assert_eq!(s.fault(), None);
-        assert_eq!(s.arm(true), Ok(()));
+        assert_eq!(s.arm(true, true), Ok(()));
         assert_eq!(s.tick(&ok_tick()).currents_a, [0.5, -0.5, 1.0]);
         assert_eq!(s.state().wire(), bank_format::State::Armed);
+    }
+
+    /// Without a reference the arm is refused and `NotReferenced` latched (zero current);
+    /// once referenced, cleared and armed again, the currents flow.
+    #[test]
+    fn arming_unreferenced_is_refused_and_latched() {
+        let mut s = Supervisor::new(SafetyConfig::new(&liver_device()));
+        s.tick(&ok_tick());
+        assert_eq!(s.arm(true, false), Err(ArmRefused::NotReferenced));
+        assert_eq!(
+            s.fault(),
+            Some(Fault {
+                reason: FaultReason::NotReferenced,
+                detail: 0
+            })
+        );
+        assert_eq!(s.tick(&ok_tick()).currents_a, [0.0; 3]);
+        // The bank's refusal comes first.
+        assert!(s.clear_fault());
+        assert_eq!(s.arm(false, false), Err(ArmRefused::InvalidBank));
+        assert_eq!(s.arm(true, true), Ok(()));
+        assert_eq!(s.tick(&ok_tick()).currents_a, [0.5, -0.5, 1.0]);
     }
 
     /// Each fault input, armed: zero current this tick and after, the reason and detail kept.
@@ -879,7 +920,7 @@ mod tests {
         };
         s.tick(&pressed);
         assert_eq!(
-            s.arm(true),
+            s.arm(true, true),
             Err(ArmRefused::NotDisarmed(State::Fault(FaultReason::EStop)))
         );
         // Cleared while still pressed: disarmed, but arming is refused and says why.
@@ -889,7 +930,7 @@ mod tests {
             reason: FaultReason::EStop,
             detail: 0,
         }));
-        assert_eq!(s.arm(true), refused);
+        assert_eq!(s.arm(true, true), refused);
         assert_eq!(s.state(), State::Disarmed);
         // The next tick latches it again.
         assert_eq!(
@@ -904,7 +945,7 @@ mod tests {
         });
         assert!(s.clear_fault());
         assert_eq!(
-            s.arm(true),
+            s.arm(true, true),
             Err(ArmRefused::Interlock(Fault {
                 reason: FaultReason::AmplifierFault,
                 detail: 0,
@@ -913,7 +954,7 @@ mod tests {
         // Released: after one quiet tick (still disarmed, no fault), arming works and currents
         // flow.
         assert_eq!(s.tick(&ok_tick()).state, State::Disarmed);
-        assert_eq!(s.arm(true), Ok(()));
+        assert_eq!(s.arm(true, true), Ok(()));
         assert_eq!(s.tick(&ok_tick()).currents_a, [0.5, -0.5, 1.0]);
     }
 
@@ -969,7 +1010,7 @@ mod tests {
             // Re-arming is explicit: clear (-> Disarmed, still zero), then arm.
             assert!(s.clear_fault());
             assert_eq!(s.tick(&now).currents_a, [0.0; 3]);
-            assert_eq!(s.arm(true), Ok(()));
+            assert_eq!(s.arm(true, true), Ok(()));
             let out = s.tick(&now);
             assert_eq!(
                 (out.state, out.currents_a),
@@ -1006,7 +1047,7 @@ mod tests {
         };
         assert_eq!(s.tick(&nan).state, State::Fault(FaultReason::Nan));
         assert!(s.clear_fault());
-        assert_eq!(s.arm(true), Ok(()));
+        assert_eq!(s.arm(true, true), Ok(()));
         assert_eq!(s.tick(&far).state, State::Armed);
     }
 

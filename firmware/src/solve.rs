@@ -699,11 +699,22 @@ pub fn condition_barycentric(
     Ok(WeightedSolve::new(bank, &triangle, &bary)?.condition())
 }
 
+/// Slope (dimensionless, N of rendered force per N of the linear model's force) at which a
+/// positive Q(0) is blended out near zero ([`apply_tissue_law`]): `Q_b(s) = Q(s) - max(0,
+/// Q(0) - LAW_ZERO_BLEND_SLOPE s)`. So `Q_b(0) = 0`, `Q_b = Q` from `s = Q(0) /
+/// LAW_ZERO_BLEND_SLOPE` on, and in between the law's slope plus this one: the blend at most
+/// adds the linear model's own stiffness (1), never a step. Without it a law with an offset
+/// (`Q(0) > 0`) renders `Q(0)` at the slightest penetration, in the direction of micrometre
+/// encoder noise: the surface buzzes. A law with `Q(0) <= 0` is unchanged, bit for bit.
+pub const LAW_ZERO_BLEND_SLOPE: f32 = 1.0;
+
 /// The quasi non-linear law (paper eqs. 5-6) on a force `f` (N) produced by imposing the
 /// displacement `d` (m): `f = f_t + f_r` with `f_t = (f . d^) d^` along the imposed direction;
 /// `|f_t|` is replaced by `max(law.eval(|f_t|), 0)` (linear continuation outside the fitted
-/// domain, clamped at 0 so a fit never pulls the tool in), `f_r` is kept. `d = 0` has no direction: `f` is returned unchanged; `f_t = 0` has none
-/// either: only `f_r` is returned. NaN or infinite input or result is an error.
+/// domain, clamped at 0 so a fit never pulls the tool in), less a positive `Q(0)` blended out
+/// near zero ([`LAW_ZERO_BLEND_SLOPE`]), so zero penetration renders zero force; `f_r` is
+/// kept. `d = 0` has no direction: `f` is returned unchanged; `f_t = 0` has none either: only
+/// `f_r` is returned. NaN or infinite input or result is an error.
 pub fn apply_tissue_law(law: &TissueLaw, f: [f32; 3], d: [f32; 3]) -> Result<[f32; 3], SolveError> {
     if !f.iter().chain(d.iter()).all(|v| v.is_finite()) {
         return Err(SolveError::NonFinite);
@@ -728,6 +739,9 @@ pub fn apply_tissue_law(law: &TissueLaw, f: [f32; 3], d: [f32; 3]) -> Result<[f3
     // (Written so that a NaN stays one and is reported below.)
     let q = law.eval(s.abs());
     let q = if q < 0.0 { 0.0 } else { q };
+    // Q(s) >= Q(0) (Q increases), so this stays >= 0.
+    let excess = law.at_zero() - LAW_ZERO_BLEND_SLOPE * s.abs();
+    let q = if excess > 0.0 { q - excess } else { q };
     let qs = if s > 0.0 { q } else { -q };
     let out = [fr[0] + qs * dh[0], fr[1] + qs * dh[1], fr[2] + qs * dh[2]];
     if out.iter().all(|v| v.is_finite()) {
@@ -1174,6 +1188,49 @@ mod tests {
             apply_tissue_law(&law, [1.0, 0.0, 0.0], d).unwrap(),
             [1.0, 0.0, 0.0]
         );
+    }
+
+    /// Q(0) = 0 at the surface: a linear law with a 0.5 N offset, and a fit whose
+    /// continuation below its domain is positive at 0 (Q(0) = 0.2 N), render no force at zero
+    /// penetration and a force that grows continuously from it: at most the blend's slope plus
+    /// the law's, monotone, and the law itself once `s >= Q(0) / LAW_ZERO_BLEND_SLOPE`. (The
+    /// law alone rendered Q(0) at the slightest press.) A law through 0 is untouched, bit for
+    /// bit.
+    #[test]
+    fn zero_penetration_renders_zero_force_whatever_the_law_at_zero() {
+        let offset = TissueLaw::linear(0.5, 1.0, [0.0, 5.0]).unwrap();
+        let fit = TissueLaw::chebyshev(&[2.6, 2.5, 0.1], [0.0, 5.0]).unwrap();
+        let continued = TissueLaw::chebyshev(&[1.0, 0.2], [0.5, 2.5]).unwrap();
+        let d = [0.0, 0.0, 1e-6];
+        for law in [offset, fit, continued] {
+            let q0 = law.at_zero();
+            assert!(q0 > 0.1, "{q0}");
+            let along = |s: f32| apply_tissue_law(&law, [0.0, 0.0, s], d).unwrap()[2];
+            assert_eq!(
+                along(1e-9),
+                law.eval(1e-9) - (q0 - 1e-9 * LAW_ZERO_BLEND_SLOPE)
+            );
+            assert!(along(1e-6) <= 1e-5, "{}", along(1e-6));
+            let mut last = 0.0f32;
+            for k in 1..=1000 {
+                let s = 2.0e-3 * k as f32;
+                let q = along(s);
+                assert!(q >= last, "{s}: {q} < {last}");
+                let slope = law.slope(s) + LAW_ZERO_BLEND_SLOPE;
+                assert!(q - last <= slope * 2.0e-3 * (1.0 + 1e-3) + 1e-6, "{s}");
+                if s >= q0 / LAW_ZERO_BLEND_SLOPE {
+                    assert_eq!(q, law.eval(s), "{s}");
+                }
+                last = q;
+            }
+        }
+        // Through zero: the law's own values.
+        let through = TissueLaw::linear(0.0, 1.3, [0.0, 5.0]).unwrap();
+        assert_eq!(through.at_zero(), 0.0);
+        for s in [1e-9f32, 1e-4, 0.3, 4.0] {
+            let q = apply_tissue_law(&through, [0.0, 0.0, s], d).unwrap()[2];
+            assert_eq!(q, through.eval(s));
+        }
     }
 
     /// A stiffening fit (convex, `Q(f_min) = 0.25 N` with slope 1.2 at `f_min = 0.5 N`) whose

@@ -7,7 +7,11 @@
 //!    ([`Device::joints`]) -> tip and Jacobian ([`Device::tip_and_jacobian`]);
 //! 2. contact update on the segment `[previous tip, tip]` ([`ContactTracker::update`]; the
 //!    first tick, and the first after zeroing the encoders, use a zero-length segment, so a
-//!    pose jump is never swept for contacts);
+//!    pose jump is never swept for contacts); an encoder jump (the supervisor's check, asked
+//!    here first) drops the contact and sweeps nothing, and a path longer than the overspeed
+//!    threshold allows is swept over its last part only ([`crate::contact::path_tail`]), so
+//!    no bank and no motion makes the detection cost more than
+//!    [`crate::contact::MAX_DETECT_PIECES`] pieces;
 //! 3. when touching, on a bank with contact samples (bank format 6, `SPEC.md` "contact
 //!    samples", the shipped scene's): the tool's patch compliance `W` at the anchor,
 //!    interpolated from the samples ([`bank_format::Samples::interpolate`]) and factored every
@@ -43,7 +47,8 @@
 //!    is the feed-forward for the instrument's own weight from the bank's optional gravity
 //!    section ([`gravity_efforts`]; zero without it), added in every mode but
 //!    `ConstantCurrent`, with or without contact, so the supervisor clamps and faults on the
-//!    sum as on any request;
+//!    sum as on any request; for [`RAMP_IN_TICKS`] after each arm, `F` and `tau_g` are scaled
+//!    by a ramp from 0 to 1 (the telemetry's tool force is the ramped one);
 //! 6. [`Supervisor::tick`]: the hardware interlocks (e-stop, amplifier faults), NaN, encoder
 //!    jumps, overspeed (the tip's and the joints' change since the previous tick against the
 //!    bank's thresholds), joint and current limits, link silence, overruns and a failed solve
@@ -61,7 +66,7 @@
 
 use bank_format::{Bank, Contact, Counters, MAX_CONTACTS, Mode, PhaseCycles, Telemetry, heapless};
 
-use crate::contact::{ContactState, ContactTracker};
+use crate::contact::{ContactState, ContactTracker, max_path_m, path_tail};
 use crate::device::{Device, Joints, sin_cos, transpose_mul};
 use crate::hal::{CycleCounter, Interlocks};
 use crate::patch::PatchBuild;
@@ -154,7 +159,26 @@ pub struct HapticLoop<'b> {
     /// The contact was detected at an earlier tick (its force starts the tick after).
     detected: bool,
     pending: Pending,
+    /// The encoders were referenced ([`HapticLoop::zero_encoders`]) since this loop started.
+    referenced: bool,
+    /// Armed ticks since the last arm, up to [`RAMP_IN_TICKS`] (the ramp-in is over then).
+    ramp_ticks: u32,
+    /// The longest path a tick sweeps for contacts ([`crate::contact::max_path_m`]).
+    max_path_m: f32,
 }
+
+/// Ticks over which the loop's output (the rendered force and the gravity feed-forward) rises
+/// linearly from zero after each `Arm`, a fault's `ClearFault` + `Arm` included: 300 ms at
+/// 1 kHz. An arm with the tip inside the tissue (pressed while disarmed, or held there through
+/// a fault) would otherwise apply the whole penetration force, up to `max_force_n`, plus the
+/// instrument's weight compensation in one step under the user's hand. Ramping rather than
+/// refusing to arm in contact: refusing would leave the gravity step, and a device that may
+/// only be armed away from the organ cannot recover from a fault while the instrument is in
+/// it. A firmware constant, not a scene field: a field would need a bank format change for a
+/// value no scene has needed to differ; a few hundred ms is short against a hand's reaction
+/// and long against the loop's stiffness. A host's `ConstantCurrent` is not ramped: those are
+/// currents it measures with, commanded and checked as sent.
+pub const RAMP_IN_TICKS: u32 = 300;
 
 /// [`FaultReason::BadCommand`](bank_format::FaultReason::BadCommand)'s detail for a `SetMode`
 /// refused while armed (0..2 name the motor of a bad `ConstantCurrent`).
@@ -223,6 +247,10 @@ struct Pending {
     origin: Option<PatchOrigin>,
     build: PatchBuild,
     stage: Stage,
+    /// Where the last rebuild that failed was started: the next starts only once the anchor
+    /// has slid [`REPATCH_FRACTION`] of the tip radius from there (not every few ticks at the
+    /// same spot). `None` when the last one succeeded, or the contact ended since.
+    failed_at: Option<[f32; 3]>,
 }
 
 /// How far a [`Pending`] rebuild has come: one step a tick, each bounded ([`PatchBuild`],
@@ -271,6 +299,7 @@ impl<'b> HapticLoop<'b> {
 
     /// A disarmed loop with explicit safety thresholds.
     pub fn with_config(bank: &'b Bank<'b>, config: SafetyConfig) -> HapticLoop<'b> {
+        let max_path_m = max_path_m(bank, config.max_tip_speed_m_s, config.tick_s);
         HapticLoop {
             bank,
             device: Device::new(bank.device()),
@@ -297,7 +326,11 @@ impl<'b> HapticLoop<'b> {
                 origin: None,
                 build: PatchBuild::new(),
                 stage: Stage::Locating,
+                failed_at: None,
             },
+            referenced: false,
+            ramp_ticks: RAMP_IN_TICKS,
+            max_path_m,
         }
     }
 
@@ -342,10 +375,21 @@ impl<'b> HapticLoop<'b> {
         &mut self.counters
     }
 
-    /// Arm (host command): only from `Disarmed` and with no interlock active at the last tick;
-    /// the bank was validated when parsed.
+    /// Arm (host command): only from `Disarmed`, with no interlock active at the last tick and
+    /// with the encoders referenced since the loop started ([`HapticLoop::zero_encoders`];
+    /// refused otherwise with [`FaultReason::NotReferenced`](bank_format::FaultReason)
+    /// latched); the bank was validated when parsed. The loop's output then ramps in over
+    /// [`RAMP_IN_TICKS`].
     pub fn arm(&mut self) -> Result<(), ArmRefused> {
-        self.supervisor.arm(true)
+        self.supervisor.arm(true, self.referenced)?;
+        self.ramp_ticks = 0;
+        Ok(())
+    }
+
+    /// Whether the encoders are referenced: a [`HapticLoop::zero_encoders`] since the loop
+    /// started (the chip's last reset), and no encoder jump since.
+    pub fn referenced(&self) -> bool {
+        self.referenced
     }
 
     /// Disarm (host command): `Armed` -> `Disarmed`; returns whether the state changed.
@@ -383,10 +427,14 @@ impl<'b> HapticLoop<'b> {
         Ok(())
     }
 
-    /// Declare the current pose (the last tick's raw counts) the calibration's home pose (host
-    /// command). Refused (returns `false`) while armed, since the tip would jump under the
-    /// user's hand. Rebases the supervisor's jump and overspeed checks and drops any contact;
-    /// the next tick does not sweep the jump for contacts.
+    /// Declare the current pose (the last tick's raw counts; encoder zero before the first
+    /// tick) the calibration's home pose (host command, with the instrument in its home
+    /// fixture): the explicit homing that references the encoders, which arming requires. The
+    /// encoder counters restart from wherever the mechanism stands at every reset (power,
+    /// brown-out, reset pin, watchdog), so nothing else can tell the pose. Refused (returns
+    /// `false`) while armed, since the tip would jump under the user's hand. Rebases the
+    /// supervisor's jump and overspeed checks and drops any contact; the next tick does not
+    /// sweep the jump for contacts.
     pub fn zero_encoders(&mut self) -> bool {
         if self.supervisor.state() == State::Armed {
             return false;
@@ -397,6 +445,7 @@ impl<'b> HapticLoop<'b> {
         self.supervisor.rebase_encoders();
         self.tracker.reset();
         self.prev_tip = None;
+        self.referenced = true;
         true
     }
 
@@ -422,8 +471,18 @@ impl<'b> HapticLoop<'b> {
         let q = self.device.joints(counts);
         let (tip, jac) = self.device.tip_and_jacobian(&q);
         let kinematics = clock.cycles();
-        let prev = self.prev_tip.unwrap_or(tip);
-        let contact = self.tracker.update(self.bank, prev, tip);
+        // An encoder jump (a glitch; the supervisor faults on it below) is never swept for
+        // contacts, and a path is swept over at most its last `max_path_m`, before any
+        // geometry: the bank cannot make a tick's detection longer than that.
+        let contact = if self.supervisor.encoder_jump(&counts).is_some() {
+            self.tracker.reset();
+            ContactState::Free
+        } else {
+            let prev = self
+                .prev_tip
+                .map_or(tip, |p| path_tail(p, tip, self.max_path_m));
+            self.tracker.update(self.bank, prev, tip)
+        };
         self.prev_tip = Some(tip);
         let detection = clock.cycles();
 
@@ -461,6 +520,13 @@ impl<'b> HapticLoop<'b> {
         if dropped_load > 0.0 {
             self.counters.capped_ticks = self.counters.capped_ticks.wrapping_add(1);
         }
+        // The ramp-in after an arm scales the rendered force and the gravity feed-forward.
+        let ramp = self.ramp_in();
+        let force_on_tool = if ramp < 1.0 {
+            force_on_tool.map(|f| ramp * f)
+        } else {
+            force_on_tool
+        };
         // A host's constant currents go to the supervisor as sent: it faults on one that is
         // not finite or over its limit instead of clamping it.
         let requested_a = match self.mode {
@@ -469,7 +535,13 @@ impl<'b> HapticLoop<'b> {
             _ => {
                 let [fp, fy, fi] = transpose_mul(&jac, force_on_tool);
                 let [gp, gy, gi] = gravity_efforts(self.bank, &q);
-                self.device.requested_currents([fp + gp, fy + gy, fi + gi])
+                let g = if ramp < 1.0 {
+                    [ramp * gp, ramp * gy, ramp * gi]
+                } else {
+                    [gp, gy, gi]
+                };
+                self.device
+                    .requested_currents([fp + g[0], fy + g[1], fi + g[2]])
             }
         };
         let law = clock.cycles();
@@ -486,6 +558,13 @@ impl<'b> HapticLoop<'b> {
             solve_failed: solve_error.is_some(),
             interlocks: input.interlocks,
         });
+        // Counts that jumped cannot be trusted to tell the pose any more.
+        if out
+            .new_fault
+            .is_some_and(|f| f.reason == bank_format::FaultReason::EncoderJump)
+        {
+            self.referenced = false;
+        }
 
         self.last.tip_m = tip;
         self.last.contact_point = match contact {
@@ -566,6 +645,7 @@ impl<'b> HapticLoop<'b> {
             self.held = None;
             self.blend = None;
             self.pending.origin = None;
+            self.pending.failed_at = None;
             self.detected = false;
             return Ok(None);
         };
@@ -648,9 +728,21 @@ impl<'b> HapticLoop<'b> {
                     dropped,
                 });
             }
-            Some(Held { origin: held, .. }) => self.maintain_patch(held, origin, repatch)?,
+            Some(Held { origin: held, .. }) => self.maintain_patch(held, origin, repatch),
         }
         Ok(Some(displacement))
+    }
+
+    /// This tick's share of the loop's output during the ramp-in after an arm
+    /// ([`RAMP_IN_TICKS`]): `k / RAMP_IN_TICKS` on the k-th armed tick, 1 once it is over and
+    /// whenever the tick starts unarmed (what telemetry reports then is the force the loop
+    /// computes).
+    fn ramp_in(&mut self) -> f32 {
+        if self.supervisor.state() != State::Armed || self.ramp_ticks >= RAMP_IN_TICKS {
+            return 1.0;
+        }
+        self.ramp_ticks += 1;
+        self.ramp_ticks as f32 / RAMP_IN_TICKS as f32
     }
 
     /// The force on the tissue for the mode from the linear model's tool force `f` at
@@ -831,18 +923,23 @@ impl HapticLoop<'_> {
     /// else advance the rebuild in progress by one bounded step (`Stage`), swapping it in
     /// when it is ready and no `Blend` is running. The solve to render with this tick is
     /// then `self.held`'s (`held` is where it was built).
-    fn maintain_patch(
-        &mut self,
-        held: PatchOrigin,
-        origin: PatchOrigin,
-        repatch: f32,
-    ) -> Result<(), SolveError> {
+    ///
+    /// A rebuild step that fails (a patch whose `B C_SS B^T` does not factor, a coupling
+    /// missing) drops that rebuild: the held patch, which solved, keeps rendering, the failure
+    /// is counted (`Counters::rebuilds_failed`) and the next rebuild waits for the anchor to
+    /// slide on from where this one started. It is not a fault: the force rendered is the held
+    /// patch's, as it is for the ticks of any rebuild. (Returning the error, as before, left
+    /// the rebuild pending: every later contact tick retried the failing step and latched
+    /// `SolveFailed`, again right after each re-arm.)
+    fn maintain_patch(&mut self, held: PatchOrigin, origin: PatchOrigin, repatch: f32) {
         let p = &mut self.pending;
         let Some(building) = p.origin else {
             let h = held;
-            let stale = h.radius_m != origin.radius_m
-                || (h.anchor != origin.anchor
-                    && dist2(h.anchor, origin.anchor) >= repatch * repatch);
+            let slid = |from: [f32; 3]| {
+                from != origin.anchor && dist2(from, origin.anchor) >= repatch * repatch
+            };
+            let stale =
+                (h.radius_m != origin.radius_m || slid(h.anchor)) && p.failed_at.is_none_or(slid);
             if stale {
                 let o = origin;
                 p.build
@@ -850,8 +947,18 @@ impl HapticLoop<'_> {
                 p.origin = Some(origin);
                 p.stage = Stage::Locating;
             }
-            return Ok(());
+            return;
         };
+        if self.advance_rebuild(building).is_err() {
+            self.pending.failed_at = Some(building.anchor);
+            self.pending.origin = None;
+            self.counters.rebuilds_failed = self.counters.rebuilds_failed.wrapping_add(1);
+        }
+    }
+
+    /// One bounded step of the rebuild started at `building` ([`Self::maintain_patch`]).
+    fn advance_rebuild(&mut self, building: PatchOrigin) -> Result<(), SolveError> {
+        let p = &mut self.pending;
         match p.stage {
             Stage::Locating => {
                 if p.build
@@ -882,6 +989,7 @@ impl HapticLoop<'_> {
             Stage::Ready(..) if self.blend.is_some() => {}
             Stage::Ready(solve, dropped) => {
                 p.origin = None;
+                p.failed_at = None;
                 self.blend = self.held.map(|h| Blend {
                     solve: h.solve,
                     left: BLEND_TICKS,
@@ -937,6 +1045,29 @@ mod tests {
     fn counts_for_insertion(dev: &Device, s: f32) -> [i32; 3] {
         let k = dev.joint_per_count()[2];
         [0, 0, ((s - 0.05) / k).round() as i32]
+    }
+
+    /// A loop on `bank` referenced at encoder zero, the home pose (a host's `ZeroEncoders`
+    /// before the first tick).
+    fn homed<'b>(bank: &'b Bank<'b>) -> HapticLoop<'b> {
+        homed_with(bank, SafetyConfig::new(bank.device()))
+    }
+
+    /// [`homed`] with explicit safety thresholds.
+    fn homed_with<'b>(bank: &'b Bank<'b>, config: SafetyConfig) -> HapticLoop<'b> {
+        let mut lp = HapticLoop::with_config(bank, config);
+        assert!(lp.zero_encoders());
+        lp
+    }
+
+    /// Ticks at `counts` until the ramp-in after the last arm is over; the last tick's output
+    /// (the first with the loop's whole output).
+    fn ramped_in(lp: &mut HapticLoop, counts: [i32; 3]) -> LoopOutput {
+        let mut out = lp.tick(input(counts));
+        for _ in 1..RAMP_IN_TICKS {
+            out = lp.tick(input(counts));
+        }
+        out
     }
 
     fn input(counts: [i32; 3]) -> LoopInput {
@@ -1002,7 +1133,7 @@ mod tests {
         let bytes = crate::fixtures::sampled_patch();
         let bank = Bank::parse(bytes.as_slice()).unwrap();
         assert!(bank.samples().is_some());
-        let mut lp = HapticLoop::new(&bank);
+        let mut lp = homed(&bank);
         lp.set_mode(Mode::LinearLaw).unwrap();
         let dev = *lp.device();
         let ws = |s: f32| counts_for_insertion(&dev, s);
@@ -1068,7 +1199,7 @@ mod tests {
         let bytes = flat_patch();
         let bank = Bank::parse(bytes.as_slice()).unwrap();
         let cal = patch_device();
-        let mut lp = HapticLoop::new(&bank);
+        let mut lp = homed(&bank);
         assert_eq!(lp.arm(), Ok(()));
         let dev = *lp.device();
         // Down from 5 mm above the surface to 4 mm deep, 0.05 mm per tick, and back up.
@@ -1116,11 +1247,117 @@ mod tests {
         assert!(tel.contacts.is_empty());
     }
 
+    /// Pressed 3 mm into the tissue while disarmed, then armed: the rendered force and the
+    /// currents rise from zero over `RAMP_IN_TICKS`, in equal steps, instead of the whole
+    /// force in the first armed tick; the same after a fault's `ClearFault` + `Arm`. The
+    /// gravity feed-forward ramps with them.
+    #[test]
+    fn the_force_ramps_in_after_each_arm() {
+        let bytes = flat_patch();
+        let bank = Bank::parse(bytes.as_slice()).unwrap();
+        let mut lp = homed(&bank);
+        let dev = *lp.device();
+        let mut out = lp.tick(input(counts_for_insertion(&dev, 0.095)));
+        for t in 1..=160 {
+            out = lp.tick(input(counts_for_insertion(
+                &dev,
+                0.095 + 0.05e-3 * t as f32,
+            )));
+        }
+        let s = counts_for_insertion(&dev, 0.103);
+        assert_eq!(out.state, State::Disarmed);
+        let full = out.tool_force_n;
+        assert!(norm(full) > 0.5, "{out:?}");
+        let check_ramp = |lp: &mut HapticLoop| {
+            let mut currents = Vec::new();
+            for k in 1..=RAMP_IN_TICKS {
+                let out = lp.tick(input(s));
+                assert_eq!(out.state, State::Armed);
+                let share = k as f32 / RAMP_IN_TICKS as f32;
+                for i in 0..3 {
+                    assert!(
+                        (out.tool_force_n[i] - share * full[i]).abs() <= 1e-5 * norm(full),
+                        "tick {k}: {out:?}"
+                    );
+                }
+                currents.push(out.currents_a[2]);
+            }
+            // The insertion current falls (pushes back) in equal steps to its full value.
+            let step = currents[RAMP_IN_TICKS as usize - 1] / RAMP_IN_TICKS as f32;
+            assert!(step < 0.0);
+            for (k, c) in currents.iter().enumerate() {
+                assert!(
+                    (c - step * (k + 1) as f32).abs() <= 1e-4 * step.abs(),
+                    "{k}"
+                );
+            }
+            assert_eq!(lp.tick(input(s)).tool_force_n, full);
+        };
+        lp.arm().unwrap();
+        check_ramp(&mut lp);
+        // A fault while pressed (the host went silent), cleared and armed again: from zero.
+        let out = lp.tick(LoopInput {
+            link_silence_ticks: 11,
+            ..input(s)
+        });
+        assert_eq!(out.state, State::Fault(FaultReason::LinkSilent));
+        assert!(lp.clear_fault());
+        lp.arm().unwrap();
+        check_ramp(&mut lp);
+
+        // The gravity feed-forward: a third of it a third of the way in.
+        let g = bank_format::GravityCompensation {
+            coeffs: [0.05, -0.02, 0.03, 0.4, 0.1, -0.3, 0.02, -0.01],
+        };
+        let with = gravity_bank(Some(g));
+        let bank = Bank::parse(with.as_slice()).unwrap();
+        let counts = [2000, -1500, 300];
+        let mut lp = homed(&bank);
+        lp.arm().unwrap();
+        let third: Vec<[f32; 3]> = (0..RAMP_IN_TICKS / 3)
+            .map(|_| lp.tick(input(counts)).currents_a)
+            .collect();
+        let whole = ramped_in(&mut lp, counts).currents_a;
+        for j in 0..3 {
+            let got = third.last().unwrap()[j];
+            assert!((got - whole[j] / 3.0).abs() <= 1e-5 * whole[j].abs(), "{j}");
+            assert!(third[0][j].abs() <= whole[j].abs() / RAMP_IN_TICKS as f32 * 1.0001);
+        }
+    }
+
+    /// Arming needs the encoders referenced (a `ZeroEncoders` since the loop started, i.e.
+    /// since the chip's reset): refused and latched `NotReferenced` before; an encoder jump
+    /// loses the reference again.
+    #[test]
+    fn arming_needs_a_reference_which_an_encoder_jump_loses() {
+        let bytes = flat_patch();
+        let bank = Bank::parse(bytes.as_slice()).unwrap();
+        let mut lp = HapticLoop::new(&bank);
+        assert!(!lp.referenced());
+        lp.tick(input([0, 0, 0]));
+        assert_eq!(lp.arm(), Err(ArmRefused::NotReferenced));
+        let out = lp.tick(input([0, 0, 0]));
+        assert_eq!(
+            (out.state, out.currents_a),
+            (State::Fault(FaultReason::NotReferenced), [0.0; 3])
+        );
+        assert!(lp.clear_fault());
+        assert!(lp.zero_encoders());
+        assert!(lp.referenced());
+        lp.arm().unwrap();
+        assert_eq!(lp.tick(input([0, 0, 0])).state, State::Armed);
+        let out = lp.tick(input([0, 0, 100_000]));
+        assert_eq!(out.state, State::Fault(FaultReason::EncoderJump));
+        assert!(!lp.referenced());
+        assert!(lp.clear_fault());
+        assert_eq!(lp.arm(), Err(ArmRefused::NotReferenced));
+    }
+
     #[test]
     fn linear_law_and_transparent_modes() {
         let bytes = flat_patch();
         let bank = Bank::parse(bytes.as_slice()).unwrap();
-        let mut lp = HapticLoop::new(&bank);
+        let mut lp = homed(&bank);
         lp.arm().unwrap();
         let dev = *lp.device();
         for t in 0..=100 {
@@ -1130,13 +1367,13 @@ mod tests {
             )));
         }
         let s = counts_for_insertion(&dev, 0.102);
-        let render = lp.tick(input(s));
+        let render = ramped_in(&mut lp, s);
         let render_contacts = lp.contacts().clone();
         // The mode is set while disarmed.
         assert!(lp.disarm());
         lp.set_mode(Mode::LinearLaw).unwrap();
         lp.arm().unwrap();
-        let linear = lp.tick(input(s));
+        let linear = ramped_in(&mut lp, s);
         // The node forces (linear model) sum to minus the linear tool force.
         let sum: [f32; 3] =
             core::array::from_fn(|i| lp.contacts().iter().map(|c| c.force_n[i]).sum());
@@ -1172,7 +1409,7 @@ mod tests {
             ([f32::INFINITY, 0.0, 0.0], 0),
             ([0.0, 2.0 + 1e-3, 0.0], 1),
         ] {
-            let mut lp = HapticLoop::new(&bank);
+            let mut lp = homed(&bank);
             assert_eq!(lp.set_mode(Mode::ConstantCurrent { currents_a }), Ok(()));
             lp.arm().unwrap();
             let out = lp.tick(input([0, 0, 0]));
@@ -1185,7 +1422,7 @@ mod tests {
             assert_eq!(out.currents_a, [0.0; 3]);
         }
         // Within the limits (the limit itself included) it is driven as given.
-        let mut lp = HapticLoop::new(&bank);
+        let mut lp = homed(&bank);
         let ok = [0.5, -2.0, 2.0];
         lp.set_mode(Mode::ConstantCurrent { currents_a: ok })
             .unwrap();
@@ -1201,7 +1438,7 @@ mod tests {
     fn set_mode_while_armed_is_refused_and_reported() {
         let bytes = flat_patch();
         let bank = Bank::parse(bytes.as_slice()).unwrap();
-        let mut lp = HapticLoop::new(&bank);
+        let mut lp = homed(&bank);
         lp.arm().unwrap();
         assert_eq!(lp.tick(input([0, 0, 0])).state, State::Armed);
         let want = Fault {
@@ -1246,10 +1483,11 @@ mod tests {
         );
         let bank = Bank::parse(bytes.as_slice()).unwrap();
         assert!(bank.device().tip_radius_m >= 0.003);
-        let mut lp = HapticLoop::new(&bank);
+        let mut lp = homed(&bank);
         lp.set_mode(Mode::LinearLaw).unwrap();
         lp.arm().unwrap();
         let dev = *lp.device();
+        ramped_in(&mut lp, counts_for_insertion(&dev, 0.099));
         let (mut capped, mut touching, mut first) = (0, 0, 0);
         for t in 0..=80 {
             let out = lp.tick(input(counts_for_insertion(
@@ -1293,58 +1531,75 @@ mod tests {
         assert_eq!(lp.telemetry().counters.capped_ticks, capped);
     }
 
+    /// A 5 cm strike in one tick, from 2 cm above the patch to 3 cm into it. With the default
+    /// thresholds it is an encoder jump: checked before any geometry, so the glitch is not
+    /// swept for contacts (before, detection ran along the whole jump and found the surface).
+    /// With the jump check relaxed, a 50 m/s move, over the 1 m/s overspeed threshold: only
+    /// the last 1 mm of it is swept (`contact::path_tail`), under the surface, so no contact;
+    /// `Overspeed`, zero current. With the overspeed check relaxed too, the sweep is still cut
+    /// to `MAX_DETECT_PIECES` cells' pieces: the bank and the motion cannot lengthen the
+    /// detection; a 12 mm strike through the surface, within that cap (13.4 mm), is found and
+    /// rendered.
     #[test]
     fn strike_in_one_tick() {
         let bytes = flat_patch();
         let bank = Bank::parse(bytes.as_slice()).unwrap();
         let cal = patch_device();
-        // Default thresholds: 5 cm in 1 ms is an encoder jump -> fault, zero current.
-        let mut lp = HapticLoop::new(&bank);
+        // Default thresholds: 5 cm in 1 ms is an encoder jump -> fault, zero current, no
+        // contact.
+        let mut lp = homed(&bank);
         lp.arm().unwrap();
         let dev = *lp.device();
         check(&lp.tick(input(counts_for_insertion(&dev, 0.08))), &cal);
         let out = lp.tick(input(counts_for_insertion(&dev, 0.13)));
         check(&out, &cal);
-        assert!(matches!(out.contact, ContactState::Touching { .. }));
+        assert_eq!(out.contact, ContactState::Free);
         assert_eq!(out.state, State::Fault(FaultReason::EncoderJump));
         assert_eq!(out.new_fault.unwrap().detail, 2);
-        assert_eq!(out.currents_a, [0.0; 3]);
-        // The detecting tick renders no force; the next one computes the capped force, and
-        // the latched fault keeps the currents at zero.
-        assert_eq!(out.tool_force_n, [0.0; 3]);
+        assert_eq!((out.currents_a, out.tool_force_n), ([0.0; 3], [0.0; 3]));
+        // Held there, the tip is under the surface untracked: no contact, no force.
         let out = lp.tick(input(counts_for_insertion(&dev, 0.13)));
-        assert_eq!(out.currents_a, [0.0; 3]);
-        assert!((norm(out.tool_force_n) - cal.max_force_n).abs() < 1e-3);
+        assert_eq!(
+            (out.contact, out.currents_a),
+            (ContactState::Free, [0.0; 3])
+        );
 
         // With the jump check relaxed, it is what it would physically be, a 50 m/s strike: the
-        // tip's overspeed (threshold 1 m/s), zero current.
+        // tip's overspeed (threshold 1 m/s), zero current; only its last millimetre is swept.
         let mut config = SafetyConfig::new(&cal);
         config.max_counts_per_tick = [u32::MAX; 3];
-        let mut lp = HapticLoop::with_config(&bank, config);
+        let mut lp = homed_with(&bank, config);
         lp.arm().unwrap();
         check(&lp.tick(input(counts_for_insertion(&dev, 0.08))), &cal);
         let out = lp.tick(input(counts_for_insertion(&dev, 0.13)));
         check(&out, &cal);
-        assert!(matches!(out.contact, ContactState::Touching { .. }));
+        assert_eq!(out.contact, ContactState::Free);
         assert_eq!(out.state, State::Fault(FaultReason::Overspeed));
         assert_eq!(out.new_fault.unwrap().detail, 3);
         assert_eq!(out.currents_a, [0.0; 3]);
 
-        // With the overspeed check relaxed too, the strike is rendered: force capped at
-        // max_force_n, currents within the limits.
+        // With the overspeed check relaxed too: the sweep is cut to three pieces of the 10 mm
+        // grid (13 mm), all under the surface here, so still no contact.
         config.max_tip_speed_m_s = f32::INFINITY;
         config.max_joint_speed = [f32::INFINITY; 3];
-        let mut lp = HapticLoop::with_config(&bank, config);
+        let mut lp = homed_with(&bank, config);
+        assert!((lp.max_path_m - 0.99 * 3.0 * 0.45 * 0.01).abs() < 1e-6);
         lp.arm().unwrap();
-        check(&lp.tick(input(counts_for_insertion(&dev, 0.08))), &cal);
+        check(&ramped_in(&mut lp, counts_for_insertion(&dev, 0.08)), &cal);
         let out = lp.tick(input(counts_for_insertion(&dev, 0.13)));
+        assert_eq!((out.contact, out.state), (ContactState::Free, State::Armed));
+        // A 12 mm strike through the surface, within the cap, is found and rendered.
+        let mut lp = homed_with(&bank, config);
+        lp.arm().unwrap();
+        check(&ramped_in(&mut lp, counts_for_insertion(&dev, 0.095)), &cal);
+        let out = lp.tick(input(counts_for_insertion(&dev, 0.107)));
         check(&out, &cal);
         assert!(matches!(out.contact, ContactState::Touching { .. }));
         assert_eq!(out.tool_force_n, [0.0; 3]);
-        let out = lp.tick(input(counts_for_insertion(&dev, 0.13)));
+        let out = lp.tick(input(counts_for_insertion(&dev, 0.107)));
         check(&out, &cal);
         assert_eq!(out.state, State::Armed, "{out:?}");
-        assert!((norm(out.tool_force_n) - cal.max_force_n).abs() < 1e-3);
+        assert!(out.tool_force_n[2] > 0.5, "{out:?}");
         assert!(out.currents_a[2] < 0.0);
     }
 
@@ -1357,7 +1612,7 @@ mod tests {
         let bank = Bank::parse(bytes.as_slice()).unwrap();
         let cal = patch_device();
         assert_eq!(cal.max_tip_speed_m_s, 1.0);
-        let mut lp = HapticLoop::new(&bank);
+        let mut lp = homed(&bank);
         lp.arm().unwrap();
         let dev = *lp.device();
         // 0.5 m/s down to 3 mm deep: fast, but under the threshold.
@@ -1407,7 +1662,7 @@ mod tests {
         let bytes = flat_patch();
         let bank = Bank::parse(bytes.as_slice()).unwrap();
         let cal = patch_device();
-        let mut lp = HapticLoop::new(&bank);
+        let mut lp = homed(&bank);
         let per_rad = 1.0 / lp.device().joint_per_count()[0];
         lp.set_mode(Mode::ConstantCurrent {
             currents_a: [0.5, 0.5, 0.5],
@@ -1441,7 +1696,7 @@ mod tests {
         let bytes = flat_patch();
         let bank = Bank::parse(bytes.as_slice()).unwrap();
         let cal = patch_device();
-        let mut lp = HapticLoop::new(&bank);
+        let mut lp = homed(&bank);
         let dev = *lp.device();
         for t in 0..200 {
             let out = lp.tick(LoopInput {
@@ -1470,7 +1725,7 @@ mod tests {
     fn link_silence_faults() {
         let bytes = flat_patch();
         let bank = Bank::parse(bytes.as_slice()).unwrap();
-        let mut lp = HapticLoop::new(&bank);
+        let mut lp = homed(&bank);
         lp.arm().unwrap();
         let dev = *lp.device();
         for t in 0..=100 {
@@ -1511,7 +1766,7 @@ mod tests {
         let bytes = flat_patch();
         let bank = Bank::parse(bytes.as_slice()).unwrap();
         let cal = patch_device();
-        let mut lp = HapticLoop::new(&bank);
+        let mut lp = homed(&bank);
         lp.arm().unwrap();
         lp.tick(input([0, 0, 0]));
         let out = lp.tick(input([i32::MAX, i32::MIN, 0]));
@@ -1526,7 +1781,7 @@ mod tests {
     fn overrun_faults() {
         let bytes = flat_patch();
         let bank = Bank::parse(bytes.as_slice()).unwrap();
-        let mut lp = HapticLoop::new(&bank);
+        let mut lp = homed(&bank);
         lp.arm().unwrap();
         let dev = *lp.device();
         let s = counts_for_insertion(&dev, 0.103);
@@ -1545,7 +1800,7 @@ mod tests {
     fn zero_encoders_rebases() {
         let bytes = flat_patch();
         let bank = Bank::parse(bytes.as_slice()).unwrap();
-        let mut lp = HapticLoop::new(&bank);
+        let mut lp = homed(&bank);
         lp.tick(input([100_000, 0, 5]));
         lp.arm().unwrap();
         assert!(!lp.zero_encoders(), "refused while armed");
@@ -1594,7 +1849,7 @@ mod tests {
         let bytes = AlignedBytes::new(&b.build().unwrap());
         let bank = Bank::parse(bytes.as_slice()).unwrap();
         let cal = bank.device();
-        let mut lp = HapticLoop::new(&bank);
+        let mut lp = homed(&bank);
         lp.arm().unwrap();
         let dev = *lp.device();
         let mut fault = None;
@@ -1621,6 +1876,136 @@ mod tests {
             "{e:?}"
         );
         assert_eq!(lp.telemetry().fault, Some(FaultReason::SolveFailed));
+    }
+
+    /// A background rebuild that fails does not fault: a 1 mm grid whose every coupling
+    /// pulls the other way along z (`C_kl,zz = -0.3 C_kk,zz`: each pair's 6 x 6 compliance
+    /// is SPD, and so is a contact triangle's `B C_SS B^T`, but not that of the tip's 8-node
+    /// patch, whose nodes share the load about equally), so every rebuild fails at its factor.
+    /// The contact triangle's solve of the first contact tick keeps rendering, armed, through
+    /// the whole press and slide; each failed rebuild is counted in telemetry, and retried
+    /// only once the anchor has slid on. (Before, the failing step stayed pending and latched
+    /// `SolveFailed`, again right after each re-arm.)
+    #[test]
+    fn a_failed_patch_rebuild_keeps_the_held_patch() {
+        let xs: Vec<f64> = (0..9).map(|i| 0.001 * i as f64).collect();
+        let mut b = crate::fixtures::grid_builder(
+            &xs,
+            &xs,
+            0.02,
+            DeviceCalibration {
+                fulcrum_m: [0.004, 0.0043, 0.1],
+                ..patch_device()
+            },
+        );
+        let c = 1.0e-3;
+        let diag = |v: f64| -> [[f64; 3]; 3] {
+            core::array::from_fn(|i| core::array::from_fn(|j| if i == j { v } else { 0.0 }))
+        };
+        b.c_kk = std::vec![diag(c); b.positions_m.len()];
+        for (_, _, block) in &mut b.couplings {
+            *block = [[0.0; 3]; 3];
+            block[2][2] = -0.3 * c;
+        }
+        let bytes = AlignedBytes::new(&b.build().unwrap());
+        let bank = Bank::parse(bytes.as_slice()).unwrap();
+        assert!(bank.samples().is_none() && bank.device().tip_radius_m >= 0.003);
+        let mut lp = homed(&bank);
+        lp.arm().unwrap();
+        let dev = *lp.device();
+        let (mut touching, mut failed) = (0, 0);
+        for t in 0..=600 {
+            let mut counts = counts_for_insertion(&dev, 0.099 + 0.02e-3 * t.min(150) as f32);
+            // Then slide sideways, 1.5 um a tick.
+            counts[0] += (t.max(300) - 300) / 4;
+            let out = lp.tick(input(counts));
+            assert_eq!(out.state, State::Armed, "tick {t}: {out:?}");
+            assert!(out.solve_error.is_none(), "tick {t}: {out:?}");
+            if out.contact_nodes > 0 {
+                touching += 1;
+                // The contact triangle's solve, never a patch.
+                assert_eq!(out.patch.map(|p| p.radius_m), Some(0.0), "{out:?}");
+                assert!(out.tool_force_n[2] > 0.0, "{out:?}");
+            }
+            let now = lp.counters().rebuilds_failed;
+            assert!(now <= failed + 1);
+            failed = now;
+        }
+        assert!(touching > 400, "{touching}");
+        // One at the press, a few more as the slide moves the anchor on: not one every few
+        // ticks.
+        assert!((2..40).contains(&failed), "{failed}");
+        assert_eq!(lp.telemetry().counters.rebuilds_failed, failed);
+    }
+
+    /// The sampled contact has no background rebuild: its `W` is factored every tick, in
+    /// place, and a failure leaves the last solve as it was ([`WeightedSolve::refactor`]). A
+    /// sampled bank whose `W` is SPD everywhere but too ill-conditioned for the solve on one
+    /// side (pivot ratio 1e-6, under `MIN_PIVOT_REL`) faults `SolveFailed` while the tip
+    /// presses there; slid on to the well-conditioned side (the fault latched meanwhile),
+    /// cleared and re-armed, it renders without faulting again: nothing of the failure is
+    /// left to re-latch.
+    #[test]
+    fn a_failed_sampled_solve_leaves_nothing_to_re_latch() {
+        let xs: Vec<f64> = (0..crate::fixtures::PATCH_SIDE)
+            .map(|i| crate::fixtures::PATCH_SPACING_M * i as f64)
+            .collect();
+        let mut b = crate::fixtures::grid_builder(&xs, &xs, 0.06, patch_device());
+        let lattice = bank_format::SharedLattice::new(&b.triangles, 2);
+        let w = lattice
+            .points
+            .iter()
+            .map(|&(t, bary)| {
+                let tri = b.triangles[t].map(|k| b.positions_m[k as usize]);
+                let y: f64 = (0..3).map(|v| bary[v] * tri[v][1]).sum();
+                // y < 2 cm: W_zz a millionth of W_xx; beyond, a tenth.
+                let zz = if y < 0.02 { 1.0e-6 } else { 0.1 };
+                [[0.05, 0.0, 0.0], [0.0, 0.05, 0.0], [0.0, 0.0, 0.05 * zz]]
+            })
+            .collect();
+        b.samples = Some(bank_format::ContactSamples {
+            level: 2,
+            tip_radius_m: 0.003,
+            triangle_samples: lattice.triangle_points,
+            w,
+        });
+        let bytes = AlignedBytes::new(&b.build().unwrap());
+        let bank = Bank::parse(bytes.as_slice()).unwrap();
+        let mut lp = homed(&bank);
+        lp.arm().unwrap();
+        let dev = *lp.device();
+        // The fulcrum is 10 cm above the patch's centre (y = 2 cm): pitch moves the tip along
+        // y, about 0.1 m per rad.
+        let at = |y: f32, s: f32| {
+            let mut c = counts_for_insertion(&dev, s);
+            c[0] = ((y - 0.02) / 0.1 / dev.joint_per_count()[0]).round() as i32;
+            c
+        };
+        let mut fault = None;
+        for t in 0..=120 {
+            let out = lp.tick(input(at(0.012, 0.097 + 0.05e-3 * t as f32)));
+            fault = fault.or(out.new_fault);
+        }
+        assert_eq!(fault.map(|f| f.reason), Some(FaultReason::SolveFailed));
+        // Slide on, in contact, to y = 3 cm, 20 um a tick.
+        for t in 0..=900 {
+            let out = lp.tick(input(at(0.012 + 20.0e-6 * t as f32, 0.103)));
+            assert!(
+                matches!(out.contact, ContactState::Touching { .. }),
+                "{t}: {out:?}"
+            );
+        }
+        assert!(lp.clear_fault());
+        lp.arm().unwrap();
+        for t in 0..500 {
+            let out = lp.tick(input(at(0.030, 0.103)));
+            assert_eq!(
+                (out.state, out.new_fault),
+                (State::Armed, None),
+                "{t}: {out:?}"
+            );
+            assert!(out.tool_force_n[2] > 0.0, "{out:?}");
+        }
     }
 
     /// A 3-node bank far below the tool (no contact ever), with or without gravity.
@@ -1667,11 +2052,11 @@ mod tests {
         let cal = *bank.device();
         let counts = [2000, -1500, 300];
         for mode in [Mode::Render, Mode::Transparent] {
-            let mut lp = HapticLoop::new(&bank);
+            let mut lp = homed(&bank);
             lp.set_mode(mode).unwrap();
             lp.arm().unwrap();
             let q = lp.device().joints(counts);
-            let out = lp.tick(input(counts));
+            let out = ramped_in(&mut lp, counts);
             assert_eq!((out.state, out.contact), (State::Armed, ContactState::Free));
             // Hand-written tau_g = dV/dq in f64.
             let c = coeffs.map(f64::from);
@@ -1694,12 +2079,12 @@ mod tests {
                 );
             }
         }
-        let mut lp = HapticLoop::new(&bank);
+        let mut lp = homed(&bank);
         let currents_a = [0.1, -0.2, 0.3];
         lp.set_mode(Mode::ConstantCurrent { currents_a }).unwrap();
         lp.arm().unwrap();
         assert_eq!(lp.tick(input(counts)).currents_a, currents_a);
-        let mut lp = HapticLoop::new(&plain);
+        let mut lp = homed(&plain);
         lp.arm().unwrap();
         assert_eq!(lp.tick(input(counts)).currents_a, [0.0; 3]);
     }

@@ -551,12 +551,24 @@ impl Prepared {
         })
     }
 
+    /// The probe bank: every pair within [`Prepared::probe_radius`] coupled, from `rows`
+    /// (computed for at least that radius), f32 blocks. The host's own: it couples every pair
+    /// one tool patch can load, however many a node (about 200 on the shipped liver), beyond
+    /// the firmware's tick limits (`BankBuilder::build_unbounded`, read with
+    /// `Bank::parse_unbounded`).
+    pub fn probe_bank(&self, rows: &[Vec<(usize, Block3)>]) -> Result<AlignedBytes> {
+        let (builder, _) = self.builder_in(rows, self.probe_radius(), None)?;
+        let bytes = builder
+            .build_unbounded(bank_format::Precision::F32)
+            .map_err(|e| anyhow::anyhow!("internal: the probe bank is invalid: {e}"))?;
+        Ok(AlignedBytes::new(&bytes))
+    }
+
     /// [`Prepared::tool_pairs`] on the probe bank built from `rows` (computed for at least
     /// [`Prepared::probe_radius`]).
     pub fn tool_pairs_from(&self, rows: &[Vec<(usize, Block3)>]) -> Result<ToolPairs> {
-        let probe = self.bank(rows, self.probe_radius())?;
-        let aligned = AlignedBytes::new(&probe.bytes);
-        let bank = Bank::parse(&aligned)
+        let aligned = self.probe_bank(rows)?;
+        let bank = Bank::parse_unbounded(&aligned)
             .map_err(|e| anyhow::anyhow!("internal: the probe bank is invalid: {e}"))?;
         self.tool_pairs(&bank, TOOL_DIVISIONS)
     }

@@ -10,7 +10,7 @@
 use anyhow::{Context, Result, anyhow, bail};
 use bank_format::{
     DeviceToHost, FaultReason, FrameDecoder, HostToDevice, MAX_FRAME, Mode, PROTOCOL_VERSION,
-    State, encode_frame,
+    ResetCause, State, encode_frame,
 };
 use firmware::tick::Contacts;
 use std::io::{ErrorKind, Read};
@@ -58,6 +58,9 @@ pub struct LoopStats {
     pub faults: u32,
     /// Whether the loop thread runs with real-time priority (virtual device only).
     pub realtime: bool,
+    /// Why the device last started, as it reported (after its `Hello`; `None` until then,
+    /// and for sources without a reset register).
+    pub reset_cause: Option<ResetCause>,
 }
 
 /// A telemetry stream.
@@ -471,6 +474,10 @@ impl Absorber {
             }
             DeviceToHost::Fault { .. } => {
                 self.stats.faults += 1;
+                mailbox.publish_stats(self.stats);
+            }
+            DeviceToHost::Reset { cause } => {
+                self.stats.reset_cause = Some(cause);
                 mailbox.publish_stats(self.stats);
             }
             DeviceToHost::Hello { .. } | DeviceToHost::Plant { .. } => {}

@@ -128,6 +128,8 @@ fn run(bytes: &AlignedBytes, shared: &Shared, home: [f64; 3]) {
     let cal = *bank.device();
     let realtime = request_realtime();
     let mut haptic = HapticLoop::new(&bank);
+    // The hand starts at the home pose (encoder zero): the homing the loop needs to arm.
+    haptic.zero_encoders();
     let _ = haptic.arm();
     let mut q = home;
     let start = Instant::now();
@@ -242,7 +244,7 @@ mod tests {
         let mut target = hi;
         let mut prev_tip: Option<[f32; 3]> = None;
         let mut peak = 0.0f32;
-        sup.arm(true).unwrap();
+        sup.arm(true, true).unwrap();
         for tick in 0..5000 {
             for i in 0..3 {
                 if (target[i] - q[i]).abs() < 1e-12 {

@@ -8,7 +8,7 @@
 use bank_format::Contact;
 use bank_format::{
     AlignedBytes, Bank, Counters, DeviceToHost, FaultReason, FrameDecoder, HostToDevice, MAX_FRAME,
-    Mode, PROTOCOL_VERSION, State, Telemetry, encode_frame,
+    Mode, PROTOCOL_VERSION, ResetCause, State, Telemetry, encode_frame,
 };
 use firmware::tick::Contacts;
 use host::kinematics::{Workspace, counts_for};
@@ -70,11 +70,15 @@ struct Fake {
     fault_after: Option<u32>,
     /// The tip after `ZeroEncoders`.
     home_tip: [f32; 3],
+    /// Homed already (`ZeroEncoders` references the encoders; `Arm` without it is refused and
+    /// latched as `NotReferenced`, as the firmware does).
+    referenced: bool,
 }
 
-/// The fake device: waits for the host's Hello, answers with `bank_crc`, then sends telemetry
-/// with `tip` every 10 ms, until `stop` is set. It follows the firmware's state machine for the
-/// host's commands (SetMode only while disarmed, Arm only from Disarmed, Disarm, ClearFault,
+/// The fake device: waits for the host's Hello, answers with `bank_crc` (and, as the firmware
+/// does, its reset cause: a brown-out), then sends telemetry with `tip` every 10 ms, until
+/// `stop` is set. It follows the firmware's state machine for the host's commands (SetMode
+/// only while disarmed, Arm only from Disarmed and referenced, Disarm, ClearFault,
 /// ZeroEncoders unless armed) and records every command but heartbeats.
 fn device(
     mut master: File,
@@ -92,13 +96,14 @@ fn device(
         let (mut tick, mut armed_ticks) = (0, 0);
         let (mut state, mut mode) = (fake.start, Mode::Render);
         let mut fault = (state == State::Fault).then_some(FaultReason::LinkSilent);
+        let mut referenced = fake.referenced;
         while !stop.load(Ordering::Relaxed) {
             // Non-blocking: nothing to read (or no host yet) is an error to skip.
             if let Ok(n) = master.read(&mut bytes) {
                 for msg in rx.feed_slice(&bytes[..n]).flatten() {
                     match msg {
                         HostToDevice::Heartbeat => continue,
-                        HostToDevice::Hello if !greeted => {
+                        HostToDevice::Hello => {
                             let hello = DeviceToHost::Hello {
                                 protocol: PROTOCOL_VERSION,
                                 bank_crc: Some(fake.bank_crc),
@@ -106,12 +111,22 @@ fn device(
                                 node_count: 25,
                             };
                             let _ = master.write_all(encode_frame(&hello, &mut buf).unwrap());
+                            let reset = DeviceToHost::Reset {
+                                cause: ResetCause::BrownOut,
+                            };
+                            let _ = master.write_all(encode_frame(&reset, &mut buf).unwrap());
                             greeted = true;
                         }
                         HostToDevice::SetMode(m) if state == State::Disarmed => mode = m,
+                        HostToDevice::Arm if state == State::Disarmed && !referenced => {
+                            (state, fault) = (State::Fault, Some(FaultReason::NotReferenced));
+                        }
                         HostToDevice::Arm if state == State::Disarmed => state = State::Armed,
                         HostToDevice::Disarm if state == State::Armed => state = State::Disarmed,
-                        HostToDevice::ZeroEncoders if state != State::Armed => tip = fake.home_tip,
+                        HostToDevice::ZeroEncoders if state != State::Armed => {
+                            tip = fake.home_tip;
+                            referenced = true;
+                        }
                         HostToDevice::ClearFault if state == State::Fault => {
                             (state, fault) = (State::Disarmed, None);
                         }
@@ -162,6 +177,7 @@ fn fake(bank_crc: u32, tip: [f32; 3]) -> Fake {
         start: State::Disarmed,
         fault_after: None,
         home_tip: tip,
+        referenced: true,
     }
 }
 
@@ -398,10 +414,17 @@ fn device_check_prints_the_joints_of_the_telemetry_tip() {
         "{}",
         String::from_utf8_lossy(&out.stderr)
     );
-    let lines: Vec<serde_json::Value> = String::from_utf8_lossy(&out.stdout)
-        .lines()
-        .map(|l| serde_json::from_str(l).expect("one JSON object per line"))
-        .collect();
+    let (resets, lines): (Vec<serde_json::Value>, Vec<serde_json::Value>) =
+        String::from_utf8_lossy(&out.stdout)
+            .lines()
+            .map(|l| serde_json::from_str(l).expect("one JSON object per line"))
+            .partition(|l: &serde_json::Value| l.get("reset_cause").is_some());
+    // The device's reset cause, once (it answers each Hello with it).
+    assert_eq!(
+        resets,
+        [serde_json::json!({ "reset_cause": "BrownOut" })],
+        "{resets:?}"
+    );
     assert!(lines.len() >= 3, "{lines:?}");
     let want_counts = counts_for(&cal, q);
     for l in &lines {
@@ -584,6 +607,28 @@ fn device_arm_clears_a_latched_fault_only_when_asked() {
             HostToDevice::Disarm,
         ]
     );
+}
+
+/// A device that was never homed since its reset refuses the arm with `NotReferenced`:
+/// `host device arm` fails and says to home it with `host device zero` first (it does not home
+/// it itself: only a person with the instrument in its home fixture can).
+#[test]
+fn device_arm_on_an_unhomed_device_says_to_zero_it_first() {
+    let dir = tempfile::tempdir().unwrap();
+    let (bytes, bank) = patch_bank(dir.path());
+    let crc = Bank::parse(&bytes).unwrap().crc();
+    let unhomed = Fake {
+        referenced: false,
+        ..fake(crc, [0.0; 3])
+    };
+    let (out, log) = arm(unhomed, &bank, &["--seconds", "0.3"]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(
+        err.contains("NotReferenced") && err.contains("host device zero"),
+        "{err}"
+    );
+    assert!(!log.contains(&HostToDevice::ZeroEncoders), "{log:?}");
 }
 
 #[test]

@@ -36,7 +36,7 @@ fn the_tool_bank_is_exact_on_every_contact_the_tool_can_make() {
 
     let rows = prep.blocks(prep.probe_radius(), None).unwrap();
     let probe_bytes = sweep::probe_bytes(&prep, &rows).unwrap();
-    let probe = Bank::parse(&probe_bytes).unwrap();
+    let probe = Bank::parse_unbounded(&probe_bytes).unwrap();
     let sites = sweep::sites(&probe, 1200, 0.005, 7);
     assert_eq!(sites.len(), 1200);
     let refs = sweep::references(&prep, &probe, &sites).unwrap();
@@ -92,7 +92,7 @@ fn bfp16_blocks_stay_within_their_rounding_bound() {
     let prep = Prepared::load(&scene).unwrap();
     let rows = prep.blocks(prep.probe_radius(), None).unwrap();
     let probe_bytes = sweep::probe_bytes(&prep, &rows).unwrap();
-    let probe = Bank::parse(&probe_bytes).unwrap();
+    let probe = Bank::parse_unbounded(&probe_bytes).unwrap();
     let pairs = prep
         .tool_pairs(&probe, host::bank::TOOL_DIVISIONS)
         .unwrap()

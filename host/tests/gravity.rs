@@ -201,9 +201,10 @@ fn bank(gravity: Option<[f64; 8]>) -> bank_format::AlignedBytes {
     bank_format::AlignedBytes::new(&b.build().unwrap())
 }
 
-/// Runs the firmware's loop, armed in `Render`, on the SIL plant with the instrument released
-/// (no hand) at `q0` for `ticks`; returns the largest joint excursions and whether it stayed
-/// armed.
+/// Runs the firmware's loop, homed at encoder zero and armed in `Render`, on the SIL plant
+/// with the instrument held at `q0` while the arm's ramp-in raises the compensation
+/// (`RAMP_IN_TICKS`), then released (no hand) for `ticks`; returns the largest joint excursions
+/// after the release and whether it stayed armed.
 fn release(
     bytes: &bank_format::AlignedBytes,
     weight: [f64; 8],
@@ -220,7 +221,16 @@ fn release(
     };
     let mut gimbal = Gimbal::at_rest(bank.device(), params, q0);
     let mut lp = firmware::tick::HapticLoop::new(&bank);
+    lp.zero_encoders();
     lp.arm().unwrap();
+    for _ in 0..firmware::tick::RAMP_IN_TICKS {
+        lp.tick(firmware::tick::LoopInput {
+            encoder_counts: gimbal.encoder_counts(),
+            overrun: false,
+            link_silence_ticks: 0,
+            interlocks: firmware::hal::Interlocks::default(),
+        });
+    }
     let mut worst = [0.0f64; 3];
     let mut armed = true;
     for _ in 0..ticks {

@@ -46,6 +46,7 @@ fn slide_across_the_patch_while_pressed() {
     let bank = Bank::parse(bytes.as_slice()).unwrap();
     let cal = patch_device();
     let mut lp = HapticLoop::new(&bank);
+    lp.zero_encoders();
     lp.arm().unwrap();
 
     let above = [0.008, 0.012, 0.002];
@@ -126,6 +127,7 @@ fn contact_nodes_micrometres_apart() {
     let bank = Bank::parse(bytes.as_slice()).unwrap();
     let cal = patch_device();
     let mut lp = HapticLoop::new(&bank);
+    lp.zero_encoders();
     lp.arm().unwrap();
     // Down onto the sliver row, then across it in y and back, pressed 2 mm.
     let above = [0.017, 0.0185, 0.002];
@@ -181,6 +183,7 @@ fn contact_next_to_the_fixed_boundary() {
     let bank = Bank::parse(bytes.as_slice()).unwrap();
     let cal = patch_device();
     let mut lp = HapticLoop::new(&bank);
+    lp.zero_encoders();
     lp.arm().unwrap();
     // 1 mm inside the patch's x = 0 edge, between two edge nodes.
     let mut last = 0.0f32;
@@ -214,6 +217,7 @@ fn sliding_faster_than_the_tip_threshold_faults_overspeed() {
     let bank = Bank::parse(bytes.as_slice()).unwrap();
     let cal = patch_device();
     let mut lp = HapticLoop::new(&bank);
+    lp.zero_encoders();
     lp.arm().unwrap();
     let above = [0.004, 0.02, 0.002];
     let start = [0.004, 0.02, -0.003];
@@ -303,6 +307,8 @@ fn the_sil_strike_trips_overspeed_before_contact() {
     let trajectory = Trajectory::new(&bank, Script::Strike).unwrap();
     let mut gimbal = Gimbal::new(&cal, PlantParams::default());
     let mut lp = HapticLoop::new(&bank);
+    // The harness homes the image while the hand rests at home (encoder zero).
+    lp.zero_encoders();
     let mut hand_prev = trajectory.at(0.0);
     let (mut faults, mut peak, mut prev_tip) = (Vec::new(), 0.0f32, None::<[f32; 3]>);
     let mut first_contact = None;

@@ -53,9 +53,19 @@ fn norm(v: [f32; 3]) -> f32 {
 
 /// Replays the encoder counts QEMU was fed through the native portable loop, arming it at the
 /// tick the image armed, and checks currents, forces, state and contact set are bit-identical.
+/// The image was homed (`ZeroEncoders` at the harness's `HOME_TICK`) with the hand at rest at
+/// the home pose, encoder zero: the native loop is homed there too.
 /// Returns the number of ticks with a nonzero current.
 fn assert_matches_native(bank: &Bank, run: &Run) -> usize {
+    let homed_at = harness::HOME_TICK as usize;
+    assert!(
+        run.ticks[..homed_at]
+            .iter()
+            .all(|t| t.encoder_counts == [0; 3]),
+        "the hand left home before the image was homed"
+    );
     let mut native = HapticLoop::new(bank);
+    native.zero_encoders();
     let mut driven = 0;
     for rec in &run.ticks {
         if rec.state == State::Armed && native.state() != firmware::safety::State::Armed {
@@ -496,43 +506,151 @@ fn near_surface_file(bank: &Bank, dir: &std::path::Path, seed: u64) -> std::path
     file
 }
 
-#[test]
-fn overrun_faults_to_zero_current() {
-    let (setup, _) = setup();
-    // The shipped scene with 40 mm grid cells: a cell near the surface lists up to 339
-    // candidate triangles (the shipped 6 mm cells: 28), and a free tick tests its cell's
-    // candidates whenever the tip is within a cell of the surface. On a virtual CPU 16 times
-    // slower (128 ns per instruction, 7,812 a 1 ms period) the press's ticks far above the
-    // liver still fit, and those of its descent towards it do not. (With the shipped bank
-    // nothing overruns at 16 times; at 32 times the link task, which gets what the ticks
-    // leave, sometimes starves first and the fault is `LinkSilent`.)
-    let mut coarse =
-        host::bank::Prepared::load(&harness::repo_root().join("host/scenes/liver.toml")).unwrap();
-    coarse.scene.bank.grid_cell_m = Some(0.04);
-    let bytes = coarse.build_bank(None).unwrap().bytes;
-    let dir = tempfile::tempdir().unwrap();
-    let path = dir.path().join("coarse-grid.bank");
+/// The nodal liver (`scenes/liver-nodal.toml`: the tool's patch rebuilt under a sliding tip,
+/// 34 neighbours a node at most) on `grid_cell_m` cells: its bank, and the file QEMU loads.
+fn nodal_bank(grid_cell_m: f64, dir: &std::path::Path) -> Result<(PathBuf, AlignedBytes), String> {
+    let scene = harness::repo_root().join("host/scenes/liver-nodal.toml");
+    let mut prep = host::bank::Prepared::load(&scene).map_err(|e| format!("{e:#}"))?;
+    prep.scene.bank.grid_cell_m = Some(grid_cell_m);
+    let bytes = prep.build_bank(None).map_err(|e| format!("{e:#}"))?.bytes;
+    let path = dir.join(format!("nodal-{grid_cell_m}.bank"));
     std::fs::write(&path, &bytes).unwrap();
-    let bytes = AlignedBytes::new(&bytes);
+    Ok((path, AlignedBytes::new(&bytes)))
+}
+
+/// Item 4 of issue 27: the worst tick is bounded by the firmware, not by the bank. A hostile but
+/// valid bank, the nodal liver on 20 mm cells (114 candidate triangles in its fullest cell,
+/// against 28 on the shipped 6 mm cells; `MAX_CELL_CANDIDATES` is 128), pressed, slid and
+/// struck: every tick's loop body stays far inside the budget `SPEC.md` derives from the
+/// bank's limits ("Limits the tick's cost rests on": 60,000 instructions), and bit-identical
+/// to the native loop. On 25 mm cells (181 candidates) the bank is refused.
+#[test]
+fn a_bank_at_the_ticks_limits_stays_within_the_budget() {
+    let (setup, _) = setup();
+    let dir = tempfile::tempdir().unwrap();
+    let err = nodal_bank(0.025, dir.path()).unwrap_err();
+    assert!(err.contains("candidate triangles"), "{err}");
+    let (path, bytes) = nodal_bank(0.02, dir.path()).unwrap();
+    let bank = Bank::parse(&bytes).unwrap();
+    let grid = bank.grid();
+    let fullest = (0..grid.cell_count())
+        .map(|c| grid.cell_triangles(c).len())
+        .max()
+        .unwrap();
+    assert!(
+        fullest > 100 && fullest <= bank_format::MAX_CELL_CANDIDATES,
+        "{fullest}"
+    );
+    let setup = Setup {
+        bank: path,
+        ..setup
+    };
+    for script in [Script::Press, Script::Slide, Script::Strike] {
+        let run = qemu(&setup, &Session::new(&bank, script, 3.0).unwrap());
+        assert_eq!(run.overruns(), 0, "{script:?}");
+        let body = run.ticks.iter().map(|t| t.body_instructions).max().unwrap();
+        eprintln!(
+            "{script:?}: worst loop body {body} instructions, {:?}",
+            CodePhaseMax::of(&run.ticks)
+        );
+        assert!(body < WORST_TICK_BUDGET, "{script:?}: {body}");
+        let driven = assert_matches_native(&bank, &run);
+        // The strike faults `Overspeed` before it reaches the liver.
+        assert!(
+            driven > 100 || script == Script::Strike,
+            "{script:?}: {driven}"
+        );
+    }
+}
+
+/// The loop body's budget `SPEC.md` derives from the bank's limits ("Limits the tick's cost
+/// rests on"), instructions.
+const WORST_TICK_BUDGET: u32 = 60_000;
+
+/// The board's overrun path under SIL (the QEMU image detects overruns with the board's
+/// `TickWatch` and restarts its ticker on one). Within the bank's limits no tick overruns even
+/// on a virtual CPU 16 times slower (7,812 instructions a period), so this runs at 32 times
+/// (3,906): the hostile 20 mm-cell bank's ticks near the surface overrun as the tip descends.
+/// With the watch keeping its old schedule after the ticker's restart (the board before issue
+/// 27) every tick from the first overrun on counted late: telemetry's `overruns` grew by one a
+/// tick, and a device cleared and armed again faulted `Overrun` in the next tick. Here the
+/// count stays small to the end, and the device, cleared and armed away from the liver, arms
+/// again. (At 32 times a free tick takes about 2,300 of a period's 3,906 instructions and the
+/// link task in thread mode gets what is left: a tick that also takes a burst of link bytes
+/// may overrun now and then, the host's heartbeats may come late enough for a `LinkSilent`,
+/// and telemetry frames are dropped; so the test bounds the overruns rather than excluding
+/// them, and does not ask how long the device stays armed. The board's exact sequence, one
+/// late wake, one overrun, armed again, is tested natively: `firmware::app`,
+/// `the_boards_tick_sequence_recovers_from_one_late_wake`.)
+#[test]
+fn an_overrun_faults_and_the_device_arms_again_after_clear_fault() {
+    let (setup, _) = setup();
+    let dir = tempfile::tempdir().unwrap();
+    let (path, bytes) = nodal_bank(0.02, dir.path()).unwrap();
     let bank = Bank::parse(&bytes).unwrap();
     let setup = Setup {
         bank: path,
         ..setup
     };
-    let mut session = Session::new(&bank, Script::Press, 1.5).unwrap();
-    session.icount_shift = 7;
+    // Joints: from home down the trocar to 4 mm into the liver by 1.5 s, then back out to 4 cm
+    // above it by 2.2 s, held.
+    let s0 = surface_insertion(&bank, [0.0, 0.0]).unwrap();
+    let csv = format!(
+        "t_s,pitch_rad,yaw_rad,insertion_m\n0,0,0,{}\n1.0,0,0,{}\n1.7,0,0,{}\n4,0,0,{}\n",
+        s0 - 0.005,
+        s0 + 0.004,
+        s0 - 0.04,
+        s0 - 0.04
+    );
+    let trajectory = Trajectory::from_csv_text(&bank, "descent.csv", &csv).unwrap();
+    let mut session = Session::with_trajectory(&bank, trajectory, 4.5).unwrap();
+    session.icount_shift = 8;
+    const REARM: u32 = 3_000;
+    // Every 100 ticks from then on: an arm taken by a tick that follows a genuine overrun (a
+    // burst of link bytes) faults at once, and the next one is then tried.
+    for at in (REARM..4_000).step_by(100) {
+        session
+            .link
+            .push((at, LinkSend::Command(HostToDevice::ClearFault)));
+        session
+            .link
+            .push((at, LinkSend::Command(HostToDevice::Arm)));
+    }
     let run = qemu(&setup, &session);
     let faults = run.faults();
-    assert_eq!(faults.len(), 1, "{faults:?}");
-    let (tick, reason, _) = faults[0];
-    assert_eq!(reason, FaultReason::Overrun);
-    // Armed and idle first: the overrun comes as the tip nears the liver.
-    assert!(tick > ARM_TICK + 100, "{tick}");
-    assert_eq!(run.ticks[tick as usize - 2].state, State::Armed);
-    assert_zero_from(&run, tick);
-    let last = run.telemetry().last().copied().cloned().unwrap();
-    assert!(last.counters.overruns >= 1, "{:?}", last.counters);
-    assert_eq!(last.fault, Some(FaultReason::Overrun));
+    // The descent overran: the first fault is `Overrun` (unless the starved link faulted
+    // first), at the latest as the tip reached the liver.
+    let first = *faults.first().unwrap();
+    assert!(
+        matches!(first.1, FaultReason::Overrun | FaultReason::LinkSilent),
+        "{faults:?}"
+    );
+    assert!(first.0 < 1_600, "{faults:?}");
+    // Cleared and armed again away from the liver.
+    assert!(
+        run.ticks[REARM as usize..]
+            .iter()
+            .any(|t| t.state == State::Armed),
+        "{faults:?}"
+    );
+    // Overruns counted by the image: the descent's, about one a tick near the liver; far above
+    // it, after the arm, a few at most (with the old schedule, one a tick: some 1,500).
+    let tel = run.telemetry();
+    let at = |tick: u32| {
+        tel.iter()
+            .rev()
+            .find(|t| t.tick <= tick)
+            .map(|t| (t.tick, t.counters.overruns))
+            .unwrap()
+    };
+    let (_, before) = at(REARM);
+    let (end, after) = at(u32::MAX);
+    assert!(before >= 1, "{faults:?}");
+    assert!(end > REARM + 1_000, "{end}");
+    assert!(
+        after - before <= 100,
+        "{before} overruns by the arm, {after} by tick {end}: {faults:?}"
+    );
 }
 
 /// `host sil --trajectory`: a recorded hand motion replayed through the plant. A pseudo-random

@@ -52,7 +52,9 @@ pub struct Board {
     pub pwm_hz: u32,
     /// Amplifier of each axis (pitch, yaw, insertion): the current at 10 % / 90 % as set in the
     /// amplifier itself (ESCON Studio "set value" scaling), and whether a positive set value
-    /// turns the motor the other way (wiring).
+    /// turns the motor the other way (wiring). The one place the amplifiers' range is written:
+    /// the PWM mapping uses it, and the boot checks the bank's `current_limit_a` against it
+    /// (`App::check_amplifiers`: a limit above it faults `AmplifierRange`, every arm refused).
     pub amplifiers: [Amplifier; 3],
     /// Encoder `j` counts down when its motor turns forward (A and B swapped in the wiring).
     pub encoder_inverted: [bool; 3],
@@ -94,7 +96,7 @@ pub const BOARD: Board = Board {
     // 2.5 % at 5 kHz); 2 kHz trades accuracy against the half-millisecond a period adds to the
     // 1 kHz loop's latency. TIM8 at 168 MHz: prescaler 2, 42,000 counts a period.
     pwm_hz: 2_000,
-    // Pitch and yaw: 3 A motors; insertion: 2 A. Must equal the ESCON's own scaling.
+    // Must equal the ESCON's own scaling (bring-up step 3).
     amplifiers: [
         Amplifier::escon(3.0, false),
         Amplifier::escon(3.0, false),
@@ -138,6 +140,28 @@ pub const ENABLES_OFF: PinLevels =
 
 /// Cycles of the core clock per tick of the force loop.
 pub const CYCLES_PER_TICK: u32 = BOARD.core_hz / firmware::TICK_HZ;
+
+/// Turn on what embassy-stm32's clock set-up leaves off, right after `embassy_stm32::init`:
+///
+/// - the flash accelerator (RM0090, FLASH_ACR): instruction cache (ICEN), data cache (DCEN) and
+///   prefetch (PRFTEN). embassy writes FLASH_ACR with the wait states alone (5 at 168 MHz),
+///   which leaves all three off, so every fetch of code and every read of the bank (read in
+///   place from flash) pays the wait states. The latency embassy set is kept (a
+///   read-modify-write of the three bits). Both caches are empty at reset, so no cache reset
+///   is needed first.
+/// - the clock security system (RCC_CR.CSSON): if the 8 MHz crystal (HSE) stops, the hardware
+///   switches the system clock to the 16 MHz HSI, stops the PLL and raises the NMI, whose
+///   handler (`safe.rs`) drives every enable off and waits for the watchdog (its LSI clock is
+///   independent of the HSE). Without it a failed crystal would leave the core stalled on a
+///   dead PLL with the enables at their last level until the watchdog fired.
+pub fn enable_accelerator_and_css() {
+    embassy_stm32::pac::FLASH.acr().modify(|w| {
+        w.set_icen(true);
+        w.set_dcen(true);
+        w.set_prften(true);
+    });
+    embassy_stm32::pac::RCC.cr().modify(|w| w.set_csson(true));
+}
 
 /// The clock tree: 8 MHz HSE / 4 x 168 = 336 MHz VCO; / 2 = 168 MHz system clock, / 7 = 48 MHz
 /// USB clock; AHB 168 MHz, APB1 42 MHz (timers 84 MHz), APB2 84 MHz (timers 168 MHz).

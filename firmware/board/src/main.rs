@@ -2,8 +2,10 @@
 //! current-mode servo amplifiers (`board.rs` says what is wired where).
 //!
 //! - Boot: the amplifier enables become outputs at their off level before anything else
-//!   ([`safe`]), then the clocks (8 MHz HSE -> 168 MHz, 48 MHz USB) and the board
-//!   ([`board::take`]). The bank is not compiled in: the bank region of the flash (`BANK` in
+//!   ([`safe`]), then the clocks (8 MHz HSE -> 168 MHz, 48 MHz USB), the flash accelerator and
+//!   the clock security system ([`board::enable_accelerator_and_css`]) and the board
+//!   ([`board::take`]). The reset cause is read and reported, the amplifiers' range checked
+//!   against the bank's current limits. The bank is not compiled in: the bank region of the flash (`BANK` in
 //!   the top-level `memory.x`, flashed separately) is validated with [`Bank::parse`]; an
 //!   invalid bank leaves the motors off and the reason on the link ([`firmware::app`]).
 //! - The 1 kHz tick ([`haptic`]) runs in an embassy `InterruptExecutor` at high priority on an
@@ -37,7 +39,7 @@ mod usb;
 
 use core::sync::atomic::{AtomicU8, Ordering};
 
-use bank_format::{Bank, BankError, State};
+use bank_format::{Bank, BankError, ResetCause, State};
 use embassy_executor::Executor;
 use embassy_stm32::gpio::{Level, Output};
 use embassy_time::{Duration, Ticker, Timer};
@@ -66,13 +68,13 @@ fn bank_region() -> &'static [u8] {
     }
 }
 
-/// The safety state after the last tick, for the LED (0 disarmed, 1 armed, 2 fault).
 /// The link grace of the application ([`App::new`]): none. The USB CDC link delivers a whole
 /// frame within a tick, so only valid frames count as link activity, and a host that sends
 /// nothing or only garbage faults `LinkSilent` after the supervisor's 10-tick timeout (the
 /// device is armed for at most 10 ms of it).
 const LINK_GRACE_TICKS: u32 = 0;
 
+/// The safety state after the last tick, for the LED (0 disarmed, 1 armed, 2 fault).
 static STATE: AtomicU8 = AtomicU8::new(0);
 
 /// The 1 kHz tick: wait for the period, run one [`App::tick`], measure it against its
@@ -96,7 +98,9 @@ async fn haptic(mut app: App<'static, 'static>, mut plant: BoardPlant, mut watch
         overrun = timing.overrun;
         if overrun {
             // Start afresh from now instead of catching up with back-to-back ticks, which
-            // would starve the link task of the time to report the fault.
+            // would starve the link task of the time to report the fault; the watch has
+            // restarted its schedule from now too (`TickWatch::end`), so one late tick is one
+            // overrun.
             ticker.reset();
         }
         let state = match report.state {
@@ -151,20 +155,14 @@ fn bringup_panic() {
     panic!("bring-up: injected panic");
 }
 
-/// Whether this boot follows a watchdog reset (RCC_CSR's IWDGRSTF: detail 0, WWDGRSTF: 1, as
-/// `FaultReason::WatchdogReset` has it); clears the reset flags (RMVF) so the next boot reads
-/// its own cause.
-fn take_watchdog_reset() -> Option<u32> {
+/// Why this boot happened, from RCC_CSR's reset flags ([`firmware::reset::cause_from_rcc_csr`]:
+/// power-on, pin, brown-out, software, either watchdog, low-power); clears the flags (RMVF) so
+/// the next boot reads its own cause.
+fn take_reset_cause() -> ResetCause {
     let rcc = embassy_stm32::pac::RCC;
-    let csr = rcc.csr().read();
+    let csr = rcc.csr().read().0;
     rcc.csr().modify(|w| w.set_rmvf(true));
-    if csr.wdgrstf() {
-        Some(0)
-    } else if csr.wwdgrstf() {
-        Some(1)
-    } else {
-        None
-    }
+    firmware::reset::cause_from_rcc_csr(csr)
 }
 
 /// Status LED: slow blink disarmed, on armed, fast blink on a fault.
@@ -191,6 +189,7 @@ async fn led(mut led: Output<'static>) {
 fn main() -> ! {
     safe::hold_enables_off_at_boot();
     let p = embassy_stm32::init(board::clocks());
+    board::enable_accelerator_and_css();
     let Ok(parts) = board::take(p) else {
         safe::stop()
     };
@@ -207,9 +206,8 @@ fn main() -> ! {
     let bank: &'static Result<Bank<'static>, BankError> = BANK.init(Bank::parse(bank_region()));
     let (tick_end, driver_end) = LINK.init(Link::new()).split();
     let mut app = App::new(bank.as_ref().map_err(|e| *e), tick_end, LINK_GRACE_TICKS);
-    if let Some(detail) = take_watchdog_reset() {
-        app.watchdog_reset(detail);
-    }
+    app.reset(take_reset_cause());
+    app.check_amplifiers(&BOARD.amplifiers);
     let plant = BoardPlant::new(parts.hardware);
 
     let tick_spawner = board::start_tick_executor();

@@ -4,8 +4,9 @@
 //!
 //! - at boot, before the clocks and the HAL are set up: the enable pins become outputs at their
 //!   off level ([`hold_enables_off_at_boot`]); the board's pull-downs hold them off before that;
-//! - by the panic handler, the HardFault handler and the default handler of every other
-//!   exception and interrupt, which first drive the enables off, then mask interrupts (so the
+//! - by the panic handler, the HardFault handler, the NMI handler (a failed crystal, through
+//!   the clock security system) and the default handler of every other exception and
+//!   interrupt, which first drive the enables off, then mask interrupts (so the
 //!   tick cannot turn them on again), drive them off once more and wait for the independent
 //!   watchdog to reset the chip (which it does within its timeout once the tick stops feeding
 //!   it; before the watchdog is started they wait with the motors off).
@@ -67,6 +68,15 @@ fn panic(_info: &core::panic::PanicInfo) -> ! {
 
 #[cortex_m_rt::exception(trampoline = false)]
 unsafe fn HardFault() -> ! {
+    stop()
+}
+
+/// The NMI: on this board, the clock security system's (the HSE crystal failed; the hardware
+/// has switched the core to the HSI and stopped the PLL, so the tick's timing and USB are
+/// gone). Motors off and wait for the watchdog, as on any fault. The NMI cannot be masked and
+/// is not cleared here (CSSF stays set): the handler never returns, so it is not re-entered.
+#[cortex_m_rt::exception]
+unsafe fn NonMaskableInt() {
     stop()
 }
 

@@ -37,6 +37,8 @@ use cortex_m_rt::exception;
 use embassy_executor::raw::Executor;
 use embassy_time::{Duration, Ticker, Timer};
 use firmware::app::App;
+use firmware::deadline::TickWatch;
+use firmware::hal::CycleCounter;
 use firmware::link::{DriverEnd, Link};
 use semihosting::io::Read;
 
@@ -112,14 +114,22 @@ unsafe fn DefaultHandler(irqn: i16) {
 }
 
 /// The 1 kHz tick: wait for the period, run one [`App::tick`], answer the plant, measure.
+///
+/// Overruns are detected exactly as on the board (`firmware/board`): a
+/// [`TickWatch`] on the core-cycle counter (here SysTick's position, [`InstructionCounter`]:
+/// virtual core cycles), and on an overrun the ticker restarts from now as the watch's
+/// schedule does, so SIL runs the board's overrun path. The whole-tick figure stays measured
+/// from the SysTick interrupt that started the period, which this image knows (the board
+/// measures from the watch's due time instead).
 #[embassy_executor::task]
 async fn haptic(mut app: App<'static, 'static>, mut plant: PlantChannel) {
     let counter = InstructionCounter;
+    let mut watch = TickWatch::new(systick::COUNTS_PER_PERIOD);
     let mut ticker = Ticker::every(Duration::from_hz(u64::from(firmware::TICK_HZ)));
     let mut overrun = false;
     loop {
         ticker.next().await;
-        let period = systick::period();
+        watch.begin(counter.cycles());
         let replied = app
             .tick(&mut plant, &counter, overrun)
             .and_then(|report| plant.reply(&report));
@@ -132,11 +142,13 @@ async fn haptic(mut app: App<'static, 'static>, mut plant: PlantChannel) {
             }
         }
         // Whole tick, from the SysTick interrupt that started it (executor wake included).
-        app.record_tick_cycles(counter.since_period_start());
-        overrun = systick::period() != period;
+        let whole = counter.since_period_start();
+        overrun = watch.end(counter.cycles()).overrun;
+        app.record_tick_cycles(whole);
         if overrun {
             // Start afresh from now instead of catching up with back-to-back ticks, which
-            // would starve the link task of the time to report the fault.
+            // would starve the link task of the time to report the fault; the watch has
+            // restarted its schedule from now too.
             ticker.reset();
         }
     }

@@ -20,8 +20,9 @@ use firmware::hal::CycleCounter;
 
 /// Core clock, Hz (the STM32F405 at full speed; QEMU's netduinoplus2 SysTick clock).
 const CORE_HZ: u32 = 168_000_000;
-/// SysTick counts per millisecond period.
-const COUNTS_PER_PERIOD: u32 = CORE_HZ / 1_000;
+/// SysTick counts per millisecond period (virtual core cycles: the tick's period for its
+/// [`firmware::deadline::TickWatch`]).
+pub const COUNTS_PER_PERIOD: u32 = CORE_HZ / 1_000;
 
 struct SysTickDriver {
     /// Milliseconds since `start`, and the timer queue.

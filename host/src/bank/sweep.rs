@@ -263,11 +263,7 @@ pub fn errors(prep: &Prepared, bank: &Bank, refs: &[Reference]) -> Errors {
 
 /// The probe bank's bytes (every pair within [`Prepared::probe_radius`]) from `rows`.
 pub fn probe_bytes(prep: &Prepared, rows: &BlockRows) -> Result<AlignedBytes> {
-    Ok(AlignedBytes::new(
-        &prep
-            .bank_in(rows, prep.probe_radius(), None, Precision::F32)?
-            .bytes,
-    ))
+    prep.probe_bank(rows)
 }
 
 /// The sweep: one row per radius (rule "radius") and one per `config.tool_radii` for the
@@ -299,7 +295,7 @@ pub fn run(
         .fold(0.0, f64::max);
     let rows = prep.blocks(rmax.max(prep.probe_radius()), progress)?;
     let probe_bytes = probe_bytes(prep, &rows)?;
-    let probe = Bank::parse(&probe_bytes)
+    let probe = Bank::parse_unbounded(&probe_bytes)
         .map_err(|e| anyhow::anyhow!("internal: the probe bank is invalid: {e}"))?;
     let sites = sites(&probe, config.sites, config.depth_m, config.seed);
     let refs = references(prep, &probe, &sites)?;

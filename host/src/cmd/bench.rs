@@ -391,6 +391,8 @@ fn tick(args: TickArgs) -> Result<()> {
         path.push(q);
     }
     let mut haptic = HapticLoop::new(&bank);
+    // The path starts at the home pose (encoder zero): home there, as a host would.
+    haptic.zero_encoders();
     haptic
         .arm()
         .map_err(|e| anyhow::anyhow!("the loop refused to arm: {e:?}"))?;

@@ -5,7 +5,7 @@
 //! end or on Ctrl-C.
 
 use anyhow::{Context, Result, bail};
-use bank_format::{AlignedBytes, Bank, DeviceCalibration, HostToDevice, Mode, State};
+use bank_format::{AlignedBytes, Bank, DeviceCalibration, FaultReason, HostToDevice, Mode, State};
 use host::kinematics::{Workspace, counts_for};
 use host::source::{Sample, SerialSource, Source};
 use std::path::PathBuf;
@@ -24,11 +24,13 @@ pub enum DeviceCmd {
     /// Select a mode, arm the device and print its state, currents and rendered force about
     /// ten times a second; disarm after --seconds or on Ctrl-C. If this host dies instead, the
     /// device faults `LinkSilent` within 10 ms (zero current). Refuses a device that is armed
-    /// already or in a fault (unless --clear-fault), and currents over the bank's limits.
+    /// already or in a fault (unless --clear-fault), and currents over the bank's limits. The
+    /// device itself refuses to arm until it has been homed (`zero`) since it started.
     Arm(ArmArgs),
     /// Declare the device's current pose its calibration's home pose (the instrument held in
     /// the home fixture, device disarmed); confirmed when the telemetry's tip is the home
-    /// pose's.
+    /// pose's. This homing references the encoders, which the device needs before it arms,
+    /// after every reset.
     Zero(DeviceArgs),
 }
 
@@ -148,6 +150,10 @@ fn check(args: CheckArgs) -> Result<()> {
             args.device.port
         );
     }
+    // The device answers Hello with its reset cause too (the one after the greeting of
+    // `open` may have gone with it).
+    source.command(HostToDevice::Hello)?;
+    let mut reset_reported = false;
     let period = Duration::from_secs_f64(1.0 / args.rate.clamp(0.1, 1000.0));
     let end = Instant::now() + Duration::from_secs_f64(args.seconds.max(0.0));
     let mut next = Instant::now();
@@ -155,6 +161,17 @@ fn check(args: CheckArgs) -> Result<()> {
     while Instant::now() < end {
         if let Some(s) = source.latest(Duration::from_millis(50))? {
             newest = Some(s);
+        }
+        if let (false, Some(cause)) = (reset_reported, source.stats().reset_cause) {
+            reset_reported = true;
+            if args.json {
+                println!(
+                    "{}",
+                    serde_json::json!({ "reset_cause": format!("{cause:?}") })
+                );
+            } else {
+                println!("the device last started from a reset: {cause:?}");
+            }
         }
         if Instant::now() < next {
             continue;
@@ -302,8 +319,15 @@ fn arm(args: ArmArgs) -> Result<()> {
     };
     if let Some(seen) = seen {
         let _ = source.command(HostToDevice::Disarm);
+        let hint = match seen.as_ref().and_then(|s| s.fault) {
+            Some(FaultReason::NotReferenced) => {
+                "; it has not been homed since it started: put the instrument in its home \
+                 fixture, run `host device zero`, then arm again with --clear-fault"
+            }
+            _ => "",
+        };
         bail!(
-            "{port}: the device did not arm in mode {mode:?}: {}",
+            "{port}: the device did not arm in mode {mode:?}: {}{hint}",
             describe(&seen)
         );
     }

@@ -19,16 +19,20 @@ use firmware::safety::State;
 use firmware::solve::{Factor, MAX_DOFS, alpha_weights, solve_triangle_alpha, solve_weighted};
 use firmware::tick::{HapticLoop, LoopInput, LoopOutput};
 
-/// A loop on `bank` in the linear law, armed at joint values `q0` after a few ticks there.
+/// A loop on `bank` in the linear law, homed at encoder zero, armed at joint values `q0`
+/// after a few ticks there, its ramp-in over.
 fn armed_loop<'b>(bank: &'b Bank<'b>, q0: [f64; 3]) -> Result<HapticLoop<'b>> {
     let mut lp = HapticLoop::new(bank);
+    lp.zero_encoders();
     lp.set_mode(Mode::LinearLaw)
         .map_err(|e| anyhow!("setting the linear law: {e:?}"))?;
     for _ in 0..5 {
         tick(&mut lp, q0);
     }
     lp.arm().map_err(|e| anyhow!("arming the loop: {e:?}"))?;
-    tick(&mut lp, q0);
+    for _ in 0..firmware::tick::RAMP_IN_TICKS {
+        tick(&mut lp, q0);
+    }
     Ok(lp)
 }
 

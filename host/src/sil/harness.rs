@@ -39,6 +39,9 @@ use std::time::{Duration, Instant};
 
 /// Instructions per 1 ms tick under `-icount shift=3` (8 ns each; see [`Session::icount_shift`]).
 pub const INSTRUCTIONS_PER_TICK: u32 = 125_000;
+/// Tick at which the default session homes the device (`ZeroEncoders`): the hand rests at the
+/// home pose for the scripts' first 100 ms, and the firmware arms only once homed.
+pub const HOME_TICK: u32 = 10;
 /// Tick at which the default session arms the device.
 pub const ARM_TICK: u32 = 20;
 
@@ -106,8 +109,8 @@ impl std::fmt::Debug for LinkObserver {
 }
 
 impl Session {
-    /// `script` for `seconds` on `bank`: `Hello` at tick 1, `Arm` at [`ARM_TICK`], a heartbeat
-    /// every 5 ticks.
+    /// `script` for `seconds` on `bank`: `Hello` at tick 1, `ZeroEncoders` at [`HOME_TICK`]
+    /// (the hand at home), `Arm` at [`ARM_TICK`], a heartbeat every 5 ticks.
     pub fn new(bank: &Bank, script: Script, seconds: f64) -> Result<Session> {
         Session::with_trajectory(bank, Trajectory::new(bank, script)?, seconds)
     }
@@ -125,6 +128,7 @@ impl Session {
             ticks: (seconds / TICK_S).round().max(1.0) as u32,
             link: vec![
                 (1, LinkSend::Command(HostToDevice::Hello)),
+                (HOME_TICK, LinkSend::Command(HostToDevice::ZeroEncoders)),
                 (ARM_TICK, LinkSend::Command(HostToDevice::Arm)),
             ],
             heartbeat_every: 5,
