@@ -136,6 +136,14 @@ pub fn run(args: Args) -> Result<()> {
 
     // A sampled scene shows its fine FEM surface under precomputed fields; a nodal one its
     // collision mesh with columns solved on demand.
+    // The name the viewer shows for the displayed surface: a sampled scene's FEM mesh.
+    let display_name = match &prep.scene.contact {
+        host::scene::ContactModel::Sampled(spec) => spec.fem_mesh.file_name().map_or_else(
+            || spec.fem_mesh.display().to_string(),
+            |n| n.to_string_lossy().into(),
+        ),
+        host::scene::ContactModel::Nodal => prep.mesh_name.clone(),
+    };
     let fields = {
         let progress = host::progress::Bar::new("display field chunks");
         let t = Instant::now();
@@ -220,7 +228,7 @@ pub fn run(args: Args) -> Result<()> {
 
     let (lo, hi) = bounds(&display.rest);
     let info = serde_json::json!({
-        "mesh": mesh_name, "mesh_nodes": mesh.nodes.len(), "display_nodes": display.rest.len(),
+        "mesh": display_name, "collision_mesh": mesh_name, "mesh_nodes": mesh.nodes.len(), "display_nodes": display.rest.len(),
         "triangles": display.triangles.len(), "fulcrum_m": cal.fulcrum_m,
         "tip_radius_m": cal.tip_radius_m, "max_force_n": cal.max_force_n,
         "bbox_min": lo, "bbox_max": hi, "press_point": aim,
