@@ -139,6 +139,11 @@ pub fn sampled_w(x: [f64; 3]) -> [[f64; 3]; 3] {
 /// [`flat_patch`] with contact samples (bank format 6) at lattice level 2: each sample's `W` is
 /// [`sampled_w`] at its point.
 pub fn sampled_patch() -> AlignedBytes {
+    sampled_patch_with(sampled_w)
+}
+
+/// [`sampled_patch`] with each sample's `W` given by `w` at its point (m -> m/N).
+pub fn sampled_patch_with(w: impl Fn([f64; 3]) -> [[f64; 3]; 3]) -> AlignedBytes {
     let xs: Vec<f64> = (0..PATCH_SIDE)
         .map(|i| PATCH_SPACING_M * i as f64)
         .collect();
@@ -149,7 +154,7 @@ pub fn sampled_patch() -> AlignedBytes {
         .iter()
         .map(|&(t, bary)| {
             let tri = b.triangles[t].map(|k| b.positions_m[k as usize]);
-            sampled_w(core::array::from_fn(|c| {
+            w(core::array::from_fn(|c| {
                 bary[0] * tri[0][c] + bary[1] * tri[1][c] + bary[2] * tri[2][c]
             }))
         })

@@ -771,34 +771,12 @@ fn sampled_compliance(
     let w = samples
         .interpolate(triangle as usize, bary)
         .ok_or(SolveError::NonFinite)?;
-    let mut shares = TriangleShares {
-        nodes: [0; 3],
-        weights: [0.0; 3],
-        len: 0,
-    };
-    for (&k, &b) in nodes.iter().zip(&bary) {
-        if b > 0.0
-            && let (Some(nk), Some(wk)) = (
-                shares.nodes.get_mut(shares.len),
-                shares.weights.get_mut(shares.len),
-            )
-        {
-            (*nk, *wk) = (k, b);
-            shares.len += 1;
-        }
-    }
-    let kept: f32 = shares.weights.iter().sum();
-    if shares.len == 0 || !(kept > 0.0 && kept.is_finite()) {
-        return Err(SolveError::BadWeights);
-    }
-    for x in shares.weights.iter_mut() {
-        *x /= kept;
-    }
+    let shares = TriangleShares::of(nodes, bary).ok_or(SolveError::BadWeights)?;
     Ok((w, shares))
 }
 
 /// A contact triangle's vertices with a positive barycentric coordinate and their shares of
-/// the tool force ([`sampled_compliance`]).
+/// the tool force ([`sampled_compliance`], [`triangle_solve`]).
 struct TriangleShares {
     nodes: [u16; 3],
     weights: [f32; 3],
@@ -806,6 +784,36 @@ struct TriangleShares {
 }
 
 impl TriangleShares {
+    /// The vertices of `nodes` with a positive (finite) barycentric coordinate, weighted by it,
+    /// normalised to sum 1; `None` when none is positive.
+    fn of(nodes: [u16; 3], bary: [f32; 3]) -> Option<TriangleShares> {
+        let mut shares = TriangleShares {
+            nodes: [0; 3],
+            weights: [0.0; 3],
+            len: 0,
+        };
+        for (&k, &b) in nodes.iter().zip(&bary) {
+            if b > 0.0
+                && b.is_finite()
+                && let (Some(nk), Some(wk)) = (
+                    shares.nodes.get_mut(shares.len),
+                    shares.weights.get_mut(shares.len),
+                )
+            {
+                (*nk, *wk) = (k, b);
+                shares.len += 1;
+            }
+        }
+        let kept: f32 = shares.weights.iter().sum();
+        if shares.len == 0 || !(kept > 0.0 && kept.is_finite()) {
+            return None;
+        }
+        for x in shares.weights.iter_mut() {
+            *x /= kept;
+        }
+        Some(shares)
+    }
+
     /// The kept vertices and their weights.
     fn split(&self) -> (&[u16], &[f32]) {
         (
@@ -821,24 +829,9 @@ impl TriangleShares {
 /// `None` when the bank does not couple two of the vertices or the solve fails, for the
 /// caller to take the patch rule's path (which drops an uncoupled vertex).
 fn triangle_solve(bank: &Bank, nodes: [u16; 3], bary: [f32; 3]) -> Option<WeightedSolve> {
-    let (mut n, mut w, mut len) = ([0u16; 3], [0.0f32; 3], 0);
-    for (&k, &b) in nodes.iter().zip(&bary) {
-        if b > 0.0
-            && b.is_finite()
-            && let (Some(nk), Some(wk)) = (n.get_mut(len), w.get_mut(len))
-        {
-            (*nk, *wk) = (k, b);
-            len += 1;
-        }
-    }
-    if len == 0 {
-        return None;
-    }
-    let kept: f32 = w.iter().sum();
-    for x in w.iter_mut() {
-        *x /= kept;
-    }
-    WeightedSolve::new(bank, n.get(..len)?, w.get(..len)?).ok()
+    let shares = TriangleShares::of(nodes, bary)?;
+    let (n, w) = shares.split();
+    WeightedSolve::new(bank, n, w).ok()
 }
 
 /// The solve phase: the tool force of `solve` at displacement `d` (blended with the outgoing
@@ -1947,29 +1940,11 @@ mod tests {
     /// left to re-latch.
     #[test]
     fn a_failed_sampled_solve_leaves_nothing_to_re_latch() {
-        let xs: Vec<f64> = (0..crate::fixtures::PATCH_SIDE)
-            .map(|i| crate::fixtures::PATCH_SPACING_M * i as f64)
-            .collect();
-        let mut b = crate::fixtures::grid_builder(&xs, &xs, 0.06, patch_device());
-        let lattice = bank_format::SharedLattice::new(&b.triangles, 2);
-        let w = lattice
-            .points
-            .iter()
-            .map(|&(t, bary)| {
-                let tri = b.triangles[t].map(|k| b.positions_m[k as usize]);
-                let y: f64 = (0..3).map(|v| bary[v] * tri[v][1]).sum();
-                // y < 2 cm: W_zz a millionth of W_xx; beyond, a tenth.
-                let zz = if y < 0.02 { 1.0e-6 } else { 0.1 };
-                [[0.05, 0.0, 0.0], [0.0, 0.05, 0.0], [0.0, 0.0, 0.05 * zz]]
-            })
-            .collect();
-        b.samples = Some(bank_format::ContactSamples {
-            level: 2,
-            tip_radius_m: 0.003,
-            triangle_samples: lattice.triangle_points,
-            w,
+        let bytes = crate::fixtures::sampled_patch_with(|x| {
+            // y < 2 cm: W_zz a millionth of W_xx; beyond, a tenth.
+            let zz = if x[1] < 0.02 { 1.0e-6 } else { 0.1 };
+            [[0.05, 0.0, 0.0], [0.0, 0.05, 0.0], [0.0, 0.0, 0.05 * zz]]
         });
-        let bytes = AlignedBytes::new(&b.build().unwrap());
         let bank = Bank::parse(bytes.as_slice()).unwrap();
         let mut lp = homed(&bank);
         lp.arm().unwrap();

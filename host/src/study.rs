@@ -218,3 +218,20 @@ pub fn extrapolate(sites: &[Site], levels: &[Level]) -> Result<(Vec<Block3>, Vec
     }
     Ok(out)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn solve3_inverts_a_general_matrix() {
+        let a = [[4.0, 1.0, 0.5], [2.0, 3.0, 1.0], [0.0, 1.0, 5.0]];
+        let d = [1.0, -2.0, 0.5];
+        let x = solve3(&a, d);
+        for (row, want) in a.iter().zip(d) {
+            assert!((dot(*row, x) - want).abs() < 1e-12, "{x:?}");
+        }
+        let singular = [[1.0, 2.0, 3.0], [2.0, 4.0, 6.0], [0.0, 0.0, 1.0]];
+        assert!(!solve3(&singular, d).iter().all(|v| v.is_finite()));
+    }
+}

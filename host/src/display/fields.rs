@@ -134,16 +134,18 @@ impl DisplayFields {
                             }
                         }
                     }
-                    let m = mul(
-                        &inverse(&w_p1).ok_or_else(|| {
-                            anyhow::anyhow!(
-                                "the P1 patch compliance of sample {} is singular (a fixed region \
+                    // M = W_P1^-1 W, column by column.
+                    let cols: Block3 = std::array::from_fn(|k| {
+                        crate::study::solve3(&w_p1, std::array::from_fn(|r| w[first + j][r][k]))
+                    });
+                    if !cols.iter().flatten().all(|v| v.is_finite()) {
+                        bail!(
+                            "the P1 patch compliance of sample {} is singular (a fixed region \
                              under the tool?)",
-                                first + j
-                            )
-                        })?,
-                        &w[first + j],
-                    );
+                            first + j
+                        );
+                    }
+                    let m: Block3 = std::array::from_fn(|l| std::array::from_fn(|k| cols[k][l]));
                     for (i, &n) in display.iter().enumerate() {
                         for r in 0..3 {
                             for k in 0..3 {
@@ -371,39 +373,4 @@ fn solve_chunk(compliance: &Compliance, chunk: &[Vec<(usize, f64)>]) -> faer::Ma
     }
     compliance.solve_in_place(x.as_mut(), faer::Par::rayon(0));
     x
-}
-
-/// `a^-1` of a 3 x 3 matrix (cofactors), `None` when singular.
-fn inverse(a: &Block3) -> Option<Block3> {
-    let c = |i: usize, j: usize| {
-        let (r0, r1) = ((i + 1) % 3, (i + 2) % 3);
-        let (c0, c1) = ((j + 1) % 3, (j + 2) % 3);
-        a[r0][c0] * a[r1][c1] - a[r0][c1] * a[r1][c0]
-    };
-    let det: f64 = (0..3).map(|j| a[0][j] * c(0, j)).sum();
-    (det.is_finite() && det.abs() > 0.0)
-        .then(|| std::array::from_fn(|i| std::array::from_fn(|j| c(j, i) / det)))
-}
-
-/// `a b` of 3 x 3 matrices.
-fn mul(a: &Block3, b: &Block3) -> Block3 {
-    std::array::from_fn(|i| std::array::from_fn(|j| (0..3).map(|k| a[i][k] * b[k][j]).sum()))
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn inverse_of_a_general_matrix() {
-        let a = [[4.0, 1.0, 0.5], [2.0, 3.0, 1.0], [0.0, 1.0, 5.0]];
-        let i = mul(&a, &inverse(&a).unwrap());
-        for (r, row) in i.iter().enumerate() {
-            for (c, v) in row.iter().enumerate() {
-                let want = if r == c { 1.0 } else { 0.0 };
-                assert!((v - want).abs() < 1e-12, "{i:?}");
-            }
-        }
-        assert!(inverse(&[[1.0, 2.0, 3.0], [2.0, 4.0, 6.0], [0.0, 0.0, 1.0]]).is_none());
-    }
 }
