@@ -14,7 +14,7 @@ use host::deform::Deformer;
 use host::display::server::{Server, SteerFn};
 use host::display::{DisplayMesh, DisplayStats, Pipeline, SurfaceModel};
 use host::kinematics::Workspace;
-use host::record::Recorder;
+use host::record::{Recorded, Recorder};
 use host::scene::{MeshSource, Scene};
 use host::script::{Script, Scripted, aim_joints, ray_hit};
 use host::sil::source::SilSource;
@@ -277,11 +277,17 @@ pub fn run(args: Args) -> Result<()> {
     let mesh = Arc::new(mesh);
     let compliance = Arc::new(compliance);
     let mut recorder = match &args.record {
-        Some(dir) => Some(Recorder::start(
-            dir,
-            Arc::clone(&mesh),
-            Arc::clone(&compliance),
-        )?),
+        Some(dir) => {
+            let what = if fields.is_some() {
+                Recorded::Surface(Arc::clone(&mesh_bytes))
+            } else {
+                Recorded::Volume {
+                    mesh: Arc::clone(&mesh),
+                    compliance: Arc::clone(&compliance),
+                }
+            };
+            Some(Recorder::start(dir, what)?)
+        }
         None => None,
     };
     let surface_model = match fields {
