@@ -21,6 +21,10 @@ liver-reach-2.8mm.msh  11,667      same, 2.8 mm in the reach (binary)
 generated/...-2mm      27,742      same, 2 mm (6.5 MB, binary, git-ignored like all below)
 generated/...-1.4mm    71,605      same, 1.4 mm (17 MB)
 generated/...-1mm      177,760     same, 1 mm (44 MB; ~5.5 min, 0.8 GB)
+generated/liver-reach-scaled-<h>mm   the reference series: liver-reach-4mm's whole size field
+                       scaled by h / 4 mm (gradient and cap too), h = 2.8, 2, 1.4, 1 mm:
+                       12,351 / 30,830 / 83,584 / 218,467 nodes, 85 MB in all (1 mm: 18 min on
+                       a loaded 2-core machine); ``--reach-series scaled``
 =====================  ==========  =======================================================
 
 The ``liver-reach-<h>mm`` family: FEM meshes for the patch-compliance samples of the
@@ -64,6 +68,7 @@ and numpy::
     python3 scripts/gen_meshes.py --reach-series       # the committed liver-reach-*mm meshes
     python3 scripts/gen_meshes.py --reach-series all   # all of them (2, 1.4, 1 mm -> generated/)
     python3 scripts/gen_meshes.py --only liver-reach-1mm   # one of them
+    python3 scripts/gen_meshes.py --reach-series scaled    # the reference series (generated/)
 
 The default run (no option) generates the first six rows of the table above (not
 liver-100k, not the liver-reach family).
@@ -242,6 +247,12 @@ REACH_SERIES = {
     for h_mm, committed in ((4.0, True), (2.8, True), (2.0, False), (1.4, False), (1.0, False))
 }
 
+# The reference series "liver-reach-scaled-<h>mm" (host/tests/data/patch-study-p2.json): the
+# 4 mm mesh's whole size field scaled by h / 4 mm, so the series refines uniformly by the ratio
+# 1.4 (the 4 mm member is liver-reach-4mm itself).  All in generated/.
+REACH_SCALED_BASE = 0.004
+REACH_SCALED = {f"liver-reach-scaled-{h_mm:g}mm": h_mm / 1000.0 for h_mm in (2.8, 2.0, 1.4, 1.0)}
+
 
 def sector_distance(p):
     """Approximate distance (m) of points p (N,3) from the tip's sector (the spherical-shell
@@ -277,23 +288,29 @@ def _sector_distance_expr() -> str:
     return f"max({d_rad},{d_ang})"
 
 
-def _reach_size_field(vol: int, h_fine: float) -> None:
+def _reach_size_field(vol: int, h_fine: float, scaled: bool = False) -> None:
     """Background size: h_fine in the fine zone, growing by REACH_GRADIENT per unit distance
     from it, capped at REACH_H_FAR.  The distance from the zone is taken as
     max(depth - ZONE_BAND, sector distance - ZONE_SECTOR_DIST, 0) (a lower bound of the
-    distance to the intersection: never coarser than intended)."""
+    distance to the intersection: never coarser than intended).
+
+    scaled: the liver-reach-4mm size field times h_fine / 4 mm everywhere (gradient and cap
+    scaled too), so that a series of them refines the whole mesh by one ratio, as Richardson
+    extrapolation assumes (the plain family refines only the fine zone and the transition
+    near it)."""
     surfs = [t for _, t in gmsh.model.getBoundary([(3, vol)], combined=False, oriented=False)]
     f = gmsh.model.mesh.field
     dist = f.add("Distance")
     f.setNumbers(dist, "SurfacesList", surfs)
     f.setNumber(dist, "Sampling", 100)
     size = f.add("MathEval")
-    f.setString(
-        size,
-        "F",
-        f"min({REACH_H_FAR!r},{h_fine!r}+{REACH_GRADIENT!r}*max(0,F{dist}-{ZONE_BAND!r},"
-        f"{_sector_distance_expr()}-{ZONE_SECTOR_DIST!r}))",
-    )
+    away = f"max(0,F{dist}-{ZONE_BAND!r},{_sector_distance_expr()}-{ZONE_SECTOR_DIST!r})"
+    if scaled:
+        scale = h_fine / REACH_SCALED_BASE
+        expr = f"{scale!r}*min({REACH_H_FAR!r},{REACH_SCALED_BASE!r}+{REACH_GRADIENT!r}*{away})"
+    else:
+        expr = f"min({REACH_H_FAR!r},{h_fine!r}+{REACH_GRADIENT!r}*{away})"
+    f.setString(size, "F", expr)
     f.setAsBackgroundMesh(size)
 
 
@@ -361,17 +378,19 @@ def _graded_size_field(vol: int, h: float, surface_factor: float) -> None:
     f.setAsBackgroundMesh(thr)
 
 
-def mesh_once(builder, h: float, surface_factor: float, reach: bool = False):
+def mesh_once(builder, h: float, surface_factor: float, reach: bool = False, scaled: bool = False):
     """Mesh the geometry with size h (reach: h in the fine zone, graded up to REACH_H_FAR
-    elsewhere); return (nodes (N,3) float64, tets (M,4) 0-based)."""
+    elsewhere, or that whole field scaled: see _reach_size_field); return (nodes (N,3) float64,
+    tets (M,4) 0-based)."""
     gmsh.clear()
-    _set_options(h, surface_factor, (h, REACH_H_FAR) if reach else None)
+    far = REACH_H_FAR * h / REACH_SCALED_BASE if scaled else REACH_H_FAR
+    _set_options(h, surface_factor, (h, far) if reach else None)
     if reach:
         gmsh.option.setNumber("Mesh.Algorithm", REACH_SURFACE_ALGORITHM)
     gmsh.model.add("m")
     vol = builder()
     if reach:
-        _reach_size_field(vol, h)
+        _reach_size_field(vol, h, scaled)
     elif surface_factor != 1.0:
         _graded_size_field(vol, h, surface_factor)
     gmsh.model.mesh.generate(3)
@@ -466,7 +485,7 @@ def reread(path):
     return len(tags), len(conn) // 4, np.asarray(coords).reshape(-1, 3)
 
 
-def generate(name, builder, h0, sf, target_nodes, target_tets, binary, path, reach=False):
+def generate(name, builder, h0, sf, target_nodes, target_tets, binary, path, reach=False, scaled=False):
     """Mesh, check, write and re-read one file.  reach: a graded liver-reach mesh (h0 is the
     fine-zone size; no node target, no re-tuning; binary None: binary when the ASCII file
     would exceed ASCII_MAX_BYTES)."""
@@ -474,7 +493,7 @@ def generate(name, builder, h0, sf, target_nodes, target_tets, binary, path, rea
     h = h0
     tried = []
     for _ in range(8):
-        nodes, tets = mesh_once(builder, h, sf, reach)
+        nodes, tets = mesh_once(builder, h, sf, reach, scaled)
         tried.append((h, len(nodes)))
         if target_nodes is None or abs(len(nodes) / target_nodes - 1.0) <= TUNE_TOL:
             break
@@ -531,9 +550,10 @@ def main(argv=None):
         "--reach-series",
         nargs="?",
         const="committed",
-        choices=["committed", "all"],
+        choices=["committed", "all", "scaled"],
         help="generate only the graded livers liver-reach-*mm (fine in the default scene's reach): "
-        "the committed ones (default), or all of them (the others -> generated/)",
+        "the committed ones (default), or all of them (the others -> generated/), or the "
+        "reference series liver-reach-scaled-*mm (-> generated/)",
     )
     ap.add_argument(
         "--liver-nodes",
@@ -561,6 +581,9 @@ def main(argv=None):
         # Scale the liver-1k4 size by the node ratio (nodes ~ h^-3), then tune.
         h = float(f"{MESHES['liver-10k'][1] * (10000 / n) ** (1 / 3):.3g}")
         jobs.append((f"liver-{n}", build_liver, h, 1.0, n, None, n > 5000, os.path.join(gen, f"liver-{n}.msh"), {}))
+    elif args.reach_series == "scaled":
+        for name, h in REACH_SCALED.items():
+            jobs.append((name, build_liver, h, 1.0, None, None, None, os.path.join(gen, name + ".msh"), {"reach": True, "scaled": True}))
     elif args.reach_series or args.only in REACH_SERIES:
         for name, (h, committed) in REACH_SERIES.items():
             if args.reach_series == "all" or (args.reach_series and committed) or args.only == name:

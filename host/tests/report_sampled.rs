@@ -55,9 +55,10 @@ fn sampled_knobs_measure_the_shipped_bank_against_the_converged_reference() {
     assert!(error.0 > 1.0, "nodal mean error {:?}", error);
 
     // With instructions (as the report measures them on the image; equal here), the front is
-    // the variants no other beats on mean error and bytes: the most accurate one is on it,
-    // and the finding says whether the scene's choice is (it is not today: level 1 is 0.3
-    // points better on the mean at 20 KB less; README, "The converged force").
+    // the variants no other beats on mean error, worst error and bytes: the most accurate on
+    // the mean and the most accurate at the worst site are on it, and so is the scene's choice
+    // (level 2: the lowest worst error; level 1 has the lowest mean at 20 KB less; README,
+    // "The converged force").
     for v in &mut variants {
         v.instructions = Some(2800.0);
     }
@@ -68,21 +69,28 @@ fn sampled_knobs_measure_the_shipped_bank_against_the_converged_reference() {
         instructions: Some(3600.0),
     }];
     let (knob, rows) = sampled::section(&variants, &nodal);
-    let best = variants
-        .iter()
-        .min_by(|a, b| a.error.0.total_cmp(&b.error.0))
-        .unwrap();
+    eprintln!("{}", knob.finding);
     let front = knob.finding.split("The front: ").nth(1).unwrap();
     let front = front.split(". The scene's choice").next().unwrap();
+    for by in [0, 1] {
+        let key = |v: &&sampled::Variant| if by == 0 { v.error.0 } else { v.error.1 };
+        let best = variants
+            .iter()
+            .min_by(|a, b| key(a).total_cmp(&key(b)))
+            .unwrap();
+        assert!(
+            front.contains(&format!("{} level {}:", best.fem, best.level)),
+            "{}",
+            knob.finding
+        );
+    }
     assert!(
-        front.contains(&format!("{} level {}", best.fem, best.level)),
+        front.contains(&format!("{} level {}:", chosen.fem, chosen.level)),
         "{}",
         knob.finding
     );
-    let on_front = front.contains(&format!("{} level {}:", chosen.fem, chosen.level));
-    assert_eq!(
+    assert!(
         knob.finding.contains("it is on the front"),
-        on_front,
         "{}",
         knob.finding
     );
