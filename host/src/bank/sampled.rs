@@ -45,6 +45,10 @@ pub struct SampledFem {
     pub factor_s: f64,
 }
 
+/// One tool load on the FEM: `(node, weight)` pairs (the pressure's nodal weights, summing
+/// to 1).
+pub type ToolLoad = Vec<(usize, f64)>;
+
 /// What the sampling measured besides the samples.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct SampleStats {
@@ -132,6 +136,19 @@ impl SampledFem {
         radius: f64,
         progress: Option<&dyn Progress>,
     ) -> Result<(Vec<Block3>, Vec<fem::tool::SurfacePoint>, usize)> {
+        let (loads, at) = self.tool_loads(points, radius)?;
+        let widest = loads.iter().map(Vec::len).max().unwrap_or(0);
+        let w = self.compliance.patch_compliances(&loads, progress)?;
+        Ok((w, at, widest))
+    }
+
+    /// The tool's loads of `radius` (m) at the FEM surface points closest to `points`: per
+    /// point, the `(node, weight)` list of the parabolic pressure, and the surface point.
+    pub fn tool_loads(
+        &self,
+        points: &[[f64; 3]],
+        radius: f64,
+    ) -> Result<(Vec<ToolLoad>, Vec<fem::tool::SurfacePoint>)> {
         let at: Vec<fem::tool::SurfacePoint> = points
             .iter()
             .map(|&q| self.surface.closest_point(q))
@@ -140,9 +157,7 @@ impl SampledFem {
             .iter()
             .map(|p| self.surface.tool_weights(p.point, radius))
             .collect::<Result<Vec<_>, _>>()?;
-        let widest = loads.iter().map(Vec::len).max().unwrap_or(0);
-        let w = self.compliance.patch_compliances(&loads, progress)?;
-        Ok((w, at, widest))
+        Ok((loads, at))
     }
 }
 

@@ -23,10 +23,9 @@
 //! most as much again).
 //!
 //! On the 10k-node liver (bed fixed, tool radius 3 mm) the active columns carry 20 % of the
-//! dense forward flops. Measured on 2 shared cores (`cargo test -p fem --profile checked --lib
-//! patch_timing -- --ignored --nocapture`), P1 with 852 loads: full solves 33-38 s, dense
-//! forward solves (faer's `l_solve`, tried first) 15 s, this method 1.0-1.1 s; P2 (187k free
-//! dofs) with 86 loads: 25-28 s, 11 s and 1.5-1.8 s.
+//! dense forward flops. `host bench patch` times this method against full solves
+//! ([`Compliance::patch_compliances_by_full_solves`]) on a scene's FEM (README, "Sampled
+//! contact").
 
 use super::gram::par_for;
 use super::{Block3, Compliance, ComplianceError};
@@ -61,6 +60,17 @@ impl Compliance {
         progress: Option<&dyn Progress>,
     ) -> Result<Vec<Block3>, ComplianceError> {
         self.patch_chunked(loads, progress, CHUNK_BYTES, Self::forward_chunk)
+    }
+
+    /// [`Compliance::patch_compliances`] the straightforward way: full solves
+    /// `X = K_ff^-1 B^T`, then `W = B X`. The reference the sparse forward substitution is
+    /// checked and timed against (`host bench patch`); several times slower.
+    pub fn patch_compliances_by_full_solves(
+        &self,
+        loads: &[Vec<(usize, f64)>],
+        progress: Option<&dyn Progress>,
+    ) -> Result<Vec<Block3>, ComplianceError> {
+        self.patch_chunked(loads, progress, CHUNK_BYTES, Self::full_solve_chunk)
     }
 
     /// Validation, chunking, progress and symmetrisation around `reduce`.
@@ -227,7 +237,6 @@ impl Compliance {
     }
 
     /// The straightforward reference: `X = K_ff^-1 B^T` by full solves, then `W = B X`.
-    #[cfg(test)]
     fn full_solve_chunk(
         &self,
         chunk: &[Vec<(usize, f64)>],
@@ -255,12 +264,10 @@ impl Compliance {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::elasticity::quadratic::QuadraticBody;
-    use crate::elasticity::{Elasticity, FixedSet, Material, Stiffness};
+    use crate::elasticity::{Elasticity, FixedSet, Material};
     use crate::mesh::TetMesh;
     use crate::tool::ToolSurface;
     use std::cell::Cell;
-    use std::time::Instant;
 
     fn liver(name: &str) -> TetMesh {
         let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../meshes");
@@ -345,46 +352,5 @@ mod tests {
                 assert!(err < 1e-12, "{name} {bytes}: {err:e}");
             }
         }
-    }
-
-    /// Times both methods on liver-10k, P1 and P2 (`cargo test -p fem --profile checked --lib
-    /// patch_timing -- --ignored --nocapture`).
-    #[test]
-    #[ignore = "timing comparison, about a minute"]
-    fn patch_timing() {
-        let mesh = liver("liver-10k.msh");
-        let surface = crate::mesh::boundary(&mesh).unwrap();
-        let material = Material::new(3.0e3, 0.45).unwrap();
-        let run = |name: &str, step: usize, body: &dyn Fn() -> (Compliance, ToolSurface)| {
-            let (c, tool) = body();
-            let l = loads(&tool, &mesh, step, 0.003);
-            let mut results = Vec::new();
-            for (method, reduce) in METHODS {
-                let start = Instant::now();
-                let w = c.patch_chunked(&l, None, CHUNK_BYTES, reduce).unwrap();
-                eprintln!(
-                    "{name}: {} loads, {} free dofs, nnz(L) {}: {method} {:.2} s",
-                    l.len(),
-                    c.dofs().free_count(),
-                    c.stats().nnz_l,
-                    start.elapsed().as_secs_f64()
-                );
-                results.push(w);
-            }
-            let err = max_rel(&results[1], &results[0]);
-            eprintln!("  max relative difference {err:.1e}");
-            assert!(err < 1e-12);
-        };
-        run("p1", 4, &|| {
-            let body = Elasticity::new(&mesh, material).unwrap();
-            let c = Compliance::factorize(&body, &bed(&mesh.nodes)).unwrap();
-            (c, ToolSurface::linear(&mesh, &surface).unwrap())
-        });
-        run("p2", 40, &|| {
-            let body = QuadraticBody::new(&mesh, material).unwrap();
-            let c = Compliance::factorize(&body, &bed(body.positions())).unwrap();
-            assert_eq!(c.dofs().nodes(), body.nodes());
-            (c, ToolSurface::quadratic(&mesh, &surface, &body).unwrap())
-        });
     }
 }
