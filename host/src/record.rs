@@ -247,6 +247,22 @@ mod tests {
     use fem::elasticity::{Elasticity, FixedSet, Material};
     use fem::mesh::structured::box_mesh;
 
+    /// A frame's info with the tool force `tool_force_n`.
+    fn info(tool_force_n: [f32; 3]) -> FrameInfo {
+        FrameInfo {
+            seq: 0,
+            tick: 1,
+            state: bank_format::State::Armed,
+            contacts: 1,
+            exact: true,
+            tip_m: [0.0; 3],
+            tool_force_n,
+            tick_rate_hz: 1000.0,
+            display_fps: 60.0,
+            max_jitter_us: 0.0,
+        }
+    }
+
     #[test]
     fn recorded_frames_read_back_deformed_with_every_point() {
         let mesh = box_mesh([0.04, 0.02, 0.02], [4, 2, 2]);
@@ -271,19 +287,7 @@ mod tests {
             compliance: Arc::clone(&c),
         };
         let mut rec = Recorder::start(dir.path(), what).unwrap();
-        let info = FrameInfo {
-            seq: 0,
-            tick: 1,
-            state: bank_format::State::Armed,
-            contacts: 1,
-            exact: true,
-            tip_m: [0.0; 3],
-            tool_force_n: [0.0, 0.0, 0.2],
-            tick_rate_hz: 1000.0,
-            display_fps: 60.0,
-            max_jitter_us: 0.0,
-        };
-        rec.frame(&info, &[(top, f)], &[]);
+        rec.frame(&info([0.0, 0.0, 0.2]), &[(top, f)], &[]);
         assert_eq!(rec.finish().unwrap(), 1);
 
         let back = fem::mesh::read(&dir.path().join("frame_000000.vtu")).unwrap();
@@ -312,20 +316,8 @@ mod tests {
         });
         let dir = tempfile::tempdir().unwrap();
         let mut rec = Recorder::start(dir.path(), Recorded::Surface(surface)).unwrap();
-        let info = FrameInfo {
-            seq: 0,
-            tick: 1,
-            state: bank_format::State::Armed,
-            contacts: 0,
-            exact: true,
-            tip_m: [0.0; 3],
-            tool_force_n: [0.0, 0.0, 0.25],
-            tick_rate_hz: 1000.0,
-            display_fps: 60.0,
-            max_jitter_us: 0.0,
-        };
         let u = [[0.0, 0.0, -0.002], [0.0, 0.0, -0.001], [0.0, 0.0, 0.0]];
-        rec.frame(&info, &[], &u);
+        rec.frame(&info([0.0, 0.0, 0.25]), &[], &u);
         assert_eq!(rec.finish().unwrap(), 1);
         let text = std::fs::read_to_string(dir.path().join("frame_000000.vtu")).unwrap();
         // Points at rest + u (f32 widened to f64 exactly), one triangle (VTK type 5).

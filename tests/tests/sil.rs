@@ -708,7 +708,11 @@ fn presses_at_study_sites_render_the_converged_force_under_qemu() {
     let bank = Bank::parse(&raw).unwrap();
     let study = host::report::sampled::reference().unwrap();
     let fulcrum = bank.device().fulcrum_m.map(f64::from);
-    for name in ["right lobe top", "straight below the trocar", "left lobe top"] {
+    for name in [
+        "right lobe top",
+        "straight below the trocar",
+        "left lobe top",
+    ] {
         let s = study.sites.iter().position(|s| s.name == name).unwrap();
         let site = &study.sites[s];
         let along: [f64; 3] = std::array::from_fn(|k| site.point[k] - fulcrum[k]);

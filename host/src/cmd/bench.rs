@@ -43,18 +43,48 @@ pub enum Bench {
     Patch(PatchArgs),
 }
 
-/// Arguments of `host bench patch`.
+/// The sampled scene and FEM of the precompute benchmarks.
 #[derive(clap::Args, Debug)]
-pub struct PatchArgs {
+pub struct SampledFemArgs {
     /// Scene file; default: the embedded default scene.
     #[arg(long)]
     scene: Option<PathBuf>,
-    /// Another FEM mesh instead of the scene's `fem_mesh`.
+    /// Compute on this FEM mesh instead of the scene's `fem_mesh`
+    /// (e.g. host/meshes/generated/liver-100k.msh).
     #[arg(long)]
     fem_mesh: Option<PathBuf>,
     /// The element: p1, anp or p2 (default: the scene's).
     #[arg(long)]
     element: Option<String>,
+}
+
+impl SampledFemArgs {
+    /// The scene and its overrides.
+    fn resolve(
+        self,
+        no_richardson: bool,
+    ) -> Result<(host::scene::Scene, host::bank::precompute::Overrides)> {
+        let scene = host::scene::Scene::load_or_default(self.scene.as_deref())?;
+        let element = self
+            .element
+            .as_deref()
+            .map(str::parse::<host::scene::FemElement>)
+            .transpose()
+            .map_err(|why| anyhow::anyhow!("--element: {why}"))?;
+        let overrides = host::bank::precompute::Overrides {
+            fem_mesh: self.fem_mesh,
+            element,
+            no_richardson,
+        };
+        Ok((scene, overrides))
+    }
+}
+
+/// Arguments of `host bench patch`.
+#[derive(clap::Args, Debug)]
+pub struct PatchArgs {
+    #[command(flatten)]
+    fem: SampledFemArgs,
     /// Tool loads, evenly spread over the scene's samples (0: all of them; full solves take
     /// about 0.3 s a load on the default scene's P2 FEM).
     #[arg(long, default_value_t = 100)]
@@ -67,16 +97,8 @@ pub struct PatchArgs {
 /// Arguments of `host bench precompute`.
 #[derive(clap::Args, Debug)]
 pub struct PrecomputeArgs {
-    /// Scene file; default: the embedded default scene.
-    #[arg(long)]
-    scene: Option<PathBuf>,
-    /// Compute the samples and fields on this FEM mesh instead of the scene's `fem_mesh`
-    /// (e.g. host/meshes/generated/liver-100k.msh).
-    #[arg(long)]
-    fem_mesh: Option<PathBuf>,
-    /// The element for the samples: p1, anp or p2 (default: the scene's).
-    #[arg(long)]
-    element: Option<String>,
+    #[command(flatten)]
+    fem: SampledFemArgs,
     /// Drop the scene's Richardson extrapolation.
     #[arg(long)]
     no_richardson: bool,
@@ -179,20 +201,8 @@ pub fn run(bench: Bench) -> Result<()> {
     }
 }
 
-/// The `--element` of the precompute benchmarks.
-fn element(arg: Option<&str>) -> Result<Option<host::scene::FemElement>> {
-    arg.map(str::parse::<host::scene::FemElement>)
-        .transpose()
-        .map_err(|why| anyhow::anyhow!("--element: {why}"))
-}
-
 fn patch(args: PatchArgs) -> Result<()> {
-    let scene = host::scene::Scene::load_or_default(args.scene.as_deref())?;
-    let overrides = host::bank::precompute::Overrides {
-        fem_mesh: args.fem_mesh,
-        element: element(args.element.as_deref())?,
-        no_richardson: true,
-    };
+    let (scene, overrides) = args.fem.resolve(true)?;
     eprintln!("factorising the FEM, then W of the loads twice ...");
     let m = host::bank::precompute::patch_methods(scene, &overrides, args.loads)?;
     if args.json {
@@ -231,12 +241,7 @@ fn patch(args: PatchArgs) -> Result<()> {
 }
 
 fn precompute(args: PrecomputeArgs) -> Result<()> {
-    let scene = host::scene::Scene::load_or_default(args.scene.as_deref())?;
-    let overrides = host::bank::precompute::Overrides {
-        fem_mesh: args.fem_mesh,
-        element: element(args.element.as_deref())?,
-        no_richardson: args.no_richardson,
-    };
+    let (scene, overrides) = args.fem.resolve(args.no_richardson)?;
     let progress = host::progress::Bar::new("chunks (patch compliance, then display fields)");
     let f = host::bank::precompute::measure(scene, &overrides, Some(&progress))?;
     progress.finish();
