@@ -626,6 +626,20 @@ mod tests {
         FakeClock(core::cell::Cell::new(0))
     }
 
+    /// The common rig: the flat patch's bank, the link split between an [`App`] on it and a
+    /// [`FakeHost`], a fresh [`FakePlant`] and [`FakeClock`], bound to the names given.
+    macro_rules! rig {
+        ($bank:ident, $app:ident, $host:ident, $plant:ident, $clock:ident) => {
+            let bytes = flat_patch();
+            let $bank = Bank::parse(bytes.as_slice()).unwrap();
+            let mut link = Link::new();
+            let (tick_end, driver) = link.split();
+            let mut $app = App::new(Ok(&$bank), tick_end, 0);
+            let mut $host = FakeHost::new(driver);
+            let (mut $plant, $clock) = (plant(), clock());
+        };
+    }
+
     /// References the encoders at encoder zero, as a host's `ZeroEncoders` taken before the
     /// first tick would (sent over the link, its bytes would push a test's other commands past
     /// the first tick's share, [`MAX_RX_BYTES_PER_TICK`]). No loop without a bank.
@@ -637,13 +651,7 @@ mod tests {
 
     #[test]
     fn commands_arm_and_telemetry_flows() {
-        let bytes = flat_patch();
-        let bank = Bank::parse(bytes.as_slice()).unwrap();
-        let mut link = Link::new();
-        let (tick_end, driver) = link.split();
-        let mut app = App::new(Ok(&bank), tick_end, 0);
-        let mut host = FakeHost::new(driver);
-        let (mut plant, clock) = (plant(), clock());
+        rig!(bank, app, host, plant, clock);
         host.send(&HostToDevice::Hello);
         host.send(&HostToDevice::SetMode(Mode::Transparent));
         // A corrupt frame between them is dropped and counted.
@@ -694,13 +702,7 @@ mod tests {
 
     #[test]
     fn silence_while_armed_faults_and_reports_once() {
-        let bytes = flat_patch();
-        let bank = Bank::parse(bytes.as_slice()).unwrap();
-        let mut link = Link::new();
-        let (tick_end, driver) = link.split();
-        let mut app = App::new(Ok(&bank), tick_end, 0);
-        let mut host = FakeHost::new(driver);
-        let (mut plant, clock) = (plant(), clock());
+        rig!(bank, app, host, plant, clock);
         host.send(&HostToDevice::ZeroEncoders);
         host.send(&HostToDevice::Arm);
         let mut reports = Vec::new();
@@ -737,13 +739,7 @@ mod tests {
     /// pressed, and works again once it is released and the fault cleared.
     #[test]
     fn an_estop_mid_run_disables_the_motors_and_reports_once() {
-        let bytes = flat_patch();
-        let bank = Bank::parse(bytes.as_slice()).unwrap();
-        let mut link = Link::new();
-        let (tick_end, driver) = link.split();
-        let mut app = App::new(Ok(&bank), tick_end, 0);
-        let mut host = FakeHost::new(driver);
-        let (mut plant, clock) = (plant(), clock());
+        rig!(bank, app, host, plant, clock);
         let drive = [0.5, -0.25, 0.0];
         host.send(&HostToDevice::SetMode(Mode::ConstantCurrent {
             currents_a: drive,
@@ -808,13 +804,7 @@ mod tests {
     /// 3) at once, the motors disabled from the next tick.
     #[test]
     fn set_mode_while_armed_is_refused_with_a_fault_frame() {
-        let bytes = flat_patch();
-        let bank = Bank::parse(bytes.as_slice()).unwrap();
-        let mut link = Link::new();
-        let (tick_end, driver) = link.split();
-        let mut app = App::new(Ok(&bank), tick_end, 0);
-        let mut host = FakeHost::new(driver);
-        let (mut plant, clock) = (plant(), clock());
+        rig!(bank, app, host, plant, clock);
         host.send(&HostToDevice::ZeroEncoders);
         host.send(&HostToDevice::Arm);
         for _ in 0..5 {
@@ -1100,13 +1090,7 @@ mod tests {
     /// meanwhile still reaches it once it reads again.
     #[test]
     fn a_fault_raised_while_the_host_is_not_reading_is_not_lost() {
-        let bytes = flat_patch();
-        let bank = Bank::parse(bytes.as_slice()).unwrap();
-        let mut link = Link::new();
-        let (tick_end, driver) = link.split();
-        let mut app = App::new(Ok(&bank), tick_end, 0);
-        let mut host = FakeHost::new(driver);
-        let (mut plant, clock) = (plant(), clock());
+        rig!(bank, app, host, plant, clock);
         host.send(&HostToDevice::ZeroEncoders);
         host.send(&HostToDevice::Arm);
         // 200 ticks unread (the host's commands still arrive: the incoming side is apart).
