@@ -8,7 +8,8 @@
 //! samples around the point, as the firmware interpolates `W`) and multiplies by the linear
 //! tool force `F` (the sum of telemetry's contact forces, `F = W^-1 d`).
 //!
-//! The fields come from P1 on the scene's `fem_mesh` (full solves `X_s = K^-1 B_s^T` in chunks:
+//! The fields come from P1 on the scene's `fem_mesh` (`X_s = K^-1 B_s^T` in chunks, by
+//! `Compliance::solve_loads`: a sparse forward substitution, then the dense backward solve;
 //! P2 on the same mesh costs about ten times as much, some 200 s for the default scene's 977
 //! samples against about 20 s). P1 is stiffer than the converged `W` the bank renders, so each
 //! sample's field is scaled on the right by `W_P1,s^-1 W_s` (`W_P1,s = B_s X_s`): the load-weighted
@@ -114,7 +115,7 @@ impl DisplayFields {
         }
         for (c, chunk) in loads.chunks(CHUNK_LOADS).enumerate() {
             let first = c * CHUNK_LOADS;
-            let x = solve_chunk(&compliance, chunk);
+            let x = compliance.solve_loads(chunk)?;
             let out = &mut data[first * nodes * 9..(first + chunk.len()) * nodes * 9];
             out.par_chunks_mut(nodes * 9)
                 .zip(chunk.par_iter())
@@ -356,21 +357,4 @@ impl Reader<'_> {
     fn f32(&mut self) -> Result<f32> {
         Ok(f32::from_le_bytes(self.take(4)?.try_into()?))
     }
-}
-
-/// `X = K_ff^-1 B^T` for a chunk of loads (three columns per load).
-fn solve_chunk(compliance: &Compliance, chunk: &[Vec<(usize, f64)>]) -> faer::Mat<f64> {
-    let dofs = compliance.dofs();
-    let mut x = faer::Mat::<f64>::zeros(dofs.free_count(), 3 * chunk.len());
-    for (s, load) in chunk.iter().enumerate() {
-        for &(n, w) in load {
-            for i in 0..3 {
-                if let Some(d) = dofs.free_dof(n, i) {
-                    x[(d, 3 * s + i)] += w;
-                }
-            }
-        }
-    }
-    compliance.solve_in_place(x.as_mut(), faer::Par::rayon(0));
-    x
 }

@@ -81,26 +81,7 @@ impl Compliance {
         chunk_bytes: usize,
         reduce: ChunkFn,
     ) -> Result<Vec<Block3>, ComplianceError> {
-        let n = self.dofs.nodes();
-        for (s, load) in loads.iter().enumerate() {
-            if load.is_empty() {
-                return Err(ComplianceError::BadLoad {
-                    load: s,
-                    reason: "it has no node".into(),
-                });
-            }
-            for &(node, w) in load {
-                if node >= n {
-                    return Err(ComplianceError::NoSuchNode { node, nodes: n });
-                }
-                if !w.is_finite() {
-                    return Err(ComplianceError::BadLoad {
-                        load: s,
-                        reason: format!("node {node} has the weight {w}"),
-                    });
-                }
-            }
-        }
+        self.check_loads(loads)?;
         let nf = self.dofs.free_count();
         let per_chunk = (chunk_bytes / (3 * 8 * nf.max(1))).max(1);
         let chunks = loads.len().div_ceil(per_chunk);
@@ -122,6 +103,62 @@ impl Compliance {
             *w = std::array::from_fn(|i| std::array::from_fn(|j| 0.5 * (w[i][j] + w[j][i])));
         }
         Ok(out)
+    }
+
+    /// Every load has a node, every node exists, every weight is finite.
+    fn check_loads(&self, loads: &[Vec<(usize, f64)>]) -> Result<(), ComplianceError> {
+        let n = self.dofs.nodes();
+        for (s, load) in loads.iter().enumerate() {
+            if load.is_empty() {
+                return Err(ComplianceError::BadLoad {
+                    load: s,
+                    reason: "it has no node".into(),
+                });
+            }
+            for &(node, w) in load {
+                if node >= n {
+                    return Err(ComplianceError::NoSuchNode { node, nodes: n });
+                }
+                if !w.is_finite() {
+                    return Err(ComplianceError::BadLoad {
+                        load: s,
+                        reason: format!("node {node} has the weight {w}"),
+                    });
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// `X = K_ff^-1 B^T` for the tool `loads` (as [`Compliance::patch_compliances`] takes
+    /// them): three columns per load, rows in free-dof order. The sparse forward substitution
+    /// `Y = L^-1 P B^T` of the module notes, then the dense backward solve `X = P^T L^-T Y`:
+    /// the forward half of a full solve costs only the loads' active columns.
+    ///
+    /// Errors: as [`Compliance::patch_compliances`].
+    pub fn solve_loads(&self, loads: &[Vec<(usize, f64)>]) -> Result<Mat<f64>, ComplianceError> {
+        self.check_loads(loads)?;
+        let nf = self.dofs.free_count();
+        if nf == 0 {
+            return Ok(Mat::zeros(0, 3 * loads.len()));
+        }
+        let (mut y, row_of) = self.sparse_forward(loads)?;
+        let SymbolicCholeskyRaw::Supernodal(sym) = self.symbolic.raw() else {
+            return Err(ComplianceError::Factorisation(
+                "internal error: expected a supernodal factor".into(),
+            ));
+        };
+        let par = faer::Par::rayon(0);
+        let mut mem = faer::dyn_stack::MemBuffer::new(
+            self.symbolic.solve_in_place_scratch::<f64>(y.ncols(), par),
+        );
+        SupernodalLltRef::new(sym, &self.values).l_transpose_solve_with_conj(
+            faer::Conj::No,
+            y.as_mut(),
+            par,
+            faer::dyn_stack::MemStack::new(&mut mem),
+        );
+        Ok(Mat::from_fn(nf, y.ncols(), |d, j| y[(row_of[d], j)]))
     }
 
     /// `B^T` of a chunk, free dof `d` in row `row(d)` (three columns per load).
@@ -150,13 +187,39 @@ impl Compliance {
         chunk: &[Vec<(usize, f64)>],
         out: &mut Vec<Block3>,
     ) -> Result<(), ComplianceError> {
+        let (y, _) = self.sparse_forward(chunk)?;
+        let y = &y;
+        out.par_extend((0..chunk.len()).into_par_iter().map(|s| {
+            let cols = [0, 1, 2].map(|i| y.col_as_slice(3 * s + i));
+            let mut w = [[0.0; 3]; 3];
+            for i in 0..3 {
+                for j in i..3 {
+                    let v: f64 = cols[i].iter().zip(cols[j]).map(|(a, b)| a * b).sum();
+                    w[i][j] = v;
+                    w[j][i] = v;
+                }
+            }
+            w
+        }));
+        Ok(())
+    }
+
+    /// `Y = L^-1 P B^T` for a chunk of loads by the sparse forward substitution of the module
+    /// documentation (rows in the factor's order), and each free dof's row in it.
+    fn sparse_forward(
+        &self,
+        chunk: &[Vec<(usize, f64)>],
+    ) -> Result<(Mat<f64>, Vec<usize>), ComplianceError> {
         let internal =
             |what: &str| ComplianceError::Factorisation(format!("internal error: {what}"));
         let SymbolicCholeskyRaw::Supernodal(sym) = self.symbolic.raw() else {
             return Err(internal("expected a supernodal factor"));
         };
         let inverse = self.symbolic.perm().map(|p| p.arrays().1);
-        let row_of = |d: usize| inverse.map_or(d, |inv| inv[d]);
+        let rows: Vec<usize> = (0..self.dofs.free_count())
+            .map(|d| inverse.map_or(d, |inv| inv[d]))
+            .collect();
+        let row_of = |d: usize| rows[d];
         let mut y = self.right_hand_sides(chunk, row_of);
         let ns = sym.n_supernodes();
         let (begin, end) = (sym.supernode_begin(), sym.supernode_end());
@@ -220,20 +283,7 @@ impl Compliance {
                 pending[up].extend_from_slice(&cols);
             }
         }
-        let y = &y;
-        out.par_extend((0..chunk.len()).into_par_iter().map(|s| {
-            let cols = [0, 1, 2].map(|i| y.col_as_slice(3 * s + i));
-            let mut w = [[0.0; 3]; 3];
-            for i in 0..3 {
-                for j in i..3 {
-                    let v: f64 = cols[i].iter().zip(cols[j]).map(|(a, b)| a * b).sum();
-                    w[i][j] = v;
-                    w[j][i] = v;
-                }
-            }
-            w
-        }));
-        Ok(())
+        Ok((y, rows))
     }
 
     /// The straightforward reference: `X = K_ff^-1 B^T` by full solves, then `W = B X`.
@@ -329,6 +379,39 @@ mod tests {
         ("full solves", Compliance::full_solve_chunk),
         ("sparse forward", Compliance::forward_chunk),
     ];
+
+    /// `solve_loads` (sparse forward, dense backward) against full solves of the same
+    /// right-hand sides, fixed dofs and all.
+    #[test]
+    fn solve_loads_matches_full_solves() {
+        let mesh = liver("liver-1k4.msh");
+        let body = Elasticity::new(&mesh, Material::new(3.0e3, 0.45).unwrap()).unwrap();
+        let c = Compliance::factorize(&body, &bed(&mesh.nodes)).unwrap();
+        let tool = ToolSurface::linear(&mesh, &crate::mesh::boundary(&mesh).unwrap()).unwrap();
+        let l = loads(&tool, &mesh, 11, 0.004);
+        let x = c.solve_loads(&l).unwrap();
+        let mut full = c.right_hand_sides(&l, |d| d);
+        c.solve_in_place(full.as_mut(), faer::Par::Seq);
+        assert_eq!((x.nrows(), x.ncols()), (full.nrows(), full.ncols()));
+        let scale = (0..full.ncols())
+            .flat_map(|j| full.col_as_slice(j).iter().copied())
+            .fold(0.0f64, |m, v| m.max(v.abs()));
+        let diff = (0..full.ncols())
+            .flat_map(|j| {
+                let (a, b) = (x.col_as_slice(j), full.col_as_slice(j));
+                a.iter()
+                    .zip(b)
+                    .map(|(p, q)| (p - q).abs())
+                    .collect::<Vec<_>>()
+            })
+            .fold(0.0f64, f64::max);
+        assert!(
+            scale > 0.0 && diff <= 1e-12 * scale,
+            "{diff:e} of {scale:e}"
+        );
+        let bad = vec![vec![(0usize, f64::NAN)]];
+        assert!(c.solve_loads(&bad).is_err());
+    }
 
     #[test]
     fn sparse_forward_matches_full_solves_for_any_chunk_size() {
