@@ -241,6 +241,7 @@ fn patch(args: PatchArgs) -> Result<()> {
 }
 
 fn precompute(args: PrecomputeArgs) -> Result<()> {
+    let larger_fem = args.fem.fem_mesh.is_some();
     let (scene, overrides) = args.fem.resolve(args.no_richardson)?;
     let progress = host::progress::Bar::new("chunks (patch compliance, then display fields)");
     let f = host::bank::precompute::measure(scene, &overrides, Some(&progress))?;
@@ -275,14 +276,18 @@ fn precompute(args: PrecomputeArgs) -> Result<()> {
         f.peak_rss_mib / 1024.0,
         f.cached_start_s
     );
-    println!(
-        "goal      default scene: precompute <= 60 s and <= 4 GiB, cached start <= 3 s: {}",
-        if total <= 60.0 && f.peak_rss_mib <= 4096.0 && f.cached_start_s <= 3.0 {
-            "met"
-        } else {
-            "not met"
-        }
-    );
+    let verdict = |met: bool| if met { "met" } else { "not met" };
+    if larger_fem {
+        println!(
+            "goal      a larger FEM (liver-100k): samples and display fields <= 300 s: {}",
+            verdict(f.bank_s + f.fields_s <= 300.0)
+        );
+    } else {
+        println!(
+            "goal      default scene: precompute <= 60 s and <= 4 GiB, cached start <= 3 s: {}",
+            verdict(total <= 60.0 && f.peak_rss_mib <= 4096.0 && f.cached_start_s <= 3.0)
+        );
+    }
     Ok(())
 }
 
