@@ -325,12 +325,23 @@ pub fn run(args: Args) -> Result<()> {
         Some(r) => Some(r.finish()?),
         None => None,
     };
-    report(&args, &display_stats, &loop_stats, recorded, display_nodes);
+    report(
+        &args,
+        &display_stats,
+        &loop_stats,
+        (recorded, display_nodes, aim),
+    );
     Ok(())
 }
 
-/// Prints the figures of a run.
-fn report(args: &Args, d: &DisplayStats, l: &LoopStats, recorded: Option<usize>, nodes: usize) {
+/// Prints the figures of a run: `(recorded frames, display nodes, press point)` besides the
+/// statistics.
+fn report(
+    args: &Args,
+    d: &DisplayStats,
+    l: &LoopStats,
+    (recorded, nodes, press_point): (Option<usize>, usize, [f64; 3]),
+) {
     if args.json {
         let v = serde_json::json!({
             "tick_rate_hz": l.tick_rate_hz, "max_jitter_us": l.max_jitter_us,
@@ -341,7 +352,7 @@ fn report(args: &Args, d: &DisplayStats, l: &LoopStats, recorded: Option<usize>,
             "column_batches": d.columns.batches, "column_nodes": d.columns.nodes,
             "column_batch_mean_ms": mean_batch_ms(d),
             "column_batch_max_ms": d.columns.max_seconds * 1e3,
-            "display_nodes": nodes, "recorded_frames": recorded,
+            "display_nodes": nodes, "recorded_frames": recorded, "press_point_m": press_point,
         });
         println!("{v}");
         return;
