@@ -1,5 +1,6 @@
-//! A mutation fuzz of every reader of user files: the mesh readers (MSH 2, MSH 4.1 ASCII and
-//! binary, VTU ascii / base64 / appended / raw, legacy VTK ASCII and binary, classic and 5.1)
+//! A mutation fuzz of every reader of user files: the mesh readers (MSH 1 and 2, MSH 4.1 ASCII
+//! and binary, VTU ascii / base64 / appended / raw, legacy VTK ASCII and binary, classic and
+//! 5.1, Medit)
 //! and the bench CSV reader. Each valid sample is mutated deterministically (byte flips,
 //! insertions, deletions, duplicated runs, digits replaced by huge numbers, truncation) and
 //! every mutant is read in a thread with a time limit. Must hold: no panic, no hang; each
@@ -116,7 +117,12 @@ fn every_reader_survives_mutated_input() {
         total.panics += t.panics;
         total.hangs += t.hangs;
     };
-    let meshes: [(&str, Parse); 12] = [
+    let meshes: [(&str, Parse); 15] = [
+        ("cube_v1.msh", |b| mesh::read_bytes(&b, Format::Msh).is_ok()),
+        ("cube_v1_sparse.msh", |b| {
+            mesh::read_bytes(&b, Format::Msh).is_ok()
+        }),
+        ("cube.mesh", |b| mesh::read_bytes(&b, Format::Medit).is_ok()),
         ("cube_v2.msh", |b| mesh::read_bytes(&b, Format::Msh).is_ok()),
         ("cube_v41.msh", |b| {
             mesh::read_bytes(&b, Format::Msh).is_ok()

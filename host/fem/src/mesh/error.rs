@@ -33,7 +33,7 @@ pub enum MeshError {
         source: std::io::Error,
     },
     /// The file name has no extension this module can read.
-    #[error("{file}unknown mesh file extension {extension:?} (expected .msh, .vtu or .vtk)")]
+    #[error("{file}unknown mesh file extension {extension:?} (expected .msh, .vtu, .vtk or .mesh)")]
     UnknownExtension {
         /// The file.
         file: Origin,

@@ -5,9 +5,9 @@
 //! (base64) and raw `appended` format, uncompressed or zlib-compressed, either byte order,
 //! 32- or 64-bit headers, any integer type for connectivity/offsets/types, several pieces.
 
-use super::TetMesh;
 use super::error::{MeshError, nofile};
 use super::vtk::Builder;
+use super::{Ignored, TetMesh};
 use std::io::Read;
 
 /// A problem located at a byte offset of the file (reported as a line, the XML being text).
@@ -16,7 +16,7 @@ struct At(usize, String);
 type Res<T> = Result<T, At>;
 
 /// Read a `.vtu` file.
-pub(crate) fn read_vtu(bytes: &[u8]) -> Result<TetMesh, MeshError> {
+pub(crate) fn read_vtu(bytes: &[u8]) -> Result<(TetMesh, Ignored), MeshError> {
     read(bytes).map_err(|At(offset, message)| MeshError::Parse {
         file: nofile(),
         line: bytes
@@ -550,7 +550,7 @@ fn finish_piece(p: PieceArrays, out: &mut Builder) -> Res<()> {
     Ok(())
 }
 
-fn read(bytes: &[u8]) -> Res<TetMesh> {
+fn read(bytes: &[u8]) -> Res<(TetMesh, Ignored)> {
     // Raw appended data is binary and may contain '<': cut it off before scanning tags.
     let (xml, appended) = match find(bytes, b"<AppendedData", 0) {
         None => (bytes, None),
@@ -699,7 +699,7 @@ mod tests {
 <DataArray type="Int32" Name="offsets" format="ascii">3 7</DataArray>
 <DataArray type="UInt8" Name="types" format="ascii">5 10</DataArray>
 </Cells></Piece></UnstructuredGrid></VTKFile>"#;
-        let m = read_vtu(text).unwrap();
+        let (m, _) = read_vtu(text).unwrap();
         assert_eq!(m.nodes.len(), 4);
         assert_eq!(m.tets, vec![[0, 1, 2, 3]]);
         let bad = String::from_utf8_lossy(text).replace("0 1 2 3<", "0 1 x 3<");
