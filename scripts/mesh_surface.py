@@ -44,10 +44,10 @@ def main():
         say(f"warning: gmsh {gmsh.__version__}, not the pinned {GMSH_VERSION}")
     size = float(job["size"])
     fine = job.get("fine")
-    gradient = float(job.get("gradient", 0.3))
+    gradient = float(job.get("gradient") or 0.3)
     reach = np.asarray(job.get("reach_points") or [], dtype=float).reshape(-1, 3)
 
-    gmsh.initialize(["gmsh", "-noenv"])
+    gmsh.initialize()
     try:
         opt = gmsh.option.setNumber
         opt("General.Terminal", 1)

@@ -195,9 +195,11 @@ fn r(x: f64) -> String {
 /// motion, a reachable region), as `out` would be read; also the reachable nodes' count.
 pub fn scene_text(mesh: &TetMesh, spec: &NewScene, out: &Path) -> Result<(String, usize)> {
     let w = aim(mesh, spec.trocar)?;
-    // The axes are unit length in f64; rounding to 6 decimals keeps them orthonormal well
-    // within the scene's check. Round the shaft and re-derive nothing: print 9 decimals.
-    let axis = |a: [f64; 3]| format!("[{:.9}, {:.9}, {:.9}]", a[0], a[1], a[2]);
+    // The axes with 9 decimals stay orthonormal well within the scene's check.
+    let axis = |a: [f64; 3]| {
+        let a = a.map(|x| x + 0.0); // no "-0.000000000"
+        format!("[{:.9}, {:.9}, {:.9}]", a[0], a[1], a[2])
+    };
     let (young, poisson, sources) = spec.tissue.preset();
     let (lo, hi) = mesh.bounding_box();
     let fixed = match spec.support {
@@ -225,7 +227,7 @@ mesh = "{mesh_name}"
 
 [material]
 {sources}
-young_pa = {young}
+young_pa = {young:.1}
 poisson = {poisson}
 
 [fixed]

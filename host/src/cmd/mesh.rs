@@ -155,15 +155,15 @@ pub fn run(a: Args) -> Result<()> {
             );
         }
         eprintln!(
-            "reach: {} surface points within the tool's reach ({}); size {fine} m there, \
-             growing by {} per m to {size} m",
+            "reach: {} surface points within the tool's reach ({}); size {fine:.4} m there, \
+             growing by {} per m to {size:.4} m",
             sizes.reach.len(),
             scene_path.display(),
             a.gradient
         );
         sizes.fine = Some((fine, a.gradient));
     } else {
-        eprintln!("size: {size} m everywhere");
+        eprintln!("size: {size:.4} m everywhere");
     }
     if a.check {
         eprintln!("--check: the surface passes; not meshed");

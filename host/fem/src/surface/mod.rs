@@ -92,7 +92,7 @@ impl TriSurface {
     }
 }
 
-/// A point for messages: three coordinates, 4 significant digits.
+/// A point for messages: three coordinates, 4 decimals (file units).
 struct At([f64; 3]);
 
 impl fmt::Display for At {
