@@ -398,3 +398,84 @@ fn a_missing_surface_and_an_unknown_extension_are_clear_errors() {
         text(&o).1
     );
 }
+
+/// Compliance energy `f . u` of the organ resting on its bed (every node up to z = 10 mm held)
+/// under its own weight (consistent nodal loads of a unit weight density, 3 kPa, nu = 0.45): a
+/// global figure that converges under refinement, unlike a point load's.
+fn weight_compliance(mesh: &fem::mesh::TetMesh) -> f64 {
+    use fem::compliance::Compliance;
+    use fem::elasticity::{Elasticity, FixedSet, Material};
+    let body = Elasticity::new(mesh, Material::new(3000.0, 0.45).unwrap()).unwrap();
+    let mut fixed = FixedSet::none(mesh.nodes.len());
+    fixed
+        .fix_box(mesh, [-1.0, -1.0, -1.0, 1.0, 1.0, 0.01], [true; 3])
+        .unwrap();
+    let c = Compliance::factorize(&body, &fixed).unwrap();
+    let mut f = vec![0.0; 3 * mesh.nodes.len()];
+    for t in 0..mesh.tets.len() {
+        let v = mesh.signed_volume(t);
+        for &n in &mesh.tets[t] {
+            f[3 * n + 2] -= v / 4.0;
+        }
+    }
+    let u = c.displacement(&f);
+    f.iter().zip(&u).map(|(a, b)| a * b).sum()
+}
+
+/// The organ meshed from its 8 mm surface against meshes of the same geometry made directly
+/// from the CAD body by scripts/gen_meshes.py (host/meshes/liver-1k4.msh, liver-10k.msh, the
+/// reference). Measured (README, "From a surface to a scene"): at 9 mm the surface's mesh is
+/// -8.5% off liver-10k, a direct 9 mm mesh -8.3% (P1 at nu = 0.45 is stiff when coarse); at
+/// 6 mm -4.9% against the direct mesh's -1.5%, the rest being the 8 mm surface's faceting
+/// (1% less volume than the CAD body, W growing as the volume squared). Held here: the error
+/// falls under refinement and stays below 6% at 6 mm.
+#[test]
+fn the_meshed_surface_has_the_compliance_of_a_direct_mesh() {
+    let meshes = Path::new(env!("CARGO_MANIFEST_DIR")).join("meshes");
+    let direct_coarse = fem::mesh::load(&meshes.join("liver-1k4.msh")).unwrap();
+    let direct_fine = fem::mesh::load(&meshes.join("liver-10k.msh")).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let mut from_surface = Vec::new();
+    for size in ["0.009", "0.006"] {
+        let out = dir.path().join(format!("organ-{size}.msh"));
+        let o = host(&[
+            "mesh",
+            &surface("organ_cm.obj"),
+            "-o",
+            out.to_str().unwrap(),
+            "--size",
+            size,
+        ]);
+        assert!(o.status.success(), "{}", text(&o).1);
+        from_surface.push((size, fem::mesh::load(&out).unwrap()));
+    }
+    let wc = weight_compliance(&direct_coarse);
+    let wf = weight_compliance(&direct_fine);
+    let spread = (wc / wf - 1.0).abs();
+    println!(
+        "direct: liver-1k4 ({} nodes) {wc:.6e}, liver-10k ({} nodes) {wf:.6e} (spread {:.2}%)",
+        direct_coarse.nodes.len(),
+        direct_fine.nodes.len(),
+        100.0 * spread
+    );
+    let volume =
+        |m: &fem::mesh::TetMesh| (0..m.tets.len()).map(|t| m.signed_volume(t)).sum::<f64>();
+    println!(
+        "direct volumes {:.4e} {:.4e}",
+        volume(&direct_coarse),
+        volume(&direct_fine)
+    );
+    let mut errors = Vec::new();
+    for (size, m) in &from_surface {
+        let w = weight_compliance(m);
+        let vol: f64 = (0..m.tets.len()).map(|t| m.signed_volume(t)).sum();
+        println!(
+            "from the surface, --size {size}: {} nodes, volume {vol:.4e} m^3, {w:.6e} ({:+.2}% of liver-10k)",
+            m.nodes.len(),
+            100.0 * (w / wf - 1.0)
+        );
+        errors.push((w / wf - 1.0).abs());
+    }
+    assert!(spread < 0.01, "the direct meshes disagree: {spread}");
+    assert!(errors[1] < errors[0] && errors[1] < 0.06, "{errors:?}");
+}

@@ -154,10 +154,9 @@ fn a_flipped_patch_is_refused_or_flipped_back() {
 fn two_shells_are_refused_or_the_largest_kept() {
     let big = sphere(2, [0.0; 3]);
     let mut small = sphere(1, [5.0, 0.0, 0.0]);
+    // Half the radius.
     for v in &mut small.vertices {
-        for k in 0..3 {
-            v[k] = 5.0 * f64::from(k == 0) + (v[k] - 5.0 * f64::from(k == 0)) * 0.5;
-        }
+        *v = [5.0 + (v[0] - 5.0) * 0.5, v[1] * 0.5, v[2] * 0.5];
     }
     let n = big.vertices.len();
     let both = TriSurface {
