@@ -311,6 +311,16 @@ fn the_organ_is_meshed_graded_near_the_reach_and_becomes_a_scene() {
             .collect();
         (v.iter().sum::<f64>() / v.len().max(1) as f64, v.len())
     };
+    // The README's table: element size (longest edge) against distance from the reach.
+    for w in [0.0, 0.005, 0.01, 0.02, 0.03, 1.0].windows(2) {
+        let (m, n) = mean(w[0], w[1]);
+        println!(
+            "distance {:.0}-{:.0} mm: {n} tets, mean longest edge {:.2} mm",
+            w[0] * 1e3,
+            w[1] * 1e3,
+            m * 1e3
+        );
+    }
     let (near, n_near) = mean(0.0, 0.005);
     let (far, n_far) = mean(0.03, 1.0);
     println!(
