@@ -14,6 +14,7 @@ by Gmsh at 8 mm (single-threaded, fixed seed: reruns give the same files).  Writ
   organ_cm.ply        the same in centimetres, binary little-endian PLY (float32 vertices)
   organ_cm.vtk        the same, legacy VTK POLYDATA ASCII
   organ_cm_bin.vtk    the same, legacy VTK POLYDATA binary (big-endian, double points)
+  organ_cm.vtp        the same, VTK XML PolyData, ascii data arrays
   organ_holes.obj     organ_cm with two holes: the faces around two vertices removed
                       (boundary loops of those vertices' valences)
   organ_flipped.obj   organ_cm with the faces whose centroid lies within 3 cm of the top of
@@ -163,6 +164,23 @@ def write_vtk(name, pts, tris, binary):
             f.write("".join(" ".join(str(x) for x in c) + "\n" for c in cells).encode())
 
 
+def write_vtp(name, pts, tris):
+    pts_text = " ".join(f"{x:.6f}" for x in pts.ravel())
+    conn = " ".join(str(int(x)) for x in tris.ravel())
+    offs = " ".join(str(3 * (i + 1)) for i in range(len(tris)))
+    with open(os.path.join(OUT, name), "w") as f:
+        f.write(
+            '<?xml version="1.0"?>\n<!-- made by scripts/gen_test_surfaces.py -->\n'
+            '<VTKFile type="PolyData" version="0.1" byte_order="LittleEndian">\n<PolyData>\n'
+            f'<Piece NumberOfPoints="{len(pts)}" NumberOfPolys="{len(tris)}">\n'
+            f'<Points><DataArray type="Float64" NumberOfComponents="3" format="ascii">{pts_text}</DataArray></Points>\n'
+            '<Polys>\n'
+            f'<DataArray type="Int32" Name="connectivity" format="ascii">{conn}</DataArray>\n'
+            f'<DataArray type="Int32" Name="offsets" format="ascii">{offs}</DataArray>\n'
+            "</Polys>\n</Piece>\n</PolyData>\n</VTKFile>\n"
+        )
+
+
 def sphere(centre, r, n=8):
     """A closed UV sphere, outward."""
     pts = [(centre[0], centre[1], centre[2] + r)]
@@ -195,6 +213,7 @@ def main():
     write_ply("organ_cm.ply", cm, tris)
     write_vtk("organ_cm.vtk", cm, tris, binary=False)
     write_vtk("organ_cm_bin.vtk", cm, tris, binary=True)
+    write_vtp("organ_cm.vtp", cm, tris)
 
     # Two holes: the fans of two vertices on the top of each lobe.
     def nearest(p):

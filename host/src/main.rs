@@ -47,7 +47,7 @@ enum Command {
     Device(cmd::device::DeviceCmd),
     /// Speed against error for every knob, and the hard cases, on one generated page.
     Report(cmd::report::Args),
-    /// A closed surface (STL, OBJ, PLY, VTK polydata) to a tetrahedral mesh through Gmsh:
+    /// A closed surface (STL, OBJ, PLY, VTK polydata, VTP) to a tetrahedral mesh through Gmsh:
     /// units, surface checks and repairs, fine where a scene's tool reaches, quality.
     Mesh(cmd::mesh::Args),
     /// Scene files: `new` writes a complete scene for a mesh, aimed from a trocar.

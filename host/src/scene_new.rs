@@ -304,13 +304,15 @@ mod tests {
 
     #[test]
     fn aimed_like_the_default_scene() {
-        // The default liver under its trocar at z = 0.16: the shaft points down at the organ,
-        // the insertion range is the default scene's [0.03, 0.14] within a few mm.
+        // The default liver under its trocar at z = 0.16: the shaft points down at the organ;
+        // the insertion starts where the default scene's does (0.03 m: the liver's top is
+        // 0.091 m away) and ends 0.13 m (half the 0.077 m depth past the top; the default
+        // scene's 0.14 reaches 0.05 m past it).
         let mesh = fem::mesh::parse_msh(include_bytes!("../meshes/liver-1k4.msh")).unwrap();
         let w = aim(&mesh, [0.0, 0.0, 0.16]).unwrap();
         assert!(w.shaft[2] < -0.95, "{:?}", w.shaft);
         assert!((w.insertion[0] - 0.03).abs() < 0.005, "{:?}", w.insertion);
-        assert!((w.insertion[1] - 0.14).abs() < 0.005, "{:?}", w.insertion);
+        assert!((w.insertion[1] - 0.13).abs() < 0.002, "{:?}", w.insertion);
         // Orthonormal, right-handed like the default (pitch x yaw = -shaft).
         let d = |a, b| dot(a, b);
         assert!(d(w.shaft, w.pitch_axis).abs() < 1e-12 && d(w.shaft, w.yaw_axis).abs() < 1e-12);

@@ -1,7 +1,7 @@
 //! A mutation fuzz of every reader of user files: the mesh readers (MSH 1 and 2, MSH 4.1 ASCII
 //! and binary, VTU ascii / base64 / appended / raw, legacy VTK ASCII and binary, classic and
 //! 5.1, Medit), the surface readers (OBJ, binary STL, binary PLY, VTK polydata ASCII and
-//! binary) followed by the surface checks and repairs,
+//! binary, VTP) followed by the surface checks and repairs,
 //! and the bench CSV reader. Each valid sample is mutated deterministically (byte flips,
 //! insertions, deletions, duplicated runs, digits replaced by huge numbers, truncation) and
 //! every mutant is read in a thread with a time limit. Must hold: no panic, no hang; each
@@ -176,7 +176,7 @@ fn every_reader_survives_mutated_input() {
     }
     // The surface readers, and the surface checks (with every repair on) on what they read.
     let surfaces = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/surfaces");
-    let surface_readers: [(&str, Parse); 5] = [
+    let surface_readers: [(&str, Parse); 6] = [
         ("organ_cm.obj", |b| read_and_check(&b, SurfaceFormat::Obj)),
         ("organ_mm.stl", |b| read_and_check(&b, SurfaceFormat::Stl)),
         ("organ_cm.ply", |b| read_and_check(&b, SurfaceFormat::Ply)),
@@ -184,6 +184,7 @@ fn every_reader_survives_mutated_input() {
         ("organ_cm_bin.vtk", |b| {
             read_and_check(&b, SurfaceFormat::Vtk)
         }),
+        ("organ_cm.vtp", |b| read_and_check(&b, SurfaceFormat::Vtp)),
     ];
     for (file, parse) in surface_readers {
         let seed = std::fs::read(surfaces.join(file)).unwrap();

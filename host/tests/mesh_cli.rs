@@ -41,6 +41,7 @@ fn each_test_surface_is_accepted_or_refused_with_its_message() {
         ("organ_cm.ply", &[], None),
         ("organ_cm.vtk", &[], None),
         ("organ_cm_bin.vtk", &[], None),
+        ("organ_cm.vtp", &[], None),
         (
             "organ_holes.obj",
             &[],

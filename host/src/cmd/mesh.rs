@@ -1,4 +1,4 @@
-//! `host mesh`: a closed surface (STL, OBJ, PLY, VTK polydata) to a tetrahedral mesh for the
+//! `host mesh`: a closed surface (STL, OBJ, PLY, VTK polydata, VTP) to a tetrahedral mesh for the
 //! FEM, through Gmsh: units, surface checks and opt-in repairs, a size field fine where the
 //! scene's tool reaches, quality, an atomic write.
 
@@ -31,7 +31,7 @@ orientation, self-intersections. Faces that all point inward are flipped (and sa
 pinned Python module gmsh==4.15.2 (scripts/test-all.sh installs it)."
 )]
 pub struct Args {
-    /// Closed triangulated surface: .stl (ASCII or binary), .obj, .ply, .vtk (POLYDATA).
+    /// Closed triangulated surface: .stl (ASCII or binary), .obj, .ply, .vtk (POLYDATA), .vtp.
     surface: PathBuf,
     /// Output tetrahedral mesh (.msh, Gmsh 4.1 ASCII, metres), written atomically.
     #[arg(short, long)]

@@ -36,6 +36,7 @@ pub(crate) use io::MAX_MESH_BYTES;
 pub use io::{Format, load, parse_msh, read, read_bytes, read_bytes_counted, read_counted};
 pub use validate::{DEGENERATE_QUALITY, DUPLICATE_NODE_TOLERANCE, validate};
 pub(crate) use vtk::read_vtk_polydata;
+pub(crate) use vtu::read_vtp;
 
 /// The elements of dimension < 3 a reader skipped (points, lines, surface triangles...): each
 /// kind's name and count, in the order the file first lists them. Displays as

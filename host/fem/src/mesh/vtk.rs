@@ -96,6 +96,8 @@ pub(crate) struct Builder {
     pub(crate) cells: u64,
     /// Cells of dimension < 3, skipped.
     ignored: Ignored,
+    /// The triangles and polygons among them (global point ids), for surface files.
+    pub(crate) polygons: Vec<Vec<usize>>,
 }
 
 impl Builder {
@@ -130,6 +132,15 @@ impl Builder {
         };
         if dim < 3 {
             self.ignored.add(kind);
+            if matches!(ty, 5 | 7) {
+                let ids = verts.iter().map(|&v| {
+                    usize::try_from(v)
+                        .ok()
+                        .and_then(|v| v.checked_add(point_offset))
+                        .unwrap_or(usize::MAX)
+                });
+                self.polygons.push(ids.collect());
+            }
             return Ok(());
         }
         if ty != VTK_TETRA {

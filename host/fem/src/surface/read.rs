@@ -1,5 +1,6 @@
 //! Triangulated surface files: STL (ASCII and binary), Wavefront OBJ, PLY (ASCII and binary,
-//! either byte order) and legacy VTK polydata (`.vtk`, ASCII and binary).
+//! either byte order), legacy VTK polydata (`.vtk`, ASCII and binary) and VTK XML polydata
+//! (`.vtp`).
 //!
 //! Hand parsers, like the tetrahedral readers beside them: errors must name the line (text) or
 //! byte offset (binary) and the face or vertex, and no input may panic. (`tobj`'s `LoadError`
@@ -25,6 +26,9 @@ pub enum SurfaceFormat {
     /// Legacy VTK `DATASET POLYDATA`, ASCII or binary, classic or 5.1 layout: `POLYGONS` and
     /// `TRIANGLE_STRIPS`; vertices and lines ignored.
     Vtk,
+    /// VTK XML `PolyData` (`.vtp`): the `<Polys>` of every piece (ascii, base64 or raw
+    /// appended data, zlib or none, as `.vtu`).
+    Vtp,
 }
 
 impl SurfaceFormat {
@@ -39,10 +43,11 @@ impl SurfaceFormat {
             "obj" => Ok(SurfaceFormat::Obj),
             "ply" => Ok(SurfaceFormat::Ply),
             "vtk" => Ok(SurfaceFormat::Vtk),
+            "vtp" => Ok(SurfaceFormat::Vtp),
             _ => Err(MeshError::Format {
                 file: crate::mesh::Origin(Some(path.to_path_buf())),
                 message: format!(
-                    "unknown surface file extension {ext:?} (expected .stl, .obj, .ply or .vtk)"
+                    "unknown surface file extension {ext:?} (expected .stl, .obj, .ply, .vtk or .vtp)"
                 ),
             }),
         }
@@ -72,6 +77,7 @@ pub fn read_surface_bytes(bytes: &[u8], format: SurfaceFormat) -> Result<TriSurf
         SurfaceFormat::Obj => read_obj(bytes)?,
         SurfaceFormat::Ply => read_ply(bytes)?,
         SurfaceFormat::Vtk => crate::mesh::read_vtk_polydata(bytes)?,
+        SurfaceFormat::Vtp => crate::mesh::read_vtp(bytes)?,
     };
     if s.triangles.is_empty() {
         return Err(format_err(format!(
