@@ -283,3 +283,21 @@ fn a_vertex_pushed_through_is_a_self_intersection() {
     }
     assert!(e.to_string().starts_with("self-intersecting: "), "{e}");
 }
+
+#[test]
+fn bad_ids_and_coordinates_are_errors() {
+    let mut s = sphere(1, [0.0; 3]);
+    s.triangles[3][1] = 99;
+    let e = check(&s, CheckOptions::default()).unwrap_err().to_string();
+    assert_eq!(e, "face 3 refers to vertex 99, but there are 18 vertices");
+    let mut s = sphere(1, [0.0; 3]);
+    s.vertices[5][2] = f64::NAN;
+    let e = check(&s, CheckOptions::default()).unwrap_err().to_string();
+    assert!(e.starts_with("vertex 5 has a non-finite coordinate"), "{e}");
+    // A far stray vertex (a huge face) is checked in bounded time.
+    let mut s = sphere(3, [0.0; 3]);
+    s.vertices[4] = [1e11, 0.0, 0.0];
+    let t = std::time::Instant::now();
+    let _ = check(&s, CheckOptions::default());
+    assert!(t.elapsed().as_secs_f64() < 5.0);
+}

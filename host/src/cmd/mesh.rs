@@ -34,8 +34,8 @@ pub struct Args {
     /// Closed triangulated surface: .stl (ASCII or binary), .obj, .ply, .vtk (POLYDATA), .vtp.
     surface: PathBuf,
     /// Output tetrahedral mesh (.msh, Gmsh 4.1 ASCII, metres), written atomically.
-    #[arg(short, long)]
-    output: PathBuf,
+    #[arg(short, long, required_unless_present = "check")]
+    output: Option<PathBuf>,
     /// Units of the surface's coordinates; default: guessed from the bounding box (an organ is
     /// 4 to 40 cm across) and printed, refused when no unit fits.
     #[arg(long, value_enum)]
@@ -165,18 +165,18 @@ pub fn run(a: Args) -> Result<()> {
     } else {
         eprintln!("size: {size:.4} m everywhere");
     }
-    if a.check {
+    let Some(output) = a.output.as_ref().filter(|_| !a.check) else {
         eprintln!("--check: the surface passes; not meshed");
         return Ok(());
-    }
+    };
     let mesh = meshing::run_gmsh(&surface_m, &sizes)?;
     let mut bytes = Vec::new();
     mesh.write_msh4_ascii(&mut bytes)?;
-    host::fsio::write_atomic(&a.output, &bytes, &[&a.surface])?;
+    host::fsio::write_atomic(output, &bytes, &[&a.surface])?;
     let tet_volume: f64 = (0..mesh.tets.len()).map(|t| mesh.signed_volume(t)).sum();
     println!(
         "{}: {} nodes, {} tetrahedra, volume {:.4e} m^3 ({:+.2}% of the surface's), {:.1} s",
-        a.output.display(),
+        output.display(),
         mesh.nodes.len(),
         mesh.tets.len(),
         tet_volume,

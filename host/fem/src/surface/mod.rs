@@ -114,6 +114,24 @@ fn at(p: [f64; 3]) -> String {
 #[derive(Debug, thiserror::Error)]
 #[non_exhaustive]
 pub enum SurfaceError {
+    /// A face refers to a vertex that does not exist.
+    #[error("face {face} refers to vertex {vertex}, but there are {count} vertices")]
+    VertexOutOfRange {
+        /// The face.
+        face: usize,
+        /// The missing vertex.
+        vertex: usize,
+        /// Vertices in all.
+        count: usize,
+    },
+    /// A vertex used by a face has a NaN or infinite coordinate.
+    #[error("vertex {vertex} has a non-finite coordinate {coords:?}")]
+    NonFinite {
+        /// The vertex.
+        vertex: usize,
+        /// Its coordinates.
+        coords: [f64; 3],
+    },
     /// Vertices closer than the merge tolerance.
     #[error(
         "{count} duplicate vertices (closer than {tolerance:.2e}): first vertices {first} and \
@@ -322,7 +340,7 @@ impl Sets {
 
 /// Check that `s` bounds a volume, repairing what `opts` allows; returns the surface (faces
 /// outward, unused vertices dropped) and one line per change made. The checks run in this
-/// order: duplicate vertices, degenerate faces, non-manifold edges, non-manifold vertices,
+/// order: vertex ids and finite coordinates, duplicate vertices, degenerate faces, non-manifold edges, non-manifold vertices,
 /// shells, holes, orientation, self-intersections. A surface whose faces all point
 /// inward is flipped whatever `opts` say (that is a convention, not a defect), and said.
 pub fn check(
@@ -331,6 +349,23 @@ pub fn check(
 ) -> Result<(TriSurface, Vec<String>), SurfaceError> {
     let mut s = s.clone();
     let mut notes = Vec::new();
+    for (face, t) in s.triangles.iter().enumerate() {
+        for &v in t {
+            let Some(&p) = s.vertices.get(v) else {
+                return Err(SurfaceError::VertexOutOfRange {
+                    face,
+                    vertex: v,
+                    count: s.vertices.len(),
+                });
+            };
+            if !p.iter().all(|x| x.is_finite()) {
+                return Err(SurfaceError::NonFinite {
+                    vertex: v,
+                    coords: p,
+                });
+            }
+        }
+    }
     merge_duplicates(&mut s, &opts, &mut notes)?;
     degenerate_faces(&mut s, &opts, &mut notes)?;
     let edges = edge_faces(&s);
@@ -831,7 +866,11 @@ fn self_intersections(s: &TriSurface) -> Result<(), SurfaceError> {
         mean_edge += norm(sub(p[1], p[0]));
         boxes.push((lo, hi));
     }
-    let cell = (2.0 * mean_edge / n as f64).max(f64::MIN_POSITIVE);
+    // Buckets of about two mean edges, but at least 1/64 of the bounding box's diagonal so
+    // that a stray far vertex (a huge triangle) cannot ask for billions of buckets.
+    let cell = (2.0 * mean_edge / n as f64)
+        .max(s.diagonal() / 64.0)
+        .max(f64::MIN_POSITIVE);
     let key = |x: [f64; 3]| x.map(|c| (c / cell).floor() as i64);
     let mut grid: HashMap<[i64; 3], Vec<usize>> = HashMap::new();
     for (f, (lo, hi)) in boxes.iter().enumerate() {

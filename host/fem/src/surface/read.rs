@@ -452,6 +452,9 @@ fn read_ply(bytes: &[u8]) -> Result<TriSurface, MeshError> {
         if is_vertex && (0..3).any(|a| !el.props.iter().any(|p| axis_of(p) == Some(a))) {
             return Err(format_err("PLY element vertex lacks an x, y or z property"));
         }
+        if el.props.is_empty() {
+            continue; // nothing to read, however many
+        }
         for i in 0..el.count {
             let mut p = [0.0; 3];
             for prop in &el.props {
