@@ -368,6 +368,21 @@ fn the_organ_is_meshed_graded_near_the_reach_and_becomes_a_scene() {
         bank.to_str().unwrap(),
     ]);
     assert!(o.status.success(), "{}", text(&o).1);
+    // The demo runs it (headless: the virtual device's 1 kHz loop, a scripted press).
+    let o = host(&[
+        "demo",
+        "--scene",
+        scene_path.to_str().unwrap(),
+        "--headless",
+        "--seconds",
+        "1",
+        "--json",
+    ]);
+    let (stdout, err) = text(&o);
+    assert!(o.status.success(), "{err}");
+    let v: serde_json::Value = serde_json::from_str(stdout.trim()).expect("one JSON object");
+    assert_eq!(v["faults"], 0, "{stdout}");
+    assert!(v["peak_force_n"].as_f64().unwrap() > 0.0, "{stdout}");
     // A trocar inside the organ is refused, and nothing is written.
     let inside = dir.path().join("inside.toml");
     let o = host(&[
