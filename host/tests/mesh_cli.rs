@@ -260,6 +260,20 @@ fn the_organ_is_meshed_graded_near_the_reach_and_becomes_a_scene() {
         uniform.tets.len()
     );
     assert!((boundary_volume(&mm) / v - 1.0).abs() < 0.01);
+    // The repaired surfaces mesh; without the sphere, or flipped back, the organ's own mesh.
+    for (name, flag) in [
+        ("organ_two_shells.obj", "--largest"),
+        ("organ_flipped.obj", "--repair"),
+        ("organ_holes.obj", "--repair"),
+    ] {
+        let out_r = dir.path().join("repaired.msh");
+        let o = host(&["mesh", &surface(name), flag, "-o", out_r.to_str().unwrap()]);
+        assert!(o.status.success(), "{name}: {}", text(&o).1);
+        let m = fem::mesh::load(&out_r).unwrap();
+        if name != "organ_holes.obj" {
+            assert_eq!(m.tets.len(), uniform.tets.len(), "{name}");
+        }
+    }
     // Never over the input, never a half-written file.
     let o = host(&[
         "mesh",

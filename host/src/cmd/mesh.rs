@@ -119,15 +119,18 @@ pub fn run(a: Args) -> Result<()> {
         eprintln!("repaired: {n}");
     }
     let surface_m = checked.scaled(units.to_metres());
+    // The default size is the kept surface's (--largest may have dropped a far shell).
+    let (lo, hi) = surface_m.bounding_box();
+    let side_m = (0..3).map(|k| hi[k] - lo[k]).fold(0.0, f64::max);
     let volume = surface_m.signed_volume();
     eprintln!(
         "surface: closed, {} faces, volume {:.4e} m^3 ({:.1} cm^3), largest side {:.4} m",
         surface_m.triangles.len(),
         volume,
         volume * 1e6,
-        side * units.to_metres()
+        side_m
     );
-    let size = a.size.unwrap_or(side * units.to_metres() / 15.0);
+    let size = a.size.unwrap_or(side_m / 15.0);
     if !(size > 0.0 && size.is_finite()) {
         bail!("--size {size}: must be a positive length in metres");
     }

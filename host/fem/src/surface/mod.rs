@@ -99,8 +99,10 @@ impl fmt::Display for At {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         write!(
             f,
-            "({:.4e}, {:.4e}, {:.4e})",
-            self.0[0], self.0[1], self.0[2]
+            "({:.4}, {:.4}, {:.4})",
+            self.0[0] + 0.0,
+            self.0[1] + 0.0,
+            self.0[2] + 0.0
         )
     }
 }
