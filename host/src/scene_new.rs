@@ -192,8 +192,13 @@ fn r(x: f64) -> String {
 /// The scene's text for `mesh` (already loaded and validated) and `spec`, checked as any
 /// scene is before a bank is built ([`Prepared::from_scene`]: the trocar and the home tip
 /// outside the organ, supports that hold something but not everything and leave no rigid
-/// motion, a reachable region), as `out` would be read; also the reachable nodes' count.
-pub fn scene_text(mesh: &TetMesh, spec: &NewScene, out: &Path) -> Result<(String, usize)> {
+/// motion, a reachable region), as `out` would be read; also the reachable nodes' count and
+/// the scene's warnings (a mesh implausibly sized in metres, a Poisson's ratio that locks).
+pub fn scene_text(
+    mesh: &TetMesh,
+    spec: &NewScene,
+    out: &Path,
+) -> Result<(String, usize, Vec<String>)> {
     let w = aim(mesh, spec.trocar)?;
     // The axes with 9 decimals stay orthonormal well within the scene's check.
     let axis = |a: [f64; 3]| {
@@ -283,7 +288,7 @@ reach_margin_m = 0.002
         i1 = r(w.insertion[1]),
     );
     let prepared = Prepared::from_scene(Scene::parse(out, &text)?)?;
-    Ok((text, prepared.region.len()))
+    Ok((text, prepared.region.len(), prepared.warnings))
 }
 
 #[cfg(test)]

@@ -111,7 +111,8 @@ fn new(a: NewArgs) -> Result<()> {
         support,
         tissue,
     };
-    let (text, reachable) = scene_text(&mesh, &spec, &a.output)?;
+    let (text, reachable, warnings) = scene_text(&mesh, &spec, &a.output)?;
+    warnings.iter().for_each(|w| eprintln!("{w}"));
     host::fsio::write_atomic(&a.output, text.as_bytes(), &[&a.mesh])?;
     println!(
         "{}: scene for {} ({} tissue); the tool reaches {reachable} surface nodes",
