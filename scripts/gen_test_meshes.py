@@ -21,6 +21,12 @@ Writes into host/fem/tests/data/:
                                                 zlib blocks, UInt64 headers, big-endian
   cube_v51.vtk                                  legacy VTK 5.1 ASCII (OFFSETS/CONNECTIVITY, meshio)
   cube_bin.vtk, cube_v51_bin.vtk                legacy VTK 4.2 and 5.1 binary (meshio)
+  cube_v1.msh                                   MSH version 1 (Gmsh's writer: $NOD/$ELM, with
+                                                points, lines and triangles)
+  cube_v1_sparse.msh                            MSH version 1, node numbers 10 * (N - i) + 3
+                                                (decreasing, sparse), the boundary triangles first
+  cube.mesh                                     Medit ASCII (Gmsh's writer: Vertices, Edges,
+                                                Triangles, Tetrahedra)
   cube_v41_sparse.msh                           MSH 4.1 ASCII with renumbered, sparse node tags
   noncontiguous_tags_v2.msh                     MSH 2.2 ASCII, node tags scrambled and sparse,
                                                 nodes listed out of tag order (valid)
@@ -71,6 +77,10 @@ def cube_with_gmsh():
         gmsh.write(os.path.join(DATA, "cube_v41_bin.msh"))
         gmsh.option.setNumber("Mesh.Binary", 0)
         gmsh.write(os.path.join(DATA, "cube.vtk"))
+        gmsh.option.setNumber("Mesh.MshFileVersion", 1.0)
+        gmsh.write(os.path.join(DATA, "cube_v1.msh"))
+        gmsh.write(os.path.join(DATA, "cube.mesh"))
+        gmsh.option.setNumber("Mesh.MshFileVersion", 4.1)
 
         tags, coords, _ = gmsh.model.mesh.getNodes()
         pos = {int(t): i for i, t in enumerate(tags)}
@@ -154,6 +164,21 @@ def write_noncontiguous_v2(points, tets):
     ]
     lines += ["$EndElements", ""]
     with open(os.path.join(DATA, "noncontiguous_tags_v2.msh"), "w") as f:
+        f.write("\n".join(lines))
+
+
+def write_sparse_v1(points, tets, tris):
+    """MSH version 1 with node numbers 10 * (N - i) + 3 and the triangles before the tets."""
+    tag = [10 * (len(points) - i) + 3 for i in range(len(points))]
+    lines = ["$NOD", str(len(points))]
+    lines += [f"{tag[i]} {float(p[0])!r} {float(p[1])!r} {float(p[2])!r}" for i, p in enumerate(points)]
+    lines += ["$ENDNOD", "$ELM", str(len(tris) + len(tets))]
+    lines += [f"{e + 1} 2 1 1 3 " + " ".join(str(tag[n]) for n in t) for e, t in enumerate(tris)]
+    lines += [
+        f"{900 + e} 4 2 1 4 " + " ".join(str(tag[n]) for n in t) for e, t in enumerate(tets)
+    ]
+    lines += ["$ENDELM", ""]
+    with open(os.path.join(DATA, "cube_v1_sparse.msh"), "w") as f:
         f.write("\n".join(lines))
 
 
@@ -280,6 +305,7 @@ def main():
     points, tets, tris = cube_with_gmsh()
     write_meshio(points, tets, tris)
     write_noncontiguous_v2(points, tets)
+    write_sparse_v1(points, tets, tris)
     write_appended_vtu(points, tets, tris)
     with open(os.path.join(DATA, "cube_v2.msh")) as f:
         cube_v2 = f.read()

@@ -62,6 +62,23 @@ need chromium chromium
 need shellcheck shellcheck
 qemu-system-arm --version | sed -n 1p
 
+step "Gmsh for host mesh: the Python module gmsh==4.15.2 and numpy (pip), its X/GL libraries (apt-get)"
+# `host mesh` runs Gmsh through its Python module, pinned like every mesh of the project
+# (scripts/gen_meshes.py): the pip wheel is the whole library at that version (Debian's gmsh
+# is another), so pip installs it here as apt-get installs QEMU. The wheel's library links
+# against X11/OpenGL libraries even without a display.
+gmsh_ok() { python3 -c 'import sys, gmsh, numpy; sys.exit(gmsh.__version__ != "4.15.2")' 2>/dev/null; }
+if ! gmsh_ok; then
+    command -v python3 >/dev/null || apt_install python3
+    python3 -m pip --version >/dev/null 2>&1 || apt_install python3-pip
+    apt_install libglu1-mesa libgl1 libxrender1 libxcursor1 libxft2 libxinerama1 libgomp1 libfontconfig1
+    # Debian's Python refuses pip installs outside a virtual environment (PEP 668) unless told.
+    python3 -m pip install "gmsh==4.15.2" numpy ||
+        python3 -m pip install --break-system-packages "gmsh==4.15.2" numpy
+fi
+gmsh_ok || { echo "error: the gmsh 4.15.2 Python module is still missing" >&2; exit 1; }
+python3 -c 'import gmsh; print("gmsh (Python module)", gmsh.__version__)'
+
 step "shell scripts"
 shellcheck scripts/*.sh .ci/run
 

@@ -47,6 +47,12 @@ enum Command {
     Device(cmd::device::DeviceCmd),
     /// Speed against error for every knob, and the hard cases, on one generated page.
     Report(cmd::report::Args),
+    /// A closed surface (STL, OBJ, PLY, VTK polydata, VTP) to a tetrahedral mesh through Gmsh:
+    /// units, surface checks and repairs, fine where a scene's tool reaches, quality.
+    Mesh(cmd::mesh::Args),
+    /// Scene files: `new` writes a complete scene for a mesh, aimed from a trocar.
+    #[command(subcommand)]
+    Scene(cmd::scene::SceneCmd),
 }
 
 fn main() -> ExitCode {
@@ -69,6 +75,8 @@ fn main() -> ExitCode {
         Command::Flash(args) => cmd::flash::run(args),
         Command::Device(c) => cmd::device::run(c),
         Command::Report(args) => cmd::report::run(args),
+        Command::Mesh(args) => cmd::mesh::run(args),
+        Command::Scene(c) => cmd::scene::run(c),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -1,5 +1,7 @@
-//! A mutation fuzz of every reader of user files: the mesh readers (MSH 2, MSH 4.1 ASCII and
-//! binary, VTU ascii / base64 / appended / raw, legacy VTK ASCII and binary, classic and 5.1)
+//! A mutation fuzz of every reader of user files: the mesh readers (MSH 1 and 2, MSH 4.1 ASCII
+//! and binary, VTU ascii / base64 / appended / raw, legacy VTK ASCII and binary, classic and
+//! 5.1, Medit), the surface readers (OBJ, binary STL, binary PLY, VTK polydata ASCII and
+//! binary, VTP) followed by the surface checks and repairs,
 //! and the bench CSV reader. Each valid sample is mutated deterministically (byte flips,
 //! insertions, deletions, duplicated runs, digits replaced by huge numbers, truncation) and
 //! every mutant is read in a thread with a time limit. Must hold: no panic, no hang; each
@@ -7,6 +9,7 @@
 //! README).
 
 use fem::mesh::{self, Format};
+use fem::surface::{CheckOptions, SurfaceFormat, check};
 use std::path::Path;
 use std::sync::mpsc;
 use std::time::Duration;
@@ -73,6 +76,16 @@ fn mutate(seed: &[u8], rng: &mut Rng) -> Vec<u8> {
     b
 }
 
+/// A surface read and checked with every repair and `--largest` on: `true` when it passes.
+fn read_and_check(bytes: &[u8], format: SurfaceFormat) -> bool {
+    let opts = CheckOptions {
+        repair: true,
+        largest: true,
+        ..CheckOptions::default()
+    };
+    fem::surface::read_surface_bytes(bytes, format).is_ok_and(|s| check(&s, opts).is_ok())
+}
+
 /// A reader on one input: read (`true`) or refused (`false`).
 type Parse = fn(Vec<u8>) -> bool;
 
@@ -116,7 +129,12 @@ fn every_reader_survives_mutated_input() {
         total.panics += t.panics;
         total.hangs += t.hangs;
     };
-    let meshes: [(&str, Parse); 12] = [
+    let meshes: [(&str, Parse); 15] = [
+        ("cube_v1.msh", |b| mesh::read_bytes(&b, Format::Msh).is_ok()),
+        ("cube_v1_sparse.msh", |b| {
+            mesh::read_bytes(&b, Format::Msh).is_ok()
+        }),
+        ("cube.mesh", |b| mesh::read_bytes(&b, Format::Medit).is_ok()),
         ("cube_v2.msh", |b| mesh::read_bytes(&b, Format::Msh).is_ok()),
         ("cube_v41.msh", |b| {
             mesh::read_bytes(&b, Format::Msh).is_ok()
@@ -150,6 +168,26 @@ fn every_reader_survives_mutated_input() {
     ];
     for (file, parse) in meshes {
         let seed = std::fs::read(data.join(file)).unwrap();
+        assert!(
+            parse(seed.clone()),
+            "{file}: the unmutated sample must read"
+        );
+        add(fuzz(file, &seed, &mut rng, parse));
+    }
+    // The surface readers, and the surface checks (with every repair on) on what they read.
+    let surfaces = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/surfaces");
+    let surface_readers: [(&str, Parse); 6] = [
+        ("organ_cm.obj", |b| read_and_check(&b, SurfaceFormat::Obj)),
+        ("organ_mm.stl", |b| read_and_check(&b, SurfaceFormat::Stl)),
+        ("organ_cm.ply", |b| read_and_check(&b, SurfaceFormat::Ply)),
+        ("organ_cm.vtk", |b| read_and_check(&b, SurfaceFormat::Vtk)),
+        ("organ_cm_bin.vtk", |b| {
+            read_and_check(&b, SurfaceFormat::Vtk)
+        }),
+        ("organ_cm.vtp", |b| read_and_check(&b, SurfaceFormat::Vtp)),
+    ];
+    for (file, parse) in surface_readers {
+        let seed = std::fs::read(surfaces.join(file)).unwrap();
         assert!(
             parse(seed.clone()),
             "{file}: the unmutated sample must read"

@@ -46,5 +46,6 @@ pub mod mesh;
 pub mod ordering;
 pub mod progress;
 pub mod reference;
+pub mod surface;
 pub mod tool;
 pub mod vec3;

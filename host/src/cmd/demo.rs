@@ -32,8 +32,9 @@ pub struct Args {
     /// Scene file (default: the embedded host/scenes/liver.toml).
     #[arg(long)]
     scene: Option<PathBuf>,
-    /// Use this organ mesh instead of the scene's (.msh, .vtu, .vtk; m), e.g.
-    /// host/meshes/liver-10k.msh.
+    /// Use this organ mesh instead of the scene's (.msh v1/v2/v4.1, .vtu, .vtk, .mesh; m),
+    /// e.g. host/meshes/liver-10k.msh. The scene's [contact] stays (a sampled scene's FEM mesh
+    /// is its own organ's): for another organ, make a scene with `host scene new`.
     #[arg(long)]
     mesh: Option<PathBuf>,
     /// Telemetry source: `virtual` (the firmware loop on this PC), `sil` (the QEMU image) or

@@ -33,7 +33,10 @@ pub enum MeshError {
         source: std::io::Error,
     },
     /// The file name has no extension this module can read.
-    #[error("{file}unknown mesh file extension {extension:?} (expected .msh, .vtu or .vtk)")]
+    #[error(
+        "{file}unknown mesh file extension {extension:?} (expected .msh, .vtu, .vtk or .mesh){}",
+        surface_hint(extension)
+    )]
     UnknownExtension {
         /// The file.
         file: Origin,
@@ -322,6 +325,16 @@ impl MeshError {
             }
         });
         self
+    }
+}
+
+/// For a surface file given where a tetrahedral mesh is wanted: how to get one.
+fn surface_hint(extension: &str) -> &'static str {
+    match extension {
+        "stl" | "obj" | "ply" | "vtp" => {
+            "; that is a surface: make a tetrahedral mesh of it with `host mesh`"
+        }
+        _ => "",
     }
 }
 

@@ -1,9 +1,9 @@
-//! Gmsh MSH files: version 2 ASCII (hand parser), version 4.1 ASCII and binary (via `mshio`),
-//! and a minimal version 4.1 ASCII writer.
+//! Gmsh MSH files: versions 1 and 2 ASCII (hand parser), version 4.1 ASCII and binary (via
+//! `mshio`), and a minimal version 4.1 ASCII writer.
 
-use super::TetMesh;
 use super::error::{MeshError, nofile};
 use super::text::{Cursor, parse_num, show, tokens, trim};
+use super::{Ignored, TetMesh};
 use std::borrow::Cow;
 use std::cell::Cell;
 use std::collections::HashMap;
@@ -58,9 +58,12 @@ pub(crate) fn element_kind(ty: i64) -> Option<(u8, Cow<'static, str>)> {
     }
 }
 
-/// Read a Gmsh MSH file of any supported version.
-pub(crate) fn read_msh(bytes: &[u8]) -> Result<TetMesh, MeshError> {
-    let header = read_header(bytes)?;
+/// Read a Gmsh MSH file of any supported version; elements of dimension < 3 are counted in the
+/// returned [`Ignored`].
+pub(crate) fn read_msh(bytes: &[u8]) -> Result<(TetMesh, Ignored), MeshError> {
+    let Some(header) = read_header(bytes)? else {
+        return read_msh_legacy(bytes, Version::One);
+    };
     let version_num: Option<f64> = parse_num(header.version.as_bytes());
     match version_num {
         Some(v) if (2.0..3.0).contains(&v) => {
@@ -70,7 +73,7 @@ pub(crate) fn read_msh(bytes: &[u8]) -> Result<TetMesh, MeshError> {
                     version: format!("{} binary", header.version),
                 });
             }
-            read_msh2(bytes)
+            read_msh_legacy(bytes, Version::Two)
         }
         _ if header.version == "4.1" => read_msh41(bytes, &header),
         _ => Err(MeshError::UnsupportedVersion {
@@ -89,18 +92,17 @@ struct Header {
     line: usize,
 }
 
-fn read_header(bytes: &[u8]) -> Result<Header, MeshError> {
+/// The `$MeshFormat` header, or `None` for a version 1 file (which starts with `$NOD`).
+fn read_header(bytes: &[u8]) -> Result<Option<Header>, MeshError> {
     let mut c = Cursor::new(bytes);
     let first = c.next_nonblank_line().ok_or_else(|| c.err("empty file"))?;
-    if first.starts_with(b"$NOD") || first.starts_with(b"$NOE") {
-        return Err(MeshError::UnsupportedVersion {
-            file: nofile(),
-            version: "1 (no $MeshFormat section)".into(),
-        });
+    if first == b"$NOD" || first == b"$NOE" {
+        return Ok(None);
     }
     if first != b"$MeshFormat" {
         return Err(c.err(format!(
-            "expected \"$MeshFormat\" at the start of a Gmsh MSH file, found {}",
+            "expected \"$MeshFormat\" (versions 2 and 4.1) or \"$NOD\" (version 1) at the start \
+             of a Gmsh MSH file, found {}",
             show(first)
         )));
     }
@@ -127,20 +129,37 @@ fn read_header(bytes: &[u8]) -> Result<Header, MeshError> {
     let data_size = parse_num(ds)
         .filter(|&x: &u32| (1..=16).contains(&x))
         .ok_or_else(|| c.err(format!("invalid MSH data size {}", show(ds))))?;
-    Ok(Header {
+    Ok(Some(Header {
         version,
         file_type,
         data_size,
         line: c.line(),
-    })
+    }))
 }
 
-/// MSH version 2 ASCII: `$MeshFormat`, `$Nodes`, `$Elements`; other sections are skipped.
-fn read_msh2(bytes: &[u8]) -> Result<TetMesh, MeshError> {
+/// The two line-oriented ASCII versions the hand parser reads.
+#[derive(Clone, Copy, PartialEq, Eq)]
+enum Version {
+    /// `$NOD`/`$ENDNOD`, `$ELM`/`$ENDELM`; an element line is `number type physical elementary
+    /// number-of-nodes nodes...`.
+    One,
+    /// `$MeshFormat`, `$Nodes`, `$Elements`; an element line is `number type number-of-tags
+    /// tags... nodes...`.
+    Two,
+}
+
+/// MSH version 1 or 2 ASCII: the node and element sections (`$Nodes`/`$Elements`, or version
+/// 1's `$NOD`/`$ELM`); other sections are skipped. Node numbers may be any (sparse, permuted).
+fn read_msh_legacy(bytes: &[u8], version: Version) -> Result<(TetMesh, Ignored), MeshError> {
     let mut c = Cursor::new(bytes);
     let mut nodes: Vec<[f64; 3]> = Vec::new();
     let mut tag_to_id: HashMap<u64, usize> = HashMap::new();
     let mut tets: Vec<[usize; 4]> = Vec::new();
+    let mut ignored = Ignored::default();
+    let (nodes_end, elements_end): (&[u8], &[u8]) = match version {
+        Version::One => (b"$ENDNOD", b"$ENDELM"),
+        Version::Two => (b"$EndNodes", b"$EndElements"),
+    };
     let mut seen_nodes = false;
     let mut seen_elements = false;
     // Capacity hint bounded by the file size, so a bogus count cannot exhaust memory.
@@ -154,13 +173,13 @@ fn read_msh2(bytes: &[u8]) -> Result<TetMesh, MeshError> {
             )));
         };
         let section_line = c.line();
-        match name {
-            b"MeshFormat" => {
+        match (version, name) {
+            (Version::Two, b"MeshFormat") => {
                 // Already checked by `read_header`; skip its content.
                 c.next_nonblank_line();
                 expect_end(&mut c, b"$EndMeshFormat")?;
             }
-            b"Nodes" => {
+            (Version::Two, b"Nodes") | (Version::One, b"NOD" | b"NOE") => {
                 if seen_nodes {
                     return Err(c.err("second $Nodes section (only one is supported)"));
                 }
@@ -208,9 +227,9 @@ fn read_msh2(bytes: &[u8]) -> Result<TetMesh, MeshError> {
                     }
                     nodes.push(p);
                 }
-                expect_end(&mut c, b"$EndNodes")?;
+                expect_end(&mut c, nodes_end)?;
             }
-            b"Elements" => {
+            (Version::Two, b"Elements") | (Version::One, b"ELM") => {
                 if !seen_nodes {
                     return Err(c.err("$Elements section before $Nodes"));
                 }
@@ -231,13 +250,16 @@ fn read_msh2(bytes: &[u8]) -> Result<TetMesh, MeshError> {
                             "unexpected end of file in $Elements: got {i} of {m} elements (file truncated?)"
                         ))
                     })?;
-                    read_msh2_element(&c, l, &tag_to_id, &mut tets)?;
+                    read_element(&c, l, version, &tag_to_id, &mut tets, &mut ignored)?;
                 }
-                expect_end(&mut c, b"$EndElements")?;
+                expect_end(&mut c, elements_end)?;
             }
             _ => {
                 // Skip an unknown section up to its matching end tag.
-                let mut end = b"$End".to_vec();
+                let mut end = match version {
+                    Version::One => b"$END".to_vec(),
+                    Version::Two => b"$End".to_vec(),
+                };
                 end.extend_from_slice(name);
                 loop {
                     let Some(l) = c.next_line() else {
@@ -259,18 +281,24 @@ fn read_msh2(bytes: &[u8]) -> Result<TetMesh, MeshError> {
         }
     }
     if !seen_nodes {
-        return Err(c.err("no $Nodes section"));
+        return Err(c.err(match version {
+            Version::One => "no $NOD section",
+            Version::Two => "no $Nodes section",
+        }));
     }
-    Ok(TetMesh { nodes, tets })
+    Ok((TetMesh { nodes, tets }, ignored))
 }
 
-/// One line of a version 2 `$Elements` section:
-/// `elm-number elm-type number-of-tags <tags> node-number-list`.
-fn read_msh2_element(
+/// One line of an element section: `elm-number elm-type number-of-tags <tags> node-number-list`
+/// (version 2) or `elm-number elm-type reg-phys reg-elem number-of-nodes node-number-list`
+/// (version 1). Elements of dimension < 3 are counted in `ignored`.
+fn read_element(
     c: &Cursor<'_>,
     line: &[u8],
+    version: Version,
     tag_to_id: &HashMap<u64, usize>,
     tets: &mut Vec<[usize; 4]>,
+    ignored: &mut Ignored,
 ) -> Result<(), MeshError> {
     let toks: Vec<&[u8]> = tokens(line).collect();
     let int = |i: usize, what: &str| -> Result<u64, MeshError> {
@@ -284,8 +312,21 @@ fn read_msh2_element(
     };
     let tag = int(0, "element tag")?;
     let ty = int(1, "element type")?;
-    let ntags = usize::try_from(int(2, "number of element tags")?).unwrap_or(usize::MAX);
-    let first_node = ntags.saturating_add(3);
+    let (first_node, listed) = match version {
+        Version::Two => {
+            let ntags = usize::try_from(int(2, "number of element tags")?).unwrap_or(usize::MAX);
+            (ntags.saturating_add(3), format!("{ntags} tags and 4 nodes"))
+        }
+        Version::One => {
+            let n = int(4, "number of nodes")?;
+            if n != 4 && ty == GMSH_TET4 as u64 {
+                return Err(c.err(format!(
+                    "tetrahedron (element number {tag}) declares {n} nodes (expected 4)"
+                )));
+            }
+            (5, "2 region numbers, a node count and 4 nodes".to_string())
+        }
+    };
     let Some((dim, kind)) = i64::try_from(ty).ok().and_then(element_kind) else {
         return Err(MeshError::UnsupportedElement {
             file: nofile(),
@@ -294,6 +335,7 @@ fn read_msh2_element(
         });
     };
     if dim < 3 {
+        ignored.add(&kind);
         return Ok(());
     }
     if ty != GMSH_TET4 as u64 {
@@ -305,7 +347,7 @@ fn read_msh2_element(
     }
     if toks.len() != first_node.saturating_add(4) {
         return Err(c.err(format!(
-            "tetrahedron (element tag {tag}) should list {ntags} tags and 4 nodes, found {} numbers",
+            "tetrahedron (element tag {tag}) should list {listed}, found {} numbers",
             toks.len()
         )));
     }
@@ -334,7 +376,7 @@ fn expect_end(c: &mut Cursor<'_>, end: &[u8]) -> Result<(), MeshError> {
 }
 
 /// MSH 4.1, ASCII or binary, through `mshio`.
-fn read_msh41(bytes: &[u8], header: &Header) -> Result<TetMesh, MeshError> {
+fn read_msh41(bytes: &[u8], header: &Header) -> Result<(TetMesh, Ignored), MeshError> {
     let binary = header.file_type == 1;
     if binary && !matches!(header.data_size, 4 | 8) {
         return Err(MeshError::Parse {
@@ -568,7 +610,10 @@ fn convert_mshio_error(e: &mshio::MshParserError<&[u8]>, bytes: &[u8], binary: b
     }
 }
 
-fn msh41_to_mesh(msh: &mshio::MshFile<u64, i32, f64>, tags: &[u64]) -> Result<TetMesh, MeshError> {
+fn msh41_to_mesh(
+    msh: &mshio::MshFile<u64, i32, f64>,
+    tags: &[u64],
+) -> Result<(TetMesh, Ignored), MeshError> {
     let fmt_err = |message: String| MeshError::Format {
         file: nofile(),
         message,
@@ -597,6 +642,7 @@ fn msh41_to_mesh(msh: &mshio::MshFile<u64, i32, f64>, tags: &[u64]) -> Result<Te
     let lookup = |tag: u64| tag_to_id.get(&tag).copied();
 
     let mut tets = Vec::new();
+    let mut ignored = Ignored::default();
     if let Some(el) = &msh.data.elements {
         for block in &el.element_blocks {
             let ty = block.element_type as i64;
@@ -611,6 +657,7 @@ fn msh41_to_mesh(msh: &mshio::MshFile<u64, i32, f64>, tags: &[u64]) -> Result<Te
                 continue;
             };
             if dim < 3 {
+                ignored.add_many(&kind, block.elements.len());
                 continue;
             }
             if ty != GMSH_TET4 {
@@ -644,8 +691,7 @@ fn msh41_to_mesh(msh: &mshio::MshFile<u64, i32, f64>, tags: &[u64]) -> Result<Te
             }
         }
     }
-    let mesh = TetMesh { nodes, tets };
-    Ok(mesh)
+    Ok((TetMesh { nodes, tets }, ignored))
 }
 
 /// Format a coordinate so that it reads back exactly and stays short.
@@ -731,10 +777,50 @@ mod tests {
                     $EndPhysicalNames\n$Nodes\n4\n10 0 0 0\n20 1 0 0\n30 0 1 0\n7 0 0 1\n$EndNodes\n\
                     $Elements\n3\n1 15 2 0 1 10\n2 2 2 0 1 10 20 30\n5 4 2 1 1 10 20 30 7\n\
                     $EndElements\n";
-        let m = read_msh(text.as_bytes()).unwrap();
+        let (m, ignored) = read_msh(text.as_bytes()).unwrap();
         assert_eq!(m.nodes.len(), 4);
         assert_eq!(m.tets, vec![[0, 1, 2, 3]]);
         assert_eq!(m.nodes[3], [0.0, 0.0, 1.0]);
+        assert_eq!(ignored.to_string(), "1 point, 1 3-node triangle");
+    }
+
+    #[test]
+    fn v1_with_sparse_numbers_and_lower_dimensional_elements() {
+        // Node numbers 10, 20, 30, 7 (not 1..N, not sorted); a point, a line and a triangle
+        // before the tetrahedron.
+        let text = "$NOD\n4\n10 0 0 0\n20 1 0 0\n30 0 1 0\n7 0 0 1\n$ENDNOD\n$ELM\n4\n\
+                    1 15 0 1 1 10\n2 1 0 1 2 10 20\n3 2 0 1 3 10 20 30\n9 4 1 1 4 10 20 30 7\n\
+                    $ENDELM\n";
+        let (m, ignored) = read_msh(text.as_bytes()).unwrap();
+        assert_eq!(
+            m.nodes,
+            vec![[0.0; 3], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]
+        );
+        assert_eq!(m.tets, vec![[0, 1, 2, 3]]);
+        assert_eq!(ignored.total(), 3);
+        assert_eq!(
+            ignored.to_string(),
+            "1 point, 1 2-node line, 1 3-node triangle"
+        );
+        // Errors name the line.
+        let bad = text.replace("9 4 1 1 4 10 20 30 7", "9 4 1 1 4 10 20 30 8");
+        let e = read_msh(bad.as_bytes()).unwrap_err().to_string();
+        assert_eq!(
+            e,
+            "element 9 refers to node tag 8, which is not defined in $Nodes"
+        );
+        let bad = text.replace("9 4 1 1 4 10 20 30 7", "9 4 1 1 3 10 20 30");
+        let e = read_msh(bad.as_bytes()).unwrap_err().to_string();
+        assert_eq!(
+            e,
+            "line 13: tetrahedron (element number 9) declares 3 nodes (expected 4)"
+        );
+        let bad = text.replace("$ENDELM\n", "");
+        let e = read_msh(bad.as_bytes()).unwrap_err().to_string();
+        assert!(e.contains("expected \"$ENDELM\""), "{e}");
+        let bad = text.replace("7 0 0 1", "7 0 0 x");
+        let e = read_msh(bad.as_bytes()).unwrap_err().to_string();
+        assert_eq!(e, "line 6: invalid z coordinate \"x\" of node tag 7");
     }
 
     #[test]
@@ -742,7 +828,7 @@ mod tests {
         let m = crate::mesh::structured::box_mesh([0.1, 0.2, 0.3], [2, 1, 1]);
         let mut buf = Vec::new();
         m.write_msh4_ascii(&mut buf).unwrap();
-        assert_eq!(read_msh(&buf).unwrap(), m);
+        assert_eq!(read_msh(&buf).unwrap().0, m);
         let empty = TetMesh {
             nodes: vec![],
             tets: vec![],

@@ -82,6 +82,11 @@ impl<'a> Cursor<'a> {
         }
     }
 
+    /// Drop the unconsumed rest of the current line (a comment).
+    pub(crate) fn drop_rest_of_line(&mut self) {
+        self.cur = &[];
+    }
+
     /// The next token without consuming it.
     pub(crate) fn peek_token(&self) -> Option<&'a [u8]> {
         self.clone().token()

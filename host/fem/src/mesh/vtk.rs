@@ -5,9 +5,10 @@
 //! (`vtkio` is not used: it prints parser diagnostics to stderr on malformed binary files,
 //! panics on some, and does not read the 5.1 layout.)
 
-use super::TetMesh;
 use super::error::{MeshError, nofile};
 use super::text::{Cursor, parse_num, show, trim};
+use super::{Ignored, TetMesh};
+use crate::surface::TriSurface;
 
 /// VTK cell type of the linear tetrahedron.
 const VTK_TETRA: u32 = 10;
@@ -93,6 +94,10 @@ pub(crate) struct Builder {
     tets: Vec<[usize; 4]>,
     /// Cells seen so far (over all pieces), for 0-based cell indices in messages.
     pub(crate) cells: u64,
+    /// Cells of dimension < 3, skipped.
+    ignored: Ignored,
+    /// The triangles and polygons among them (global point ids), for surface files.
+    pub(crate) polygons: Vec<Vec<usize>>,
 }
 
 impl Builder {
@@ -126,6 +131,16 @@ impl Builder {
             });
         };
         if dim < 3 {
+            self.ignored.add(kind);
+            if matches!(ty, 5 | 7) {
+                let ids = verts.iter().map(|&v| {
+                    usize::try_from(v)
+                        .ok()
+                        .and_then(|v| v.checked_add(point_offset))
+                        .unwrap_or(usize::MAX)
+                });
+                self.polygons.push(ids.collect());
+            }
             return Ok(());
         }
         if ty != VTK_TETRA {
@@ -153,11 +168,12 @@ impl Builder {
         Ok(())
     }
 
-    pub(crate) fn finish(self) -> TetMesh {
-        TetMesh {
+    pub(crate) fn finish(self) -> (TetMesh, Ignored) {
+        let mesh = TetMesh {
             nodes: self.nodes,
             tets: self.tets,
-        }
+        };
+        (mesh, self.ignored)
     }
 }
 
@@ -168,8 +184,103 @@ fn format_err(message: String) -> MeshError {
     }
 }
 
+/// What a legacy file's `DATASET` must be.
+#[derive(Clone, Copy, PartialEq, Eq)]
+enum Dataset {
+    /// `UNSTRUCTURED_GRID` (tetrahedra).
+    Grid,
+    /// `POLYDATA` (a surface).
+    Poly,
+}
+
+/// The sections of a legacy file that are kept: points, cells (offsets, connectivity), cell
+/// types (grids), and polygons (polydata, triangle strips already split).
+#[derive(Default)]
+struct Sections {
+    points: Option<Vec<f64>>,
+    cells: Option<(Vec<usize>, Vec<u64>)>,
+    types: Option<Vec<u32>>,
+    polygons: Vec<Vec<u64>>,
+}
+
+impl Sections {
+    /// Keep the cells of a polydata section: `POLYGONS` as they are, `TRIANGLE_STRIPS` split
+    /// into triangles (alternate ones reversed to keep the strip's orientation), `VERTICES`
+    /// and `LINES` dropped.
+    fn add_poly(&mut self, keyword: &[u8], offsets: &[usize], conn: &[u64]) {
+        for w in offsets.windows(2) {
+            let cell = &conn[w[0]..w[1]];
+            match keyword {
+                b"POLYGONS" => self.polygons.push(cell.to_vec()),
+                b"TRIANGLE_STRIPS" => {
+                    for k in 0..cell.len().saturating_sub(2) {
+                        let t = if k % 2 == 0 {
+                            [cell[k], cell[k + 1], cell[k + 2]]
+                        } else {
+                            [cell[k + 1], cell[k], cell[k + 2]]
+                        };
+                        self.polygons.push(t.to_vec());
+                    }
+                }
+                _ => {}
+            }
+        }
+    }
+}
+
 /// Read a legacy VTK file (`.vtk`).
-pub(crate) fn read_legacy(bytes: &[u8]) -> Result<TetMesh, MeshError> {
+pub(crate) fn read_legacy(bytes: &[u8]) -> Result<(TetMesh, Ignored), MeshError> {
+    let s = read_sections(bytes, Dataset::Grid)?;
+    let missing = |what: &str| format_err(format!("no {what} section (file truncated?)"));
+    let points = s.points.ok_or_else(|| missing("POINTS"))?;
+    let (offsets, conn) = s.cells.ok_or_else(|| missing("CELLS"))?;
+    let types = s.types.ok_or_else(|| missing("CELL_TYPES"))?;
+    assemble(&points, &offsets, &conn, &types)
+}
+
+/// Read a legacy VTK polydata file (a surface): its points and polygons, split into fans.
+pub(crate) fn read_vtk_polydata(bytes: &[u8]) -> Result<TriSurface, MeshError> {
+    let s = read_sections(bytes, Dataset::Poly)?;
+    let flat = s
+        .points
+        .ok_or_else(|| format_err("no POINTS section (file truncated?)".into()))?;
+    if !flat.len().is_multiple_of(3) {
+        return Err(format_err("the points array is not a multiple of 3".into()));
+    }
+    let vertices: Vec<[f64; 3]> = flat.chunks_exact(3).map(|p| [p[0], p[1], p[2]]).collect();
+    let mut triangles = Vec::new();
+    for (i, poly) in s.polygons.iter().enumerate() {
+        let ids: Vec<usize> = poly
+            .iter()
+            .map(|&v| {
+                usize::try_from(v)
+                    .ok()
+                    .filter(|&v| v < vertices.len())
+                    .ok_or_else(|| {
+                        format_err(format!(
+                            "polygon {i} refers to point {v}, but there are {} points",
+                            vertices.len()
+                        ))
+                    })
+            })
+            .collect::<Result<_, _>>()?;
+        if ids.len() < 3 {
+            return Err(format_err(format!(
+                "polygon {i} has {} points (at least 3 needed)",
+                ids.len()
+            )));
+        }
+        for k in 1..ids.len() - 1 {
+            triangles.push([ids[0], ids[k], ids[k + 1]]);
+        }
+    }
+    Ok(TriSurface {
+        vertices,
+        triangles,
+    })
+}
+
+fn read_sections(bytes: &[u8], want: Dataset) -> Result<Sections, MeshError> {
     let mut c = Cursor::new(bytes);
     let first = c.next_line().ok_or_else(|| c.err("empty file"))?;
     let first = trim(first);
@@ -185,10 +296,10 @@ pub(crate) fn read_legacy(bytes: &[u8]) -> Result<TetMesh, MeshError> {
         c.err("unexpected end of file: missing ASCII/BINARY line (file truncated?)")
     })?;
     match enc.to_ascii_uppercase().as_slice() {
-        b"ASCII" => read_legacy_ascii(c, bytes.len()),
+        b"ASCII" => read_legacy_ascii(c, bytes.len(), want),
         b"BINARY" => {
             let start = bytes.len() - c.rest().len();
-            read_legacy_binary(bytes, start)
+            read_legacy_binary(bytes, start, want)
         }
         _ => Err(c.err(format!("expected ASCII or BINARY, found {}", show(enc)))),
     }
@@ -199,26 +310,39 @@ fn keyword(c: &mut Cursor<'_>, what: &str) -> Result<Vec<u8>, MeshError> {
 }
 
 /// The body of a legacy ASCII file, after the `ASCII` line.
-fn read_legacy_ascii(mut c: Cursor<'_>, file_len: usize) -> Result<TetMesh, MeshError> {
+fn read_legacy_ascii(
+    mut c: Cursor<'_>,
+    file_len: usize,
+    want: Dataset,
+) -> Result<Sections, MeshError> {
     // Capacity hints are bounded by the file size so a bogus count cannot exhaust memory.
     let cap = |n: usize| n.min(file_len / 2);
     if keyword(&mut c, "DATASET")? != b"DATASET" {
         return Err(c.err("expected \"DATASET UNSTRUCTURED_GRID\""));
     }
     let kind = keyword(&mut c, "dataset type")?;
-    if kind != b"UNSTRUCTURED_GRID" {
-        return Err(c.err(format!(
-            "unsupported VTK dataset type {} (only UNSTRUCTURED_GRID holds tetrahedra)",
-            show(&kind)
-        )));
-    }
-    let mut points: Option<Vec<f64>> = None;
-    // Cells as (offsets, connectivity): cell i is connectivity[offsets[i]..offsets[i + 1]].
-    let mut cells: Option<(Vec<usize>, Vec<u64>)> = None;
-    let mut types: Option<Vec<u32>> = None;
+    check_dataset(&kind, want).map_err(|m| c.err(m))?;
+    let mut out = Sections::default();
+    let Sections {
+        points,
+        cells,
+        types,
+        ..
+    } = &mut out;
+    let mut poly_cells = Vec::new();
 
     while let Some(tok) = c.token() {
-        match tok.to_ascii_uppercase().as_slice() {
+        let kw = tok.to_ascii_uppercase();
+        let is_poly = want == Dataset::Poly
+            && matches!(
+                kw.as_slice(),
+                b"VERTICES" | b"LINES" | b"POLYGONS" | b"TRIANGLE_STRIPS"
+            );
+        match if is_poly {
+            &b"CELLS"[..]
+        } else {
+            kw.as_slice()
+        } {
             b"FIELD" => skip_field(&mut c)?,
             b"METADATA" => c.skip_past_blank_line(),
             b"POINTS" => {
@@ -237,7 +361,7 @@ fn read_legacy_ascii(mut c: Cursor<'_>, file_len: usize) -> Result<TetMesh, Mesh
                         ))
                     })?);
                 }
-                points = Some(v);
+                *points = Some(v);
             }
             b"CELLS" => {
                 let a: usize = c.number("number of cells")?;
@@ -245,7 +369,7 @@ fn read_legacy_ascii(mut c: Cursor<'_>, file_len: usize) -> Result<TetMesh, Mesh
                 let is_v5 = c
                     .peek_token()
                     .is_some_and(|t| t.eq_ignore_ascii_case(b"OFFSETS"));
-                cells = Some(if is_v5 {
+                let list = if is_v5 {
                     c.token();
                     c.expect_token("offsets data type")?;
                     let mut offsets = Vec::with_capacity(cap(a));
@@ -294,7 +418,12 @@ fn read_legacy_ascii(mut c: Cursor<'_>, file_len: usize) -> Result<TetMesh, Mesh
                         )));
                     }
                     (offsets, conn)
-                });
+                };
+                if is_poly {
+                    poly_cells.push((kw, list));
+                } else {
+                    *cells = Some(list);
+                }
             }
             b"CELL_TYPES" => {
                 let n: usize = c.number("number of cell types")?;
@@ -302,7 +431,7 @@ fn read_legacy_ascii(mut c: Cursor<'_>, file_len: usize) -> Result<TetMesh, Mesh
                 for _ in 0..n {
                     v.push(c.number::<u32>("cell type")?);
                 }
-                types = Some(v);
+                *types = Some(v);
             }
             // Attribute data follows; nothing of it is needed.
             b"POINT_DATA" | b"CELL_DATA" => break,
@@ -314,16 +443,25 @@ fn read_legacy_ascii(mut c: Cursor<'_>, file_len: usize) -> Result<TetMesh, Mesh
             }
         }
     }
-    let line = c.line();
-    let missing = |what: &str| MeshError::Parse {
-        file: nofile(),
-        line,
-        message: format!("no {what} section (file truncated?)"),
-    };
-    let points = points.ok_or_else(|| missing("POINTS"))?;
-    let (offsets, conn) = cells.ok_or_else(|| missing("CELLS"))?;
-    let types = types.ok_or_else(|| missing("CELL_TYPES"))?;
-    assemble(&points, &offsets, &conn, &types)
+    for (kw, (offsets, conn)) in poly_cells {
+        out.add_poly(&kw, &offsets, &conn);
+    }
+    Ok(out)
+}
+
+/// Whether dataset type `kind` is the one wanted, else the message saying why not.
+fn check_dataset(kind: &[u8], want: Dataset) -> Result<(), String> {
+    match (want, kind) {
+        (Dataset::Grid, b"UNSTRUCTURED_GRID") | (Dataset::Poly, b"POLYDATA") => Ok(()),
+        (Dataset::Grid, _) => Err(format!(
+            "unsupported VTK dataset type {} (only UNSTRUCTURED_GRID holds tetrahedra)",
+            show(kind)
+        )),
+        (Dataset::Poly, _) => Err(format!(
+            "VTK dataset type {} is not a surface (expected POLYDATA)",
+            show(kind)
+        )),
+    }
 }
 
 /// Build the mesh from flat coordinates and cells as `(offsets, connectivity, types)`, cell `i`
@@ -333,7 +471,7 @@ fn assemble(
     offsets: &[usize],
     conn: &[u64],
     types: &[u32],
-) -> Result<TetMesh, MeshError> {
+) -> Result<(TetMesh, Ignored), MeshError> {
     let ncells = offsets.len().saturating_sub(1);
     if types.len() != ncells {
         return Err(format_err(format!(
@@ -476,7 +614,7 @@ impl Num {
 }
 
 /// The body of a binary legacy file, from byte `start` (just after the `BINARY` line).
-fn read_legacy_binary(bytes: &[u8], start: usize) -> Result<TetMesh, MeshError> {
+fn read_legacy_binary(bytes: &[u8], start: usize, want: Dataset) -> Result<Sections, MeshError> {
     let mut r = Bin {
         b: bytes,
         pos: start,
@@ -490,21 +628,37 @@ fn read_legacy_binary(bytes: &[u8], start: usize) -> Result<TetMesh, MeshError> 
         .line()
         .ok_or_else(|| r.err(start, "unexpected end of file before DATASET"))?;
     let is = |t: Option<&&[u8]>, kw: &[u8]| t.is_some_and(|t| t.eq_ignore_ascii_case(kw));
-    if !is(toks.first(), b"DATASET") || !is(toks.get(1), b"UNSTRUCTURED_GRID") {
-        return Err(r.err(
-            at,
-            "expected \"DATASET UNSTRUCTURED_GRID\" (only unstructured grids hold tetrahedra)",
-        ));
+    if !is(toks.first(), b"DATASET") {
+        return Err(r.err(at, "expected \"DATASET\""));
     }
-    let mut points: Option<Vec<f64>> = None;
-    let mut cells: Option<(Vec<usize>, Vec<u64>)> = None;
-    let mut types: Option<Vec<u32>> = None;
+    let kind = toks
+        .get(1)
+        .map(|t| t.to_ascii_uppercase())
+        .unwrap_or_default();
+    check_dataset(&kind, want).map_err(|m| r.err(at, m))?;
+    let mut out = Sections::default();
+    let Sections {
+        points,
+        cells,
+        types,
+        ..
+    } = &mut out;
+    let mut poly_cells = Vec::new();
     while let Some((at, toks)) = r.line() {
         let kw = toks
             .first()
             .map(|t| t.to_ascii_uppercase())
             .unwrap_or_default();
-        match kw.as_slice() {
+        let is_poly = want == Dataset::Poly
+            && matches!(
+                kw.as_slice(),
+                b"VERTICES" | b"LINES" | b"POLYGONS" | b"TRIANGLE_STRIPS"
+            );
+        match if is_poly {
+            &b"CELLS"[..]
+        } else {
+            kw.as_slice()
+        } {
             b"FIELD" => {
                 let arrays = parse_count(&r, at, toks.get(2), "number of field arrays")?;
                 for _ in 0..arrays {
@@ -534,7 +688,7 @@ fn read_legacy_binary(bytes: &[u8], start: usize) -> Result<TetMesh, MeshError> 
                 let n = parse_count(&r, at, toks.get(1), "number of points")?;
                 let ty = toks.get(2).copied().unwrap_or(b"");
                 let v = r.numbers(n.saturating_mul(3), ty, "point coordinates")?;
-                points = Some(
+                *points = Some(
                     v.iter()
                         .map(|x| match *x {
                             Num::Float(f) => f,
@@ -570,7 +724,11 @@ fn read_legacy_binary(bytes: &[u8], start: usize) -> Result<TetMesh, MeshError> 
                         if bad {
                             return Err(r.err(at2, "cell offsets must start at 0, never decrease, and end at the connectivity length"));
                         }
-                        cells = Some((offsets, conn));
+                        if is_poly {
+                            poly_cells.push((kw, (offsets, conn)));
+                        } else {
+                            *cells = Some((offsets, conn));
+                        }
                     }
                     _ => {
                         r.pos = save;
@@ -593,14 +751,18 @@ fn read_legacy_binary(bytes: &[u8], start: usize) -> Result<TetMesh, MeshError> 
                                 format!("CELLS header says {b} numbers, the cells use {i}"),
                             ));
                         }
-                        cells = Some((offsets, conn));
+                        if is_poly {
+                            poly_cells.push((kw, (offsets, conn)));
+                        } else {
+                            *cells = Some((offsets, conn));
+                        }
                     }
                 }
             }
             b"CELL_TYPES" => {
                 let n = parse_count(&r, at, toks.get(1), "number of cell types")?;
                 let v = r.indices(n, b"int", "cell types")?;
-                types = Some(
+                *types = Some(
                     v.iter()
                         .map(|&t| u32::try_from(t).unwrap_or(u32::MAX))
                         .collect(),
@@ -618,12 +780,10 @@ fn read_legacy_binary(bytes: &[u8], start: usize) -> Result<TetMesh, MeshError> 
             }
         }
     }
-    let end = bytes.len();
-    let missing = |what: &str| r.err(end, format!("no {what} section (file truncated?)"));
-    let points = points.ok_or_else(|| missing("POINTS"))?;
-    let (offsets, conn) = cells.ok_or_else(|| missing("CELLS"))?;
-    let types = types.ok_or_else(|| missing("CELL_TYPES"))?;
-    assemble(&points, &offsets, &conn, &types)
+    for (kw, (offsets, conn)) in poly_cells {
+        out.add_poly(&kw, &offsets, &conn);
+    }
+    Ok(out)
 }
 
 /// Skip `FIELD name n` and its `n` arrays (`name components tuples type` then the values).
@@ -653,9 +813,10 @@ mod tests {
 
     #[test]
     fn legacy_v4_with_field_metadata_and_lines() {
-        let m = read_legacy(TET_V4.as_bytes()).unwrap();
+        let (m, ignored) = read_legacy(TET_V4.as_bytes()).unwrap();
         assert_eq!(m.nodes.len(), 4);
         assert_eq!(m.tets, vec![[0, 1, 2, 3]]);
+        assert_eq!(ignored.to_string(), "1 VTK_LINE");
     }
 
     #[test]
@@ -663,7 +824,7 @@ mod tests {
         let text = "# vtk DataFile Version 5.1\nt\nASCII\nDATASET UNSTRUCTURED_GRID\n\
             POINTS 4 float\n0 0 0 1 0 0 0 1 0 0 0 1\nCELLS 3 6\nOFFSETS vtktypeint64\n0 2 6\n\
             CONNECTIVITY vtktypeint64\n0 1 0 1 2 3\nCELL_TYPES 2\n3\n10\n";
-        let m = read_legacy(text.as_bytes()).unwrap();
+        let (m, _) = read_legacy(text.as_bytes()).unwrap();
         assert_eq!(m.tets, vec![[0, 1, 2, 3]]);
     }
 

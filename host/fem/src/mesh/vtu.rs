@@ -5,9 +5,10 @@
 //! (base64) and raw `appended` format, uncompressed or zlib-compressed, either byte order,
 //! 32- or 64-bit headers, any integer type for connectivity/offsets/types, several pieces.
 
-use super::TetMesh;
 use super::error::{MeshError, nofile};
 use super::vtk::Builder;
+use super::{Ignored, TetMesh};
+use crate::surface::TriSurface;
 use std::io::Read;
 
 /// A problem located at a byte offset of the file (reported as a line, the XML being text).
@@ -16,15 +17,49 @@ struct At(usize, String);
 type Res<T> = Result<T, At>;
 
 /// Read a `.vtu` file.
-pub(crate) fn read_vtu(bytes: &[u8]) -> Result<TetMesh, MeshError> {
-    read(bytes).map_err(|At(offset, message)| MeshError::Parse {
+pub(crate) fn read_vtu(bytes: &[u8]) -> Result<(TetMesh, Ignored), MeshError> {
+    read(bytes, false)
+        .map(Builder::finish)
+        .map_err(|e| located(bytes, e))
+}
+
+/// Read a `.vtp` file (VTK XML `PolyData`): its points and polygons (`<Polys>`), split into
+/// fans; vertices, lines and strips are ignored.
+pub(crate) fn read_vtp(bytes: &[u8]) -> Result<TriSurface, MeshError> {
+    let b = read(bytes, true).map_err(|e| located(bytes, e))?;
+    let mut triangles = Vec::new();
+    for p in &b.polygons {
+        for k in 1..p.len().saturating_sub(1) {
+            triangles.push([p[0], p[k], p[k + 1]]);
+        }
+    }
+    for t in &triangles {
+        if let Some(&v) = t.iter().find(|&&v| v >= b.nodes.len()) {
+            return Err(MeshError::Format {
+                file: nofile(),
+                message: format!(
+                    "a polygon refers to point {v}, but there are {} points",
+                    b.nodes.len()
+                ),
+            });
+        }
+    }
+    Ok(TriSurface {
+        vertices: b.nodes,
+        triangles,
+    })
+}
+
+/// The byte offset of an error as a line.
+fn located(bytes: &[u8], At(offset, message): At) -> MeshError {
+    MeshError::Parse {
         file: nofile(),
         line: bytes
             .get(..offset)
             .map_or(0, |b| b.iter().filter(|&&c| c == b'\n').count())
             + 1,
         message,
-    })
+    }
 }
 
 /// One XML tag.
@@ -489,7 +524,7 @@ fn int(n: &Num, at: usize, what: &str) -> Res<u64> {
     }
 }
 
-fn finish_piece(p: PieceArrays, out: &mut Builder) -> Res<()> {
+fn finish_piece(p: PieceArrays, out: &mut Builder, poly: bool) -> Res<()> {
     let at = p.start;
     let missing = |what: &str| At(at, format!("piece without {what} data array"));
     let points = p.points.ok_or_else(|| missing("a Points"))?;
@@ -517,7 +552,12 @@ fn finish_piece(p: PieceArrays, out: &mut Builder) -> Res<()> {
     }
     let conn = p.connectivity.ok_or_else(|| missing("a connectivity"))?;
     let offsets = p.offsets.ok_or_else(|| missing("an offsets"))?;
-    let types = p.types.ok_or_else(|| missing("a types"))?;
+    // A PolyData piece's `<Polys>` are polygons, without a types array.
+    let types = match p.types {
+        Some(t) => t,
+        None if poly => (0..offsets.len()).map(|_| Num::Int(VTK_POLYGON)).collect(),
+        None => return Err(missing("a types")),
+    };
     if offsets.len() as u64 != p.num_cells || types.len() as u64 != p.num_cells {
         return Err(At(
             at,
@@ -550,7 +590,16 @@ fn finish_piece(p: PieceArrays, out: &mut Builder) -> Res<()> {
     Ok(())
 }
 
-fn read(bytes: &[u8]) -> Res<TetMesh> {
+/// VTK cell type of a polygon.
+const VTK_POLYGON: i128 = 7;
+
+/// The points and cells of a `.vtu` (`poly` false) or `.vtp` file (`poly`: the `<Polys>`).
+fn read(bytes: &[u8], poly: bool) -> Res<Builder> {
+    let (root_type, cells_section, count_attr): (&[u8], &[u8], &str) = if poly {
+        (b"PolyData", b"Polys", "NumberOfPolys")
+    } else {
+        (b"UnstructuredGrid", b"Cells", "NumberOfCells")
+    };
     // Raw appended data is binary and may contain '<': cut it off before scanning tags.
     let (xml, appended) = match find(bytes, b"<AppendedData", 0) {
         None => (bytes, None),
@@ -587,12 +636,17 @@ fn read(bytes: &[u8]) -> Res<TetMesh> {
         match (tag.name, tag.closing) {
             (b"VTKFile", false) => {
                 seen_root = true;
-                if tag.attr("type") != Some(b"UnstructuredGrid") {
+                if tag.attr("type") != Some(root_type) {
                     return Err(At(
                         tag.start,
                         format!(
-                            "VTK XML file of type {:?}; only UnstructuredGrid holds tetrahedra",
-                            tag.attr_str("type").unwrap_or_default()
+                            "VTK XML file of type {:?}; expected {}",
+                            tag.attr_str("type").unwrap_or_default(),
+                            if poly {
+                                "PolyData (a surface)"
+                            } else {
+                                "UnstructuredGrid (only it holds tetrahedra)"
+                            }
                         ),
                     ));
                 }
@@ -615,7 +669,7 @@ fn read(bytes: &[u8]) -> Res<TetMesh> {
             (b"Piece", false) => {
                 piece = Some(PieceArrays {
                     num_points: tag.attr_num("NumberOfPoints")?.unwrap_or(0),
-                    num_cells: tag.attr_num("NumberOfCells")?.unwrap_or(0),
+                    num_cells: tag.attr_num(count_attr)?.unwrap_or(0),
                     start: tag.start,
                     ..Default::default()
                 });
@@ -624,16 +678,20 @@ fn read(bytes: &[u8]) -> Res<TetMesh> {
                 let p = piece
                     .take()
                     .ok_or_else(|| At(tag.start, "</Piece> without <Piece>".into()))?;
-                finish_piece(p, &mut out)?;
+                finish_piece(p, &mut out, poly)?;
             }
-            (b"Points" | b"Cells" | b"PointData" | b"CellData" | b"FieldData", false)
-                if !tag.empty =>
-            {
+            (
+                b"Points" | b"Cells" | b"Polys" | b"Verts" | b"Lines" | b"Strips" | b"PointData"
+                | b"CellData" | b"FieldData",
+                false,
+            ) if !tag.empty => {
                 section = Some(tag.name);
             }
-            (b"Points" | b"Cells" | b"PointData" | b"CellData" | b"FieldData", true) => {
-                section = None
-            }
+            (
+                b"Points" | b"Cells" | b"Polys" | b"Verts" | b"Lines" | b"Strips" | b"PointData"
+                | b"CellData" | b"FieldData",
+                true,
+            ) => section = None,
             (b"DataArray", false) => {
                 let content_end = if tag.empty {
                     tag.end
@@ -652,9 +710,9 @@ fn read(bytes: &[u8]) -> Res<TetMesh> {
                 };
                 let slot = match (sec, tag.attr("Name")) {
                     (b"Points", _) if p.points.is_none() => &mut p.points,
-                    (b"Cells", Some(b"connectivity")) => &mut p.connectivity,
-                    (b"Cells", Some(b"offsets")) => &mut p.offsets,
-                    (b"Cells", Some(b"types")) => &mut p.types,
+                    (s, Some(b"connectivity")) if s == cells_section => &mut p.connectivity,
+                    (s, Some(b"offsets")) if s == cells_section => &mut p.offsets,
+                    (s, Some(b"types")) if s == cells_section => &mut p.types,
                     _ => continue,
                 };
                 *slot = Some(decode_array(&tag, content, enc, appended)?);
@@ -671,7 +729,7 @@ fn read(bytes: &[u8]) -> Res<TetMesh> {
             "unexpected end of file inside <Piece> (file truncated?)".into(),
         ));
     }
-    Ok(out.finish())
+    Ok(out)
 }
 
 #[cfg(test)]
@@ -699,7 +757,7 @@ mod tests {
 <DataArray type="Int32" Name="offsets" format="ascii">3 7</DataArray>
 <DataArray type="UInt8" Name="types" format="ascii">5 10</DataArray>
 </Cells></Piece></UnstructuredGrid></VTKFile>"#;
-        let m = read_vtu(text).unwrap();
+        let (m, _) = read_vtu(text).unwrap();
         assert_eq!(m.nodes.len(), 4);
         assert_eq!(m.tets, vec![[0, 1, 2, 3]]);
         let bad = String::from_utf8_lossy(text).replace("0 1 2 3<", "0 1 x 3<");

@@ -1,0 +1,204 @@
+//! `host mesh`: a closed surface (STL, OBJ, PLY, VTK polydata, VTP) to a tetrahedral mesh for the
+//! FEM, through Gmsh: units, surface checks and opt-in repairs, a size field fine where the
+//! scene's tool reaches, quality, an atomic write.
+
+use anyhow::{Context, Result, bail};
+use fem::mesh::quality::SLIVER_DIHEDRAL_DEG;
+use fem::surface::{CheckOptions, read_surface};
+use host::meshing::{self, Sizes, Units};
+use host::scene::Scene;
+use std::path::PathBuf;
+use std::time::Instant;
+
+/// Length units of the surface file.
+#[derive(clap::ValueEnum, Clone, Copy, Debug)]
+pub enum UnitsArg {
+    /// Metres.
+    M,
+    /// Centimetres.
+    Cm,
+    /// Millimetres.
+    Mm,
+}
+
+/// Arguments of `host mesh`.
+#[derive(clap::Args, Debug)]
+#[command(
+    after_help = "The surface is checked before meshing, each problem an error naming \
+the faces or vertices (0-based, file order), counts and a location: duplicate vertices, \
+degenerate faces, non-manifold edges and vertices, several shells, holes, inconsistent \
+orientation, self-intersections. Faces that all point inward are flipped (and said). Gmsh: the \
+pinned Python module gmsh==4.15.2 (scripts/test-all.sh installs it)."
+)]
+pub struct Args {
+    /// Closed triangulated surface: .stl (ASCII or binary), .obj, .ply, .vtk (POLYDATA), .vtp.
+    surface: PathBuf,
+    /// Output tetrahedral mesh (.msh, Gmsh 4.1 ASCII, metres), written atomically.
+    #[arg(short, long, required_unless_present = "check")]
+    output: Option<PathBuf>,
+    /// Units of the surface's coordinates; default: guessed from the bounding box (an organ is
+    /// 4 to 40 cm across) and printed, refused when no unit fits.
+    #[arg(long, value_enum)]
+    units: Option<UnitsArg>,
+    /// Element size in metres (away from the reach with --refine-near); default: the largest
+    /// side of the bounding box / 15.
+    #[arg(long, value_name = "M")]
+    size: Option<f64>,
+    /// A scene whose tool reach (trocar, joint ranges, tip radius + reach margin) gets the
+    /// fine size --fine, growing by --gradient per metre away from it.
+    #[arg(long, value_name = "SCENE")]
+    refine_near: Option<PathBuf>,
+    /// Element size where the tool reaches, metres (with --refine-near); default --size / 3.
+    #[arg(long, value_name = "M")]
+    fine: Option<f64>,
+    /// Growth of the element size per metre of distance from the reach (with --refine-near).
+    #[arg(long, default_value_t = 0.3)]
+    gradient: f64,
+    /// Safe repairs, each reported: merge duplicate vertices (--merge-tolerance), drop faces
+    /// that use a vertex twice, make the orientation consistent, fill holes of at most
+    /// --fill-holes edges.
+    #[arg(long)]
+    repair: bool,
+    /// Largest hole --repair fills, in boundary edges.
+    #[arg(long, default_value_t = 32, value_name = "N")]
+    fill_holes: usize,
+    /// Vertices closer than this fraction of the bounding-box diagonal are duplicates.
+    #[arg(long, default_value_t = 1e-7, value_name = "FRACTION")]
+    merge_tolerance: f64,
+    /// Keep the largest shell (by area) when the surface has several, instead of refusing.
+    #[arg(long)]
+    largest: bool,
+    /// Check (and repair) the surface and print the units and sizes, without meshing.
+    #[arg(long)]
+    check: bool,
+}
+
+/// Runs the command.
+pub fn run(a: Args) -> Result<()> {
+    let t0 = Instant::now();
+    let surface = read_surface(&a.surface)?;
+    let name = a.surface.display().to_string();
+    eprintln!(
+        "{name}: {} vertices, {} faces",
+        surface.vertices.len(),
+        surface.triangles.len()
+    );
+    let (lo, hi) = surface.bounding_box();
+    let side = (0..3).map(|k| hi[k] - lo[k]).fold(0.0, f64::max);
+    let units = match a.units {
+        Some(UnitsArg::M) => Units::M,
+        Some(UnitsArg::Cm) => Units::Cm,
+        Some(UnitsArg::Mm) => Units::Mm,
+        None => {
+            let u = meshing::guess_units(side).map_err(|e| anyhow::anyhow!("{name}: {e}"))?;
+            eprintln!(
+                "units: {} (guessed: the largest side is {side:.4}, {:.3} m in {}; --units \
+                 overrides)",
+                u.name(),
+                side * u.to_metres(),
+                u.name()
+            );
+            u
+        }
+    };
+    if !(a.merge_tolerance >= 0.0 && a.merge_tolerance < 0.01) {
+        bail!(
+            "--merge-tolerance {}: must be in [0, 0.01)",
+            a.merge_tolerance
+        );
+    }
+    let opts = CheckOptions {
+        repair: a.repair,
+        merge_tolerance: a.merge_tolerance,
+        fill_holes: a.fill_holes,
+        largest: a.largest,
+    };
+    let (checked, notes) =
+        fem::surface::check(&surface, opts).with_context(|| format!("{name}: refused"))?;
+    for n in &notes {
+        eprintln!("repaired: {n}");
+    }
+    let surface_m = checked.scaled(units.to_metres());
+    // The default size is the kept surface's (--largest may have dropped a far shell).
+    let (lo, hi) = surface_m.bounding_box();
+    let side_m = (0..3).map(|k| hi[k] - lo[k]).fold(0.0, f64::max);
+    let volume = surface_m.signed_volume();
+    eprintln!(
+        "surface: closed, {} faces, volume {:.4e} m^3 ({:.1} cm^3), largest side {:.4} m",
+        surface_m.triangles.len(),
+        volume,
+        volume * 1e6,
+        side_m
+    );
+    let size = a.size.unwrap_or(side_m / 15.0);
+    if !(size > 0.0 && size.is_finite()) {
+        bail!("--size {size}: must be a positive length in metres");
+    }
+    let mut sizes = Sizes {
+        size,
+        fine: None,
+        reach: Vec::new(),
+    };
+    if let Some(scene_path) = &a.refine_near {
+        let scene = Scene::load(scene_path)?;
+        let fine = a.fine.unwrap_or(size / 3.0);
+        if !(fine > 0.0 && fine <= size) {
+            bail!("--fine {fine}: must be positive and at most the size {size} m");
+        }
+        if !(a.gradient > 0.0 && a.gradient.is_finite()) {
+            bail!("--gradient {}: must be positive", a.gradient);
+        }
+        sizes.reach = meshing::reach_points(&surface_m, &scene);
+        if sizes.reach.is_empty() {
+            bail!(
+                "{}: the tool reaches no point of {name} (in {}): is the organ where the scene's \
+                 trocar and insertion range expect it?",
+                scene_path.display(),
+                units.name()
+            );
+        }
+        eprintln!(
+            "reach: {} surface points within the tool's reach ({}); size {fine:.4} m there, \
+             growing by {} per m to {size:.4} m",
+            sizes.reach.len(),
+            scene_path.display(),
+            a.gradient
+        );
+        sizes.fine = Some((fine, a.gradient));
+    } else {
+        eprintln!("size: {size:.4} m everywhere");
+    }
+    let Some(output) = a.output.as_ref().filter(|_| !a.check) else {
+        eprintln!("--check: the surface passes; not meshed");
+        return Ok(());
+    };
+    let mesh = meshing::run_gmsh(&surface_m, &sizes)?;
+    let mut bytes = Vec::new();
+    mesh.write_msh4_ascii(&mut bytes)?;
+    host::fsio::write_atomic(output, &bytes, &[&a.surface])?;
+    let tet_volume: f64 = (0..mesh.tets.len()).map(|t| mesh.signed_volume(t)).sum();
+    println!(
+        "{}: {} nodes, {} tetrahedra, volume {:.4e} m^3 ({:+.2}% of the surface's), {:.1} s",
+        output.display(),
+        mesh.nodes.len(),
+        mesh.tets.len(),
+        tet_volume,
+        100.0 * (tet_volume / volume - 1.0),
+        t0.elapsed().as_secs_f64()
+    );
+    if let Some(q) = mesh.quality_summary() {
+        println!(
+            "quality: worst dihedral angle {:.2} deg (tetrahedron {}), largest {:.1} deg; \
+             radius ratio min {:.3} (tetrahedron {}), mean {:.3}; {} slivers (a dihedral angle \
+             below {SLIVER_DIHEDRAL_DEG} deg) after Gmsh's and Netgen's optimisation",
+            q.min_dihedral_deg.0,
+            q.min_dihedral_deg.1,
+            q.max_dihedral_deg,
+            q.min_radius_ratio.0,
+            q.min_radius_ratio.1,
+            q.mean_radius_ratio,
+            q.slivers
+        );
+    }
+    Ok(())
+}

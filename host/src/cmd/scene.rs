@@ -1,0 +1,124 @@
+//! `host scene new`: a complete, commented scene for a tetrahedral organ mesh.
+
+use anyhow::{Context, Result, bail};
+use host::scene_new::{NewScene, Support, Tissue, relative_to, scene_text};
+use std::path::PathBuf;
+
+/// `host scene` subcommands.
+#[derive(clap::Subcommand, Debug)]
+pub enum SceneCmd {
+    /// Write a scene for a mesh: the device aimed from the trocar at the organ, supports, a
+    /// tissue preset; checked by loading it as any scene, ready for `host bank build` and
+    /// `host demo --scene`.
+    New(NewArgs),
+}
+
+/// Tissue presets.
+#[derive(clap::ValueEnum, Clone, Copy, Debug)]
+pub enum TissueArg {
+    /// Liver parenchyma (the default scene's 3 kPa).
+    Liver,
+    /// Kidney (a placeholder figure, no checked source).
+    Kidney,
+    /// Brain (Miller and Chinzei 2002's small-strain modulus, as the project quotes it).
+    Brain,
+}
+
+/// Arguments of `host scene new`.
+#[derive(clap::Args, Debug)]
+#[command(allow_negative_numbers = true)]
+pub struct NewArgs {
+    /// Tetrahedral mesh (.msh, .vtu, .vtk, .mesh), metres: e.g. the output of `host mesh`.
+    #[arg(long)]
+    mesh: PathBuf,
+    /// The trocar (the gimbal's fulcrum), m: `X,Y,Z`, outside the organ.
+    #[arg(long, value_name = "X,Y,Z")]
+    trocar: String,
+    /// Hold every node at or below this height (m).
+    #[arg(
+        long,
+        value_name = "Z",
+        conflicts_with = "fix_box",
+        required_unless_present = "fix_box"
+    )]
+    fix_below: Option<f64>,
+    /// Hold the nodes in this box (m): `XMIN,YMIN,ZMIN,XMAX,YMAX,ZMAX`.
+    #[arg(long, value_name = "X0,Y0,Z0,X1,Y1,Z1")]
+    fix_box: Option<String>,
+    /// Material preset (Young's modulus, Poisson's ratio; sources in the scene's comments).
+    #[arg(long, value_enum, default_value = "liver")]
+    tissue: TissueArg,
+    /// Output scene file (TOML), written atomically.
+    #[arg(short, long)]
+    output: PathBuf,
+}
+
+/// Runs the command.
+pub fn run(cmd: SceneCmd) -> Result<()> {
+    match cmd {
+        SceneCmd::New(a) => new(a),
+    }
+}
+
+fn numbers<const N: usize>(s: &str, what: &str) -> Result<[f64; N]> {
+    let v: Vec<f64> = s
+        .split(',')
+        .map(|t| t.trim().parse::<f64>())
+        .collect::<Result<_, _>>()
+        .with_context(|| format!("{what} {s:?}: expected {N} comma-separated numbers"))?;
+    let arr: [f64; N] = v.try_into().map_err(|v: Vec<f64>| {
+        anyhow::anyhow!("{what} {s:?}: {} numbers, expected {N}", v.len())
+    })?;
+    if arr.iter().any(|x| !x.is_finite()) {
+        bail!("{what} {s:?}: not finite");
+    }
+    Ok(arr)
+}
+
+fn new(a: NewArgs) -> Result<()> {
+    let (mesh, ignored) = fem::mesh::read_counted(&a.mesh)?;
+    fem::mesh::validate(&mesh).map_err(|e| e.with_path(&a.mesh))?;
+    let skipped = if ignored.total() > 0 {
+        format!(" (skipped: {ignored})")
+    } else {
+        String::new()
+    };
+    eprintln!(
+        "{}: {} nodes, {} tetrahedra{skipped}",
+        a.mesh.display(),
+        mesh.nodes.len(),
+        mesh.tets.len()
+    );
+    let trocar = numbers::<3>(&a.trocar, "--trocar")?;
+    let support = match (a.fix_below, &a.fix_box) {
+        (Some(z), _) => Support::Below(z),
+        (None, Some(b)) => Support::Box(numbers::<6>(b, "--fix-box")?),
+        (None, None) => bail!("give --fix-below or --fix-box"),
+    };
+    let tissue = match a.tissue {
+        TissueArg::Liver => Tissue::Liver,
+        TissueArg::Kidney => Tissue::Kidney,
+        TissueArg::Brain => Tissue::Brain,
+    };
+    let dir = a
+        .output
+        .parent()
+        .filter(|p| !p.as_os_str().is_empty())
+        .unwrap_or(std::path::Path::new("."));
+    let spec = NewScene {
+        mesh_path: relative_to(&a.mesh, dir),
+        trocar,
+        support,
+        tissue,
+    };
+    let (text, reachable, warnings) = scene_text(&mesh, &spec, &a.output)?;
+    warnings.iter().for_each(|w| eprintln!("{w}"));
+    host::fsio::write_atomic(&a.output, text.as_bytes(), &[&a.mesh])?;
+    println!(
+        "{}: scene for {} ({} tissue); the tool reaches {reachable} surface nodes",
+        a.output.display(),
+        a.mesh.display(),
+        tissue.name()
+    );
+    Ok(())
+}

@@ -1,0 +1,234 @@
+//! From a closed surface to a tetrahedral mesh (`host mesh`): units, the size field near the
+//! tool's reach, and Gmsh (its Python module, pinned to 4.15.2 and installed by
+//! `scripts/test-all.sh`) as the mesher.
+//!
+//! Why Gmsh through Python: Gmsh is the project's mesher already (`scripts/gen_meshes.py`
+//! makes every shipped mesh with the same pinned module), its pip wheel carries the whole
+//! library (no system package has 4.15.2), and its STL remeshing (`classifySurfaces`,
+//! `createGeometry`) and optimisers (Gmsh's and Netgen's) are what a segmented surface needs.
+//! The script (`scripts/mesh_surface.py`) is embedded in the binary and run with `python3`
+//! (or `$HOST_PYTHON`); the surface and the reachable points go to it as files, the mesh
+//! comes back as a temporary MSH file that is validated here before anything is written.
+
+use crate::kinematics::Workspace;
+use crate::scene::Scene;
+use anyhow::{Context, Result, bail};
+use fem::mesh::TetMesh;
+use fem::surface::TriSurface;
+use std::process::Command;
+
+/// The meshing script, run by [`run_gmsh`].
+const SCRIPT: &str = include_str!("../../scripts/mesh_surface.py");
+
+/// Length units of a surface file.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Units {
+    /// Metres.
+    M,
+    /// Centimetres.
+    Cm,
+    /// Millimetres.
+    Mm,
+}
+
+impl Units {
+    /// Metres per unit.
+    pub fn to_metres(self) -> f64 {
+        match self {
+            Units::M => 1.0,
+            Units::Cm => 0.01,
+            Units::Mm => 0.001,
+        }
+    }
+
+    /// The unit's symbol.
+    pub fn name(self) -> &'static str {
+        match self {
+            Units::M => "m",
+            Units::Cm => "cm",
+            Units::Mm => "mm",
+        }
+    }
+}
+
+/// Largest side of a whole organ's bounding box, m: 4 cm (a small kidney is 10 cm, a
+/// specimen is not an organ) to 40 cm (a large liver is about 25 cm).
+pub const ORGAN_SIDE_M: (f64, f64) = (0.04, 0.4);
+
+/// The units in which a bounding box whose largest side is `side` (file units) is an organ's,
+/// [`ORGAN_SIDE_M`]: the three ranges do not overlap, so the guess is unique; `Err` says why
+/// none fits.
+pub fn guess_units(side: f64) -> Result<Units, String> {
+    for u in [Units::M, Units::Cm, Units::Mm] {
+        let m = side * u.to_metres();
+        if (ORGAN_SIDE_M.0..=ORGAN_SIDE_M.1).contains(&m) {
+            return Ok(u);
+        }
+    }
+    Err(format!(
+        "the largest side of the bounding box is {side:.4} file units: no unit makes that an \
+         organ's {} to {} m (in m: {side:.3} m, in cm: {:.3} m, in mm: {:.4} m); pass --units",
+        ORGAN_SIDE_M.0,
+        ORGAN_SIDE_M.1,
+        side * 0.01,
+        side * 0.001
+    ))
+}
+
+/// The points of `surface` (metres; vertices and face centroids) within the tip radius plus
+/// the scene's reach margin of the scene's tool workspace ([`Workspace::reaches`], the test
+/// the bank's reachable region uses).
+pub fn reach_points(surface: &TriSurface, scene: &Scene) -> Vec<[f64; 3]> {
+    let w = Workspace::from_device(&scene.device);
+    let margin = scene.tip_radius_m + scene.bank.reach_margin_m;
+    let centroids = surface.triangles.iter().map(|t| {
+        let [a, b, c] = t.map(|v| surface.vertices[v]);
+        [0, 1, 2].map(|k| (a[k] + b[k] + c[k]) / 3.0)
+    });
+    surface
+        .vertices
+        .iter()
+        .copied()
+        .chain(centroids)
+        .filter(|&p| w.reaches(p, margin))
+        .collect()
+}
+
+/// Sizes for [`run_gmsh`], metres.
+#[derive(Debug, Clone)]
+pub struct Sizes {
+    /// Size away from the reach (everywhere without one).
+    pub size: f64,
+    /// Size at the reachable points, and its growth per metre of distance from them.
+    pub fine: Option<(f64, f64)>,
+    /// The reachable points.
+    pub reach: Vec<[f64; 3]>,
+}
+
+/// Mesh the inside of `surface` (metres, checked: closed, oriented, one shell) with Gmsh; the
+/// mesh is validated ([`fem::mesh::validate`]) and holds only the nodes its tetrahedra use.
+pub fn run_gmsh(surface: &TriSurface, sizes: &Sizes) -> Result<TetMesh> {
+    let dir = tempfile::tempdir().context("cannot make a temporary directory for Gmsh")?;
+    let stl = dir.path().join("surface.stl");
+    let out = dir.path().join("volume.msh");
+    let script = dir.path().join("mesh_surface.py");
+    let job = dir.path().join("job.json");
+    std::fs::write(&stl, surface.to_stl_binary())?;
+    std::fs::write(&script, SCRIPT)?;
+    let (fine, gradient) = sizes.fine.unzip();
+    let job_json = serde_json::json!({
+        "surface": stl,
+        "output": out,
+        "size": sizes.size,
+        "fine": fine,
+        "gradient": gradient,
+        "reach_points": sizes.reach,
+    });
+    std::fs::write(&job, job_json.to_string())?;
+    let python = std::env::var("HOST_PYTHON").unwrap_or_else(|_| "python3".into());
+    let status = Command::new(&python)
+        .arg(&script)
+        .arg(&job)
+        .status()
+        .with_context(|| {
+            format!(
+                "cannot run {python} for Gmsh (install Python 3 and `pip install gmsh==4.15.2 \
+                 numpy`; scripts/test-all.sh does)"
+            )
+        })?;
+    if !status.success() {
+        bail!(
+            "Gmsh failed ({status}; its messages are above). If the module is missing: `pip \
+             install gmsh==4.15.2 numpy`"
+        );
+    }
+    let mesh = fem::mesh::read(&out).context("reading Gmsh's mesh")?;
+    let mesh = compact(mesh);
+    fem::mesh::validate(&mesh).context("Gmsh's mesh fails validation")?;
+    Ok(mesh)
+}
+
+/// The mesh without the nodes no tetrahedron uses (Gmsh may keep some of the input
+/// surface's), the others in their original order.
+fn compact(mesh: TetMesh) -> TetMesh {
+    let mut used = vec![false; mesh.nodes.len()];
+    for t in &mesh.tets {
+        for &v in t {
+            if let Some(u) = used.get_mut(v) {
+                *u = true;
+            }
+        }
+    }
+    let mut new_id = vec![usize::MAX; mesh.nodes.len()];
+    let mut nodes = Vec::new();
+    for (i, p) in mesh.nodes.iter().enumerate() {
+        if used[i] {
+            new_id[i] = nodes.len();
+            nodes.push(*p);
+        }
+    }
+    let tets = mesh
+        .tets
+        .iter()
+        .map(|t| t.map(|v| new_id.get(v).copied().unwrap_or(usize::MAX)))
+        .collect();
+    TetMesh { nodes, tets }
+}
+
+/// Where an element's size is measured: its longest edge, against the distance of its
+/// centroid from the nearest of `points`. For the size-against-reach report.
+pub fn size_against_distance(mesh: &TetMesh, points: &[[f64; 3]]) -> Vec<(f64, f64)> {
+    mesh.tets
+        .iter()
+        .map(|t| {
+            let p = t.map(|v| mesh.nodes[v]);
+            let mut longest: f64 = 0.0;
+            for i in 0..4 {
+                for j in i + 1..4 {
+                    longest = longest.max(fem::vec3::norm(fem::vec3::sub(p[i], p[j])));
+                }
+            }
+            let c = [0, 1, 2].map(|k| (p[0][k] + p[1][k] + p[2][k] + p[3][k]) / 4.0);
+            let d = points
+                .iter()
+                .map(|&q| fem::vec3::dist2(c, q))
+                .fold(f64::INFINITY, f64::min)
+                .sqrt();
+            (d, longest)
+        })
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn units_are_guessed_from_an_organs_size() {
+        assert_eq!(guess_units(0.14), Ok(Units::M));
+        assert_eq!(guess_units(14.0), Ok(Units::Cm));
+        assert_eq!(guess_units(140.0), Ok(Units::Mm));
+        // Between the ranges (1 m or 1 mm?) and outside them: refused.
+        assert!(guess_units(1.0).unwrap_err().contains("pass --units"));
+        assert!(guess_units(5000.0).is_err());
+        assert!(guess_units(0.001).is_err());
+    }
+
+    #[test]
+    fn compact_drops_unused_nodes_keeping_the_order() {
+        let m = TetMesh {
+            nodes: vec![
+                [9.0; 3],
+                [0.0; 3],
+                [1.0, 0.0, 0.0],
+                [0.0, 1.0, 0.0],
+                [0.0, 0.0, 1.0],
+            ],
+            tets: vec![[1, 2, 3, 4]],
+        };
+        let c = compact(m);
+        assert_eq!(c.nodes.len(), 4);
+        assert_eq!(c.tets, vec![[0, 1, 2, 3]]);
+        assert_eq!(c.nodes[0], [0.0; 3]);
+    }
+}

@@ -1,0 +1,333 @@
+//! `host scene new`: a complete, commented scene for a tetrahedral organ mesh, the device's
+//! joint ranges aimed from a trocar at the organ, a tissue preset; the text is validated by
+//! loading it as any scene ([`Scene::parse`]) before it is written.
+
+use crate::bank::Prepared;
+use crate::kinematics::Workspace;
+use crate::scene::Scene;
+use anyhow::{Result, bail};
+use fem::mesh::TetMesh;
+use fem::vec3::{cross, dot, norm, scale, sub};
+use std::path::{Component, Path, PathBuf};
+
+/// A tissue's linear-elastic preset, with where each figure comes from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Tissue {
+    /// Liver parenchyma.
+    Liver,
+    /// Kidney.
+    Kidney,
+    /// Brain.
+    Brain,
+}
+
+impl Tissue {
+    /// Young's modulus (Pa), Poisson's ratio, and the comment giving their sources.
+    fn preset(self) -> (f64, f64, String) {
+        let (young, source) = match self {
+            Tissue::Liver => (
+                3000.0,
+                "# Liver preset. young_pa = 3000: the value of the project's default scene\n\
+# (host/scenes/liver.toml, \"a few kPa\"); no measurement of it is checked here: fit the\n\
+# tissue law on bench data with `host calibrate tissue`.",
+            ),
+            Tissue::Kidney => (
+                5000.0,
+                "# Kidney preset. young_pa = 5000: a placeholder of the order of the liver's, with\n\
+# no checked source; measure it and fit the law with `host calibrate tissue`.",
+            ),
+            Tissue::Brain => (
+                2526.0,
+                "# Brain preset. young_pa = 2526 = 3 mu0 with mu0 = 842 Pa, the small-strain shear\n\
+# modulus of K. Miller and K. Chinzei, J. Biomech. 35(4):483-490, 2002, as quoted by\n\
+# scripts/gen_brain_bench.py (the quote is not checked against the paper here).",
+            ),
+        };
+        let poisson = "# poisson = 0.45: nearly incompressible soft tissue held at 0.45 because the P1\n\
+# element locks above it (README, \"Nearly incompressible tissue\"; `element = \"anp\"` allows\n\
+# more).";
+        (young, 0.45, format!("{source}\n{poisson}"))
+    }
+
+    /// The preset's name.
+    pub fn name(self) -> &'static str {
+        match self {
+            Tissue::Liver => "liver",
+            Tissue::Kidney => "kidney",
+            Tissue::Brain => "brain",
+        }
+    }
+}
+
+/// The supports of a new scene.
+#[derive(Debug, Clone, Copy)]
+pub enum Support {
+    /// Every node at or below this height is held (m).
+    Below(f64),
+    /// The nodes in this box are held: min x, y, z, max x, y, z (m).
+    Box([f64; 6]),
+}
+
+/// What `host scene new` needs.
+#[derive(Debug, Clone)]
+pub struct NewScene {
+    /// The mesh file, as the scene should name it (made relative to the scene's folder).
+    pub mesh_path: PathBuf,
+    /// The trocar (fulcrum), m.
+    pub trocar: [f64; 3],
+    /// Supports.
+    pub support: Support,
+    /// Tissue preset.
+    pub tissue: Tissue,
+}
+
+/// `path` relative to `dir` (both made absolute against the current directory first).
+pub fn relative_to(path: &Path, dir: &Path) -> PathBuf {
+    let abs = |p: &Path| {
+        let p = if p.is_absolute() {
+            p.to_path_buf()
+        } else {
+            std::env::current_dir().unwrap_or_default().join(p)
+        };
+        // Lexical normalisation (no symlink resolution): drop `.`, fold `..`.
+        let mut out = PathBuf::new();
+        for c in p.components() {
+            match c {
+                Component::CurDir => {}
+                Component::ParentDir => {
+                    out.pop();
+                }
+                other => out.push(other),
+            }
+        }
+        out
+    };
+    let (p, d) = (abs(path), abs(dir));
+    let pc: Vec<_> = p.components().collect();
+    let dc: Vec<_> = d.components().collect();
+    let common = pc.iter().zip(&dc).take_while(|(a, b)| a == b).count();
+    let mut out = PathBuf::new();
+    for _ in common..dc.len() {
+        out.push("..");
+    }
+    for c in &pc[common..] {
+        out.push(c);
+    }
+    out
+}
+
+/// The device's orientation and ranges aimed from `trocar` at `organ`'s boundary nodes: the
+/// shaft at rest points at the centroid of the boundary nodes; pitch and yaw cover every
+/// boundary node's direction (5% more, within +-1.2 rad); the insertion starts 6 cm short of
+/// the nearest boundary node and goes 5 cm past it (at most half the organ's depth along the
+/// line of sight), like the default scene (0.03 to 0.14 m, the liver 0.09 m away).
+pub fn aim(mesh: &TetMesh, trocar: [f64; 3]) -> Result<Workspace> {
+    let surface = fem::mesh::boundary(mesh)?;
+    let pts: Vec<[f64; 3]> = surface.nodes.iter().map(|&n| mesh.nodes[n]).collect();
+    let c = scale(
+        pts.iter()
+            .fold([0.0; 3], |a, p| [a[0] + p[0], a[1] + p[1], a[2] + p[2]]),
+        1.0 / pts.len() as f64,
+    );
+    let to_c = sub(c, trocar);
+    if norm(to_c) < 1e-6 {
+        bail!("the trocar is at the organ's centre");
+    }
+    let shaft = scale(to_c, 1.0 / norm(to_c));
+    let reference = if dot(shaft, [0.0, 1.0, 0.0]).abs() < 0.9 {
+        [0.0, 1.0, 0.0]
+    } else {
+        [1.0, 0.0, 0.0]
+    };
+    let p = cross(shaft, reference);
+    let pitch_axis = scale(p, 1.0 / norm(p));
+    let yaw_axis = cross(pitch_axis, shaft);
+    let mut w = Workspace {
+        fulcrum: trocar,
+        shaft,
+        pitch_axis,
+        yaw_axis,
+        pitch: [0.0; 2],
+        yaw: [0.0; 2],
+        insertion: [0.0; 2],
+    };
+    let (mut pmin, mut pmax, mut ymin, mut ymax) = (0.0f64, 0.0f64, 0.0f64, 0.0f64);
+    let (mut dmin, mut dmax) = (f64::INFINITY, 0.0f64);
+    for &q in &pts {
+        let v = sub(q, trocar);
+        let (pi, yi) = w.angles(v);
+        pmin = pmin.min(pi);
+        pmax = pmax.max(pi);
+        ymin = ymin.min(yi);
+        ymax = ymax.max(yi);
+        dmin = dmin.min(norm(v));
+        dmax = dmax.max(norm(v));
+    }
+    let lim = |x: f64| (x * 1.05).clamp(-1.2, 1.2);
+    w.pitch = [lim(pmin), lim(pmax)];
+    w.yaw = [lim(ymin), lim(ymax)];
+    w.insertion = [
+        (dmin - 0.06).max(0.0),
+        dmin + (0.5 * (dmax - dmin)).min(0.05),
+    ];
+    Ok(w)
+}
+
+fn v3(a: [f64; 3]) -> String {
+    format!("[{}, {}, {}]", r(a[0]), r(a[1]), r(a[2]))
+}
+
+/// A number rounded to 6 decimals, written so that TOML reads it as a float.
+fn r(x: f64) -> String {
+    let s = format!("{:.6}", x);
+    let s = s.trim_end_matches('0');
+    let s = if s.ends_with('.') {
+        format!("{s}0")
+    } else {
+        s.to_string()
+    };
+    if s == "-0.0" { "0.0".into() } else { s }
+}
+
+/// The scene's text for `mesh` (already loaded and validated) and `spec`, checked as any
+/// scene is before a bank is built ([`Prepared::from_scene`]: the trocar and the home tip
+/// outside the organ, supports that hold something but not everything and leave no rigid
+/// motion, a reachable region), as `out` would be read; also the reachable nodes' count and
+/// the scene's warnings (a mesh implausibly sized in metres, a Poisson's ratio that locks).
+pub fn scene_text(
+    mesh: &TetMesh,
+    spec: &NewScene,
+    out: &Path,
+) -> Result<(String, usize, Vec<String>)> {
+    let w = aim(mesh, spec.trocar)?;
+    // The axes with 9 decimals stay orthonormal well within the scene's check.
+    let axis = |a: [f64; 3]| {
+        let a = a.map(|x| x + 0.0); // no "-0.000000000"
+        format!("[{:.9}, {:.9}, {:.9}]", a[0], a[1], a[2])
+    };
+    let (young, poisson, sources) = spec.tissue.preset();
+    let (lo, hi) = mesh.bounding_box();
+    let fixed = match spec.support {
+        Support::Below(z) => format!(
+            "# --fix-below {z}: every node at or below z = {z} m is held (the organ's lowest point\n\
+             # is at z = {}).\nboxes = [\n    {{ min = [-1000.0, -1000.0, -1000.0], max = [1000.0, 1000.0, {}] }},\n]",
+            r(lo[2]),
+            r(z)
+        ),
+        Support::Box(b) => format!(
+            "# --fix-box: the nodes in this box are held.\nboxes = [\n    {{ min = {}, max = {} }},\n]",
+            v3([b[0], b[1], b[2]]),
+            v3([b[3], b[4], b[5]])
+        ),
+    };
+    let mesh_name = spec.mesh_path.display().to_string().replace('\\', "/");
+    let text = format!(
+        r#"# A scene made by `host scene new` for {mesh_name} (tissue preset: {tissue}).
+# `host bank build <this file> -o organ.bank` turns it into a firmware bank; `host demo
+# --scene <this file>` shows it. Every key is explained in host/scenes/liver.toml; units are SI
+# (m, rad, Pa, N, A, N m/A). The organ's bounding box: {lo} to {hi} m.
+
+# Organ mesh, relative to this file (.msh v1/v2/v4.1, .vtu, .vtk, .mesh; coordinates in m).
+mesh = "{mesh_name}"
+
+[material]
+{sources}
+young_pa = {young:.1}
+poisson = {poisson}
+
+[fixed]
+{fixed}
+nodes = []
+
+[tool]
+tip_radius_m = 0.003   # radius of the tool tip, in [0, 0.05]
+
+[device]
+# The default scene's gimbal, aimed from the trocar at the organ: the shaft at rest points at
+# the centroid of the organ's boundary nodes, pitch and yaw cover every boundary node's
+# direction, the insertion starts 6 cm short of the nearest boundary node and reaches 5 cm past
+# it (at most half the organ's depth along the line of sight). The tool reaches what lies in
+# that sector; the scene's check refuses a trocar inside the organ.
+fulcrum_m = {fulcrum}
+shaft_axis = {shaft}
+pitch_axis = {pitch_axis}
+yaw_axis = {yaw_axis}
+pitch_range_rad = [{p0}, {p1}]
+yaw_range_rad = [{y0}, {y1}]
+insertion_range_m = [{i0}, {i1}]
+counts_per_rev = [4096, 4096, 4096]
+gear_ratio = [12.0, 12.0, 400.0]
+torque_constant_nm_per_a = [0.025, 0.025, 0.025]
+current_limit_a = [2.0, 2.0, 2.0]
+max_force_n = 5.0
+max_tip_speed_m_s = 1.0
+
+[law]
+kind = "linear"   # fit a Chebyshev Q on bench data with `host calibrate tissue`
+
+[bank]
+# The nodal contact model on the mesh's nodes (no [contact] table): pairs within 12 mm, 16-bit
+# blocks (see host/scenes/liver-nodal.toml for the alternatives).
+couplings = "radius"
+truncation_radius_m = 0.012
+precision = "bfp16"
+reach_margin_m = 0.002
+"#,
+        tissue = spec.tissue.name(),
+        lo = v3(lo),
+        hi = v3(hi),
+        fulcrum = v3(w.fulcrum),
+        shaft = axis(w.shaft),
+        pitch_axis = axis(w.pitch_axis),
+        yaw_axis = axis(w.yaw_axis),
+        p0 = r(w.pitch[0]),
+        p1 = r(w.pitch[1]),
+        y0 = r(w.yaw[0]),
+        y1 = r(w.yaw[1]),
+        i0 = r(w.insertion[0]),
+        i1 = r(w.insertion[1]),
+    );
+    let prepared = Prepared::from_scene(Scene::parse(out, &text)?)?;
+    Ok((text, prepared.region.len(), prepared.warnings))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn relative_paths() {
+        assert_eq!(
+            relative_to(Path::new("/a/b/m.msh"), Path::new("/a/c")),
+            PathBuf::from("../b/m.msh")
+        );
+        assert_eq!(
+            relative_to(Path::new("/a/b/m.msh"), Path::new("/a/b")),
+            PathBuf::from("m.msh")
+        );
+    }
+
+    #[test]
+    fn aimed_like_the_default_scene() {
+        // The default liver under its trocar at z = 0.16: the shaft points down at the organ;
+        // the insertion starts where the default scene's does (0.03 m: the liver's top is
+        // 0.091 m away) and ends 0.13 m (half the 0.077 m depth past the top; the default
+        // scene's 0.14 reaches 0.05 m past it).
+        let mesh = fem::mesh::parse_msh(include_bytes!("../meshes/liver-1k4.msh")).unwrap();
+        let w = aim(&mesh, [0.0, 0.0, 0.16]).unwrap();
+        assert!(w.shaft[2] < -0.95, "{:?}", w.shaft);
+        assert!((w.insertion[0] - 0.03).abs() < 0.005, "{:?}", w.insertion);
+        assert!((w.insertion[1] - 0.13).abs() < 0.002, "{:?}", w.insertion);
+        // Orthonormal, right-handed like the default (pitch x yaw = -shaft).
+        let d = |a, b| dot(a, b);
+        assert!(d(w.shaft, w.pitch_axis).abs() < 1e-12 && d(w.shaft, w.yaw_axis).abs() < 1e-12);
+        let c = cross(w.pitch_axis, w.yaw_axis);
+        assert!((d(c, w.shaft) + 1.0).abs() < 1e-12);
+        // Every boundary node's direction is within the ranges.
+        let s = fem::mesh::boundary(&mesh).unwrap();
+        for &n in &s.nodes {
+            let (p, y) = w.angles(sub(mesh.nodes[n], w.fulcrum));
+            assert!(p >= w.pitch[0] && p <= w.pitch[1] && y >= w.yaw[0] && y <= w.yaw[1]);
+        }
+    }
+}

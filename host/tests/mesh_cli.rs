@@ -1,0 +1,521 @@
+//! `host mesh` and `host scene new` end to end on the committed test surfaces
+//! (`host/tests/data/surfaces/`, made by `scripts/gen_test_surfaces.py`): each surface is meshed
+//! or refused with the expected message, repairs say what they did, the mesh is valid and
+//! graded near the reach, and a new scene builds a bank. Meshing needs Python with the gmsh
+//! 4.15.2 module (`scripts/test-all.sh` installs it).
+
+use std::path::Path;
+use std::process::{Command, Output};
+
+fn host(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_host"))
+        .args(args)
+        .output()
+        .expect("run host")
+}
+
+fn surface(name: &str) -> String {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/data/surfaces")
+        .join(name)
+        .display()
+        .to_string()
+}
+
+fn text(o: &Output) -> (String, String) {
+    (
+        String::from_utf8_lossy(&o.stdout).into_owned(),
+        String::from_utf8_lossy(&o.stderr).into_owned(),
+    )
+}
+
+/// Faces and volume of the organ, as scripts/gen_test_surfaces.py prints them.
+const ORGAN_FACES: usize = 1344;
+const ORGAN_VOLUME_M3: f64 = 4.404783e-4;
+
+#[test]
+fn each_test_surface_is_accepted_or_refused_with_its_message() {
+    let cases: &[(&str, &[&str], Option<&str>)] = &[
+        ("organ_cm.obj", &[], None),
+        ("organ_mm.stl", &[], None),
+        ("organ_cm.ply", &[], None),
+        ("organ_cm.vtk", &[], None),
+        ("organ_cm_bin.vtk", &[], None),
+        ("organ_cm.vtp", &[], None),
+        (
+            "organ_holes.obj",
+            &[],
+            Some(
+                "refused: not closed: 2 holes, boundary loops of 7, 5 edges; the first starts at vertex",
+            ),
+        ),
+        (
+            "organ_flipped.obj",
+            &[],
+            Some("refused: inconsistent orientation: 113 of 1344 faces point the other way"),
+        ),
+        (
+            "organ_selfx.obj",
+            &[],
+            Some("refused: self-intersecting: 9 pairs of faces cross, first faces"),
+        ),
+        (
+            "organ_two_shells.obj",
+            &[],
+            Some("refused: 2 disconnected shells (1344 faces, area 3.083e2, centred at"),
+        ),
+        // The repairs and --largest.
+        ("organ_holes.obj", &["--repair"], None),
+        ("organ_flipped.obj", &["--repair"], None),
+        ("organ_two_shells.obj", &["--largest"], None),
+        // A self-intersection is not repaired.
+        (
+            "organ_selfx.obj",
+            &["--repair"],
+            Some("refused: self-intersecting: 9 pairs"),
+        ),
+        // A hole larger than --fill-holes stays a refusal.
+        (
+            "organ_holes.obj",
+            &["--repair", "--fill-holes", "6"],
+            Some("--repair fills holes of at most 6 edges (--fill-holes)"),
+        ),
+    ];
+    for (name, extra, refusal) in cases {
+        let path = surface(name);
+        let mut args = vec![
+            "mesh",
+            path.as_str(),
+            "-o",
+            "/nonexistent/unused.msh",
+            "--check",
+        ];
+        args.extend_from_slice(extra);
+        let o = host(&args);
+        let (_, err) = text(&o);
+        match refusal {
+            None => {
+                assert!(o.status.success(), "{name} {extra:?}: {err}");
+                assert!(err.contains("--check: the surface passes"), "{err}");
+            }
+            Some(msg) => {
+                assert!(!o.status.success(), "{name} {extra:?} accepted: {err}");
+                assert!(err.contains(msg), "{name} {extra:?}: {err:?} lacks {msg:?}");
+                assert!(
+                    err.starts_with(&format!("{path}: ")) || err.contains(&path),
+                    "{err}"
+                );
+                assert!(!err.contains("panicked"), "{err}");
+            }
+        }
+    }
+}
+
+#[test]
+fn repairs_and_units_are_said() {
+    let o = host(&[
+        "mesh",
+        &surface("organ_holes.obj"),
+        "-o",
+        "x.msh",
+        "--check",
+        "--repair",
+    ]);
+    let (_, err) = text(&o);
+    assert!(
+        err.contains(
+            "repaired: filled 2 holes (boundary loops of 7, 5 edges) with a fan around each \
+             loop's centroid"
+        ),
+        "{err}"
+    );
+    let o = host(&[
+        "mesh",
+        &surface("organ_flipped.obj"),
+        "-o",
+        "x.msh",
+        "--check",
+        "--repair",
+    ]);
+    assert!(
+        text(&o).1.contains("repaired: flipped 113 of 1344 faces"),
+        "{}",
+        text(&o).1
+    );
+    let o = host(&[
+        "mesh",
+        &surface("organ_two_shells.obj"),
+        "-o",
+        "x.msh",
+        "--check",
+        "--largest",
+    ]);
+    let err = text(&o).1;
+    assert!(
+        err.contains("repaired: kept the largest of 2 shells (1344 faces"),
+        "{err}"
+    );
+    assert!(
+        err.contains(&format!("surface: closed, {ORGAN_FACES} faces")),
+        "{err}"
+    );
+    // Units: guessed and printed, the same organ in cm and mm.
+    for (name, unit) in [("organ_cm.obj", "cm"), ("organ_mm.stl", "mm")] {
+        let err = text(&host(&["mesh", &surface(name), "-o", "x.msh", "--check"])).1;
+        assert!(
+            err.contains(&format!("units: {unit} (guessed: the largest side is")),
+            "{err}"
+        );
+        assert!(err.contains("volume 4.4048e-4 m^3"), "{err}");
+    }
+    // Given units that make the organ 14 m across are taken (the user said so)...
+    let err = text(&host(&[
+        "mesh",
+        &surface("organ_cm.obj"),
+        "-o",
+        "x.msh",
+        "--check",
+        "--units",
+        "m",
+    ]))
+    .1;
+    assert!(err.contains("largest side 13.98"), "{err}");
+    // ... a surface no unit makes organ-sized is refused unless --units is given.
+    let dir = tempfile::tempdir().unwrap();
+    let tiny = dir.path().join("tiny.obj");
+    std::fs::write(
+        &tiny,
+        "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 3 2\nf 1 2 4\nf 1 4 3\nf 2 3 4\n",
+    )
+    .unwrap();
+    let o = host(&["mesh", tiny.to_str().unwrap(), "-o", "x.msh", "--check"]);
+    let err = text(&o).1;
+    assert!(
+        !o.status.success() && err.contains("no unit makes that an organ's"),
+        "{err}"
+    );
+    assert!(
+        host(&[
+            "mesh",
+            tiny.to_str().unwrap(),
+            "-o",
+            "x.msh",
+            "--check",
+            "--units",
+            "cm"
+        ])
+        .status
+        .success()
+    );
+    // Malformed input: located error, no panic.
+    let bad = dir.path().join("bad.obj");
+    std::fs::write(&bad, "v 0 0 0\nv 1 0 0\nf 1 2 3\n").unwrap();
+    let err = text(&host(&["mesh", bad.to_str().unwrap(), "-o", "x.msh"])).1;
+    assert!(
+        err.contains(
+            "bad.obj: line 3: face 1 refers to vertex 3, but 2 vertices are defined so far"
+        ),
+        "{err}"
+    );
+}
+
+fn boundary_volume(mesh: &fem::mesh::TetMesh) -> f64 {
+    (0..mesh.tets.len()).map(|t| mesh.signed_volume(t)).sum()
+}
+
+#[test]
+fn the_organ_is_meshed_graded_near_the_reach_and_becomes_a_scene() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("organ.msh");
+    let o = host(&[
+        "mesh",
+        &surface("organ_cm.obj"),
+        "-o",
+        out.to_str().unwrap(),
+    ]);
+    let (stdout, err) = text(&o);
+    assert!(o.status.success(), "{err}");
+    assert!(stdout.contains("quality: worst dihedral angle"), "{stdout}");
+    let uniform = fem::mesh::load(&out).unwrap();
+    // The volume is the surface's within the remeshing's faceting (measured -1.6%).
+    let v = boundary_volume(&uniform);
+    assert!((v / ORGAN_VOLUME_M3 - 1.0).abs() < 0.03, "{v}");
+    let q = uniform.quality_summary().unwrap();
+    assert!(q.min_dihedral_deg.0 > 5.0 && q.slivers == 0, "{q:?}");
+    // The same organ in millimetres (binary STL) gives a mesh of the same size.
+    let out_mm = dir.path().join("organ-mm.msh");
+    let o = host(&[
+        "mesh",
+        &surface("organ_mm.stl"),
+        "-o",
+        out_mm.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", text(&o).1);
+    let mm = fem::mesh::load(&out_mm).unwrap();
+    let ratio = mm.tets.len() as f64 / uniform.tets.len() as f64;
+    assert!(
+        (ratio - 1.0).abs() < 0.1,
+        "{} vs {}",
+        mm.tets.len(),
+        uniform.tets.len()
+    );
+    assert!((boundary_volume(&mm) / v - 1.0).abs() < 0.01);
+    // The repaired surfaces mesh; without the sphere, or flipped back, the organ's own mesh.
+    for (name, flag) in [
+        ("organ_two_shells.obj", "--largest"),
+        ("organ_flipped.obj", "--repair"),
+        ("organ_holes.obj", "--repair"),
+    ] {
+        let out_r = dir.path().join("repaired.msh");
+        let o = host(&["mesh", &surface(name), flag, "-o", out_r.to_str().unwrap()]);
+        assert!(o.status.success(), "{name}: {}", text(&o).1);
+        let m = fem::mesh::load(&out_r).unwrap();
+        if name != "organ_holes.obj" {
+            assert_eq!(m.tets.len(), uniform.tets.len(), "{name}");
+        }
+    }
+    // Never over the input, never a half-written file.
+    let o = host(&[
+        "mesh",
+        &surface("organ_cm.obj"),
+        "-o",
+        &surface("organ_cm.obj"),
+        "--size",
+        "0.02",
+    ]);
+    assert!(
+        !o.status.success() && text(&o).1.contains("that is the input"),
+        "{}",
+        text(&o).1
+    );
+
+    // Graded: fine where the default scene's tool reaches (this organ is the default liver's
+    // shape, where its trocar expects it).
+    let scenes = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/liver.toml");
+    let graded_path = dir.path().join("graded.msh");
+    let o = host(&[
+        "mesh",
+        &surface("organ_cm.obj"),
+        "-o",
+        graded_path.to_str().unwrap(),
+        "--refine-near",
+        scenes.to_str().unwrap(),
+        "--size",
+        "0.008",
+        "--fine",
+        "0.003",
+    ]);
+    let (_, err) = text(&o);
+    assert!(o.status.success(), "{err}");
+    assert!(
+        err.contains("surface points within the tool's reach"),
+        "{err}"
+    );
+    let graded = fem::mesh::load(&graded_path).unwrap();
+    let scene = host::scene::Scene::load(&scenes).unwrap();
+    let surface_m = fem::surface::read_surface(Path::new(&surface("organ_cm.obj")))
+        .unwrap()
+        .scaled(0.01);
+    let reach = host::meshing::reach_points(&surface_m, &scene);
+    let pairs = host::meshing::size_against_distance(&graded, &reach);
+    let mean = |lo: f64, hi: f64| {
+        let v: Vec<f64> = pairs
+            .iter()
+            .filter(|p| p.0 >= lo && p.0 < hi)
+            .map(|p| p.1)
+            .collect();
+        (v.iter().sum::<f64>() / v.len().max(1) as f64, v.len())
+    };
+    // The README's table: element size (longest edge) against distance from the reach.
+    for w in [0.0, 0.005, 0.01, 0.02, 0.03, 1.0].windows(2) {
+        let (m, n) = mean(w[0], w[1]);
+        println!(
+            "distance {:.0}-{:.0} mm: {n} tets, mean longest edge {:.2} mm",
+            w[0] * 1e3,
+            w[1] * 1e3,
+            m * 1e3
+        );
+    }
+    let (near, n_near) = mean(0.0, 0.005);
+    let (far, n_far) = mean(0.03, 1.0);
+    println!(
+        "longest edge: {near:.4} m within 5 mm of the reach ({n_near} tets), {far:.4} m beyond 30 mm ({n_far})"
+    );
+    assert!(n_near > 100 && n_far > 10);
+    assert!(
+        near < 0.006 && far > 0.009 && near < 0.6 * far,
+        "{near} {far}"
+    );
+    assert!(graded.tets.len() > 3 * uniform.tets.len());
+
+    // A scene for the uniform mesh: aimed from a trocar above, fixed below 1 cm, loads and
+    // builds a bank.
+    let scene_path = dir.path().join("organ.toml");
+    let o = host(&[
+        "scene",
+        "new",
+        "--mesh",
+        out.to_str().unwrap(),
+        "--trocar",
+        "0,0,0.16",
+        "--fix-below",
+        "0.01",
+        "--tissue",
+        "kidney",
+        "-o",
+        scene_path.to_str().unwrap(),
+    ]);
+    let (stdout, err) = text(&o);
+    assert!(o.status.success(), "{err}");
+    assert!(stdout.contains("the tool reaches"), "{stdout}");
+    let text_ = std::fs::read_to_string(&scene_path).unwrap();
+    assert!(
+        text_.contains("mesh = \"organ.msh\"") && text_.contains("young_pa = 5000.0"),
+        "{text_}"
+    );
+    let bank = dir.path().join("organ.bank");
+    let o = host(&[
+        "bank",
+        "build",
+        scene_path.to_str().unwrap(),
+        "-o",
+        bank.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", text(&o).1);
+    // The demo runs it (headless: the virtual device's 1 kHz loop, a scripted press).
+    let o = host(&[
+        "demo",
+        "--scene",
+        scene_path.to_str().unwrap(),
+        "--headless",
+        "--seconds",
+        "1",
+        "--json",
+    ]);
+    let (stdout, err) = text(&o);
+    assert!(o.status.success(), "{err}");
+    let v: serde_json::Value = serde_json::from_str(stdout.trim()).expect("one JSON object");
+    assert_eq!(v["faults"], 0, "{stdout}");
+    assert!(v["peak_force_n"].as_f64().unwrap() > 0.0, "{stdout}");
+    // A trocar inside the organ is refused, and nothing is written.
+    let inside = dir.path().join("inside.toml");
+    let o = host(&[
+        "scene",
+        "new",
+        "--mesh",
+        out.to_str().unwrap(),
+        "--trocar",
+        "0.02,0,0.03",
+        "--fix-below",
+        "0.01",
+        "-o",
+        inside.to_str().unwrap(),
+    ]);
+    assert!(
+        !o.status.success() && text(&o).1.contains("lies inside the organ"),
+        "{}",
+        text(&o).1
+    );
+    assert!(!inside.exists());
+}
+
+#[test]
+fn a_missing_surface_and_an_unknown_extension_are_clear_errors() {
+    let o = host(&["mesh", "/nonexistent/organ.stl", "-o", "x.msh"]);
+    assert!(
+        text(&o)
+            .1
+            .contains("/nonexistent/organ.stl: cannot read mesh file"),
+        "{}",
+        text(&o).1
+    );
+    let o = host(&["mesh", "organ.xyz", "-o", "x.msh"]);
+    assert!(
+        text(&o)
+            .1
+            .contains("unknown surface file extension \"xyz\""),
+        "{}",
+        text(&o).1
+    );
+}
+
+/// Compliance energy `f . u` of the organ resting on its bed (every node up to z = 10 mm held)
+/// under its own weight (consistent nodal loads of a unit weight density, 3 kPa, nu = 0.45): a
+/// global figure that converges under refinement, unlike a point load's.
+fn weight_compliance(mesh: &fem::mesh::TetMesh) -> f64 {
+    use fem::compliance::Compliance;
+    use fem::elasticity::{Elasticity, FixedSet, Material};
+    let body = Elasticity::new(mesh, Material::new(3000.0, 0.45).unwrap()).unwrap();
+    let mut fixed = FixedSet::none(mesh.nodes.len());
+    fixed
+        .fix_box(mesh, [-1.0, -1.0, -1.0, 1.0, 1.0, 0.01], [true; 3])
+        .unwrap();
+    let c = Compliance::factorize(&body, &fixed).unwrap();
+    let mut f = vec![0.0; 3 * mesh.nodes.len()];
+    for t in 0..mesh.tets.len() {
+        let v = mesh.signed_volume(t);
+        for &n in &mesh.tets[t] {
+            f[3 * n + 2] -= v / 4.0;
+        }
+    }
+    let u = c.displacement(&f);
+    f.iter().zip(&u).map(|(a, b)| a * b).sum()
+}
+
+/// The organ meshed from its 8 mm surface against meshes of the same geometry made directly
+/// from the CAD body by scripts/gen_meshes.py (host/meshes/liver-1k4.msh, liver-10k.msh, the
+/// reference). Measured (README, "From a surface to a scene"): at 9 mm the surface's mesh is
+/// -8.5% off liver-10k, a direct 9 mm mesh -8.3% (P1 at nu = 0.45 is stiff when coarse); at
+/// 6 mm -4.9% against the direct mesh's -1.5%, the rest being the 8 mm surface's faceting
+/// (1% less volume than the CAD body, W growing as the volume squared). Held here: the error
+/// falls under refinement and stays below 6% at 6 mm.
+#[test]
+fn the_meshed_surface_has_the_compliance_of_a_direct_mesh() {
+    let meshes = Path::new(env!("CARGO_MANIFEST_DIR")).join("meshes");
+    let direct_coarse = fem::mesh::load(&meshes.join("liver-1k4.msh")).unwrap();
+    let direct_fine = fem::mesh::load(&meshes.join("liver-10k.msh")).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let mut from_surface = Vec::new();
+    for size in ["0.009", "0.006"] {
+        let out = dir.path().join(format!("organ-{size}.msh"));
+        let o = host(&[
+            "mesh",
+            &surface("organ_cm.obj"),
+            "-o",
+            out.to_str().unwrap(),
+            "--size",
+            size,
+        ]);
+        assert!(o.status.success(), "{}", text(&o).1);
+        from_surface.push((size, fem::mesh::load(&out).unwrap()));
+    }
+    let wc = weight_compliance(&direct_coarse);
+    let wf = weight_compliance(&direct_fine);
+    let spread = (wc / wf - 1.0).abs();
+    println!(
+        "direct: liver-1k4 ({} nodes) {wc:.6e}, liver-10k ({} nodes) {wf:.6e} (spread {:.2}%)",
+        direct_coarse.nodes.len(),
+        direct_fine.nodes.len(),
+        100.0 * spread
+    );
+    let volume =
+        |m: &fem::mesh::TetMesh| (0..m.tets.len()).map(|t| m.signed_volume(t)).sum::<f64>();
+    println!(
+        "direct volumes {:.4e} {:.4e}",
+        volume(&direct_coarse),
+        volume(&direct_fine)
+    );
+    let mut errors = Vec::new();
+    for (size, m) in &from_surface {
+        let w = weight_compliance(m);
+        let vol: f64 = (0..m.tets.len()).map(|t| m.signed_volume(t)).sum();
+        println!(
+            "from the surface, --size {size}: {} nodes, volume {vol:.4e} m^3, {w:.6e} ({:+.2}% of liver-10k)",
+            m.nodes.len(),
+            100.0 * (w / wf - 1.0)
+        );
+        errors.push((w / wf - 1.0).abs());
+    }
+    assert!(spread < 0.01, "the direct meshes disagree: {spread}");
+    assert!(errors[1] < errors[0] && errors[1] < 0.06, "{errors:?}");
+}
