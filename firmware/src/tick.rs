@@ -1833,6 +1833,7 @@ mod tests {
             scene_id: 1,
             law: TissueLaw::chebyshev(&[2.6, 2.5, -0.1], [0.0, 5.0]).unwrap(),
             gravity: None,
+            relaxation: None,
             samples: None,
             device: DeviceCalibration {
                 fulcrum_m: [0.01 / 3.0, 0.01 / 3.0, 0.1],

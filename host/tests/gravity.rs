@@ -217,6 +217,7 @@ fn release(
         hand_stiffness: [0.0; 3],
         hand_damping: [0.0; 3],
         gravity: Some(weight),
+        relaxation: None,
         ..PlantParams::default()
     };
     let mut gimbal = Gimbal::at_rest(bank.device(), params, q0);

@@ -47,6 +47,7 @@ impl Default for PlantParams {
             hand_stiffness: [20.0, 20.0, 2000.0],
             hand_damping: [0.2, 0.2, 20.0],
             gravity: None,
+            relaxation: None,
         }
     }
 }
