@@ -47,7 +47,6 @@ impl Default for PlantParams {
             hand_stiffness: [20.0, 20.0, 2000.0],
             hand_damping: [0.2, 0.2, 20.0],
             gravity: None,
-            relaxation: None,
         }
     }
 }
