@@ -696,3 +696,154 @@ fn a_recorded_near_surface_trajectory_replays_bit_identical_to_the_native_loop()
         eprintln!("  code phases, max: {:?}", CodePhaseMax::of(&run.ticks));
     }
 }
+
+/// Issue 30: `press-hold` (5 mm in, 10 s held, out) on the liver with viscoelastic relaxation
+/// (`host/scenes/liver-qlv.toml`). The image's force trace is (a) bit-identical to the native
+/// loop's on the same bank, and (b) Fung's QLV response to the elastic force the same motion
+/// gives on the elastic liver (`liver.toml`, replayed natively): the hereditary integral of
+/// the scene's `G(t)` over the piecewise-linear elastic force, summed directly over the whole
+/// history in f64 (not the firmware's recursion), with the contact's unilateral rule
+/// (`firmware::relax`), within 1e-4 of the peak force at every tick. Prints the instructions
+/// the relaxation adds per term (the law phase against the elastic run's) and the worst tick.
+#[test]
+fn press_hold_relaxes_as_the_scenes_qlv_law() {
+    let (elastic_setup, elastic_raw) = setup();
+    let scene = harness::repo_root().join("host/scenes/liver-qlv.toml");
+    let bytes = host::bank::scene_bank(&scene).expect("the liver-qlv scene's bank");
+    let path = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("sil-liver-qlv.bank");
+    host::fsio::write_atomic(&path, &bytes, &[]).expect("writing the bank for QEMU");
+    let qlv_raw = AlignedBytes::new(&bytes);
+    let qlv_bank = Bank::parse(&qlv_raw).unwrap();
+    let elastic_bank = Bank::parse(&elastic_raw).unwrap();
+    let law = *qlv_bank.relaxation().expect("liver-qlv relaxes");
+    let qlv_setup = Setup {
+        bank: path,
+        ..elastic_setup.clone()
+    };
+    let seconds = 11.5;
+    let run = qemu(
+        &qlv_setup,
+        &Session::new(&qlv_bank, Script::PressHold, seconds).unwrap(),
+    );
+    assert!(assert_matches_native(&qlv_bank, &run) > 5000);
+
+    // The elastic force of the same motion (forces on the tool; QLV is linear in it).
+    let mut elastic = HapticLoop::new(&elastic_bank);
+    elastic.zero_encoders();
+    let q: Vec<[f64; 3]> = run
+        .ticks
+        .iter()
+        .map(|rec| {
+            elastic
+                .tick(LoopInput {
+                    encoder_counts: rec.encoder_counts,
+                    overrun: false,
+                    link_silence_ticks: 0,
+                    interlocks: firmware::hal::Interlocks::default(),
+                })
+                .tool_force_n
+                .map(f64::from)
+        })
+        .collect();
+    let dt = 1.0e-3;
+    let terms: Vec<(f64, f64)> = law
+        .terms()
+        .map(|(g, tau)| (f64::from(g), f64::from(tau)))
+        .collect();
+    let g_inf = 1.0 - terms.iter().map(|t| t.0).sum::<f64>();
+    let n = q.len();
+    // Per term: e^{-m dt / tau} for every age m, and the segment weight (tau/dt)(1 - e^{-dt/tau}).
+    let decay: Vec<(f64, Vec<f64>, f64)> = terms
+        .iter()
+        .map(|&(g, tau)| {
+            let pow = (0..n).map(|m| (-(m as f64) * dt / tau).exp()).collect();
+            (g, pow, tau / dt * (1.0 - (-dt / tau).exp()))
+        })
+        .collect();
+    let dq: Vec<[f64; 3]> = (0..n)
+        .map(|j| {
+            let prev = if j == 0 { [0.0; 3] } else { q[j - 1] };
+            std::array::from_fn(|i| q[j][i] - prev[i])
+        })
+        .collect();
+    let peak = q
+        .iter()
+        .map(|v| v.iter().map(|x| x * x).sum::<f64>().sqrt())
+        .fold(0.0, f64::max);
+    assert!(peak > 0.02, "peak elastic force {peak} N");
+    let mut worst = 0.0f64;
+    let mut hold_ratio = 0.0;
+    for (k, rec) in run.ticks.iter().enumerate() {
+        let mut f = q[k].map(|v| g_inf * v);
+        for (g, pow, seg) in &decay {
+            for j in 0..=k {
+                let w = g * seg * pow[k - j];
+                for i in 0..3 {
+                    f[i] += w * dq[j][i];
+                }
+            }
+        }
+        // The unilateral rule: nothing without an elastic force, no pull against it.
+        let qq: f64 = q[k].iter().map(|v| v * v).sum();
+        let along: f64 = (0..3).map(|i| f[i] * q[k][i]).sum();
+        let want = if qq == 0.0 {
+            [0.0; 3]
+        } else if along < 0.0 {
+            std::array::from_fn(|i| f[i] - along / qq * q[k][i])
+        } else {
+            f
+        };
+        for i in 0..3 {
+            worst = worst.max((f64::from(rec.force_n[i]) - want[i]).abs() / peak);
+        }
+        // Near the end of the hold (10.9 s), the force relative to the elastic one.
+        if k == 10_900 {
+            hold_ratio = f64::from(rec.force_n[2]) / q[k][2];
+        }
+    }
+    eprintln!(
+        "press-hold: peak elastic {peak:.5} N, worst |QEMU - QLV| / peak {worst:.2e}, force / \
+         elastic at 10.9 s {hold_ratio:.4} (g_inf {g_inf:.4})"
+    );
+    assert!(worst < 1e-4, "worst {worst:e} of the peak");
+    assert!(hold_ratio > g_inf && hold_ratio < 0.7, "{hold_ratio}");
+
+    // Cost: the same motion on the elastic bank, phase by phase.
+    let plain = qemu(
+        &elastic_setup,
+        &Session::new(&elastic_bank, Script::PressHold, seconds).unwrap(),
+    );
+    let max_law = |r: &Run| {
+        r.ticks
+            .iter()
+            .map(|t| t.phase_instructions.law)
+            .max()
+            .unwrap()
+    };
+    let mean_law = |r: &Run| {
+        r.ticks
+            .iter()
+            .map(|t| f64::from(t.phase_instructions.law))
+            .sum::<f64>()
+            / r.ticks.len() as f64
+    };
+    let worst_body = |r: &Run| r.ticks.iter().map(|t| t.body_instructions).max().unwrap();
+    let worst_tick = |r: &Run| r.ticks.iter().map(|t| t.tick_instructions).max().unwrap();
+    let terms_n = terms.len() as f64;
+    eprintln!(
+        "law phase: elastic max {} mean {:.1}, relaxing ({} terms) max {} mean {:.1}: {:.1} \
+         instructions per term (mean); worst body {} vs {}, worst tick {} vs {}",
+        max_law(&plain),
+        mean_law(&plain),
+        terms.len(),
+        max_law(&run),
+        mean_law(&run),
+        (mean_law(&run) - mean_law(&plain)) / terms_n,
+        worst_body(&run),
+        worst_body(&plain),
+        worst_tick(&run),
+        worst_tick(&plain)
+    );
+    assert!(worst_body(&run) <= 3_000, "{}", worst_body(&run));
+    assert!(worst_tick(&run) <= 6_000, "{}", worst_tick(&run));
+}
