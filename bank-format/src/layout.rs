@@ -648,7 +648,7 @@ pub struct Relaxation {
     pub reserved: u32,
     /// `g_k`, dimensionless, each `>= 0`, `sum < 1`; entries past `count` zero.
     pub g: [f32; MAX_PRONY_TERMS],
-    /// `tau_k`, s, in `[`[`RELAXATION_TAU_MIN_S`]`, `[`RELAXATION_TAU_MAX_S`]`]`; entries past
+    /// `tau_k`, s, from [`RELAXATION_TAU_MIN_S`] to [`RELAXATION_TAU_MAX_S`]; entries past
     /// `count` zero.
     pub tau_s: [f32; MAX_PRONY_TERMS],
 }

@@ -32,8 +32,8 @@
 //! decay per tick is not lost in the rounding of `a_k` to 1. Rounding: the decrement `c_k h` is
 //! rounded to an ulp of `h` (`2^-24 |h|`), a relative error of `2^-24 tau / dt` in the decay
 //! rate: 6e-4 at `tau` = 10 s, 0.2 at an hour, the bank's limit (whence the limit). Constant
-//! cost: every tick, touching or not, updates every term (two multiply-adds and a multiply a
-//! term and axis), no exponential in the tick.
+//! cost: every tick, touching or not, updates every term (two multiplies and three adds a
+//! term and axis, the sum of the `h_k` taken in the same pass), no exponential in the tick.
 //!
 //! **Contact.** The tissue's memory is the state `h_k`; it is not the tool's. When the contact
 //! ends (or the tick renders no force: a free tool, the detecting tick, a solve error, a mode
@@ -111,28 +111,35 @@ impl Qlv {
 
     /// One tick in contact with elastic response `q_e` (N, on the tissue, finite): the state
     /// updated by (2), and the force to render, `g_inf Q_e + sum_k h_k`, with a component
-    /// against `Q_e` removed (module notes, "Contact"). A non-finite result is an error (the
-    /// tick faults, as for the elastic force) and resets the state, so one bad tick does not
-    /// poison every later one.
+    /// against `Q_e` removed and nothing for `Q_e = 0` (module notes, "Contact"). A non-finite
+    /// force is an error (the tick faults, as for the elastic force) and resets the state, so
+    /// one bad tick does not poison every later one.
     pub fn press(&mut self, q_e: [f32; 3]) -> Result<[f32; 3], SolveError> {
-        self.update(q_e);
-        let mut f = q_e.map(|q| self.g_inf * q);
-        for h in self.h.iter().take(self.terms) {
-            for (fi, hi) in f.iter_mut().zip(h) {
-                *fi += *hi;
-            }
-        }
-        let qq = dot(q_e, q_e);
+        let h = self.update(q_e);
+        let f = [
+            self.g_inf * q_e[0] + h[0],
+            self.g_inf * q_e[1] + h[1],
+            self.g_inf * q_e[2] + h[2],
+        ];
+        // `f . Q_e` is not finite when a component of `f` is not (an infinite one times a zero
+        // component of `Q_e` is NaN), so one test covers the three (it also refuses a product
+        // that overflows, at forces far beyond any device's cap).
         let along = dot(f, q_e);
-        let out = if !(qq > 0.0) {
-            [0.0; 3]
-        } else if along < 0.0 {
-            let s = along / qq;
-            [f[0] - s * q_e[0], f[1] - s * q_e[1], f[2] - s * q_e[2]]
-        } else {
-            f
-        };
-        if out.iter().chain(f.iter()).all(|v| v.is_finite()) {
+        if !along.is_finite() {
+            self.reset();
+            return Err(SolveError::NonFinite);
+        }
+        if along > 0.0 {
+            return Ok(f);
+        }
+        // The rare case: the total would pull the tool in (or there is no elastic force).
+        let qq = dot(q_e, q_e);
+        if !(qq > 0.0) {
+            return Ok([0.0; 3]);
+        }
+        let s = along / qq;
+        let out = [f[0] - s * q_e[0], f[1] - s * q_e[1], f[2] - s * q_e[2]];
+        if out.iter().all(|v| v.is_finite()) {
             Ok(out)
         } else {
             self.reset();
@@ -141,12 +148,10 @@ impl Qlv {
     }
 
     /// One tick without a contact force (free, or nothing rendered): (2) with `Q_e = 0`; the
-    /// memory decays.
+    /// memory decays. Not checked here: with a zero input the state cannot grow past what the
+    /// last pressed (finite) `Q_e` gave it, and a press checks the whole sum before rendering.
     pub fn release(&mut self) {
         self.update([0.0; 3]);
-        if !self.h.iter().flatten().all(|v| v.is_finite()) {
-            self.reset();
-        }
     }
 
     /// Back to the relaxed tissue (no history).
@@ -160,13 +165,16 @@ impl Qlv {
         self.g_inf
     }
 
-    /// The update (2) of every term with this tick's `Q_e`.
-    fn update(&mut self, q_e: [f32; 3]) {
+    /// The update (2) of every term with this tick's `Q_e`; returns `sum_k h_k` (one pass over
+    /// the state).
+    fn update(&mut self, q_e: [f32; 3]) -> [f32; 3] {
         let dq = [
             q_e[0] - self.q_prev[0],
             q_e[1] - self.q_prev[1],
             q_e[2] - self.q_prev[2],
         ];
+        self.q_prev = q_e;
+        let mut sum = [0.0f32; 3];
         for ((h, c), b) in self
             .h
             .iter_mut()
@@ -174,12 +182,13 @@ impl Qlv {
             .zip(&self.gain)
             .take(self.terms)
         {
-            for (hi, d) in h.iter_mut().zip(dq) {
+            for ((hi, d), si) in h.iter_mut().zip(dq).zip(sum.iter_mut()) {
                 *hi -= c * *hi;
                 *hi += b * d;
+                *si += *hi;
             }
         }
-        self.q_prev = q_e;
+        sum
     }
 }
 
@@ -332,18 +341,20 @@ mod tests {
         assert!((a[2] - b[2]).abs() < 1e-6, "{a:?} vs {b:?}");
     }
 
-    /// A non-finite force is an error and leaves a relaxed state behind; the coefficients keep
+    /// A non-finite force is an error and leaves a relaxed state behind (also a state that went
+    /// non-finite while released); the coefficients keep
     /// the incremental stiffness at or below the elastic law's (module notes, (b)).
     #[test]
     fn overflow_is_an_error_and_the_stiffness_never_exceeds_the_elastic() {
         let r = law(&[0.3, 0.6], &[0.002, 3600.0]);
         let mut qlv = Qlv::new(&r, DT as f32);
-        assert_eq!(
-            qlv.press([f32::MAX, 0.0, 0.0]).map(|_| ()),
-            Ok(()),
-            "finite"
-        );
-        assert_eq!(qlv.press([-f32::MAX, 0.0, 0.0]), Err(SolveError::NonFinite));
+        assert!(qlv.press([1.0e18, 0.0, 0.0]).is_ok());
+        assert_eq!(qlv.press([f32::MAX, 0.0, 0.0]), Err(SolveError::NonFinite));
+        assert_eq!(qlv, Qlv::new(&r, DT as f32));
+        // A state driven to infinity while released is caught by the next press.
+        qlv.h[1][2] = f32::INFINITY;
+        qlv.release();
+        assert_eq!(qlv.press([0.0, 0.0, 1.0]), Err(SolveError::NonFinite));
         assert_eq!(qlv, Qlv::new(&r, DT as f32));
         let stiffness = qlv.g_inf() + qlv.gain.iter().sum::<f32>();
         assert!(stiffness <= 1.0 + 1e-6, "{stiffness}");

@@ -258,30 +258,35 @@ fn rms(a: &[f64], b: &[f64]) -> f64 {
     (a.iter().zip(b).map(|(x, y)| (x - y) * (x - y)).sum::<f64>() / a.len() as f64).sqrt()
 }
 
-/// The QLV fit for fixed time constants: alternating NNLS on `c` (elastic law) and on the
-/// amplitudes `(g_inf, g_k)` of `G`, normalised to `G(0) = 1`. Returns `(c, g_inf, g, model,
-/// rms)`.
+/// A fit for fixed time constants ([`fit_fixed`]).
 struct Inner {
+    /// The elastic law's `c_j`, N.
     c: Vec<f64>,
-    g_inf: f64,
+    /// `g_k`, one per time constant (`g_inf = 1 - sum`).
     g: Vec<f64>,
+    /// The model's force per row, N.
     model: Vec<f64>,
+    /// RMS residual, N.
     rms: f64,
 }
 
-fn fit_fixed(t: &[f64], xi: &[f64], f: &[f64], taus: &[f64], start: Option<&Inner>) -> Inner {
+/// The QLV fit for fixed time constants `taus`: alternating NNLS on `c` (the elastic law, in
+/// `xi = x / x_max`) and on the amplitudes `(g_inf, g_k)` of `G`, normalised to `G(0) = 1`,
+/// while the residual falls (each half-step cannot raise it: both are least-squares optima
+/// with the other half fixed).
+fn fit_fixed(t: &[f64], xi: &[f64], f: &[f64], taus: &[f64]) -> Inner {
     let basis: Vec<Vec<f64>> = (1..=ELASTIC_DEGREE)
         .map(|j| xi.iter().map(|v| v.powi(j as i32)).collect())
         .collect();
     // Each basis function's response to every part of G (computed once).
     let parts: Vec<Vec<Vec<f64>>> = basis.iter().map(|u| columns(t, u, taus)).collect();
-    let (mut g_inf, mut g) = match start {
-        Some(s) if s.g.len() == taus.len() => (s.g_inf, s.g.clone()),
-        _ => (0.5, vec![0.5 / taus.len().max(1) as f64; taus.len()]),
+    let (mut g_inf, mut g) = (0.5, vec![0.5 / taus.len().max(1) as f64; taus.len()]);
+    let mut best = Inner {
+        c: vec![0.0; ELASTIC_DEGREE],
+        g: g.clone(),
+        model: vec![0.0; f.len()],
+        rms: rms(&vec![0.0; f.len()], f),
     };
-    let mut c = vec![0.0; ELASTIC_DEGREE];
-    let mut best = f64::INFINITY;
-    let mut model = vec![0.0; f.len()];
     for _ in 0..200 {
         // c for fixed G.
         let cols: Vec<Vec<f64>> = parts
@@ -295,7 +300,7 @@ fn fit_fixed(t: &[f64], xi: &[f64], f: &[f64], taus: &[f64], start: Option<&Inne
                     .collect()
             })
             .collect();
-        c = nnls(&cols, f);
+        let mut c = nnls(&cols, f);
         // G's amplitudes for fixed Q_e: the parts' responses combine linearly in c.
         let amp_cols: Vec<Vec<f64>> = (0..=taus.len())
             .map(|k| {
@@ -312,23 +317,24 @@ fn fit_fixed(t: &[f64], xi: &[f64], f: &[f64], taus: &[f64], start: Option<&Inne
         g_inf = w[0] / s;
         g = w[1..].iter().map(|v| v / s).collect();
         c.iter_mut().for_each(|v| *v *= s);
-        model = (0..f.len())
+        let model: Vec<f64> = (0..f.len())
             .map(|i| amp_cols.iter().zip(&w).map(|(col, wk)| wk * col[i]).sum())
             .collect();
         let r = rms(&model, f);
-        if r > best * (1.0 - 1e-9) {
-            best = best.min(r);
+        let done = !(r < best.rms * (1.0 - 1e-9));
+        if r <= best.rms {
+            best = Inner {
+                c,
+                g: g.clone(),
+                model,
+                rms: r,
+            };
+        }
+        if done {
             break;
         }
-        best = r;
     }
-    Inner {
-        c,
-        g_inf,
-        g,
-        rms: best,
-        model,
-    }
+    best
 }
 
 /// Nelder-Mead minimisation of `f` from `x0` with initial steps `step`.
@@ -426,7 +432,7 @@ pub fn fit(t: &[f64], x: &[f64], f: &[f64]) -> Result<RelaxationFit, RelaxationE
     let noise = diffs[diffs.len() / 2] / (0.6745 * std::f64::consts::SQRT_2);
     let xi: Vec<f64> = x.iter().map(|v| v / x_max).collect();
 
-    let elastic_fit = fit_fixed(t, &xi, f, &[], None);
+    let elastic_fit = fit_fixed(t, &xi, f, &[]);
     let peak = elastic_fit.model.iter().fold(0.0f64, |m, v| m.max(v.abs()));
     let snr = peak / noise.max(1e-300);
     if !(snr >= MIN_SIGNAL_TO_NOISE) {
@@ -448,7 +454,7 @@ pub fn fit(t: &[f64], x: &[f64], f: &[f64]) -> Result<RelaxationFit, RelaxationE
     let grid: Vec<f64> = (0..GRID_TAUS)
         .map(|i| lo * (hi / lo).powf(i as f64 / (GRID_TAUS - 1) as f64))
         .collect();
-    let gridded = fit_fixed(t, &xi, f, &grid, None);
+    let gridded = fit_fixed(t, &xi, f, &grid);
     // Clusters of non-zero grid amplitudes (neighbours merge), weighted geometric mean tau.
     let mut clusters: Vec<(f64, f64)> = Vec::new(); // (amplitude, amplitude-weighted ln tau)
     let mut prev_on = false;
@@ -489,12 +495,12 @@ pub fn fit(t: &[f64], x: &[f64], f: &[f64]) -> Result<RelaxationFit, RelaxationE
                 return f64::INFINITY;
             }
             let taus: Vec<f64> = ln_tau.iter().map(|v| v.exp()).collect();
-            fit_fixed(t, &xi, f, &taus, None).rms
+            fit_fixed(t, &xi, f, &taus).rms
         };
         let ln_tau = nelder_mead(objective, &x0, 0.3, 60 * count);
         let mut taus: Vec<f64> = ln_tau.iter().map(|v| v.exp()).collect();
         taus.sort_by(f64::total_cmp);
-        let inner = fit_fixed(t, &xi, f, &taus, None);
+        let inner = fit_fixed(t, &xi, f, &taus);
         survey.push((count, inner.rms));
         best.push((taus, inner));
     }
