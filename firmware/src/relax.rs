@@ -83,6 +83,8 @@ pub struct Qlv {
     h: [[f32; 3]; MAX_PRONY_TERMS],
     /// `Q_e` of the previous tick, N (zero when it rendered no contact).
     q_prev: [f32; 3],
+    /// This tick has pressed ([`Qlv::press`]); cleared by [`Qlv::end_tick`].
+    pressed: bool,
 }
 
 impl Qlv {
@@ -106,6 +108,7 @@ impl Qlv {
             gain,
             h: [[0.0; 3]; MAX_PRONY_TERMS],
             q_prev: [0.0; 3],
+            pressed: false,
         }
     }
 
@@ -115,6 +118,7 @@ impl Qlv {
     /// force is an error (the tick faults, as for the elastic force) and resets the state, so
     /// one bad tick does not poison every later one.
     pub fn press(&mut self, q_e: [f32; 3]) -> Result<[f32; 3], SolveError> {
+        self.pressed = true;
         let h = self.update(q_e);
         let f = [
             self.g_inf * q_e[0] + h[0],
@@ -152,6 +156,16 @@ impl Qlv {
     /// last pressed (finite) `Q_e` gave it, and a press checks the whole sum before rendering.
     pub fn release(&mut self) {
         self.update([0.0; 3]);
+    }
+
+    /// The end of a tick: one that did not [`Qlv::press`] (no contact force rendered: free,
+    /// the detecting tick, an error, another mode) is a [`Qlv::release`]. Called once a tick,
+    /// so every tick updates the state exactly once.
+    pub fn end_tick(&mut self) {
+        if !self.pressed {
+            self.release();
+        }
+        self.pressed = false;
     }
 
     /// Back to the relaxed tissue (no history).
@@ -350,11 +364,13 @@ mod tests {
         let mut qlv = Qlv::new(&r, DT as f32);
         assert!(qlv.press([1.0e18, 0.0, 0.0]).is_ok());
         assert_eq!(qlv.press([f32::MAX, 0.0, 0.0]), Err(SolveError::NonFinite));
+        qlv.end_tick();
         assert_eq!(qlv, Qlv::new(&r, DT as f32));
         // A state driven to infinity while released is caught by the next press.
         qlv.h[1][2] = f32::INFINITY;
         qlv.release();
         assert_eq!(qlv.press([0.0, 0.0, 1.0]), Err(SolveError::NonFinite));
+        qlv.end_tick();
         assert_eq!(qlv, Qlv::new(&r, DT as f32));
         let stiffness = qlv.g_inf() + qlv.gain.iter().sum::<f32>();
         assert!(stiffness <= 1.0 + 1e-6, "{stiffness}");

@@ -512,11 +512,14 @@ impl<'b> HapticLoop<'b> {
             _ => Ok(None),
         });
         let solved = clock.cycles();
-        let elastic = linear.and_then(|l| match l {
-            None => Ok(None),
-            Some((f, d)) => self.law(f, d).map(Some),
+        let rendered = linear.and_then(|l| match l {
+            None => Ok([0.0; 3]),
+            Some((f, d)) => self.law(f, d),
         });
-        let rendered = self.relax(elastic);
+        // A tick that rendered no relaxed contact force feeds the relaxation a zero one.
+        if let Some(qlv) = &mut self.qlv {
+            qlv.end_tick();
+        }
         let (force_on_tool, solve_error) = match rendered {
             Ok(on_tissue) => (self.device.limit_force(on_tissue.map(|f| -f)), None),
             Err(e) => {
@@ -756,33 +759,19 @@ impl<'b> HapticLoop<'b> {
         self.ramp_ticks as f32 / RAMP_IN_TICKS as f32
     }
 
-    /// The force on the tissue after the bank's viscoelastic relaxation ([`Qlv`]) from this
-    /// tick's elastic force (`None`: no contact force this tick): the elastic force itself, or
-    /// zero, on a bank without one. With one, `Render`'s contact force is the relaxed one; a
-    /// tick without a contact force, with an error or in another mode feeds it zero (the
-    /// memory decays) and renders the elastic force as it is.
-    fn relax(
-        &mut self,
-        elastic: Result<Option<[f32; 3]>, SolveError>,
-    ) -> Result<[f32; 3], SolveError> {
-        let Some(qlv) = &mut self.qlv else {
-            return elastic.map(|e| e.unwrap_or([0.0; 3]));
-        };
-        match elastic {
-            Ok(Some(q)) if self.mode == Mode::Render => qlv.press(q),
-            other => {
-                qlv.release();
-                other.map(|e| e.unwrap_or([0.0; 3]))
-            }
-        }
-    }
-
     /// The force on the tissue for the mode from the linear model's tool force `f` at
-    /// displacement `d` (the law phase): Q in `Render`, `f` itself in `LinearLaw`, none in
-    /// the modes that render no contact.
-    fn law(&self, f: [f32; 3], d: [f32; 3]) -> Result<[f32; 3], SolveError> {
+    /// displacement `d` (the law phase): Q in `Render`, then the bank's viscoelastic
+    /// relaxation if it has one ([`Qlv::press`]); `f` itself in `LinearLaw`, none in the modes
+    /// that render no contact (the relaxation then sees a zero force, [`Qlv::end_tick`]).
+    fn law(&mut self, f: [f32; 3], d: [f32; 3]) -> Result<[f32; 3], SolveError> {
         match self.mode {
-            Mode::Render => apply_tissue_law(self.bank.tissue_law(), f, d),
+            Mode::Render => {
+                let q = apply_tissue_law(self.bank.tissue_law(), f, d)?;
+                match &mut self.qlv {
+                    Some(qlv) => qlv.press(q),
+                    None => Ok(q),
+                }
+            }
             Mode::LinearLaw => Ok(f),
             Mode::Transparent | Mode::ConstantCurrent { .. } => Ok([0.0; 3]),
         }
