@@ -138,7 +138,7 @@ impl Qlv {
         }
         // The rare case: the total would pull the tool in (or there is no elastic force).
         let qq = dot(q_e, q_e);
-        if !(qq > 0.0) {
+        if qq <= 0.0 {
             return Ok([0.0; 3]);
         }
         let s = along / qq;

@@ -187,7 +187,7 @@ impl Viscoelastic {
             r.tau_s[k] = tf;
         }
         let sum: f64 = r.g.iter().map(|&g| f64::from(g)).sum();
-        if !(sum < 1.0) {
+        if sum >= 1.0 {
             return Err(format!(
                 "the g sum to {sum} >= 1: g_inf = 1 - sum must stay > 0 (a solid keeps a force                  in a hold)"
             ));

@@ -195,6 +195,7 @@ fn bank(gravity: Option<[f64; 8]>) -> bank_format::AlignedBytes {
         gravity: gravity.map(|c| bank_format::GravityCompensation {
             coeffs: c.map(|v| v as f32),
         }),
+        relaxation: None,
         samples: None,
         device: firmware::fixtures::bench_device([0.0, 0.0, 0.3]),
     };
@@ -217,7 +218,6 @@ fn release(
         hand_stiffness: [0.0; 3],
         hand_damping: [0.0; 3],
         gravity: Some(weight),
-        relaxation: None,
         ..PlantParams::default()
     };
     let mut gimbal = Gimbal::at_rest(bank.device(), params, q0);

@@ -778,8 +778,8 @@ fn press_hold_relaxes_as_the_scenes_qlv_law() {
         for (g, pow, seg) in &decay {
             for j in 0..=k {
                 let w = g * seg * pow[k - j];
-                for i in 0..3 {
-                    f[i] += w * dq[j][i];
+                for (fi, d) in f.iter_mut().zip(dq[j]) {
+                    *fi += w * d;
                 }
             }
         }
@@ -793,8 +793,8 @@ fn press_hold_relaxes_as_the_scenes_qlv_law() {
         } else {
             f
         };
-        for i in 0..3 {
-            worst = worst.max((f64::from(rec.force_n[i]) - want[i]).abs() / peak);
+        for (got, want) in rec.force_n.iter().zip(want) {
+            worst = worst.max((f64::from(*got) - want).abs() / peak);
         }
         // Near the end of the hold (10.9 s), the force relative to the elastic one.
         if k == 10_900 {

@@ -227,9 +227,11 @@ fn solve_spd(gram: &[Vec<f64>], rhs: &[f64], set: &[usize]) -> Vec<f64> {
             if i == j {
                 s += 1e-13;
             }
-            for k in 0..j {
-                s -= l[i][k] * l[j][k];
-            }
+            s -= l[i][..j]
+                .iter()
+                .zip(&l[j][..j])
+                .map(|(a, b)| a * b)
+                .sum::<f64>();
             l[i][j] = if i == j {
                 s.max(1e-300).sqrt()
             } else {
@@ -311,7 +313,7 @@ fn fit_fixed(t: &[f64], xi: &[f64], f: &[f64], taus: &[f64]) -> Inner {
             .collect();
         let w = nnls(&amp_cols, f);
         let s: f64 = w.iter().sum();
-        if !(s > 0.0) {
+        if s.is_nan() || s <= 0.0 {
             break;
         }
         g_inf = w[0] / s;
@@ -321,7 +323,7 @@ fn fit_fixed(t: &[f64], xi: &[f64], f: &[f64], taus: &[f64]) -> Inner {
             .map(|i| amp_cols.iter().zip(&w).map(|(col, wk)| wk * col[i]).sum())
             .collect();
         let r = rms(&model, f);
-        let done = !(r < best.rms * (1.0 - 1e-9));
+        let done = r.is_nan() || r >= best.rms * (1.0 - 1e-9);
         if r <= best.rms {
             best = Inner {
                 c,
@@ -401,14 +403,14 @@ pub fn fit(t: &[f64], x: &[f64], f: &[f64]) -> Result<RelaxationFit, RelaxationE
             "{n} rows: a ramp and a hold need at least 20"
         )));
     }
-    if let Some(i) = (1..n).find(|&i| !(t[i] > t[i - 1])) {
+    if let Some(i) = (1..n).find(|&i| t[i].is_nan() || t[i] <= t[i - 1]) {
         return Err(RelaxationError::Data(format!(
             "time does not increase at data row {}",
             i + 1
         )));
     }
     let x_max = x.iter().fold(0.0f64, |m, &v| m.max(v));
-    if !(x_max > 0.0) {
+    if x_max <= 0.0 {
         return Err(RelaxationError::NoHold(
             "the displacement never rises above 0".into(),
         ));
@@ -435,7 +437,7 @@ pub fn fit(t: &[f64], x: &[f64], f: &[f64]) -> Result<RelaxationFit, RelaxationE
     let elastic_fit = fit_fixed(t, &xi, f, &[]);
     let peak = elastic_fit.model.iter().fold(0.0f64, |m, v| m.max(v.abs()));
     let snr = peak / noise.max(1e-300);
-    if !(snr >= MIN_SIGNAL_TO_NOISE) {
+    if snr.is_nan() || snr < MIN_SIGNAL_TO_NOISE {
         return Err(RelaxationError::Noise { snr });
     }
 
@@ -446,7 +448,7 @@ pub fn fit(t: &[f64], x: &[f64], f: &[f64]) -> Result<RelaxationFit, RelaxationE
         .fold(f64::INFINITY, f64::min);
     let lo = (2.0 * dt_min).max(f64::from(bank_format::RELAXATION_TAU_MIN_S));
     let hi = duration.min(f64::from(bank_format::RELAXATION_TAU_MAX_S));
-    if !(hi > lo) {
+    if hi <= lo {
         return Err(RelaxationError::Data(format!(
             "the test lasts {duration} s: too short for time constants above {lo} s"
         )));
@@ -519,7 +521,7 @@ pub fn fit(t: &[f64], x: &[f64], f: &[f64]) -> Result<RelaxationFit, RelaxationE
         .map(|(g, t)| (*g, *t))
         .unzip();
 
-    if !(elastic_fit.rms >= MIN_RELAXATION_GAIN * inner.rms) {
+    if elastic_fit.rms < MIN_RELAXATION_GAIN * inner.rms {
         return Err(RelaxationError::NoRelaxation {
             why: format!(
                 "relaxation lowers the RMS residual only from {:.3e} to {:.3e} N",
@@ -534,7 +536,7 @@ pub fn fit(t: &[f64], x: &[f64], f: &[f64]) -> Result<RelaxationFit, RelaxationE
         .zip(&tau_s)
         .map(|(gk, tk)| q_peak * gk * (1.0 - (-hold / tk).exp()))
         .sum();
-    if !(relaxed >= MIN_RELAXATION_SNR * noise) {
+    if relaxed.is_nan() || relaxed < MIN_RELAXATION_SNR * noise {
         return Err(RelaxationError::NoRelaxation {
             why: format!(
                 "the fitted terms relax {relaxed:.3e} N over the hold, under {MIN_RELAXATION_SNR} \
