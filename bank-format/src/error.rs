@@ -322,6 +322,19 @@ pub enum BankError {
         /// Index of the coefficient (0..8, the order of `GravityCompensation::coeffs`).
         coefficient: u32,
     },
+    /// The viscoelastic relaxation's term count is 0 or above [`crate::MAX_PRONY_TERMS`].
+    RelaxationCount {
+        /// Count found.
+        count: u32,
+    },
+    /// A relaxation term with `g_k < 0`, or `tau_k` outside
+    /// [`crate::RELAXATION_TAU_MIN_S`]`..=`[`crate::RELAXATION_TAU_MAX_S`].
+    RelaxationTerm {
+        /// Which term.
+        term: u32,
+    },
+    /// The relaxation's `g_k` sum to 1 or more (`g_inf <= 0`: a fluid, no force left in a hold).
+    RelaxationSum,
     /// A 16-bit coupling block's exponent outside [`crate::CKL16_EXP_MIN`]`..=`
     /// [`crate::CKL16_EXP_MAX`] (its values would not decode exactly to finite f32).
     CklExponent {
@@ -436,6 +449,9 @@ impl BankError {
             BankError::TooManyCandidates { .. } => 50,
             BankError::TooManyNeighbours { .. } => 51,
             BankError::TooManyTriangles { .. } => 52,
+            BankError::RelaxationCount { .. } => 53,
+            BankError::RelaxationTerm { .. } => 54,
+            BankError::RelaxationSum => 55,
         }
     }
 }
@@ -538,6 +554,20 @@ impl fmt::Display for BankError {
                 "gravity coefficient {coefficient} beyond +-{} (N m or N)",
                 crate::GRAVITY_COEFF_MAX
             ),
+            E::RelaxationCount { count } => write!(
+                f,
+                "viscoelastic relaxation: {count} terms, not 1..={}",
+                crate::MAX_PRONY_TERMS
+            ),
+            E::RelaxationTerm { term } => write!(
+                f,
+                "viscoelastic relaxation term {term}: g < 0 or tau outside {}..={} s",
+                crate::RELAXATION_TAU_MIN_S,
+                crate::RELAXATION_TAU_MAX_S
+            ),
+            E::RelaxationSum => {
+                f.write_str("viscoelastic relaxation: the g_k sum to 1 or more (g_inf <= 0)")
+            }
             E::CklExponent { entry } => write!(
                 f,
                 "16-bit C_kl block {entry}: exponent outside {}..={}",

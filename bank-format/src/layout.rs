@@ -14,10 +14,13 @@ pub const MAGIC: [u8; 8] = *b"HAPTBANK";
 /// ([`SectionKind::CouplingStarts`]), narrower index arrays; 5: the per-triangle planes
 /// ([`SectionKind::TrianglePlanes`]) became a required section; 6: the contact samples
 /// ([`SampleHeader`]: the tool's patch compliance `W(p)` sampled over the reachable surface), whose
-/// presence changes how the firmware renders a contact (`SPEC.md`, "Versioning").
-pub const VERSION_MAJOR: u16 = 6;
+/// presence changes how the firmware renders a contact (`SPEC.md`, "Versioning"); 7: the
+/// optional viscoelastic relaxation ([`Relaxation`]), whose presence changes the force the
+/// firmware renders for the same penetration (a 6.x reader would skip it and render the
+/// instantaneous elastic response for ever, up to `1 / g_inf` times too stiff in a hold).
+pub const VERSION_MAJOR: u16 = 7;
 /// Minor version this crate writes. Readers accept any minor version of their major version
-/// (minor versions only add optional sections, which older readers skip). 5.0 has the optional
+/// (minor versions only add optional sections, which older readers skip). 7.0 has the optional
 /// gravity section ([`SectionKind::Gravity`], added in 3.1).
 pub const VERSION_MINOR: u16 = 0;
 /// Size of [`BankHeader`] in bytes; the section table follows it.
@@ -179,6 +182,10 @@ pub enum SectionKind {
     /// Patch compliance samples `W`, `[f32; 6]` = xx, xy, xz, yy, yz, zz, m/N, each symmetric
     /// positive definite.
     PatchCompliance,
+    /// [`Relaxation`], one element; optional (7.0): present means the firmware renders the
+    /// quasi-linear viscoelastic force (`SPEC.md`, "viscoelastic relaxation"), absent the
+    /// elastic one.
+    Relaxation,
     /// A section of a later minor version that this reader does not know; skipped.
     Unknown(u32),
 }
@@ -238,6 +245,7 @@ impl SectionKind {
             23 => SectionKind::TriangleSamples,
             24 => SectionKind::Gravity,
             25 => SectionKind::PatchCompliance,
+            26 => SectionKind::Relaxation,
             other => SectionKind::Unknown(other),
         }
     }
@@ -271,6 +279,7 @@ impl SectionKind {
             SectionKind::TriangleSamples => 23,
             SectionKind::Gravity => 24,
             SectionKind::PatchCompliance => 25,
+            SectionKind::Relaxation => 26,
             SectionKind::Unknown(code) => code,
         }
     }
@@ -305,6 +314,7 @@ impl SectionKind {
             SectionKind::SampleHeader => core::mem::size_of::<SampleHeader>(),
             SectionKind::TriangleSamples => 2,
             SectionKind::PatchCompliance => 24,
+            SectionKind::Relaxation => core::mem::size_of::<Relaxation>(),
         })
     }
 
@@ -337,6 +347,7 @@ impl SectionKind {
             SectionKind::SampleHeader => "sample header",
             SectionKind::TriangleSamples => "triangle samples",
             SectionKind::PatchCompliance => "patch compliance",
+            SectionKind::Relaxation => "viscoelastic relaxation",
             SectionKind::Unknown(_) => "unknown",
         }
     }
@@ -609,6 +620,57 @@ impl GravityCompensation {
     }
 }
 
+/// Most Prony terms of the reduced relaxation function ([`Relaxation`]).
+pub const MAX_PRONY_TERMS: usize = 4;
+/// Shortest relaxation time a bank may hold, s: two ticks of the 1 kHz loop. A faster term
+/// has relaxed before the next tick can render it (its force is gone within the tick it
+/// appeared in: instantaneous elasticity the scene should fold into `Q` instead).
+pub const RELAXATION_TAU_MIN_S: f32 = 2.0e-3;
+/// Longest relaxation time a bank may hold, s: an hour. A slower term does not relax within a
+/// session (it is elasticity), and its per-tick decay `dt / tau < 2.8e-7` is a few f32 ulps
+/// of 1, so the firmware could not render it faithfully anyway.
+pub const RELAXATION_TAU_MAX_S: f32 = 3600.0;
+
+/// The reduced relaxation function of Fung's quasi-linear viscoelasticity (section
+/// [`SectionKind::Relaxation`], optional, 7.0; `SPEC.md`, "viscoelastic relaxation"):
+///
+/// `G(t) = g_inf + sum_k g_k exp(-t / tau_k)`, `G(0) = 1`, so `g_inf = 1 - sum_k g_k`,
+///
+/// the force on the tissue being `F(t) = integral_0^t G(t - s) dQ_e(s)`, with `Q_e` the
+/// elastic law's force (the tissue law `Q` of the linear model's force) taken as the
+/// instantaneous response.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, PartialEq, Pod, Zeroable)]
+pub struct Relaxation {
+    /// Number of Prony terms, `1..=`[`MAX_PRONY_TERMS`].
+    pub count: u32,
+    /// Reserved, zero.
+    pub reserved: u32,
+    /// `g_k`, dimensionless, each `>= 0`, `sum < 1`; entries past `count` zero.
+    pub g: [f32; MAX_PRONY_TERMS],
+    /// `tau_k`, s, from [`RELAXATION_TAU_MIN_S`] to [`RELAXATION_TAU_MAX_S`]; entries past
+    /// `count` zero.
+    pub tau_s: [f32; MAX_PRONY_TERMS],
+}
+
+impl Relaxation {
+    /// The terms `(g_k, tau_k)` in use (the first `count`, at most [`MAX_PRONY_TERMS`]).
+    pub fn terms(&self) -> impl Iterator<Item = (f32, f32)> + '_ {
+        let n = (self.count as usize).min(MAX_PRONY_TERMS);
+        self.g
+            .iter()
+            .copied()
+            .zip(self.tau_s.iter().copied())
+            .take(n)
+    }
+
+    /// `g_inf = 1 - sum_k g_k`: the share of the elastic force left after full relaxation
+    /// (> 0 in a valid bank).
+    pub fn g_inf(&self) -> f32 {
+        1.0 - self.terms().map(|(g, _)| g).sum::<f32>()
+    }
+}
+
 /// The CRC-32 of `bank` as the header's `crc32` field defines it: over all of `bank` with the
 /// four bytes at [`CRC_OFFSET`] taken as zero. `bank` must be exactly the bank (`total_len`
 /// bytes); a slice shorter than the header gives the CRC of what there is.
@@ -661,4 +723,5 @@ const _: () = {
     assert!(core::mem::size_of::<GravityCompensation>() == 32);
     assert!(core::mem::size_of::<Ckl16>() == 20);
     assert!(core::mem::size_of::<TrianglePlane>() == 16);
+    assert!(core::mem::size_of::<Relaxation>() == 40);
 };

@@ -86,9 +86,10 @@ pub use layout::{
     CRC_OFFSET, CRC32, Ckl16, DeviceCalibration, GRAVITY_COEFF_MAX, GRAVITY_COEFFS,
     GravityCompensation, GridHeader, HEADER_LEN, LAW_CHEBYSHEV, LAW_LINEAR, LawRecord, MAGIC,
     MAX_CELL_CANDIDATES, MAX_LAW_COEFFS, MAX_NODE_NEIGHBOURS, MAX_NODE_TRIANGLES, MAX_NODES,
-    MAX_SAMPLE_LEVEL, MAX_SECTIONS, MAX_TRIANGLES, OCCUPIED_WIDEN_CELLS, PIECE_CELLS, PLANE_TOL,
-    Precision, SECTION_ALIGN, SECTION_ENTRY_LEN, SampleHeader, SectionEntry, SectionKind,
-    TrianglePlane, VERSION_MAJOR, VERSION_MINOR, bank_crc, reseal,
+    MAX_PRONY_TERMS, MAX_SAMPLE_LEVEL, MAX_SECTIONS, MAX_TRIANGLES, OCCUPIED_WIDEN_CELLS,
+    PIECE_CELLS, PLANE_TOL, Precision, RELAXATION_TAU_MAX_S, RELAXATION_TAU_MIN_S, Relaxation,
+    SECTION_ALIGN, SECTION_ENTRY_LEN, SampleHeader, SectionEntry, SectionKind, TrianglePlane,
+    VERSION_MAJOR, VERSION_MINOR, bank_crc, reseal,
 };
 pub use reader::{Bank, Grid, SPD_PIVOT_REL, TRUNCATION_SLACK, UpperCouplings, validate_device};
 pub use samples::{Samples, lattice_bary, lattice_corners, lattice_index, lattice_len};

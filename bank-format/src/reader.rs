@@ -6,10 +6,10 @@ use crate::law::TissueLaw;
 use crate::layout::{
     BANK_ALIGN, BankHeader, BankMeta, CANDIDATE_WIDEN_CELLS, CKL16_EXP_MAX, CKL16_EXP_MIN, Ckl16,
     DeviceCalibration, GRAVITY_COEFF_MAX, GravityCompensation, GridHeader, HEADER_LEN, MAGIC,
-    MAX_CELL_CANDIDATES, MAX_NODE_NEIGHBOURS, MAX_NODE_TRIANGLES, MAX_NODES, MAX_SAMPLE_LEVEL,
-    MAX_SECTIONS, MAX_TRIANGLES, OCCUPIED_WIDEN_CELLS, PLANE_TOL, Precision, SECTION_ALIGN,
-    SECTION_ENTRY_LEN, SampleHeader, SectionEntry, SectionKind, TrianglePlane, VERSION_MAJOR,
-    bank_crc,
+    MAX_CELL_CANDIDATES, MAX_NODE_NEIGHBOURS, MAX_NODE_TRIANGLES, MAX_NODES, MAX_PRONY_TERMS,
+    MAX_SAMPLE_LEVEL, MAX_SECTIONS, MAX_TRIANGLES, OCCUPIED_WIDEN_CELLS, PLANE_TOL, Precision,
+    RELAXATION_TAU_MAX_S, RELAXATION_TAU_MIN_S, Relaxation, SECTION_ALIGN, SECTION_ENTRY_LEN,
+    SampleHeader, SectionEntry, SectionKind, TrianglePlane, VERSION_MAJOR, bank_crc,
 };
 use crate::samples::{Samples, lattice_index, lattice_len};
 use bytemuck::Pod;
@@ -45,6 +45,7 @@ pub struct Bank<'a> {
     law: TissueLaw,
     device: &'a DeviceCalibration,
     gravity: Option<&'a GravityCompensation>,
+    relaxation: Option<&'a Relaxation>,
     samples: Option<Samples<'a>>,
 }
 
@@ -480,6 +481,39 @@ fn parse_gravity<'a>(
         });
     }
     Ok(Some(gravity))
+}
+
+/// `SPEC.md` "Validation" rule 7, viscoelastic relaxation (optional section): absent is
+/// `None`; else one element, all finite, reserved zero, count in `1..=MAX_PRONY_TERMS`,
+/// entries past it zero, each `g_k >= 0` and `tau_k` within
+/// `[RELAXATION_TAU_MIN_S, RELAXATION_TAU_MAX_S]`, and `sum g_k < 1` (in f64).
+fn parse_relaxation<'a>(sections: &Sections<'a>) -> Result<Option<&'a Relaxation>, BankError> {
+    let section = SectionKind::Relaxation;
+    if !sections.table.iter().any(|e| e.kind == section.code()) {
+        return Ok(None);
+    }
+    let r: &Relaxation = sections.single(section)?;
+    if !all_finite(&r.g) || !all_finite(&r.tau_s) {
+        return Err(BankError::NonFinite { section, entry: 0 });
+    }
+    if r.reserved != 0 {
+        return Err(BankError::ReservedNotZero { section });
+    }
+    let n = r.count as usize;
+    if !(1..=MAX_PRONY_TERMS).contains(&n) {
+        return Err(BankError::RelaxationCount { count: r.count });
+    }
+    if r.g[n..].iter().chain(&r.tau_s[n..]).any(|&v| v != 0.0) {
+        return Err(BankError::ReservedNotZero { section });
+    }
+    let tau_range = RELAXATION_TAU_MIN_S..=RELAXATION_TAU_MAX_S;
+    if let Some(k) = (0..n).find(|&k| !(r.g[k] >= 0.0 && tau_range.contains(&r.tau_s[k]))) {
+        return Err(BankError::RelaxationTerm { term: k as u32 });
+    }
+    if !(r.g[..n].iter().map(|&g| f64::from(g)).sum::<f64>() < 1.0) {
+        return Err(BankError::RelaxationSum);
+    }
+    Ok(Some(r))
 }
 
 /// `SPEC.md` "Validation" rule 15, contact samples: all three sections or none; the header
@@ -1113,6 +1147,7 @@ impl<'a> Bank<'a> {
         let law = parse_law(&sections)?;
         let device = parse_device(&sections)?;
         let gravity = parse_gravity(&sections)?;
+        let relaxation = parse_relaxation(&sections)?;
         let positions = parse_positions(&sections)?;
         let n = positions.len();
         let mesh_ids = parse_mesh_ids(&sections, n)?;
@@ -1144,6 +1179,7 @@ impl<'a> Bank<'a> {
             law,
             device,
             gravity,
+            relaxation,
             samples: None,
         };
         bank.check_couplings()?;
@@ -1422,6 +1458,12 @@ impl<'a> Bank<'a> {
     /// compensated).
     pub fn gravity(&self) -> Option<&'a GravityCompensation> {
         self.gravity
+    }
+
+    /// The viscoelastic relaxation (`SPEC.md`, "viscoelastic relaxation"), `None` when the bank
+    /// has none (the firmware then renders the elastic force, as before 7.0).
+    pub fn relaxation(&self) -> Option<&'a Relaxation> {
+        self.relaxation
     }
 
     /// The contact samples (`SPEC.md`, "contact samples"): the tool's patch compliance over the

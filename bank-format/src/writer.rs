@@ -6,8 +6,8 @@ use crate::law::TissueLaw;
 use crate::layout::{
     BankHeader, BankMeta, CANDIDATE_WIDEN_CELLS, CKL16_EXP_MAX, CKL16_EXP_MIN, Ckl16,
     DeviceCalibration, GravityCompensation, GridHeader, HEADER_LEN, MAGIC, MAX_NODES,
-    MAX_TRIANGLES, OCCUPIED_WIDEN_CELLS, Precision, SECTION_ALIGN, SECTION_ENTRY_LEN, SampleHeader,
-    SectionEntry, SectionKind, TrianglePlane, VERSION_MAJOR, VERSION_MINOR, reseal,
+    MAX_TRIANGLES, OCCUPIED_WIDEN_CELLS, Precision, Relaxation, SECTION_ALIGN, SECTION_ENTRY_LEN,
+    SampleHeader, SectionEntry, SectionKind, TrianglePlane, VERSION_MAJOR, VERSION_MINOR, reseal,
 };
 use crate::reader::{Bank, cell_of, triangle_cells};
 use alloc::collections::BTreeMap;
@@ -50,6 +50,9 @@ pub struct BankBuilder {
     /// Gravity compensation of the instrument's weight; `None` writes no gravity section (no
     /// compensation).
     pub gravity: Option<GravityCompensation>,
+    /// The viscoelastic relaxation (`SPEC.md`, "viscoelastic relaxation"); `None` writes none
+    /// (the firmware renders the elastic force).
+    pub relaxation: Option<Relaxation>,
     /// The tool's patch compliance sampled over R (`SPEC.md`, "contact samples"); `None`
     /// writes none (the firmware then renders contacts from the nodal compliance).
     pub samples: Option<ContactSamples>,
@@ -550,6 +553,9 @@ impl BankBuilder {
         body.push(SectionKind::Device, bytemuck::bytes_of(&self.device), 1)?;
         if let Some(gravity) = &self.gravity {
             body.push(SectionKind::Gravity, bytemuck::bytes_of(gravity), 1)?;
+        }
+        if let Some(relaxation) = &self.relaxation {
+            body.push(SectionKind::Relaxation, bytemuck::bytes_of(relaxation), 1)?;
         }
         if let Some(samples) = &self.samples {
             let (header, ids, w) = samples.sections(triangles.len())?;

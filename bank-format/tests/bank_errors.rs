@@ -217,6 +217,25 @@ fn the_unbounded_reader_takes_what_only_the_limits_refuse() {
     ));
 }
 
+/// A valid bank with a two-term relaxation section, `f` applied to the section, resealed,
+/// parsed.
+fn relaxation(f: impl FnOnce(&mut bank_format::Relaxation)) -> Result<(), E> {
+    let mut r = bank_format::Relaxation {
+        count: 2,
+        reserved: 0,
+        g: [0.3, 0.2, 0.0, 0.0],
+        tau_s: [0.1, 10.0, 0.0, 0.0],
+    };
+    let mut b = builder();
+    b.relaxation = Some(r);
+    let mut bytes = b.build().unwrap();
+    f(&mut r);
+    let (_, off, ..) = section(&bytes, K::Relaxation);
+    bytes[off..off + 40].copy_from_slice(bytemuck::bytes_of(&r));
+    assert!(bank_format::reseal(&mut bytes));
+    parse(&bytes)
+}
+
 /// `f` applied to a valid bank with contact samples, resealed, parsed.
 fn corrupt_sampled(f: impl FnOnce(&mut Vec<u8>)) -> Result<(), E> {
     let mut bytes = sampled_builder().build().unwrap();
@@ -244,9 +263,9 @@ cases! {
         Bank::parse(&aligned[1..]).map(|_| ())
     };
     bad_magic: E::BadMagic => corrupt(|b| b[0] = b'X');
-    // A bank of the previous major version (it has no triangle planes).
-    unsupported_version: E::UnsupportedVersion { major: 5, .. } => corrupt(|b| put_u16(b, 8, 5));
-    unsupported_later_version: E::UnsupportedVersion { major: 7, .. } => corrupt(|b| put_u16(b, 8, 7));
+    // A bank of the previous major version (its reader would skip a relaxation section).
+    unsupported_version: E::UnsupportedVersion { major: 6, .. } => corrupt(|b| put_u16(b, 8, 6));
+    unsupported_later_version: E::UnsupportedVersion { major: 8, .. } => corrupt(|b| put_u16(b, 8, 8));
     bad_header_length: E::BadHeaderLength { header_len: 24 } => corrupt(|b| put_u16(b, 12, 24));
     too_many_sections: E::TooManySections { count: 33 } => corrupt(|b| put_u16(b, 14, 33));
     bad_total_length_unaligned: E::BadTotalLength { .. } => {
@@ -506,6 +525,9 @@ cases! {
         assert!(bank_format::reseal(&mut bytes));
         parse(&bytes)
     };
+    relaxation_count: E::RelaxationCount { count: 5 } => relaxation(|r| r.count = 5);
+    relaxation_term: E::RelaxationTerm { term: 1 } => relaxation(|r| r.tau_s[1] = 1.0e-3);
+    relaxation_sum: E::RelaxationSum => relaxation(|r| r.g[0] = 0.9);
     samples_incomplete: E::MissingSection { section: K::PatchCompliance } => corrupt_sampled(|b| {
         let (i, ..) = section(b, K::PatchCompliance);
         put_u32(b, entry_field(i, 0), 99);
@@ -600,8 +622,8 @@ fn error_codes_are_distinct_and_stable() {
     assert_eq!(E::SampleDiscontinuous { triangle: 0 }.code(), 49);
     assert_eq!(E::TooManyCandidates { cell: 0, count: 0 }.code(), 50);
     assert_eq!(E::TooManyNeighbours { node: 0, count: 0 }.code(), 51);
-    assert_eq!(
-        E::TooManyTriangles { node: 0, count: 0 }.code(),
-        last_code()
-    );
+    assert_eq!(E::TooManyTriangles { node: 0, count: 0 }.code(), 52);
+    assert_eq!(E::RelaxationCount { count: 0 }.code(), 53);
+    assert_eq!(E::RelaxationTerm { term: 0 }.code(), 54);
+    assert_eq!(E::RelaxationSum.code(), last_code());
 }

@@ -217,6 +217,7 @@ fn random_builder(
         scene_id: n as u64,
         law: law(),
         gravity: None,
+        relaxation: None,
         samples: None,
         device: device(),
     })

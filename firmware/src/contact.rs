@@ -712,6 +712,7 @@ mod tests {
             scene_id: 3,
             law: TissueLaw::chebyshev(&[2.6, 2.5, 0.1], [0.0, 5.0]).unwrap(),
             gravity: None,
+            relaxation: None,
             samples: None,
             device: crate::fixtures::bench_device([0.02, 0.02, 0.1]),
         };

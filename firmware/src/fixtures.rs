@@ -226,6 +226,7 @@ pub fn grid_builder(
         scene_id: 7,
         law: TissueLaw::chebyshev(&[2.6, 2.5, -0.1], [0.0, 5.0]).expect("valid law"),
         gravity: None,
+        relaxation: None,
         samples: None,
         device,
     }

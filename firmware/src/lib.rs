@@ -4,7 +4,8 @@
 //! One tick ([`tick::HapticLoop::tick`]), following the paper's pipeline: encoder counts ->
 //! gimbal forward kinematics ([`device`]) -> contact detection and tracking on the bank's
 //! reachable surface ([`contact`], paper section 5) -> contact solve in compliance form and the
-//! tissue law Q ([`solve`], eqs. 3-8) -> `J^T F`, plus the bank's feed-forward for the
+//! tissue law Q ([`solve`], eqs. 3-8) -> the bank's optional viscoelastic relaxation
+//! ([`relax`], Fung's QLV) -> `J^T F`, plus the bank's feed-forward for the
 //! instrument's weight ([`tick::gravity_efforts`]) -> motor currents -> limits and the safety
 //! supervisor ([`safety`]). `no_std`, no heap, f32.
 //!
@@ -47,6 +48,7 @@ pub mod fixtures;
 pub mod hal;
 pub mod link;
 pub mod patch;
+pub mod relax;
 pub mod reset;
 pub mod safety;
 pub mod solve;

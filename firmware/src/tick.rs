@@ -42,7 +42,13 @@
 //!    `u = C f_S` displays the surface under the tip;
 //! 4. the tissue law Q on the tool force ([`apply_tissue_law`], bank's law), except in
 //!    [`Mode::LinearLaw`]; the force on the tool is the *opposite* of the force on the tissue
-//!    (sign convention of [`crate::device`]); it is capped by [`Device::limit_force`];
+//!    (sign convention of [`crate::device`]); on a bank with the optional viscoelastic
+//!    relaxation (format 7, `SPEC.md` "viscoelastic relaxation") the force on the tissue is
+//!    then Fung's QLV response to it ([`Qlv`]: `g_inf Q_e + sum_k h_k`, the `h_k` updated
+//!    every tick, touching or not, in `Render`; the elastic force unchanged in the other
+//!    modes, whose ticks feed the relaxation a zero force); without the section this step is
+//!    skipped and the force is the elastic one, bit for bit; the force is capped by
+//!    [`Device::limit_force`];
 //! 5. `tau = J^T F + tau_g(q)`, requested currents ([`Device::requested_currents`]); `tau_g`
 //!    is the feed-forward for the instrument's own weight from the bank's optional gravity
 //!    section ([`gravity_efforts`]; zero without it), added in every mode but
@@ -70,6 +76,7 @@ use crate::contact::{ContactState, ContactTracker, max_path_m, path_tail};
 use crate::device::{Device, Joints, sin_cos, transpose_mul};
 use crate::hal::{CycleCounter, Interlocks};
 use crate::patch::PatchBuild;
+use crate::relax::Qlv;
 use crate::safety::{ArmRefused, Fault, SafetyConfig, State, Supervisor, TickInput};
 use crate::solve::{SolveError, WeightedFill, WeightedSolve, apply_tissue_law};
 use crate::vec3::dist2;
@@ -165,6 +172,8 @@ pub struct HapticLoop<'b> {
     ramp_ticks: u32,
     /// The longest path a tick sweeps for contacts ([`crate::contact::max_path_m`]).
     max_path_m: f32,
+    /// The tissue's viscoelastic memory, on a bank with a relaxation section.
+    qlv: Option<Qlv>,
 }
 
 /// Ticks over which the loop's output (the rendered force and the gravity feed-forward) rises
@@ -331,6 +340,7 @@ impl<'b> HapticLoop<'b> {
             referenced: false,
             ramp_ticks: RAMP_IN_TICKS,
             max_path_m,
+            qlv: bank.relaxation().map(|r| Qlv::new(r, config.tick_s)),
         }
     }
 
@@ -506,6 +516,10 @@ impl<'b> HapticLoop<'b> {
             None => Ok([0.0; 3]),
             Some((f, d)) => self.law(f, d),
         });
+        // A tick that rendered no relaxed contact force feeds the relaxation a zero one.
+        if let Some(qlv) = &mut self.qlv {
+            qlv.end_tick();
+        }
         let (force_on_tool, solve_error) = match rendered {
             Ok(on_tissue) => (self.device.limit_force(on_tissue.map(|f| -f)), None),
             Err(e) => {
@@ -746,11 +760,18 @@ impl<'b> HapticLoop<'b> {
     }
 
     /// The force on the tissue for the mode from the linear model's tool force `f` at
-    /// displacement `d` (the law phase): Q in `Render`, `f` itself in `LinearLaw`, none in
-    /// the modes that render no contact.
-    fn law(&self, f: [f32; 3], d: [f32; 3]) -> Result<[f32; 3], SolveError> {
+    /// displacement `d` (the law phase): Q in `Render`, then the bank's viscoelastic
+    /// relaxation if it has one ([`Qlv::press`]); `f` itself in `LinearLaw`, none in the modes
+    /// that render no contact (the relaxation then sees a zero force, [`Qlv::end_tick`]).
+    fn law(&mut self, f: [f32; 3], d: [f32; 3]) -> Result<[f32; 3], SolveError> {
         match self.mode {
-            Mode::Render => apply_tissue_law(self.bank.tissue_law(), f, d),
+            Mode::Render => {
+                let q = apply_tissue_law(self.bank.tissue_law(), f, d)?;
+                match &mut self.qlv {
+                    Some(qlv) => qlv.press(q),
+                    None => Ok(q),
+                }
+            }
             Mode::LinearLaw => Ok(f),
             Mode::Transparent | Mode::ConstantCurrent { .. } => Ok([0.0; 3]),
         }
@@ -1238,6 +1259,96 @@ mod tests {
         assert_eq!(tel.tick, path.len() as u32);
         assert_eq!(tel.state, bank_format::State::Armed);
         assert!(tel.contacts.is_empty());
+    }
+
+    /// The flat patch with the relaxation `g`, `tau_s` (s), or elastic.
+    fn relaxing_patch(g: &[f32], tau_s: &[f32]) -> AlignedBytes {
+        let side: Vec<f64> = (0..crate::fixtures::PATCH_SIDE)
+            .map(|i| crate::fixtures::PATCH_SPACING_M * i as f64)
+            .collect();
+        let mut b = crate::fixtures::grid_builder(&side, &side, 0.06, patch_device());
+        if !g.is_empty() {
+            let mut r = bank_format::Relaxation {
+                count: g.len() as u32,
+                reserved: 0,
+                g: [0.0; 4],
+                tau_s: [0.0; 4],
+            };
+            r.g[..g.len()].copy_from_slice(g);
+            r.tau_s[..tau_s.len()].copy_from_slice(tau_s);
+            b.relaxation = Some(r);
+        }
+        AlignedBytes::new(&b.build().unwrap())
+    }
+
+    /// A press (3 mm at 10 mm/s), a 2 s hold and a release on a bank with a two-term
+    /// relaxation: every tick's force is the QLV convolution (`firmware::relax`, (1)) of the
+    /// elastic bank's force on the same path, evaluated independently of the recursion as
+    /// the direct sum over the history's segments (each segment's integral in closed form,
+    /// f64); nothing after the release; and in `LinearLaw` the relaxed bank renders the elastic
+    /// force bit for bit.
+    #[test]
+    fn a_relaxing_bank_renders_the_qlv_convolution_of_the_elastic_force() {
+        let (g, tau) = ([0.4f64, 0.25], [0.05f64, 0.8]);
+        let elastic = relaxing_patch(&[], &[]);
+        let relaxing = relaxing_patch(&[0.4, 0.25], &[0.05, 0.8]);
+        let elastic = Bank::parse(elastic.as_slice()).unwrap();
+        let relaxing = Bank::parse(relaxing.as_slice()).unwrap();
+        let dev = Device::new(&patch_device());
+        let mut path: Vec<f32> = (0..=400).map(|t| 0.097 + 0.01e-3 * t as f32).collect();
+        path.extend(std::iter::repeat_n(0.101, 2000));
+        path.extend((0..=400).rev().map(|t| 0.097 + 0.01e-3 * t as f32));
+        let run = |bank: &Bank, mode: Mode| -> Vec<[f32; 3]> {
+            let mut lp = homed(bank);
+            lp.set_mode(mode).unwrap();
+            path.iter()
+                .map(|&s| lp.tick(input(counts_for_insertion(&dev, s))).tool_force_n)
+                .collect()
+        };
+        let q = run(&elastic, Mode::Render);
+        let f = run(&relaxing, Mode::Render);
+        assert_eq!(
+            run(&relaxing, Mode::LinearLaw),
+            run(&elastic, Mode::LinearLaw)
+        );
+        let peak = q.iter().map(|v| norm(*v)).fold(0.0, f32::max);
+        assert!(
+            peak > 0.3 && peak < patch_device().max_force_n * 0.9,
+            "{peak}"
+        );
+        let g_inf = 1.0 - g.iter().sum::<f64>();
+        let dt = 1.0e-3;
+        let mut worst = 0.0f64;
+        let release = 400 + 2000;
+        for n in 0..release {
+            for i in 0..3 {
+                // F(n) = g_inf Q(n) + sum_k g_k sum_j e^{-(n-j) dt/tau} (tau/dt)(1 - e^{-dt/tau})
+                // (Q(j) - Q(j-1)): the convolution (1) of the linear interpolation of Q.
+                let qi = |j: usize| if j == 0 { 0.0 } else { f64::from(q[j - 1][i]) };
+                let mut want = g_inf * qi(n + 1);
+                for (gk, tk) in g.iter().zip(tau) {
+                    let seg = tk / dt * (1.0 - (-dt / tk).exp());
+                    for j in 1..=n + 1 {
+                        let age = (n + 1 - j) as f64 * dt;
+                        want += gk * seg * (-age / tk).exp() * (qi(j) - qi(j - 1));
+                    }
+                }
+                worst = worst.max((f64::from(f[n][i]) - want).abs() / f64::from(peak));
+            }
+        }
+        assert!(worst < 1e-5, "worst {worst:e} of the peak");
+        // Relaxed in the hold: at its end (2 s) the 50 ms term is gone and the 0.8 s one has
+        // e^-2.5 of its share left: the force is g_inf of the elastic one plus under 0.025.
+        let end = release - 1;
+        let excess = f64::from(f[end][2] / q[end][2]) - g_inf;
+        assert!((0.0..0.025).contains(&excess), "{excess}");
+        // Out of contact: nothing.
+        assert_eq!(*f.last().unwrap(), [0.0; 3]);
+        for (a, b) in f.iter().zip(&q).skip(release) {
+            if *b == [0.0; 3] {
+                assert_eq!(*a, [0.0; 3]);
+            }
+        }
     }
 
     /// Pressed 3 mm into the tissue while disarmed, then armed: the rendered force and the
@@ -1833,6 +1944,7 @@ mod tests {
             scene_id: 1,
             law: TissueLaw::chebyshev(&[2.6, 2.5, -0.1], [0.0, 5.0]).unwrap(),
             gravity: None,
+            relaxation: None,
             samples: None,
             device: DeviceCalibration {
                 fulcrum_m: [0.01 / 3.0, 0.01 / 3.0, 0.1],
@@ -2004,6 +2116,7 @@ mod tests {
             scene_id: 3,
             law: TissueLaw::linear(0.0, 1.0, [0.0, 5.0]).unwrap(),
             gravity,
+            relaxation: None,
             samples: None,
             device: crate::fixtures::bench_device([0.0, 0.0, 0.3]),
         };

@@ -337,6 +337,13 @@ impl Prepared {
                 .map(|c| bank_format::GravityCompensation {
                     coeffs: c.map(|v| v as f32),
                 }),
+            relaxation: self
+                .scene
+                .viscoelastic
+                .as_ref()
+                .map(|v| v.record())
+                .transpose()
+                .map_err(|e| anyhow::anyhow!("[viscoelastic]: {e}"))?,
             samples: None,
             device: self.scene.device,
         };

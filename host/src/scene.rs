@@ -75,6 +75,8 @@ struct RawScene {
     display_law: Option<RawDisplayLaw>,
     #[serde(default)]
     gravity: Option<RawGravity>,
+    #[serde(default)]
+    viscoelastic: Option<RawViscoelastic>,
     bank: RawBank,
     #[serde(default)]
     contact: Option<RawContact>,
@@ -105,6 +107,93 @@ struct RawContact {
 #[serde(deny_unknown_fields)]
 struct RawGravity {
     coeffs: Spanned<[f64; bank_format::GRAVITY_COEFFS]>,
+}
+
+/// `[viscoelastic]`: the Prony terms of the reduced relaxation function (`bank-format`
+/// `SPEC.md`, "viscoelastic relaxation"), written by `host calibrate relaxation`.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawViscoelastic {
+    g: Spanned<Vec<f64>>,
+    tau_s: Spanned<Vec<f64>>,
+}
+
+/// Fung's quasi-linear viscoelasticity of the tissue (`[viscoelastic]`): the reduced relaxation
+/// function `G(t) = g_inf + sum_k g_k exp(-t / tau_k)`, `G(0) = 1`, applied by the firmware to
+/// the elastic force (`firmware::relax`). Validated: 1 to [`bank_format::MAX_PRONY_TERMS`]
+/// terms, `g_k >= 0`, `sum g_k < 1`, each `tau_k` in [`bank_format::RELAXATION_TAU_MIN_S`] (two
+/// ticks) ..= [`bank_format::RELAXATION_TAU_MAX_S`] (an hour).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Viscoelastic {
+    /// `g_k`, dimensionless.
+    pub g: Vec<f64>,
+    /// `tau_k`, s.
+    pub tau_s: Vec<f64>,
+}
+
+impl Viscoelastic {
+    /// `g_inf = 1 - sum_k g_k`, the share of the elastic force left after full relaxation.
+    pub fn g_inf(&self) -> f64 {
+        1.0 - self.g.iter().sum::<f64>()
+    }
+
+    /// The bank's record (f32), or why the terms do not make a valid one: the scene's own
+    /// rules, also for a fit before it is written (`host calibrate relaxation`).
+    pub fn record(&self) -> Result<bank_format::Relaxation, String> {
+        let n = self.g.len();
+        if n != self.tau_s.len() {
+            return Err(format!(
+                "g has {n} terms, tau_s {}: one time constant per term",
+                self.tau_s.len()
+            ));
+        }
+        if !(1..=bank_format::MAX_PRONY_TERMS).contains(&n) {
+            return Err(format!(
+                "{n} terms: the firmware renders 1 to {} (delete the table for an elastic tissue)",
+                bank_format::MAX_PRONY_TERMS
+            ));
+        }
+        let mut r = bank_format::Relaxation {
+            count: n as u32,
+            reserved: 0,
+            g: [0.0; bank_format::MAX_PRONY_TERMS],
+            tau_s: [0.0; bank_format::MAX_PRONY_TERMS],
+        };
+        let (lo, hi) = (
+            bank_format::RELAXATION_TAU_MIN_S,
+            bank_format::RELAXATION_TAU_MAX_S,
+        );
+        for (k, (&g, &tau)) in self.g.iter().zip(&self.tau_s).enumerate() {
+            if !g.is_finite() || !tau.is_finite() {
+                return Err(format!("term {k}: values must be finite"));
+            }
+            if g < 0.0 {
+                return Err(format!(
+                    "term {k}: g = {g} < 0 (a negative share would make the force grow in a hold)"
+                ));
+            }
+            let (gf, tf) = (g as f32, tau as f32);
+            if tf < lo {
+                return Err(format!(
+                    "term {k}: tau = {tau} s is under two ticks of the 1 kHz loop ({lo} s): it                      relaxes before the loop can render it; fold it into the elastic law"
+                ));
+            }
+            if tf > hi {
+                return Err(format!(
+                    "term {k}: tau = {tau} s is over an hour ({hi} s): it does not relax within                      a session (it is elasticity), and its decay per tick is below f32 precision"
+                ));
+            }
+            r.g[k] = gf;
+            r.tau_s[k] = tf;
+        }
+        let sum: f64 = r.g.iter().map(|&g| f64::from(g)).sum();
+        if sum >= 1.0 {
+            return Err(format!(
+                "the g sum to {sum} >= 1: g_inf = 1 - sum must stay > 0 (a solid keeps a force                  in a hold)"
+            ));
+        }
+        Ok(r)
+    }
 }
 
 #[derive(Debug, Deserialize)]
@@ -391,6 +480,9 @@ pub struct Scene {
     /// `[a_c, a_s, a_p, b_c, b_s, b_p, d_c, d_s]` (N m, N m, N m, N, N, N, N m, N m; `bank-format`
     /// `SPEC.md`, "gravity"). `None`: no compensation (the bank has no gravity section).
     pub gravity: Option<[f64; bank_format::GRAVITY_COEFFS]>,
+    /// Viscoelastic relaxation from the optional `[viscoelastic]` table; `None`: elastic (the
+    /// bank has no relaxation section).
+    pub viscoelastic: Option<Viscoelastic>,
     /// Bank options.
     pub bank: BankOptions,
     /// The contact model (`[contact]`; absent: [`ContactModel::Nodal`]).
@@ -560,6 +652,11 @@ impl Scene {
             .as_ref()
             .map(|g| parse_gravity(&ctx, g))
             .transpose()?;
+        let viscoelastic = raw
+            .viscoelastic
+            .as_ref()
+            .map(|v| parse_viscoelastic(&ctx, v))
+            .transpose()?;
         let bank = parse_bank(&ctx, &raw.bank)?;
         let contact = match &raw.contact {
             Some(c) => parse_contact(&ctx, path, c)?,
@@ -589,6 +686,7 @@ impl Scene {
             display_law,
             friction_offset,
             gravity,
+            viscoelastic,
             bank,
             contact,
             text_hash: fnv1a(FNV_OFFSET, text.as_bytes()),
@@ -1326,6 +1424,20 @@ fn parse_gravity(
     Ok(c)
 }
 
+/// `[viscoelastic]`: [`Viscoelastic::record`]'s rules, the error on the table's `g` line
+/// (`tau_s`'s for a time constant).
+fn parse_viscoelastic(ctx: &Ctx, v: &RawViscoelastic) -> Result<Viscoelastic, SceneError> {
+    let out = Viscoelastic {
+        g: v.g.get_ref().clone(),
+        tau_s: v.tau_s.get_ref().clone(),
+    };
+    match out.record() {
+        Ok(_) => Ok(out),
+        Err(m) if m.contains("tau =") => Err(ctx.err(v.tau_s.span(), "viscoelastic.tau_s", m)),
+        Err(m) => Err(ctx.err(v.g.span(), "viscoelastic.g", m)),
+    }
+}
+
 /// `[bank]`: `couplings` "radius" (default) or "tool"; `truncation_radius_m` finite and >= 0
 /// (required with "radius", default 0 with "tool"); `precision` "f32" (default);
 /// `max_contact_nodes` in 1..=[`bank_format::MAX_CONTACTS`] (default the maximum);
@@ -1462,6 +1574,70 @@ mod tests {
         assert!(bank_format::validate_device(&s.device).is_ok());
         let (mesh, _, _) = s.load_mesh().unwrap();
         assert!(s.fixed_set(&mesh).unwrap().count() > 0);
+    }
+
+    /// `[viscoelastic]`: parsed into the bank's record; absent, none; each rule refused with
+    /// its reason, at the file's line of the offending key.
+    #[test]
+    fn viscoelastic_terms_are_validated_with_their_reasons() {
+        let (_, t) = shipped();
+        let s = Scene::parse(Path::new("scene.toml"), &t).unwrap();
+        assert_eq!(s.viscoelastic, None);
+        let with = |g: &str, tau: &str| format!("{t}\n[viscoelastic]\ng = {g}\ntau_s = {tau}\n");
+        let line_g = t.lines().count() + 3;
+        let s = Scene::parse(Path::new("scene.toml"), &with("[0.5, 0.2]", "[0.05, 5.0]")).unwrap();
+        let v = s.viscoelastic.unwrap();
+        assert!((v.g_inf() - 0.3).abs() < 1e-12);
+        let r = v.record().unwrap();
+        assert_eq!((r.count, r.g[1], r.tau_s[1], r.g[2]), (2, 0.2, 5.0, 0.0));
+        for (g, tau, key, line, words) in [
+            (
+                "[0.5, 0.5]",
+                "[0.05, 5.0]",
+                "viscoelastic.g",
+                line_g,
+                "g_inf",
+            ),
+            ("[-0.1]", "[1.0]", "viscoelastic.g", line_g, "< 0"),
+            (
+                "[0.1, 0.1]",
+                "[1.0]",
+                "viscoelastic.g",
+                line_g,
+                "one time constant",
+            ),
+            ("[]", "[]", "viscoelastic.g", line_g, "0 terms"),
+            (
+                "[0.1, 0.1, 0.1, 0.1, 0.1]",
+                "[1, 2, 3, 4, 5]",
+                "viscoelastic.g",
+                line_g,
+                "1 to 4",
+            ),
+            (
+                "[0.1]",
+                "[0.001]",
+                "viscoelastic.tau_s",
+                line_g + 1,
+                "two ticks",
+            ),
+            (
+                "[0.1]",
+                "[7200.0]",
+                "viscoelastic.tau_s",
+                line_g + 1,
+                "an hour",
+            ),
+            ("[0.1]", "[nan]", "viscoelastic.g", line_g, "finite"),
+        ] {
+            let e = err_of(&with(g, tau));
+            assert_eq!(
+                (e.key.as_str(), e.line),
+                (key, Some(line)),
+                "{g} {tau}: {e}"
+            );
+            assert!(e.message.contains(words), "{g} {tau}: {e}");
+        }
     }
 
     /// Replaces the first line starting with `key =` and returns the text and its line number.

@@ -67,6 +67,11 @@ pub enum Script {
     /// Every 1.5 s: from 20 mm above, strike 8 mm in at the hand's top speed, hold 0.25 s,
     /// withdraw.
     Strike,
+    /// Every 12 s: from 5 mm above, press 5 mm in over 0.5 s, hold 10 s, release: what a
+    /// viscoelastic tissue's relaxation shows (`[viscoelastic]`, `firmware::relax`).
+    #[value(name = "press-hold")]
+    #[serde(rename = "press-hold")]
+    PressHold,
 }
 
 /// Samples of the rest surface's distance from the fulcrum along the shaft across the slide's
@@ -155,6 +160,15 @@ impl Scripted {
                     ramp(t, 0.5, 0.556, -0.020, 0.008)
                 } else {
                     ramp(t, 0.806, 1.0, 0.008, -0.020)
+                };
+                (0.0, d)
+            }
+            Script::PressHold => {
+                let t = t % 12.0;
+                let d = if t < 11.0 {
+                    ramp(t, 0.3, 0.8, -0.005, 0.005)
+                } else {
+                    ramp(t, 10.8, 11.3, 0.005, -0.005)
                 };
                 (0.0, d)
             }

@@ -64,8 +64,9 @@ fn shipped_scene_builds_a_valid_bank_and_inspect_refuses_damaged_copies() {
     );
 
     // The scene's speed thresholds, the cell certificates, pairs stored once and the triangle
-    // planes (format 5).
-    assert_eq!(bank.version().0, 6);
+    // planes (format 5); format 7, and the default scene elastic (no relaxation section).
+    assert_eq!(bank.version().0, 7);
+    assert_eq!(bank.relaxation(), None);
     assert_eq!(bank.triangle_planes().len(), bank.triangles().len());
     assert_eq!(bank.device().max_tip_speed_m_s, 1.0);
     assert_eq!(bank.device().max_joint_speed, [10.0, 10.0, 1.0]);

@@ -195,6 +195,7 @@ fn bank(gravity: Option<[f64; 8]>) -> bank_format::AlignedBytes {
         gravity: gravity.map(|c| bank_format::GravityCompensation {
             coeffs: c.map(|v| v as f32),
         }),
+        relaxation: None,
         samples: None,
         device: firmware::fixtures::bench_device([0.0, 0.0, 0.3]),
     };

@@ -72,6 +72,7 @@ fn cap() -> AlignedBytes {
         scene_id: 11,
         law: TissueLaw::chebyshev(&[2.6, 2.5, 0.1], [0.0, 5.0]).unwrap(),
         gravity: None,
+        relaxation: None,
         samples: None,
         device: firmware::fixtures::bench_device([0.0, 0.0, 0.1]),
     };

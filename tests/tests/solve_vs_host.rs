@@ -68,6 +68,7 @@ fn bank_bytes() -> AlignedBytes {
         scene_id: 7,
         law: TissueLaw::chebyshev(&[2.6, 2.5, 0.1], [0.0, 5.0]).unwrap(),
         gravity: None,
+        relaxation: None,
         samples: None,
         device: firmware::fixtures::bench_device([0.008, 0.004, 0.1]),
     };

@@ -111,6 +111,7 @@ pub fn builder() -> BankBuilder {
         scene_id: 0x0123_4567_89ab_cdef,
         law: law(),
         gravity: None,
+        relaxation: None,
         samples: None,
         device: device(),
     }

@@ -9,7 +9,8 @@
 //! comments, [`specimen`] computes the linear model's prediction for a compression specimen, and
 //! [`plot`] draws data, fit and residuals (PNG and SVG); [`cost`] estimates what evaluating a law
 //! costs on the MCU; [`gravity`] fits the feed-forward for the instrument's own weight to the
-//! currents that hold it at a few poses.
+//! currents that hold it at a few poses; [`relaxation`] fits Fung's quasi-linear
+//! viscoelasticity (Prony terms and the instantaneous elastic law) to a ramp-and-hold test.
 
 pub mod cheb;
 pub mod cost;
@@ -18,5 +19,6 @@ pub mod fit;
 pub mod gravity;
 pub mod motor;
 pub mod plot;
+pub mod relaxation;
 pub mod scene_edit;
 pub mod specimen;

@@ -212,3 +212,29 @@ pub fn set_gravity(
     }
     validated(path, &doc)
 }
+
+/// The scene text with `[viscoelastic] g, tau_s` set to a relaxation fit (`bank-format`
+/// `SPEC.md`, "viscoelastic relaxation"); `source` (the CSV and its residual) goes into a
+/// comment.
+pub fn set_viscoelastic(
+    path: &Path,
+    text: &str,
+    g: &[f64],
+    tau_s: &[f64],
+    source: &str,
+) -> Result<String, EditError> {
+    let mut doc = parse(path, text)?;
+    let new_table = "\n# Viscoelastic relaxation (Fung's QLV): the rendered force is the elastic force\n\
+                     # convolved with G(t) = g_inf + sum_k g_k exp(-t / tau_k), G(0) = 1 (tau_s in s).\n\
+                     # The bank carries it and the firmware renders it (firmware::relax). Written by\n\
+                     # `host calibrate relaxation`; delete the table for an elastic tissue.\n";
+    let t = table(path, &mut doc, "viscoelastic", Some(new_table))?;
+    set(t, "g", array(g.iter().copied()));
+    set(t, "tau_s", array(tau_s.iter().copied()));
+    if let Some(mut key) = t.key_mut("g") {
+        key.leaf_decor_mut().set_prefix(format!(
+            "# fitted by `host calibrate relaxation`: {source}\n"
+        ));
+    }
+    validated(path, &doc)
+}

@@ -31,6 +31,40 @@ pub enum Calibrate {
     /// The linear FEM prediction for a cylindrical compression specimen: force and radial
     /// displacement per metre of compression, as JSON.
     Specimen(SpecimenArgs),
+    /// Fit the viscoelastic relaxation (Fung's QLV: Prony terms of G(t), G(0) = 1, with the
+    /// instantaneous elastic law of the displacement) to a ramp-and-hold test, ramp and hold
+    /// together, and write it into the scene's [viscoelastic] table.
+    Relaxation(RelaxationArgs),
+}
+
+/// Arguments of `host calibrate relaxation`.
+#[derive(clap::Args, Debug)]
+pub struct RelaxationArgs {
+    /// Bench CSV: a header row, then one row per sample (times increasing); `#` lines are
+    /// comments.
+    #[arg(long)]
+    csv: PathBuf,
+    /// Column of the time, s.
+    #[arg(long, default_value = "t_s")]
+    t: String,
+    /// Column of the displacement (indentation or compression, positive into the tissue), m.
+    #[arg(long, default_value = "x_m")]
+    x: String,
+    /// Column of the force (positive pushing back), N.
+    #[arg(long, default_value = "force_n")]
+    f: String,
+    /// Scene file to write [viscoelastic] into (comments and layout kept, written
+    /// atomically); without it nothing is written.
+    #[arg(long)]
+    scene: Option<PathBuf>,
+    /// Plot path without extension: writes <PLOT>.svg and <PLOT>.png (force against time, data
+    /// and fit, residuals below).
+    #[arg(long, default_value = "calibration-relaxation")]
+    plot: PathBuf,
+    /// Print one JSON object (g_inf, g, tau_s, the elastic law, residuals) instead of the
+    /// table.
+    #[arg(long)]
+    json: bool,
 }
 
 /// Arguments of `host calibrate tissue`.
@@ -147,6 +181,7 @@ pub fn run(cmd: Calibrate) -> Result<()> {
         Calibrate::Motor(a) => motor_cmd(a),
         Calibrate::Gravity(a) => gravity_cmd(a),
         Calibrate::Specimen(a) => specimen_cmd(a),
+        Calibrate::Relaxation(a) => relaxation_cmd(a),
     }
 }
 
@@ -161,6 +196,144 @@ fn parse_degree(s: &str) -> Result<Option<usize>> {
             fit::MAX_DEGREE
         ),
     }
+}
+
+#[derive(serde::Serialize)]
+struct RelaxationReport<'a> {
+    g_inf: f64,
+    g: &'a [f64],
+    tau_s: &'a [f64],
+    /// `Q_e(x) = sum_j c_j (x / x_max)^j`, j = 1.., N.
+    elastic_coeffs_n: &'a [f64],
+    x_max_m: f64,
+    rms_n: f64,
+    elastic_only_rms_n: f64,
+    noise_n: f64,
+    survey: Vec<[f64; 2]>,
+    rows: usize,
+    scene: Option<&'a Path>,
+    plot: [PathBuf; 2],
+}
+
+fn relaxation_cmd(a: RelaxationArgs) -> Result<()> {
+    use host::calibrate::relaxation;
+    let table = csv::read(&a.csv, &[&a.t, &a.x, &a.f])?;
+    table.require_rows(20, "a ramp and a hold")?;
+    let t = table.numbers(0)?;
+    table.require_increasing(0, &t)?;
+    let x = table.numbers(1)?;
+    let f = table.numbers(2)?;
+    let fit = relaxation::fit(&t, &x, &f).with_context(|| {
+        format!(
+            "{}: fitting the relaxation; nothing was written",
+            a.csv.display()
+        )
+    })?;
+    let residuals: Vec<(f64, f64)> = t
+        .iter()
+        .zip(f.iter().zip(&fit.model))
+        .map(|(&ti, (&fi, &mi))| (ti, 1e3 * (fi - mi)))
+        .collect();
+    let spec = PlotSpec {
+        title: format!(
+            "QLV relaxation: {} (g_inf {:.3}, {} term(s), RMS {:.3e} N)",
+            a.csv
+                .file_name()
+                .map_or(String::new(), |n| n.to_string_lossy().into_owned()),
+            fit.g_inf,
+            fit.g.len(),
+            fit.rms
+        ),
+        x_label: format!("time ({}), s", a.t),
+        y_label: format!("force ({}), N", a.f),
+        data: (
+            "bench data".into(),
+            t.iter().copied().zip(f.iter().copied()).collect(),
+        ),
+        curves: vec![
+            (
+                format!(
+                    "QLV fit: g = {:?}, tau = {:?} s",
+                    fit.g
+                        .iter()
+                        .map(|v| (v * 1e3).round() / 1e3)
+                        .collect::<Vec<_>>(),
+                    fit.tau_s
+                        .iter()
+                        .map(|v| (v * 1e3).round() / 1e3)
+                        .collect::<Vec<_>>()
+                ),
+                t.iter().copied().zip(fit.model.iter().copied()).collect(),
+            ),
+            (
+                "instantaneous elastic response Q_e(x(t))".into(),
+                t.iter()
+                    .zip(&x)
+                    .map(|(&ti, &xi)| (ti, fit.elastic_at(xi)))
+                    .collect(),
+            ),
+        ],
+        residual_label: "residual, mN".into(),
+        residuals,
+    };
+    let plots = plot::write(&a.plot, &spec)?;
+    if let Some(scene) = &a.scene {
+        let source = format!(
+            "{}, columns {}, {}, {}: g_inf {:.4}, RMS residual {:.3e} N (noise {:.3e} N)",
+            a.csv.display(),
+            a.t,
+            a.x,
+            a.f,
+            fit.g_inf,
+            fit.rms,
+            fit.noise
+        );
+        write_scene(scene, |text| {
+            Ok(scene_edit::set_viscoelastic(
+                scene, text, &fit.g, &fit.tau_s, &source,
+            )?)
+        })?;
+    }
+    if a.json {
+        let report = RelaxationReport {
+            g_inf: fit.g_inf,
+            g: &fit.g,
+            tau_s: &fit.tau_s,
+            elastic_coeffs_n: &fit.elastic,
+            x_max_m: fit.x_max,
+            rms_n: fit.rms,
+            elastic_only_rms_n: fit.elastic_rms,
+            noise_n: fit.noise,
+            survey: fit.survey.iter().map(|&(n, r)| [n as f64, r]).collect(),
+            rows: t.len(),
+            scene: a.scene.as_deref(),
+            plot: plots,
+        };
+        println!("{}", serde_json::to_string(&report)?);
+        return Ok(());
+    }
+    println!("terms  rms residual (N)");
+    for (n, r) in &fit.survey {
+        let mark = if *n == fit.g.len() { "  <- chosen" } else { "" };
+        println!("{n:>5}  {r:.4e}{mark}");
+    }
+    println!(
+        "elastic only (G = 1): rms {:.4e} N; noise estimate {:.4e} N",
+        fit.elastic_rms, fit.noise
+    );
+    println!("g_inf = {:.5}", fit.g_inf);
+    for (k, (g, tau)) in fit.g.iter().zip(&fit.tau_s).enumerate() {
+        println!("term {k}: g = {g:.5}, tau = {tau:.5} s");
+    }
+    println!(
+        "instantaneous elastic law: Q_e(x) = sum_j c_j (x / {:.4e} m)^j, c = {:?} N",
+        fit.x_max, fit.elastic
+    );
+    println!("plot: {} and {}", plots[0].display(), plots[1].display());
+    if let Some(scene) = &a.scene {
+        println!("wrote [viscoelastic] into {}", scene.display());
+    }
+    Ok(())
 }
 
 fn write_scene(path: &Path, edit: impl FnOnce(&str) -> Result<String>) -> Result<()> {

@@ -5,7 +5,9 @@
 //!
 //! - `press`: down to 6 mm below the surface in 1 s, hold 0.5 s, back up in 1 s;
 //! - `slide`: down to 4 mm, sweep pitch +-0.05 rad (about +-5 mm at the tip) while pressed, up;
-//! - `strike`: from 10 mm above, 18 mm down in 20 ms (peak 1.35 m/s), hold, retract.
+//! - `strike`: from 10 mm above, 18 mm down in 20 ms (peak 1.35 m/s), hold, retract;
+//! - `press-hold`: down to 5 mm below the surface in 0.5 s, hold 10 s, back up in 0.5 s (a
+//!   viscoelastic tissue's relaxation, issue 30).
 //!
 //! Waypoints are joined by smoothstep (`3 s^2 - 2 s^3`) blends, so the hand's speed is
 //! continuous.
@@ -185,6 +187,7 @@ impl Trajectory {
             Motion::Script(Script::Press) => 0.006,
             Motion::Script(Script::Slide) => 0.004,
             Motion::Script(Script::Strike) => 0.008,
+            Motion::Script(Script::PressHold) => 0.005,
             Motion::Recorded(_) => 0.0,
         }
     }
@@ -234,6 +237,15 @@ impl Trajectory {
                     (0.52, pose(0.0, d)),
                     (0.8, pose(0.0, d)),
                     (1.2, start),
+                ],
+            ),
+            Script::PressHold => (
+                11.5,
+                vec![
+                    (0.0, start),
+                    (0.5, pose(0.0, d)),
+                    (10.5, pose(0.0, d)),
+                    (11.0, start),
                 ],
             ),
         };

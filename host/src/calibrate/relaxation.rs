@@ -1,0 +1,620 @@
+//! Fung's quasi-linear viscoelasticity fitted to a bench ramp-and-hold test (issue 30): the
+//! reduced relaxation function `G(t) = g_inf + sum_k g_k exp(-t / tau_k)`, `G(0) = 1`, and
+//! the instantaneous elastic response `Q_e(x)`, a monotone law of the displacement, together.
+//!
+//! **Model.** `F(t) = integral_0^t G(t - s) dQ_e(x(s))` (Fung, *Biomechanics*, 2nd ed., ch. 7)
+//! over the measured `x(t)`, ramp and hold alike: the finite ramp is in the integral, so
+//! nothing assumes an instantaneous step (the bias Abramowitch & Woo, J. Biomech. Eng. 126,
+//! 2004, showed for the step assumption; they too fit ramp and hold together). `Q_e(x) = sum_j
+//! c_j (x / x_max)^j`, `j = 1..=`[`ELASTIC_DEGREE`], `c_j >= 0`: increasing for `x >= 0`,
+//! zero at zero. With the data taken as piecewise linear in time, each Prony term's
+//! convolution is the exact recursion `H(i) = a H(i-1) + (1 - a) / (dt / tau) (u(i) - u(i-1))`,
+//! `a = exp(-dt / tau)` (as the firmware's, `firmware::relax`).
+//!
+//! **Fit.** The model is linear in `c` for a fixed `G`, and in the Prony amplitudes for a
+//! fixed `Q_e`: alternating non-negative least squares (Lawson & Hanson, *Solving Least
+//! Squares Problems*, 1974, ch. 23: [`nnls`]) solves for one with the other fixed, then scales
+//! so that `G(0) = 1`. Terms are chosen by the data: first on a log-spaced grid of
+//! [`GRID_TAUS`] time constants over the test's time scales (NNLS leaves few non-zero), the
+//! non-zero ones merged into clusters (neighbours on the grid), the largest
+//! [`bank_format::MAX_PRONY_TERMS`] kept; then each count of terms from one to the clusters'
+//! is refined (Nelder-Mead on `log tau`, the amplitudes by NNLS at each step), and the
+//! smallest count whose RMS residual is within [`TERMS_RMS_SLACK`] of the best is taken.
+//!
+//! **Refusals.** Data that is noise (the elastic response explains less than
+//! [`MIN_SIGNAL_TO_NOISE`] times the noise) and data that does not relax (the fitted terms
+//! lower the residual by less than [`MIN_RELAXATION_GAIN`] against the best elastic fit, or
+//! relax less than [`MIN_RELAXATION_SNR`] noise levels of force) are refused, as is a test
+//! without a hold.
+
+use bank_format::MAX_PRONY_TERMS;
+
+/// Degree of the instantaneous elastic law's polynomial in `x / x_max` (non-negative
+/// coefficients).
+pub const ELASTIC_DEGREE: usize = 3;
+/// Time constants on the first, gridded, fit.
+pub const GRID_TAUS: usize = 36;
+/// A count of terms is taken when its RMS residual is within this factor of the best count's.
+pub const TERMS_RMS_SLACK: f64 = 1.02;
+/// The elastic response must explain this many noise levels of force (peak force over the
+/// noise's standard deviation), or the data is refused as noise.
+pub const MIN_SIGNAL_TO_NOISE: f64 = 20.0;
+/// The relaxation must cut the elastic fit's RMS residual by this factor, or the data is
+/// refused as not relaxing.
+pub const MIN_RELAXATION_GAIN: f64 = 1.5;
+/// The force the fitted terms relax over the hold must exceed this many noise levels.
+pub const MIN_RELAXATION_SNR: f64 = 10.0;
+
+/// The fitted law.
+#[derive(Clone, Debug, PartialEq)]
+pub struct RelaxationFit {
+    /// `g_inf = 1 - sum g`.
+    pub g_inf: f64,
+    /// `g_k`, by increasing `tau_k`.
+    pub g: Vec<f64>,
+    /// `tau_k`, s, increasing.
+    pub tau_s: Vec<f64>,
+    /// `c_j` of `Q_e(x) = sum_j c_j (x / x_max)^j`, N, `j = 1..`.
+    pub elastic: Vec<f64>,
+    /// `x_max`, m (the largest displacement of the test).
+    pub x_max: f64,
+    /// The model's force at each row, N.
+    pub model: Vec<f64>,
+    /// RMS of `data - model`, N.
+    pub rms: f64,
+    /// RMS residual of the best elastic fit (`G = 1`), N.
+    pub elastic_rms: f64,
+    /// The noise's standard deviation, estimated from the hold's successive differences, N.
+    pub noise: f64,
+    /// Per count of terms tried: (count, RMS residual in N).
+    pub survey: Vec<(usize, f64)>,
+}
+
+impl RelaxationFit {
+    /// `Q_e(x)`, N.
+    pub fn elastic_at(&self, x: f64) -> f64 {
+        elastic(&self.elastic, x / self.x_max)
+    }
+}
+
+/// Why a relaxation fit was refused.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum RelaxationError {
+    /// Too few rows, or times not increasing.
+    #[error("{0}")]
+    Data(String),
+    /// The displacement has no hold after its ramp.
+    #[error(
+        "no hold: the displacement must rise to its largest value and stay within 2 % of it for \
+         at least a third of the test ({0})"
+    )]
+    NoHold(String),
+    /// The force is noise.
+    #[error(
+        "the force is noise: the elastic response explains {snr:.1} noise levels, fewer than \
+         {MIN_SIGNAL_TO_NOISE} (a wrong column, an unplugged load cell?)"
+    )]
+    Noise {
+        /// Peak model force over the noise level.
+        snr: f64,
+    },
+    /// The force does not relax.
+    #[error(
+        "the data does not relax: {why} (an elastic material, or a hold too short to see it); \
+         keep the scene elastic"
+    )]
+    NoRelaxation {
+        /// The measure that failed.
+        why: String,
+    },
+}
+
+/// `sum_j c_j xi^j`, `j = 1..`.
+fn elastic(c: &[f64], xi: f64) -> f64 {
+    c.iter()
+        .enumerate()
+        .map(|(j, &cj)| cj * xi.powi(j as i32 + 1))
+        .sum()
+}
+
+/// `integral_0^t exp(-(t - s) / tau) du(s)` at every row for `u` piecewise linear in time
+/// (exact recursion), `u` taken as 0 before the first row.
+fn convolve(t: &[f64], u: &[f64], tau: f64) -> Vec<f64> {
+    let mut out = Vec::with_capacity(u.len());
+    let mut h = 0.0;
+    for i in 0..u.len() {
+        let (du, dt) = if i == 0 {
+            (u[0], 0.0)
+        } else {
+            (u[i] - u[i - 1], t[i] - t[i - 1])
+        };
+        let x = dt / tau;
+        let (a, b) = if x > 0.0 {
+            ((-x).exp(), -(-x).exp_m1() / x)
+        } else {
+            (1.0, 1.0)
+        };
+        h = a * h + b * du;
+        out.push(h);
+    }
+    out
+}
+
+/// The responses to `u` of `G`'s parts: `u` itself (g_inf) and each term's convolution.
+fn columns(t: &[f64], u: &[f64], taus: &[f64]) -> Vec<Vec<f64>> {
+    let mut cols = vec![u.to_vec()];
+    cols.extend(taus.iter().map(|&tau| convolve(t, u, tau)));
+    cols
+}
+
+/// Non-negative least squares, `min |A x - b|`, `x >= 0` (Lawson & Hanson's active-set
+/// algorithm, ch. 23), `A` given by columns. Solves the passive set's normal equations by
+/// Cholesky; columns are scaled to unit norm first (the result is scaled back).
+pub fn nnls(cols: &[Vec<f64>], b: &[f64]) -> Vec<f64> {
+    let n = cols.len();
+    let norms: Vec<f64> = cols
+        .iter()
+        .map(|c| c.iter().map(|v| v * v).sum::<f64>().sqrt())
+        .collect();
+    let a: Vec<Vec<f64>> = cols
+        .iter()
+        .zip(&norms)
+        .map(|(c, &s)| {
+            let s = if s > 0.0 { s } else { 1.0 };
+            c.iter().map(|v| v / s).collect()
+        })
+        .collect();
+    let gram: Vec<Vec<f64>> = (0..n)
+        .map(|i| (0..n).map(|j| dot(&a[i], &a[j])).collect())
+        .collect();
+    let atb: Vec<f64> = a.iter().map(|c| dot(c, b)).collect();
+    let mut x = vec![0.0; n];
+    let mut passive = vec![false; n];
+    let tol = 1e-12 * atb.iter().fold(0.0f64, |m, v| m.max(v.abs())).max(1e-300);
+    for _ in 0..3 * n + 10 {
+        // Gradient of -|Ax - b|^2 / 2: w = A^T (b - A x).
+        let w: Vec<f64> = (0..n)
+            .map(|i| atb[i] - (0..n).map(|j| gram[i][j] * x[j]).sum::<f64>())
+            .collect();
+        let Some(enter) = (0..n)
+            .filter(|&i| !passive[i] && w[i] > tol)
+            .max_by(|&i, &j| w[i].total_cmp(&w[j]))
+        else {
+            break;
+        };
+        passive[enter] = true;
+        loop {
+            let set: Vec<usize> = (0..n).filter(|&i| passive[i]).collect();
+            let z = solve_spd(&gram, &atb, &set);
+            if set.iter().zip(&z).all(|(_, &zi)| zi > 0.0) {
+                for (&i, &zi) in set.iter().zip(&z) {
+                    x[i] = zi;
+                }
+                break;
+            }
+            // Step toward z until a passive variable reaches zero; drop it.
+            let mut alpha = 1.0f64;
+            for (&i, &zi) in set.iter().zip(&z) {
+                if zi <= 0.0 {
+                    alpha = alpha.min(x[i] / (x[i] - zi));
+                }
+            }
+            for (&i, &zi) in set.iter().zip(&z) {
+                x[i] += alpha * (zi - x[i]);
+                if x[i] <= 1e-15 * (1.0 + zi.abs()) {
+                    x[i] = 0.0;
+                    passive[i] = false;
+                }
+            }
+            if !set.iter().any(|&i| passive[i]) {
+                break;
+            }
+        }
+    }
+    x.iter()
+        .zip(&norms)
+        .map(|(&v, &s)| if s > 0.0 { v / s } else { 0.0 })
+        .collect()
+}
+
+/// The solution of the normal equations restricted to `set` (Cholesky with a tiny ridge).
+fn solve_spd(gram: &[Vec<f64>], rhs: &[f64], set: &[usize]) -> Vec<f64> {
+    let m = set.len();
+    let mut l = vec![vec![0.0; m]; m];
+    for i in 0..m {
+        for j in 0..=i {
+            let mut s = gram[set[i]][set[j]];
+            if i == j {
+                s += 1e-13;
+            }
+            s -= l[i][..j]
+                .iter()
+                .zip(&l[j][..j])
+                .map(|(a, b)| a * b)
+                .sum::<f64>();
+            l[i][j] = if i == j {
+                s.max(1e-300).sqrt()
+            } else {
+                s / l[j][j]
+            };
+        }
+    }
+    let mut y = vec![0.0; m];
+    for i in 0..m {
+        let s: f64 = (0..i).map(|k| l[i][k] * y[k]).sum();
+        y[i] = (rhs[set[i]] - s) / l[i][i];
+    }
+    let mut z = vec![0.0; m];
+    for i in (0..m).rev() {
+        let s: f64 = (i + 1..m).map(|k| l[k][i] * z[k]).sum();
+        z[i] = (y[i] - s) / l[i][i];
+    }
+    z
+}
+
+fn dot(a: &[f64], b: &[f64]) -> f64 {
+    a.iter().zip(b).map(|(x, y)| x * y).sum()
+}
+
+fn rms(a: &[f64], b: &[f64]) -> f64 {
+    (a.iter().zip(b).map(|(x, y)| (x - y) * (x - y)).sum::<f64>() / a.len() as f64).sqrt()
+}
+
+/// A fit for fixed time constants ([`fit_fixed`]).
+struct Inner {
+    /// The elastic law's `c_j`, N.
+    c: Vec<f64>,
+    /// `g_k`, one per time constant (`g_inf = 1 - sum`).
+    g: Vec<f64>,
+    /// The model's force per row, N.
+    model: Vec<f64>,
+    /// RMS residual, N.
+    rms: f64,
+}
+
+/// The QLV fit for fixed time constants `taus`: alternating NNLS on `c` (the elastic law, in
+/// `xi = x / x_max`) and on the amplitudes `(g_inf, g_k)` of `G`, normalised to `G(0) = 1`,
+/// while the residual falls (each half-step cannot raise it: both are least-squares optima
+/// with the other half fixed).
+fn fit_fixed(t: &[f64], xi: &[f64], f: &[f64], taus: &[f64]) -> Inner {
+    let basis: Vec<Vec<f64>> = (1..=ELASTIC_DEGREE)
+        .map(|j| xi.iter().map(|v| v.powi(j as i32)).collect())
+        .collect();
+    // Each basis function's response to every part of G (computed once).
+    let parts: Vec<Vec<Vec<f64>>> = basis.iter().map(|u| columns(t, u, taus)).collect();
+    let (mut g_inf, mut g) = (0.5, vec![0.5 / taus.len().max(1) as f64; taus.len()]);
+    let mut best = Inner {
+        c: vec![0.0; ELASTIC_DEGREE],
+        g: g.clone(),
+        model: vec![0.0; f.len()],
+        rms: rms(&vec![0.0; f.len()], f),
+    };
+    for _ in 0..200 {
+        // c for fixed G.
+        let cols: Vec<Vec<f64>> = parts
+            .iter()
+            .map(|p| {
+                (0..f.len())
+                    .map(|i| {
+                        g_inf * p[0][i]
+                            + g.iter().zip(&p[1..]).map(|(gk, h)| gk * h[i]).sum::<f64>()
+                    })
+                    .collect()
+            })
+            .collect();
+        let mut c = nnls(&cols, f);
+        // G's amplitudes for fixed Q_e: the parts' responses combine linearly in c.
+        let amp_cols: Vec<Vec<f64>> = (0..=taus.len())
+            .map(|k| {
+                (0..f.len())
+                    .map(|i| c.iter().zip(&parts).map(|(cj, p)| cj * p[k][i]).sum())
+                    .collect()
+            })
+            .collect();
+        let w = nnls(&amp_cols, f);
+        let s: f64 = w.iter().sum();
+        if s.is_nan() || s <= 0.0 {
+            break;
+        }
+        g_inf = w[0] / s;
+        g = w[1..].iter().map(|v| v / s).collect();
+        c.iter_mut().for_each(|v| *v *= s);
+        let model: Vec<f64> = (0..f.len())
+            .map(|i| amp_cols.iter().zip(&w).map(|(col, wk)| wk * col[i]).sum())
+            .collect();
+        let r = rms(&model, f);
+        let done = r.is_nan() || r >= best.rms * (1.0 - 1e-9);
+        if r <= best.rms {
+            best = Inner {
+                c,
+                g: g.clone(),
+                model,
+                rms: r,
+            };
+        }
+        if done {
+            break;
+        }
+    }
+    best
+}
+
+/// Nelder-Mead minimisation of `f` from `x0` with initial steps `step`.
+fn nelder_mead(f: impl Fn(&[f64]) -> f64, x0: &[f64], step: f64, iters: usize) -> Vec<f64> {
+    let n = x0.len();
+    let mut pts: Vec<Vec<f64>> = vec![x0.to_vec()];
+    for i in 0..n {
+        let mut p = x0.to_vec();
+        p[i] += step;
+        pts.push(p);
+    }
+    let mut vals: Vec<f64> = pts.iter().map(|p| f(p)).collect();
+    for _ in 0..iters {
+        let mut idx: Vec<usize> = (0..=n).collect();
+        idx.sort_by(|&a, &b| vals[a].total_cmp(&vals[b]));
+        pts = idx.iter().map(|&i| pts[i].clone()).collect();
+        vals = idx.iter().map(|&i| vals[i]).collect();
+        if (vals[n] - vals[0]).abs() <= 1e-10 * vals[0].abs() {
+            break;
+        }
+        let centroid: Vec<f64> = (0..n)
+            .map(|d| pts[..n].iter().map(|p| p[d]).sum::<f64>() / n as f64)
+            .collect();
+        let along = |s: f64| -> Vec<f64> {
+            (0..n)
+                .map(|d| centroid[d] + s * (pts[n][d] - centroid[d]))
+                .collect()
+        };
+        let r = along(-1.0);
+        let fr = f(&r);
+        if fr < vals[0] {
+            let e = along(-2.0);
+            let fe = f(&e);
+            (pts[n], vals[n]) = if fe < fr { (e, fe) } else { (r, fr) };
+        } else if fr < vals[n - 1] {
+            (pts[n], vals[n]) = (r, fr);
+        } else {
+            let k = along(0.5);
+            let fk = f(&k);
+            if fk < vals[n] {
+                (pts[n], vals[n]) = (k, fk);
+            } else {
+                for i in 1..=n {
+                    pts[i] = (0..n)
+                        .map(|d| pts[0][d] + 0.5 * (pts[i][d] - pts[0][d]))
+                        .collect();
+                    vals[i] = f(&pts[i]);
+                }
+            }
+        }
+    }
+    let best = (0..=n)
+        .min_by(|&a, &b| vals[a].total_cmp(&vals[b]))
+        .unwrap_or(0);
+    pts.swap_remove(best)
+}
+
+/// Fits `G` and `Q_e` to a ramp-and-hold test: times `t` (s, increasing), displacement `x`
+/// (m, compression or indentation positive) and force `f` (N, same sign).
+pub fn fit(t: &[f64], x: &[f64], f: &[f64]) -> Result<RelaxationFit, RelaxationError> {
+    let n = t.len();
+    if n < 20 || x.len() != n || f.len() != n {
+        return Err(RelaxationError::Data(format!(
+            "{n} rows: a ramp and a hold need at least 20"
+        )));
+    }
+    if let Some(i) = (1..n).find(|&i| t[i].is_nan() || t[i] <= t[i - 1]) {
+        return Err(RelaxationError::Data(format!(
+            "time does not increase at data row {}",
+            i + 1
+        )));
+    }
+    let x_max = x.iter().fold(0.0f64, |m, &v| m.max(v));
+    if x_max <= 0.0 {
+        return Err(RelaxationError::NoHold(
+            "the displacement never rises above 0".into(),
+        ));
+    }
+    let peak_at = x.iter().position(|&v| v >= 0.98 * x_max).unwrap_or(0);
+    let hold_end = (peak_at..n).find(|&i| x[i] < 0.98 * x_max).unwrap_or(n);
+    let duration = t[n - 1] - t[0];
+    let hold = t[hold_end - 1] - t[peak_at];
+    if hold < duration / 3.0 || hold_end - peak_at < 10 {
+        return Err(RelaxationError::NoHold(format!(
+            "it holds {hold:.3} s of {duration:.3} s"
+        )));
+    }
+    // Noise from the hold's successive differences (the relaxation's own change between rows
+    // is second order there): sigma = rms(diff) / sqrt(2), from the median-based estimate so a
+    // fast early relaxation does not count.
+    let mut diffs: Vec<f64> = (peak_at + 1..hold_end)
+        .map(|i| (f[i] - f[i - 1]).abs())
+        .collect();
+    diffs.sort_by(f64::total_cmp);
+    let noise = diffs[diffs.len() / 2] / (0.6745 * std::f64::consts::SQRT_2);
+    let xi: Vec<f64> = x.iter().map(|v| v / x_max).collect();
+
+    let elastic_fit = fit_fixed(t, &xi, f, &[]);
+    let peak = elastic_fit.model.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+    let snr = peak / noise.max(1e-300);
+    if snr.is_nan() || snr < MIN_SIGNAL_TO_NOISE {
+        return Err(RelaxationError::Noise { snr });
+    }
+
+    // Gridded time constants: from the data's finest sampling (at least two bench samples)
+    // to the test's length.
+    let dt_min = (1..n)
+        .map(|i| t[i] - t[i - 1])
+        .fold(f64::INFINITY, f64::min);
+    let lo = (2.0 * dt_min).max(f64::from(bank_format::RELAXATION_TAU_MIN_S));
+    let hi = duration.min(f64::from(bank_format::RELAXATION_TAU_MAX_S));
+    if hi <= lo {
+        return Err(RelaxationError::Data(format!(
+            "the test lasts {duration} s: too short for time constants above {lo} s"
+        )));
+    }
+    let grid: Vec<f64> = (0..GRID_TAUS)
+        .map(|i| lo * (hi / lo).powf(i as f64 / (GRID_TAUS - 1) as f64))
+        .collect();
+    let gridded = fit_fixed(t, &xi, f, &grid);
+    // Clusters of non-zero grid amplitudes (neighbours merge), weighted geometric mean tau.
+    let mut clusters: Vec<(f64, f64)> = Vec::new(); // (amplitude, amplitude-weighted ln tau)
+    let mut prev_on = false;
+    for (k, &gk) in gridded.g.iter().enumerate() {
+        let on = gk > 1e-4;
+        if on {
+            let ln = grid[k].ln();
+            match clusters.last_mut() {
+                Some(c) if prev_on => {
+                    c.0 += gk;
+                    c.1 += gk * ln;
+                }
+                _ => clusters.push((gk, gk * ln)),
+            }
+        }
+        prev_on = on;
+    }
+    clusters.sort_by(|a, b| b.0.total_cmp(&a.0));
+    clusters.truncate(MAX_PRONY_TERMS);
+    let mut starts: Vec<f64> = clusters.iter().map(|c| c.1 / c.0).collect();
+    if starts.is_empty() {
+        return Err(RelaxationError::NoRelaxation {
+            why: "no time constant on the grid takes any share of the force".into(),
+        });
+    }
+    starts.sort_by(f64::total_cmp);
+
+    // Refine each count of terms: the largest clusters, log tau by Nelder-Mead.
+    let (ln_lo, ln_hi) = (lo.ln(), hi.ln());
+    let mut survey = Vec::new();
+    let mut best: Vec<(Vec<f64>, Inner)> = Vec::new();
+    for count in 1..=starts.len() {
+        let mut by_size = clusters[..count].to_vec();
+        by_size.sort_by(|a, b| (a.1 / a.0).total_cmp(&(b.1 / b.0)));
+        let x0: Vec<f64> = by_size.iter().map(|c| c.1 / c.0).collect();
+        let objective = |ln_tau: &[f64]| {
+            if ln_tau.iter().any(|&v| v < ln_lo - 0.5 || v > ln_hi + 1.0) {
+                return f64::INFINITY;
+            }
+            let taus: Vec<f64> = ln_tau.iter().map(|v| v.exp()).collect();
+            fit_fixed(t, &xi, f, &taus).rms
+        };
+        let ln_tau = nelder_mead(objective, &x0, 0.3, 60 * count);
+        let mut taus: Vec<f64> = ln_tau.iter().map(|v| v.exp()).collect();
+        taus.sort_by(f64::total_cmp);
+        let inner = fit_fixed(t, &xi, f, &taus);
+        survey.push((count, inner.rms));
+        best.push((taus, inner));
+    }
+    let best_rms = survey.iter().map(|s| s.1).fold(f64::INFINITY, f64::min);
+    let chosen = survey
+        .iter()
+        .position(|s| s.1 <= TERMS_RMS_SLACK * best_rms)
+        .unwrap_or(0);
+    let (taus, inner) = best.swap_remove(chosen);
+    // Drop terms the fit gave no share (NNLS may zero one).
+    let (g, tau_s): (Vec<f64>, Vec<f64>) = inner
+        .g
+        .iter()
+        .zip(&taus)
+        .filter(|(g, _)| **g > 0.0)
+        .map(|(g, t)| (*g, *t))
+        .unzip();
+
+    if elastic_fit.rms < MIN_RELAXATION_GAIN * inner.rms {
+        return Err(RelaxationError::NoRelaxation {
+            why: format!(
+                "relaxation lowers the RMS residual only from {:.3e} to {:.3e} N",
+                elastic_fit.rms, inner.rms
+            ),
+        });
+    }
+    // Force the terms relax over the hold: Q_e(x_max) times their share that decays in it.
+    let q_peak = elastic(&inner.c, 1.0);
+    let relaxed: f64 = g
+        .iter()
+        .zip(&tau_s)
+        .map(|(gk, tk)| q_peak * gk * (1.0 - (-hold / tk).exp()))
+        .sum();
+    if relaxed.is_nan() || relaxed < MIN_RELAXATION_SNR * noise {
+        return Err(RelaxationError::NoRelaxation {
+            why: format!(
+                "the fitted terms relax {relaxed:.3e} N over the hold, under {MIN_RELAXATION_SNR} \
+                 noise levels ({noise:.3e} N)"
+            ),
+        });
+    }
+    Ok(RelaxationFit {
+        g_inf: 1.0 - g.iter().sum::<f64>(),
+        g,
+        tau_s,
+        elastic: inner.c,
+        x_max,
+        model: inner.model,
+        rms: inner.rms,
+        elastic_rms: elastic_fit.rms,
+        noise,
+        survey,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// NNLS against a problem with a known answer: an exact non-negative combination is
+    /// recovered; a negative one is clipped to the constrained optimum (checked by the KKT
+    /// conditions).
+    #[test]
+    fn nnls_recovers_and_respects_the_bound() {
+        let m = 30;
+        let col = |k: usize| -> Vec<f64> {
+            (0..m)
+                .map(|i| ((i + 1) as f64 * 0.1 * (k + 1) as f64).sin() + 0.1 * k as f64)
+                .collect()
+        };
+        let cols: Vec<Vec<f64>> = (0..4).map(col).collect();
+        let want = [0.5, 0.0, 2.0, 0.25];
+        let b: Vec<f64> = (0..m)
+            .map(|i| (0..4).map(|k| want[k] * cols[k][i]).sum())
+            .collect();
+        let x = nnls(&cols, &b);
+        for k in 0..4 {
+            assert!((x[k] - want[k]).abs() < 1e-8, "{x:?}");
+        }
+        let b2: Vec<f64> = (0..m).map(|i| cols[0][i] - 3.0 * cols[1][i]).collect();
+        let x = nnls(&cols, &b2);
+        assert!(x.iter().all(|&v| v >= 0.0));
+        // KKT: w = A^T (b - Ax) <= 0, and = 0 where x > 0.
+        let r: Vec<f64> = (0..m)
+            .map(|i| b2[i] - (0..4).map(|k| x[k] * cols[k][i]).sum::<f64>())
+            .collect();
+        for k in 0..4 {
+            let w = dot(&cols[k], &r);
+            assert!(w < 1e-8, "{k}: {w}");
+            if x[k] > 0.0 {
+                assert!(w.abs() < 1e-8, "{k}: {w}");
+            }
+        }
+    }
+
+    /// The recursion against the closed form of a ramp's convolution:
+    /// `integral_0^t e^{-(t-s)/tau} r ds = r tau (1 - e^{-t/tau})`.
+    #[test]
+    fn the_convolution_of_a_ramp_is_exact() {
+        let t: Vec<f64> = (0..200)
+            .map(|i| 0.003 * i as f64 + 1e-4 * (i % 3) as f64)
+            .collect();
+        let u: Vec<f64> = t.iter().map(|&s| 2.0 * s).collect();
+        let h = convolve(&t, &u, 0.1);
+        for (i, &ti) in t.iter().enumerate() {
+            let want = 2.0 * 0.1 * (1.0 - (-ti / 0.1).exp());
+            // The first row is a step from 0 to u(t_0) at t_0.
+            let step0 = 2.0 * t[0] * (-(ti - t[0]) / 0.1).exp();
+            let want = want
+                - 2.0 * 0.1 * (1.0 - (-t[0] / 0.1f64).exp()) * (-(ti - t[0]) / 0.1).exp()
+                + step0;
+            assert!((h[i] - want).abs() < 1e-12, "{i}: {} vs {want}", h[i]);
+        }
+    }
+}
