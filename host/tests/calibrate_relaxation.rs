@@ -3,6 +3,7 @@
 //! g = (0.450, 0.365), tau = (0.5, 50) s, with a finite ramp and noise), refuses noise and data
 //! that does not relax, and writes the scene atomically (a refused fit leaves it untouched).
 
+use host::calibrate::csv;
 use host::calibrate::relaxation::{self, RelaxationError};
 use host::scene::Scene;
 use std::path::{Path, PathBuf};
@@ -16,36 +17,16 @@ const BENCH: &str = "data/brain-relaxation-ramp-hold.csv";
 /// The generator's force noise, N (its docstring).
 const FORCE_NOISE: f64 = 0.5e-3;
 
-/// `(t, x, f)` columns of a bench CSV (the three columns in that order, `#` comments).
+/// The `t_s`, `x_m`, `force_n` columns of a bench CSV, by the calibration's own reader.
 fn columns(text: &str) -> (Vec<f64>, Vec<f64>, Vec<f64>) {
-    let mut out = (Vec::new(), Vec::new(), Vec::new());
-    for line in text.lines().filter(|l| !l.starts_with('#')).skip(1) {
-        let v: Vec<f64> = line.split(',').map(|s| s.parse().unwrap()).collect();
-        out.0.push(v[0]);
-        out.1.push(v[1]);
-        out.2.push(v[2]);
-    }
-    out
+    let table = csv::parse(BENCH, text, &["t_s", "x_m", "force_n"]).unwrap();
+    let col = |c| table.numbers(c).unwrap();
+    (col(0), col(1), col(2))
 }
 
-/// Deterministic standard normal samples (splitmix64 + Box-Muller).
-struct Noise(u64);
-
-impl Noise {
-    fn uniform(&mut self) -> f64 {
-        self.0 = self.0.wrapping_add(0x9e37_79b9_7f4a_7c15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
-        z ^= z >> 31;
-        ((z >> 11) as f64 + 0.5) / (1u64 << 53) as f64
-    }
-
-    fn normal(&mut self) -> f64 {
-        let (u, v) = (self.uniform(), self.uniform());
-        (-2.0 * u.ln()).sqrt() * (std::f64::consts::TAU * v).cos()
-    }
-}
+#[path = "support/noise.rs"]
+mod noise;
+use noise::Noise;
 
 #[test]
 fn the_fit_recovers_the_published_brain_law_within_the_noise() {

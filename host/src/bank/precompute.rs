@@ -194,18 +194,7 @@ pub fn patch_methods(scene: Scene, overrides: &Overrides, loads: usize) -> Resul
         .compliance
         .patch_compliances_by_full_solves(&tool_loads, None)?;
     let full_s = t.elapsed().as_secs_f64();
-    let max_difference = forward
-        .iter()
-        .zip(&full)
-        .map(|(a, b)| {
-            let scale = (0..3).map(|i| b[i][i].abs()).fold(0.0, f64::max);
-            a.iter()
-                .flatten()
-                .zip(b.iter().flatten())
-                .map(|(x, y)| (x - y).abs() / scale)
-                .fold(0.0, f64::max)
-        })
-        .fold(0.0, f64::max);
+    let max_difference = fem::compliance::largest_difference(&forward, &full);
     let stats = fem.compliance.stats();
     Ok(PatchMethods {
         fem_mesh: spec.fem_mesh.display().to_string(),

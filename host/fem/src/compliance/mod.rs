@@ -13,6 +13,7 @@
 
 mod gram;
 mod patch;
+pub use patch::largest_difference;
 
 pub use patch::CHUNK_BYTES;
 

@@ -311,6 +311,22 @@ impl Compliance {
     }
 }
 
+/// The largest difference of an entry between the patch compliances `a` and `b`, relative to
+/// that `b`'s largest diagonal entry (how two methods' `W` agree).
+pub fn largest_difference(a: &[Block3], b: &[Block3]) -> f64 {
+    a.iter()
+        .zip(b)
+        .map(|(x, y)| {
+            let scale = (0..3).map(|i| y[i][i].abs()).fold(0.0, f64::max);
+            x.iter()
+                .flatten()
+                .zip(y.iter().flatten())
+                .map(|(p, q)| (p - q).abs() / scale)
+                .fold(0.0, f64::max)
+        })
+        .fold(0.0, f64::max)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -358,20 +374,6 @@ mod tests {
         fn advance(&self, steps: u64) {
             self.1.set(self.1.get() + steps);
         }
-    }
-
-    fn max_rel(a: &[Block3], b: &[Block3]) -> f64 {
-        a.iter()
-            .zip(b)
-            .map(|(x, y)| {
-                let scale = (0..3).map(|i| y[i][i].abs()).fold(0.0, f64::max);
-                x.iter()
-                    .flatten()
-                    .zip(y.iter().flatten())
-                    .map(|(p, q)| (p - q).abs() / scale)
-                    .fold(0.0, f64::max)
-            })
-            .fold(0.0, f64::max)
     }
 
     /// The methods to compare: the full-solve reference and the sparse forward substitution.
@@ -431,7 +433,7 @@ mod tests {
                 let w = c.patch_chunked(&l, Some(&count), bytes, method).unwrap();
                 let chunks = l.len().div_ceil((bytes / (24 * nf)).max(1)) as u64;
                 assert_eq!((count.0.get(), count.1.get()), (chunks, chunks));
-                let err = max_rel(&w, &reference);
+                let err = largest_difference(&w, &reference);
                 assert!(err < 1e-12, "{name} {bytes}: {err:e}");
             }
         }

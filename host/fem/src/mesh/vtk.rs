@@ -333,16 +333,8 @@ fn read_legacy_ascii(
 
     while let Some(tok) = c.token() {
         let kw = tok.to_ascii_uppercase();
-        let is_poly = want == Dataset::Poly
-            && matches!(
-                kw.as_slice(),
-                b"VERTICES" | b"LINES" | b"POLYGONS" | b"TRIANGLE_STRIPS"
-            );
-        match if is_poly {
-            &b"CELLS"[..]
-        } else {
-            kw.as_slice()
-        } {
+        let (section, is_poly) = section_keyword(&kw, want);
+        match section {
             b"FIELD" => skip_field(&mut c)?,
             b"METADATA" => c.skip_past_blank_line(),
             b"POINTS" => {
@@ -649,16 +641,8 @@ fn read_legacy_binary(bytes: &[u8], start: usize, want: Dataset) -> Result<Secti
             .first()
             .map(|t| t.to_ascii_uppercase())
             .unwrap_or_default();
-        let is_poly = want == Dataset::Poly
-            && matches!(
-                kw.as_slice(),
-                b"VERTICES" | b"LINES" | b"POLYGONS" | b"TRIANGLE_STRIPS"
-            );
-        match if is_poly {
-            &b"CELLS"[..]
-        } else {
-            kw.as_slice()
-        } {
+        let (section, is_poly) = section_keyword(&kw, want);
+        match section {
             b"FIELD" => {
                 let arrays = parse_count(&r, at, toks.get(2), "number of field arrays")?;
                 for _ in 0..arrays {
@@ -800,6 +784,18 @@ fn skip_field(c: &mut Cursor<'_>) -> Result<(), MeshError> {
         }
     }
     Ok(())
+}
+
+/// The section an (upper-case) keyword opens, and whether it is a polydata cell list:
+/// `VERTICES`, `LINES`, `POLYGONS` and `TRIANGLE_STRIPS` are read as `CELLS` when a polydata
+/// file is wanted; any other keyword is itself.
+fn section_keyword(kw: &[u8], want: Dataset) -> (&[u8], bool) {
+    let poly = want == Dataset::Poly
+        && matches!(
+            kw,
+            b"VERTICES" | b"LINES" | b"POLYGONS" | b"TRIANGLE_STRIPS"
+        );
+    (if poly { b"CELLS" } else { kw }, poly)
 }
 
 #[cfg(test)]
