@@ -164,7 +164,7 @@ pub struct Counters {
     pub max_tick_cycles: u32,
     /// Outgoing frames dropped because the link's queue was full (the host read too slowly).
     pub tx_dropped: u32,
-    /// Received bytes dropped because the link's incoming queue was full.
+    /// Received commands (decoded frames) dropped because the link's incoming queue was full.
     pub rx_dropped: u32,
     /// Ticks whose contact patch dropped load (protocol 4): nodes beyond the
     /// [`MAX_CONTACTS`] the solve carries, or not coupled in the bank.

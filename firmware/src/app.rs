@@ -17,27 +17,25 @@
 //! arm command is refused (the latched fault re-sent) while one is active.
 
 use bank_format::{
-    Bank, BankError, Counters, DeviceToHost, FaultReason, FrameDecoder, HostToDevice, Mode,
-    PROTOCOL_VERSION, PhaseCycles, ResetCause, State, Telemetry, heapless,
+    Bank, BankError, Counters, DeviceToHost, FaultReason, HostToDevice, Mode, PROTOCOL_VERSION,
+    PhaseCycles, ResetCause, State, Telemetry, heapless,
 };
 
 use crate::hal::{CycleCounter, Plant};
-use crate::link::{MAX_COMMAND_FRAME, TickEnd};
+use crate::link::TickEnd;
 use crate::safety::{ArmRefused, Fault, SafetyConfig, Supervisor, TickInput};
 use crate::tick::{HapticLoop, LoopInput, PhaseMarks};
 
 /// Telemetry goes out every this many ticks (100 Hz at 1 kHz).
 pub const TELEMETRY_EVERY_TICKS: u32 = 10;
-/// At most this many received link bytes are taken per tick, so a burst or a flood cannot
-/// stretch a tick: a byte costs the tick about 50 instructions (COBS, CRC, decode, the
-/// command), so 32 bound it near 1,600. 32 bytes hold the largest command frame with an `Arm`
-/// (`SetMode` with constant currents is 20 bytes, `Arm` 7), so a host's command lands in the
-/// tick after it arrives; a backlog waits in the link queue ([`crate::link::RX_BYTES`]), which
-/// only fills under a flood. The decoder holds at most [`MAX_COMMAND_FRAME`] bytes, so the
-/// decoding at a delimiter never covers more than a tick's bytes (a 263-byte buffer would let
-/// bytes of earlier ticks be decoded all at once). (At 128, bursts of queued bytes took up to
-/// 4,400 instructions of one SIL tick.)
-pub const MAX_RX_BYTES_PER_TICK: usize = 32;
+/// At most this many received commands are applied per tick, so a burst of them (a host that
+/// stalled, then sent its backlog) cannot stretch a tick: the link's driver decodes them
+/// outside the tick ([`crate::link`]), and taking one out of the queue costs the tick a
+/// copy of about 20 bytes and the command itself. 4 is more than a host sends in a tick (a
+/// heartbeat every few ticks, a command now and then); a backlog waits in the link's queue
+/// ([`crate::link::RX_COMMANDS`]). (The tick used to decode up to 32 received bytes itself,
+/// about 1,600 instructions when a burst landed.)
+pub const MAX_COMMANDS_PER_TICK: usize = 4;
 
 /// What one tick did, for the caller (the software-in-the-loop image reports it to its
 /// harness; a board ignores it).
@@ -79,7 +77,8 @@ enum Core<'b> {
 pub struct App<'b, 'q> {
     core: Core<'b>,
     link: TickEnd<'q>,
-    rx: FrameDecoder<HostToDevice, MAX_COMMAND_FRAME>,
+    /// The link's received-byte count when the tick last looked.
+    rx_bytes_seen: u32,
     ticks_since_host_frame: u32,
     ticks_since_host_byte: u32,
     link_grace_ticks: u32,
@@ -117,7 +116,7 @@ impl<'b, 'q> App<'b, 'q> {
         let mut app = App {
             core,
             link,
-            rx: FrameDecoder::new(),
+            rx_bytes_seen: 0,
             ticks_since_host_frame: 0,
             ticks_since_host_byte: 0,
             link_grace_ticks,
@@ -310,13 +309,20 @@ impl<'b, 'q> App<'b, 'q> {
         Ok(out)
     }
 
-    /// Take and apply what the link has received, at most [`MAX_RX_BYTES_PER_TICK`] bytes.
+    /// Apply what the link has received, at most [`MAX_COMMANDS_PER_TICK`] commands; note
+    /// whether any byte arrived since the last tick (activity, for [`App::link_silence`]).
     fn poll_link(&mut self) {
-        for _ in 0..MAX_RX_BYTES_PER_TICK {
-            let Some(byte) = self.link.receive() else {
+        let bytes = self.link.rx_counts().bytes();
+        if bytes != self.rx_bytes_seen {
+            self.rx_bytes_seen = bytes;
+            self.ticks_since_host_byte = 0;
+        }
+        for _ in 0..MAX_COMMANDS_PER_TICK {
+            let Some(cmd) = self.link.receive() else {
                 break;
             };
-            self.receive(byte);
+            self.ticks_since_host_frame = 0;
+            self.command(cmd);
         }
     }
 
@@ -331,8 +337,11 @@ impl<'b, 'q> App<'b, 'q> {
     /// The telemetry of the last tick.
     pub fn telemetry(&self) -> Telemetry {
         let mut t = self.core_telemetry();
+        let rx = self.link.rx_counts();
+        t.counters.rx_frames = rx.frames();
+        t.counters.rx_errors = rx.errors();
+        t.counters.rx_dropped = rx.dropped();
         t.counters.tx_dropped = self.link.tx_dropped();
-        t.counters.rx_dropped = self.link.rx_dropped();
         t
     }
 
@@ -393,24 +402,6 @@ impl<'b, 'q> App<'b, 'q> {
             self.ticks_since_host_frame
                 .saturating_sub(self.link_grace_ticks),
         )
-    }
-
-    /// Feed one link byte; apply the command it completes, count it or the dropped frame.
-    fn receive(&mut self, byte: u8) {
-        self.ticks_since_host_byte = 0;
-        match self.rx.feed(byte) {
-            None => {}
-            Some(Err(_)) => {
-                let c = self.counters_mut();
-                c.rx_errors = c.rx_errors.wrapping_add(1);
-            }
-            Some(Ok(cmd)) => {
-                let c = self.counters_mut();
-                c.rx_frames = c.rx_frames.wrapping_add(1);
-                self.ticks_since_host_frame = 0;
-                self.command(cmd);
-            }
-        }
     }
 
     fn command(&mut self, cmd: HostToDevice) {
@@ -641,8 +632,8 @@ mod tests {
     }
 
     /// References the encoders at encoder zero, as a host's `ZeroEncoders` taken before the
-    /// first tick would (sent over the link, its bytes would push a test's other commands past
-    /// the first tick's share, [`MAX_RX_BYTES_PER_TICK`]). No loop without a bank.
+    /// first tick would (sent over the link, it would push a test's other commands past the
+    /// first tick's share, [`MAX_COMMANDS_PER_TICK`]). No loop without a bank.
     fn home(app: &mut App) {
         if let Core::Loop(lp) = &mut app.core {
             assert!(lp.zero_encoders());
@@ -1060,30 +1051,31 @@ mod tests {
         );
     }
 
-    /// A frame longer than any command is dropped as oversize without being decoded: the
-    /// decoder holds the largest command frame, not the 263 bytes of the largest telemetry
-    /// frame, so a tick's bytes bound the work at a delimiter.
+    /// A backlog of commands (a host that stalled, then sent them at once) is applied at most
+    /// [`MAX_COMMANDS_PER_TICK`] a tick, in order: the last of ten lands in the third tick.
     #[test]
-    fn a_frame_longer_than_any_command_is_dropped_undecoded() {
-        let bytes = flat_patch();
-        let bank = Bank::parse(bytes.as_slice()).unwrap();
-        let mut link = Link::new();
-        let (tick_end, mut driver) = link.split();
-        let mut app = App::new(Ok(&bank), tick_end, 0);
-        let (mut plant, clock) = (plant(), clock());
-        let mut garbage = [0x5Au8; 41];
-        garbage[40] = 0;
-        driver.put_rx(&garbage);
-        for _ in 0..3 {
-            app.tick(&mut plant, &clock, false).unwrap();
-        }
-        assert_eq!(app.rx.stats().oversize, 1, "{:?}", app.rx.stats());
-        assert_eq!(app.telemetry().counters.rx_errors, 1);
-        // A command after it still decodes.
-        let mut buf = [0u8; MAX_FRAME];
-        driver.put_rx(encode_frame(&HostToDevice::Heartbeat, &mut buf).unwrap());
+    fn a_burst_of_commands_is_applied_a_few_a_tick_in_order() {
+        rig!(bank, app, host, plant, clock);
+        home(&mut app);
+        host.send(&HostToDevice::Arm);
         app.tick(&mut plant, &clock, false).unwrap();
-        assert_eq!(app.telemetry().counters.rx_frames, 1);
+        for _ in 0..9 {
+            host.send(&HostToDevice::Heartbeat);
+        }
+        host.send(&HostToDevice::Disarm);
+        let states: Vec<WireState> = (0..4)
+            .map(|_| app.tick(&mut plant, &clock, false).unwrap().state)
+            .collect();
+        assert_eq!(
+            states,
+            [
+                WireState::Armed,
+                WireState::Armed,
+                WireState::Disarmed,
+                WireState::Disarmed
+            ]
+        );
+        assert_eq!(app.telemetry().counters.rx_frames, 11);
     }
 
     /// A host that stopped reading lets telemetry fill the outgoing queue; a fault raised

@@ -1,12 +1,14 @@
 //! The host link between the tick and the link driver: two bounded single-producer,
-//! single-consumer queues, so the tick never waits on I/O and never encodes a frame.
+//! single-consumer queues, so the tick never waits on I/O and never encodes or decodes a
+//! frame.
 //!
 //! The tick ([`crate::app::App::tick`], high priority) owns a [`TickEnd`]: it pushes whole
-//! messages (telemetry snapshots, faults, `Hello`), not yet encoded, and pops the bytes the
-//! host sent. A lower-priority driver (a UART or USB CDC task, in thread mode) owns the
-//! [`DriverEnd`]: it takes each message, encodes it as a link frame (postcard, CRC, COBS:
-//! [`encode_frame`]) and hands out its bytes as fast as the wire accepts them, and pushes what
-//! it received. Neither end ever blocks:
+//! messages (telemetry snapshots, faults, `Hello`), not yet encoded, and pops the host's
+//! commands, already decoded. A lower-priority driver (a UART or USB CDC task, in thread mode)
+//! owns the [`DriverEnd`]: it takes each message, encodes it as a link frame (postcard, CRC,
+//! COBS: [`encode_frame`]) and hands out its bytes as fast as the wire accepts them, and feeds
+//! the bytes it received to the command decoder ([`DriverEnd::put_rx`]), which queues each
+//! valid command. Neither end ever blocks:
 //!
 //! - a message that finds the outgoing queue full is dropped whole and counted
 //!   ([`TickEnd::send`] returns `false`; [`TickEnd::tx_dropped`], telemetry's `tx_dropped`); a
@@ -16,24 +18,33 @@
 //! - periodic telemetry ([`TickEnd::send_periodic`]) leaves the last [`TX_RESERVED`] slots
 //!   free, so a host that stops reading fills the queue with telemetry but a fault raised
 //!   meanwhile (or a reply) still finds room and reaches the host once it reads again;
-//! - received bytes that find the incoming queue full are dropped and counted
-//!   ([`DriverEnd::rx_dropped`]); the frame they belonged to then fails its CRC on the device
-//!   and is counted there as an `rx_error`.
+//! - a received frame that does not decode (CRC, COBS, too short or long, not a command) is
+//!   dropped and counted ([`RxCounts::errors`], telemetry's `rx_errors`); a decoded command
+//!   that finds the incoming queue full is dropped and counted ([`RxCounts::dropped`],
+//!   telemetry's `rx_dropped`).
 //!
-//! The queues are lock-free (heapless `spsc`), so the two ends may live at different interrupt
-//! priorities on one core. Encoding in the driver keeps postcard, the CRC, COBS and the
-//! frame buffers out of the tick: the tick only moves the message (a few hundred bytes) into
-//! its queue slot.
+//! The queues are lock-free (heapless `spsc`) and the counters atomic, so the two ends may
+//! live at different interrupt priorities on one core. Encoding and decoding in the driver
+//! keep postcard, the CRC, COBS and the frame buffers out of the tick: the tick only moves a
+//! message (a few hundred bytes) into its queue slot and takes at most
+//! [`crate::app::MAX_COMMANDS_PER_TICK`] commands (about 20 bytes each) out of the other, so
+//! however the host's bytes bunch up (a burst after a stall, a flood of garbage), what the
+//! link costs the tick is bounded by a few commands, not by the bytes that arrived.
 
-use bank_format::{DeviceToHost, FRAME_CRC_LEN, MAX_FRAME, cobs_max_len, encode_frame};
+use bank_format::{
+    DeviceToHost, FRAME_CRC_LEN, FrameDecoder, HostToDevice, MAX_FRAME, cobs_max_len, encode_frame,
+};
 use core::sync::atomic::{AtomicU32, Ordering};
 use heapless::spsc::{Consumer, Producer, Queue};
 
 /// Outgoing messages the queue holds (minus one: heapless keeps a slot free). At 100 Hz
 /// telemetry this is 70 ms of messages for a host that stopped reading.
 pub const TX_FRAMES: usize = 8;
-/// Incoming bytes the queue holds (minus one).
-pub const RX_BYTES: usize = 512;
+/// Incoming commands the queue holds (minus one): a host sends a heartbeat every few ticks
+/// and a command now and then; 15 hold a USB packet's worth of heartbeats (64 bytes, 7 bytes
+/// a heartbeat frame) with room to spare while the tick takes
+/// [`crate::app::MAX_COMMANDS_PER_TICK`] a tick.
+pub const RX_COMMANDS: usize = 16;
 /// Outgoing slots periodic telemetry never takes ([`TickEnd::send_periodic`]): room for a
 /// latched fault and a reply (an arm refusal, a `Hello`) while a host that stopped reading has
 /// let telemetry fill the rest.
@@ -42,18 +53,57 @@ pub const TX_RESERVED: usize = 2;
 /// variant index and four varints of at most 5 bytes (`SetMode(ConstantCurrent)`, the largest
 /// command, is 14).
 pub const MAX_COMMAND_MESSAGE: usize = 21;
-/// The largest host-to-device frame, its 0x00 included: what the device's decoder holds
-/// ([`crate::app::App`]). A longer frame is dropped as oversize without being decoded, so the
-/// decoding work at a delimiter is bounded by this, not by [`MAX_FRAME`] (263): the
-/// [`crate::app::MAX_RX_BYTES_PER_TICK`] bytes a tick takes cost at most that many bytes of
-/// decoding, whatever their content.
+/// The largest host-to-device frame, its 0x00 included: what the driver's command decoder
+/// holds. A longer frame is dropped as oversize without being decoded, so the decoding work at
+/// a delimiter is bounded by this, not by [`MAX_FRAME`] (263).
 pub const MAX_COMMAND_FRAME: usize = cobs_max_len(MAX_COMMAND_MESSAGE + FRAME_CRC_LEN) + 1;
+
+/// What the driver's end has received, all wrapping: written by the driver, read by the tick.
+pub struct RxCounts {
+    bytes: AtomicU32,
+    frames: AtomicU32,
+    errors: AtomicU32,
+    dropped: AtomicU32,
+}
+
+impl RxCounts {
+    const fn new() -> RxCounts {
+        RxCounts {
+            bytes: AtomicU32::new(0),
+            frames: AtomicU32::new(0),
+            errors: AtomicU32::new(0),
+            dropped: AtomicU32::new(0),
+        }
+    }
+
+    /// Bytes received: the tick's evidence of link activity while a frame is still arriving.
+    pub fn bytes(&self) -> u32 {
+        self.bytes.load(Ordering::Relaxed)
+    }
+
+    /// Frames that decoded to a command (telemetry's `rx_frames`).
+    pub fn frames(&self) -> u32 {
+        self.frames.load(Ordering::Relaxed)
+    }
+
+    /// Frames dropped: CRC, COBS, too short, oversize or not a command (telemetry's
+    /// `rx_errors`).
+    pub fn errors(&self) -> u32 {
+        self.errors.load(Ordering::Relaxed)
+    }
+
+    /// Decoded commands dropped because the incoming queue was full (telemetry's
+    /// `rx_dropped`).
+    pub fn dropped(&self) -> u32 {
+        self.dropped.load(Ordering::Relaxed)
+    }
+}
 
 /// The link's queues; [`Link::split`] hands out the two ends.
 pub struct Link {
     tx: Queue<DeviceToHost, TX_FRAMES>,
-    rx: Queue<u8, RX_BYTES>,
-    rx_dropped: AtomicU32,
+    rx: Queue<HostToDevice, RX_COMMANDS>,
+    rx_counts: RxCounts,
     tx_dropped: AtomicU32,
 }
 
@@ -69,7 +119,7 @@ impl Link {
         Link {
             tx: Queue::new(),
             rx: Queue::new(),
-            rx_dropped: AtomicU32::new(0),
+            rx_counts: RxCounts::new(),
             tx_dropped: AtomicU32::new(0),
         }
     }
@@ -78,19 +128,20 @@ impl Link {
     pub fn split(&mut self) -> (TickEnd<'_>, DriverEnd<'_>) {
         let (tx_in, tx_out) = self.tx.split();
         let (rx_in, rx_out) = self.rx.split();
-        let (rx_dropped, tx_dropped) = (&self.rx_dropped, &self.tx_dropped);
+        let (rx_counts, tx_dropped) = (&self.rx_counts, &self.tx_dropped);
         (
             TickEnd {
                 tx: tx_in,
                 rx: rx_out,
-                rx_dropped,
+                rx_counts,
                 tx_dropped,
             },
             DriverEnd {
                 tx: tx_out,
                 rx: rx_in,
-                rx_dropped,
+                rx_counts,
                 tx_dropped,
+                decoder: FrameDecoder::new(),
                 frame: [0; MAX_FRAME],
                 len: 0,
                 sent: 0,
@@ -99,11 +150,11 @@ impl Link {
     }
 }
 
-/// The tick's end: queue messages, take received bytes. Every method returns at once.
+/// The tick's end: queue messages, take received commands. Every method returns at once.
 pub struct TickEnd<'q> {
     tx: Producer<'q, DeviceToHost>,
-    rx: Consumer<'q, u8>,
-    rx_dropped: &'q AtomicU32,
+    rx: Consumer<'q, HostToDevice>,
+    rx_counts: &'q RxCounts,
     tx_dropped: &'q AtomicU32,
 }
 
@@ -129,14 +180,14 @@ impl TickEnd<'_> {
         self.send(msg)
     }
 
-    /// The next received byte, if any.
-    pub fn receive(&mut self) -> Option<u8> {
+    /// The next command the host sent, if any.
+    pub fn receive(&mut self) -> Option<HostToDevice> {
         self.rx.dequeue()
     }
 
-    /// Received bytes the driver dropped because the incoming queue was full (wrapping).
-    pub fn rx_dropped(&self) -> u32 {
-        self.rx_dropped.load(Ordering::Relaxed)
+    /// What the driver has received so far.
+    pub fn rx_counts(&self) -> &RxCounts {
+        self.rx_counts
     }
 
     /// Outgoing messages dropped whole, the queue being full (or, at the driver, the message
@@ -146,12 +197,15 @@ impl TickEnd<'_> {
     }
 }
 
-/// The driver's end: outgoing frames' bytes in message order, received bytes in.
+/// The driver's end: outgoing frames' bytes in message order, received bytes decoded into
+/// commands.
 pub struct DriverEnd<'q> {
     tx: Consumer<'q, DeviceToHost>,
-    rx: Producer<'q, u8>,
-    rx_dropped: &'q AtomicU32,
+    rx: Producer<'q, HostToDevice>,
+    rx_counts: &'q RxCounts,
     tx_dropped: &'q AtomicU32,
+    /// The command decoder: holds at most the largest command frame.
+    decoder: FrameDecoder<HostToDevice, MAX_COMMAND_FRAME>,
     /// The frame being sent (`frame[..len]`) and how much of it is out (`sent`; none is being
     /// sent when `sent == len`).
     frame: [u8; MAX_FRAME],
@@ -203,18 +257,33 @@ impl DriverEnd<'_> {
         self.sent < self.len || self.tx.ready()
     }
 
-    /// Push received `bytes`; those that do not fit are dropped and counted.
+    /// Take received `bytes`: decode them ([`FrameDecoder`], resynchronising on each 0x00) and
+    /// queue every command they complete; a frame that does not decode, or a command that
+    /// finds the queue full, is dropped and counted ([`RxCounts`]).
     pub fn put_rx(&mut self, bytes: &[u8]) {
-        for &b in bytes {
-            if self.rx.enqueue(b).is_err() {
-                self.rx_dropped.fetch_add(1, Ordering::Relaxed);
-            }
+        let counts = self.rx_counts;
+        counts.bytes.fetch_add(
+            u32::try_from(bytes.len()).unwrap_or(u32::MAX),
+            Ordering::Relaxed,
+        );
+        for result in self.decoder.feed_slice(bytes) {
+            let counter = match result {
+                Ok(cmd) => {
+                    counts.frames.fetch_add(1, Ordering::Relaxed);
+                    if self.rx.enqueue(cmd).is_ok() {
+                        continue;
+                    }
+                    &counts.dropped
+                }
+                Err(_) => &counts.errors,
+            };
+            counter.fetch_add(1, Ordering::Relaxed);
         }
     }
 
-    /// Received bytes dropped so far (wrapping).
-    pub fn rx_dropped(&self) -> u32 {
-        self.rx_dropped.load(Ordering::Relaxed)
+    /// What has been received so far.
+    pub fn rx_counts(&self) -> &RxCounts {
+        self.rx_counts
     }
 }
 
@@ -305,8 +374,7 @@ mod tests {
         assert_eq!(got[TX_FRAMES - 2], fault);
     }
 
-    /// Every host message, at its largest, fits the command decoder, and a tick's share of
-    /// received bytes holds the largest frame.
+    /// Every host message, at its largest, fits the command decoder.
     #[test]
     fn every_host_message_fits_the_command_frame() {
         use bank_format::{HostToDevice, Mode};
@@ -328,7 +396,6 @@ mod tests {
             assert!(frame.len() <= MAX_COMMAND_FRAME, "{msg:?}: {}", frame.len());
         }
         assert_eq!(postcard_len(&largest[0]), MAX_COMMAND_MESSAGE);
-        const { assert!(MAX_COMMAND_FRAME <= crate::app::MAX_RX_BYTES_PER_TICK) };
     }
 
     fn postcard_len(msg: &bank_format::HostToDevice) -> usize {
@@ -338,15 +405,60 @@ mod tests {
         encoded - 2 - FRAME_CRC_LEN
     }
 
+    fn frame(cmd: &HostToDevice) -> Vec<u8> {
+        let mut buf = [0u8; MAX_FRAME];
+        encode_frame(cmd, &mut buf).unwrap().to_vec()
+    }
+
+    /// Commands come out decoded and in order, however the bytes were split; garbage, a torn
+    /// frame and an oversize frame are counted as errors (the oversize one undecoded: the
+    /// decoder holds the largest command frame, not the 263 bytes of the largest telemetry),
+    /// and decoding resumes at the next delimiter.
     #[test]
-    fn received_bytes_arrive_in_order_and_overflow_is_counted() {
+    fn received_bytes_decode_into_commands_and_bad_frames_are_counted() {
+        use bank_format::HostToDevice::{Arm, ClearFault, Heartbeat};
         let mut link = Link::new();
         let (mut tick, mut driver) = link.split();
-        let bytes: Vec<u8> = (0..RX_BYTES + 9).map(|i| i as u8).collect();
-        driver.put_rx(&bytes);
-        assert_eq!(driver.rx_dropped(), 10);
-        assert_eq!(tick.rx_dropped(), 10);
-        let got: Vec<u8> = core::iter::from_fn(|| tick.receive()).collect();
-        assert_eq!(got, bytes[..RX_BYTES - 1]);
+        let mut bytes = frame(&Arm);
+        bytes.extend([0x55, 0x13, 0x00]); // garbage
+        let torn = frame(&ClearFault);
+        bytes.extend(&torn[..torn.len() / 2]);
+        bytes.push(0); // the torn frame ends early
+        bytes.extend([0x11; 3 * MAX_COMMAND_FRAME]);
+        bytes.push(0); // oversize
+        bytes.extend(frame(&Heartbeat));
+        bytes.extend(frame(&ClearFault));
+        for chunk in bytes.chunks(5) {
+            driver.put_rx(chunk);
+        }
+        let got: Vec<HostToDevice> = core::iter::from_fn(|| tick.receive()).collect();
+        assert_eq!(got, [Arm, Heartbeat, ClearFault]);
+        let counts = tick.rx_counts();
+        assert_eq!(counts.bytes(), bytes.len() as u32);
+        assert_eq!(
+            (counts.frames(), counts.errors(), counts.dropped()),
+            (3, 3, 0)
+        );
+        assert_eq!(driver.decoder.stats().oversize, 1);
+    }
+
+    /// A full incoming queue drops whole commands and counts them; the queued ones stay in
+    /// order.
+    #[test]
+    fn commands_beyond_the_queue_are_dropped_and_counted() {
+        let mut link = Link::new();
+        let (mut tick, mut driver) = link.split();
+        let beat = frame(&HostToDevice::Heartbeat);
+        for _ in 0..RX_COMMANDS + 4 {
+            driver.put_rx(&beat);
+        }
+        assert_eq!(
+            core::iter::from_fn(|| tick.receive()).count(),
+            RX_COMMANDS - 1
+        );
+        let counts = driver.rx_counts();
+        assert_eq!(counts.frames(), RX_COMMANDS as u32 + 4);
+        assert_eq!(counts.dropped(), 5);
+        assert_eq!(counts.errors(), 0);
     }
 }

@@ -379,8 +379,8 @@ impl<'b> HapticLoop<'b> {
         self.counters
     }
 
-    /// The counters, for the link layer to update `rx_frames`, `rx_errors` and
-    /// `max_tick_cycles` (the loop itself counts `overruns`).
+    /// The counters, for the application to update `max_tick_cycles` (the loop itself counts
+    /// `overruns`; the link's counters are the link's own, [`crate::link::RxCounts`]).
     pub fn counters_mut(&mut self) -> &mut Counters {
         &mut self.counters
     }

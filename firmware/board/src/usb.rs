@@ -2,7 +2,8 @@
 //! `host demo --source serial:/dev/ttyACM0`), in the thread-mode executor below the tick. It
 //! only moves bytes between the USB endpoints and the link's [`DriverEnd`]: outgoing frames
 //! (encoded by [`DriverEnd::take_tx`] here, in thread mode) in 64-byte packets as the host takes
-//! them, received packets into the incoming queue. The tick never waits on it: when the host is
+//! them, received packets decoded into commands for the incoming queue
+//! ([`DriverEnd::put_rx`], also here in thread mode). The tick never waits on it: when the host is
 //! slow or absent, whole messages are dropped on the tick's side and counted (`tx_dropped`).
 
 use core::cell::RefCell;
@@ -84,7 +85,7 @@ async fn send(mut tx: Sender<'static, UsbDriver>, link: &RefCell<DriverEnd<'stat
     }
 }
 
-/// Incoming: every packet the host sends goes to the tick's queue.
+/// Incoming: every packet the host sends is decoded, its commands queued for the tick.
 async fn receive(mut rx: Receiver<'static, UsbDriver>, link: &RefCell<DriverEnd<'static>>) {
     let mut packet = [0u8; PACKET];
     loop {

@@ -169,8 +169,9 @@ const TX_CHUNK: usize = 16;
 /// garbage after 10 + 20 ticks without a valid frame.
 const LINK_GRACE_TICKS: u32 = 20;
 
-/// The link: received bytes into the tick's queue, queued messages out (encoded as frames
-/// here, by [`DriverEnd::take_tx`], not in the tick), at most `budget` bytes sent per tick
+/// The link: received bytes decoded into the tick's command queue ([`DriverEnd::put_rx`]),
+/// queued messages out (encoded as frames here, by [`DriverEnd::take_tx`]); neither in the
+/// tick. At most `budget` bytes sent per tick
 /// period. Busy while there is traffic, asleep until the next period otherwise.
 #[embassy_executor::task]
 async fn link(mut end: DriverEnd<'static>, mut uart: Usart1, budget: u32) {
