@@ -22,6 +22,19 @@ fn set<const D: usize>(m: &mut [[f32; D]; D], i: usize, j: usize, v: f32) {
 }
 
 impl<const D: usize> Cholesky<D> {
+    /// The factor of the identity (`L = I`).
+    // Evaluated at compile time: an index out of range would fail the build, never a tick.
+    #[allow(clippy::indexing_slicing)]
+    pub const IDENTITY: Cholesky<D> = {
+        let mut l = [[0.0f32; D]; D];
+        let mut i = 0;
+        while i < D {
+            l[i][i] = 1.0;
+            i += 1;
+        }
+        Cholesky { l }
+    };
+
     /// Factors `a` (its lower triangle), column by column: `L_jj = sqrt(a_jj - sum_k L_jk^2)`,
     /// `L_ij = (a_ij - sum_k L_ik L_jk) / L_jj` for `i > j`. `None` when a pivot is not
     /// positive (or NaN): `a` is not positive definite at f32 precision.

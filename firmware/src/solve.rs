@@ -168,6 +168,14 @@ pub struct Factor<const D: usize> {
 }
 
 impl<const D: usize> Factor<D> {
+    /// The factor of the identity matrix (every pivot 1).
+    pub const IDENTITY: Factor<D> = Factor {
+        chol: Cholesky::IDENTITY,
+        min_pivot: 1.0,
+        max_pivot: 1.0,
+        max_diag: 1.0,
+    };
+
     /// Factors `a` (only its lower triangle is read). Fails on NaN or infinite entries or when
     /// Cholesky breaks down; does *not* apply [`MIN_PIVOT_REL`] (see [`Factor::check`]).
     pub fn new(a: [[f32; D]; D], active: usize) -> Result<Factor<D>, SolveError> {
@@ -449,31 +457,26 @@ impl WeightedSolve {
         fill.factor()
     }
 
+    /// The solve of the unit compliance `M = I` over no node: storage for
+    /// [`WeightedSolve::refactor`] to factor a new contact's `M` into in place (writing this
+    /// costs the tick less than moving a returned solve, which it would do twice).
+    pub const UNIT: WeightedSolve = WeightedSolve {
+        nodes: [0; MAX_CONTACT_NODES],
+        weights: [0.0; MAX_CONTACT_NODES],
+        len: 0,
+        factor: Factor::IDENTITY,
+    };
+
     /// Factors a given patch compliance `M` (xx, xy, xz, yy, yz, zz, m/N; e.g. the bank's
     /// sampled `W(p)`, [`bank_format::Samples::interpolate`]) for the contact spread over
     /// `nodes` with `weights` (finite, `>= 0`, sum 1: the telemetry's node forces `w_a
-    /// f_tool`). The same checks and factor as [`WeightedFill::factor`].
-    /// Unlike [`WeightedFill::new`] the nodes are kept in the order given (no sort: no sum
-    /// over them follows).
-    pub fn from_compliance(
-        m: [f32; 6],
-        nodes: &[u16],
-        weights: &[f32],
-    ) -> Result<WeightedSolve, SolveError> {
-        check_contact(nodes, weights)?;
-        let mut out = WeightedSolve {
-            nodes: [0; MAX_CONTACT_NODES],
-            weights: [0.0; MAX_CONTACT_NODES],
-            len: 0,
-            factor: factor_compliance(m)?,
-        };
-        out.set_contact(nodes, weights);
-        Ok(out)
-    }
-
-    /// [`WeightedSolve::from_compliance`] in place, for a loop that factors a new `M` every
-    /// tick (the sampled `W`): the solve is a few hundred bytes, which a returned value would
-    /// copy twice. On an error `self` is unchanged.
+    /// f_tool`), in place: the loop factors a new `M` every tick, and the solve is a few
+    /// hundred bytes, which a returned value would copy twice. The same checks and factor as
+    /// [`WeightedFill::factor`]; the nodes are kept in the order given (no sort: no sum over
+    /// them follows). On an error `self` is unchanged.
+    // Out of line: inlined into the tick (one large function) it cost the sampled contact's
+    // patch phase 127 more instructions a tick (806 -> 933 under QEMU, register spills).
+    #[inline(never)]
     pub fn refactor(
         &mut self,
         m: [f32; 6],
@@ -831,8 +834,10 @@ mod tests {
     #[test]
     fn refactor_in_place_keeps_the_solve_on_error() {
         let w = [2.0e-3, 1.0e-4, 0.0, 1.5e-3, 2.0e-4, 1.0e-3];
-        let mut s = WeightedSolve::from_compliance(w, &[4, 7], &[0.25, 0.75]).unwrap();
         let d = [1.0e-3, -2.0e-3, 5.0e-3];
+        let mut s = WeightedSolve::UNIT;
+        assert_eq!(s.tool_force(d).unwrap(), d, "M = I");
+        s.refactor(w, &[4, 7], &[0.25, 0.75]).unwrap();
         let before = s.tool_force(d).unwrap();
         // W f = d.
         let m = [[w[0], w[1], w[2]], [w[1], w[3], w[4]], [w[2], w[4], w[5]]];

@@ -161,7 +161,11 @@ pub struct HapticLoop<'b> {
     tick: u32,
     counters: Counters,
     last: Last,
-    held: Option<Held>,
+    /// The solve the contact renders with, while `holding`. Kept between contacts as storage
+    /// that a sampled bank's next contact refactors in place: writing a new `Held`, some 140
+    /// bytes, cost the first contact tick about 120 instructions.
+    held: Held,
+    holding: bool,
     blend: Option<Blend>,
     /// The contact was detected at an earlier tick (its force starts the tick after).
     detected: bool,
@@ -328,7 +332,18 @@ impl<'b> HapticLoop<'b> {
                 tool_force_n: [0.0; 3],
                 dropped_load: 0.0,
             },
-            held: None,
+            held: Held {
+                origin: PatchOrigin {
+                    triangle: 0,
+                    nodes: [0; 3],
+                    bary: [0.0; 3],
+                    anchor: [0.0; 3],
+                    radius_m: 0.0,
+                },
+                solve: WeightedSolve::UNIT,
+                dropped: 0.0,
+            },
+            holding: false,
             blend: None,
             detected: false,
             pending: Pending {
@@ -501,7 +516,7 @@ impl<'b> HapticLoop<'b> {
         // The solve to render is the held one (`contact_solve` has just kept or replaced it).
         // The node forces go straight into `last.contacts` (telemetry's): no copy of the set.
         self.last.contacts.clear();
-        let linear = touching.and_then(|d| match (d, &self.held) {
+        let linear = touching.and_then(|d| match (d, self.holding.then_some(&self.held)) {
             (Some(d), Some(held)) => {
                 let tool = tool_force(&held.solve, self.blend.as_ref(), d)?;
                 Ok(Some((
@@ -527,7 +542,7 @@ impl<'b> HapticLoop<'b> {
                 ([0.0; 3], Some(e))
             }
         };
-        let dropped_load = match &self.held {
+        let dropped_load = match self.holding.then_some(&self.held) {
             Some(h) if solve_error.is_none() => h.dropped,
             _ => 0.0,
         };
@@ -602,7 +617,7 @@ impl<'b> HapticLoop<'b> {
             fault: self.supervisor.fault(),
             new_fault: out.new_fault,
             solve_error,
-            patch: self.held.as_ref().map(|h| h.origin),
+            patch: self.holding.then_some(self.held.origin),
             dropped_load,
         };
         let marks = PhaseMarks {
@@ -656,7 +671,7 @@ impl<'b> HapticLoop<'b> {
             displacement,
         } = *contact
         else {
-            self.held = None;
+            self.holding = false;
             self.blend = None;
             self.pending.origin = None;
             self.pending.failed_at = None;
@@ -666,7 +681,7 @@ impl<'b> HapticLoop<'b> {
         // The tick that detects a contact renders none: its displacement is under one tick of
         // motion, and detection with a hit is the costliest phase of all; the contact
         // triangle's solve comes the next tick, while detection only tracks.
-        if self.held.is_none() && !self.detected {
+        if !self.holding && !self.detected {
             self.detected = true;
             return Ok(None);
         }
@@ -681,22 +696,14 @@ impl<'b> HapticLoop<'b> {
                 anchor,
                 radius_m: samples.tip_radius_m(),
             };
-            // Refactored in place: the held solve is a few hundred bytes to move.
+            // Refactored in place, the first tick of a contact too (`held` is its storage): the
+            // held solve is a few hundred bytes to move. On an error `held` is unchanged.
             let (w, shares) = sampled_compliance(&samples, triangle, nodes, bary)?;
             let (n, wt) = shares.split();
-            match &mut self.held {
-                Some(h) => {
-                    h.solve.refactor(w, n, wt)?;
-                    h.origin = origin;
-                }
-                None => {
-                    self.held = Some(Held {
-                        origin,
-                        solve: WeightedSolve::from_compliance(w, n, wt)?,
-                        dropped: 0.0,
-                    });
-                }
-            }
+            self.held.solve.refactor(w, n, wt)?;
+            self.held.origin = origin;
+            self.held.dropped = 0.0;
+            self.holding = true;
             return Ok(Some(displacement));
         }
         if let Some(b) = &mut self.blend {
@@ -714,35 +721,35 @@ impl<'b> HapticLoop<'b> {
             anchor,
             radius_m: tip_radius,
         };
-        match self.held {
+        if self.holding {
+            self.maintain_patch(self.held.origin, origin, repatch);
+        } else {
             // The first tick of a contact's force solves on the contact triangle alone (the
             // tip's displacement is still tiny, so is the force); the tip's patch is built
             // over the next ticks.
-            None => {
-                self.pending.origin = None;
-                let (solve, dropped) = match triangle_solve(self.bank, nodes, bary) {
-                    Some(solve) => (solve, 0.0),
-                    None => {
-                        // A vertex pair the bank does not couple (or a failing solve): the
-                        // patch rule's choice, `tool_patch(.., 0.0)`, in the idle rebuild's
-                        // place (no large temporary).
-                        let build = &mut self.pending.build;
-                        build.start(self.bank, triangle, nodes, bary, anchor, 0.0);
-                        let patch = build.finish(self.bank);
-                        let solve = WeightedSolve::new(self.bank, patch.nodes(), patch.weights())?;
-                        (solve, patch.dropped)
-                    }
-                };
-                self.held = Some(Held {
-                    origin: PatchOrigin {
-                        radius_m: 0.0,
-                        ..origin
-                    },
-                    solve,
-                    dropped,
-                });
-            }
-            Some(Held { origin: held, .. }) => self.maintain_patch(held, origin, repatch),
+            self.pending.origin = None;
+            let (solve, dropped) = match triangle_solve(self.bank, nodes, bary) {
+                Some(solve) => (solve, 0.0),
+                None => {
+                    // A vertex pair the bank does not couple (or a failing solve): the
+                    // patch rule's choice, `tool_patch(.., 0.0)`, in the idle rebuild's
+                    // place (no large temporary).
+                    let build = &mut self.pending.build;
+                    build.start(self.bank, triangle, nodes, bary, anchor, 0.0);
+                    let patch = build.finish(self.bank);
+                    let solve = WeightedSolve::new(self.bank, patch.nodes(), patch.weights())?;
+                    (solve, patch.dropped)
+                }
+            };
+            self.held = Held {
+                origin: PatchOrigin {
+                    radius_m: 0.0,
+                    ..origin
+                },
+                solve,
+                dropped,
+            };
+            self.holding = true;
         }
         Ok(Some(displacement))
     }
@@ -1004,15 +1011,16 @@ impl HapticLoop<'_> {
             Stage::Ready(solve, dropped) => {
                 p.origin = None;
                 p.failed_at = None;
-                self.blend = self.held.map(|h| Blend {
-                    solve: h.solve,
+                self.blend = self.holding.then_some(Blend {
+                    solve: self.held.solve,
                     left: BLEND_TICKS,
                 });
-                self.held = Some(Held {
+                self.held = Held {
                     origin: building,
                     solve,
                     dropped,
-                });
+                };
+                self.holding = true;
             }
         }
         Ok(())

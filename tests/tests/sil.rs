@@ -953,12 +953,14 @@ fn press_hold_relaxes_as_the_scenes_qlv_law() {
     );
     // Constant cost: what the relaxation adds to the worst tick stays within its per-tick
     // cost (measured 62 fixed + 18 a term on the mean; 30 + 60 a term allowed on the worst
-    // tick's excess), and the whole tick
-    // within the goal. The loop body's goal of 3,000 is NOT met with relaxation: the elastic
-    // image's worst body on this script is already within 50 of it (README, "Viscoelastic").
+    // tick's excess), and every run within the loop's goal (issue 26: body <= 3,000, whole
+    // tick <= 6,000; measured 2,683 / 2,812 / 2,848 and 4,662 / 4,790 / 4,834).
+    assert!(worst_body(&plain) <= 3_000, "{}", worst_body(&plain));
+    assert!(worst_tick(&plain) <= 6_000, "{}", worst_tick(&plain));
     for (r, terms) in [(&run, 2.0), (&run4, 4.0)] {
         let added = f64::from(worst_body(r)) - f64::from(worst_body(&plain));
         assert!(added <= 30.0 + 60.0 * terms, "{terms} terms add {added}");
+        assert!(worst_body(r) <= 3_000, "{terms} terms: {}", worst_body(r));
         assert!(worst_tick(r) <= 6_000, "{}", worst_tick(r));
     }
 }
