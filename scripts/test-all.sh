@@ -11,7 +11,21 @@ step() {
 # A failure names its step and command, so a log's last lines say what broke.
 trap 'echo "test-all.sh: failed in step \"${current_step:-set-up}\" at line $LINENO: $BASH_COMMAND" >&2' ERR
 
-# apt-get install as root, or through sudo; says what to do when neither is possible.
+# Debian packages apt-get removed to install what the suite needs (apt may remove a package to
+# resolve a conflict, e.g. qemu-utils for qemu-system-arm): said before, and again at the end.
+removed=()
+# shellcheck disable=SC2317 # called by the EXIT traps
+report_removed() {
+    if [ "${#removed[@]}" -gt 0 ]; then
+        echo "test-all.sh: apt-get removed these Debian packages during this run: ${removed[*]}"
+    elif [ -n "${apt_updated:-}" ]; then
+        echo "test-all.sh: apt-get installed packages and removed none"
+    fi
+}
+trap report_removed EXIT
+
+# apt-get install as root, or through sudo; says what to do when neither is possible, and what
+# apt-get will remove (from a simulated run) before it does.
 apt_install() {
     local as=()
     if [ "$(id -u)" -ne 0 ]; then
@@ -25,6 +39,13 @@ apt_install() {
     if [ -z "${apt_updated:-}" ]; then
         "${as[@]}" apt-get update
         apt_updated=1
+    fi
+    local gone
+    gone=$(apt-get install -s -y --no-install-recommends "$@" 2>/dev/null | awk '/^Remv / { print $2 }' | tr '\n' ' ')
+    if [ -n "$gone" ]; then
+        echo "test-all.sh: installing $* makes apt-get REMOVE: $gone"
+        read -r -a gone_list <<<"$gone"
+        removed+=("${gone_list[@]}")
     fi
     "${as[@]}" env DEBIAN_FRONTEND=noninteractive apt-get install -y --no-install-recommends "$@"
 }
@@ -112,7 +133,7 @@ grep -q '^initial stack pointer 0x10010000$' <<<"$board_size" ||
 
 step "tests (profile checked: release speed, overflow checks and debug assertions on)"
 log=$(mktemp)
-trap 'rm -f "$log"' EXIT
+trap 'rm -f "$log"; report_removed' EXIT
 status=0
 cargo test --workspace --profile checked --no-fail-fast 2>&1 | tee "$log" || status=$?
 # One closing line for the whole suite (cargo prints one per test binary).
