@@ -236,6 +236,21 @@ fn strikes_grazing_and_from_behind_on_the_cap() {
     }
 }
 
+/// Where the random walk's tip is, from the sphere alone (independent of the tracker): a tick
+/// clearly above the sphere must be free; a tick clearly below the meshed cap, reached from
+/// above without leaving the footprint, must touch (a missed contact fails here), and so must
+/// every later one while the tip stays below and inside.
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Expect {
+    /// Clearly above the surface: free.
+    Out,
+    /// Pressed in from above within the footprint: touching.
+    In,
+    /// Below the surface's level after leaving the footprint (entered from the side or from
+    /// behind, where the mesh has no surface): either.
+    Either,
+}
+
 #[test]
 fn random_walk_keeps_invariants() {
     let bytes = cap();
@@ -249,19 +264,44 @@ fn random_walk_keeps_invariants() {
         (seed >> 40) as f32 / (1u64 << 24) as f32 - 0.5
     };
     let rf = R as f32;
+    // The mesh's chords lie up to 0.1 mm below the sphere (5 mm spacing); the footprint ends
+    // at +-30 mm, kept 2 mm clear of.
+    let (sag, above, edge) = (2.0e-4f32, 3.0e-4f32, 0.028f32);
     let mut prev = at_radius(0.0, 0.0, rf + 0.003);
     let (mut x, mut y, mut r) = (0.0f32, 0.0f32, rf + 0.003);
-    let mut touching_ticks = 0;
-    for _ in 0..20_000 {
+    let mut expect = Expect::Out;
+    let (mut touching_ticks, mut pressed_in) = (0, 0);
+    for tick in 0..20_000 {
         x = (x + 0.002 * rnd()).clamp(-0.035, 0.035);
         y = (y + 0.002 * rnd()).clamp(-0.035, 0.035);
         r = (r + 0.001 * rnd()).clamp(rf - 0.006, rf + 0.006);
         let tip = at_radius(x, y, r);
         let s = tr.update(&bank, prev, tip);
-        if check(&bank, &s, tip).is_some() {
+        let touching = check(&bank, &s, tip).is_some();
+        let inside = x.abs() < edge && y.abs() < edge;
+        if r > rf + above {
+            expect = Expect::Out;
+        } else if !inside {
+            expect = Expect::Either;
+        } else if r < rf - sag && expect == Expect::Out {
+            expect = Expect::In;
+            pressed_in += 1;
+        }
+        match expect {
+            Expect::Out if r > rf + above => {
+                assert!(!touching, "a contact above the surface at tick {tick}, tip {tip:?}")
+            }
+            Expect::In if r < rf - sag => {
+                assert!(touching, "missed or lost contact at tick {tick}, tip {tip:?}")
+            }
+            _ => {}
+        }
+        if touching {
             touching_ticks += 1;
         }
         prev = tip;
     }
+    // The walk presses in from above many times, and touches for a good share of it.
+    assert!(pressed_in > 20, "{pressed_in}");
     assert!(touching_ticks > 1000, "{touching_ticks}");
 }
