@@ -112,9 +112,9 @@ fn relative(got: &[[f32; 3]], want: &[[f64; 3]]) -> f64 {
 /// The whole tick (encoder counts -> kinematics -> contact -> tool patch -> solve) on the
 /// shipped liver bank, pressing along the shaft and then sliding, against the host's f64 patch and solve on the
 /// untruncated compliance for the contact state the tick reports, on the bank's surface (R's
-/// triangles). Asserts the f32 tick against f64 on the contact set the firmware kept, and
-/// prints for each contact set the press went through what the bank's truncation costs
-/// against the whole patch.
+/// triangles). Asserts the f32 tick against f64 on the contact set the firmware kept and on
+/// the whole patch (the bank's truncation drops no node of it), and prints both for each
+/// contact set the press went through.
 #[test]
 fn full_tick_forces_match_the_host_f64_reference_on_the_liver_bank() {
     use firmware::contact::ContactState;
@@ -253,5 +253,9 @@ fn full_tick_forces_match_the_host_f64_reference_on_the_liver_bank() {
              vs the untruncated patch (up to {dropped} node(s) not coupled in the bank): {trunc:.2e}"
         );
         assert!(*err <= 1e-4 && *tool <= 1e-4, "{nodes:?}: {err:e} {tool:e}");
+        // The bank couples every pair one tool patch can load (the "tool" rule): no patch node
+        // is dropped, so the tick's force is the untruncated patch's too.
+        assert_eq!(*dropped, 0, "{nodes:?}");
+        assert!(*trunc <= 1e-4, "{nodes:?}: vs the untruncated patch {trunc:e}");
     }
 }
