@@ -736,6 +736,24 @@ impl Scene {
         Ok(fixed)
     }
 
+    /// The files the scene reads besides itself (already resolved against its directory): the
+    /// organ mesh unless it is the embedded one, and a sampled contact's FEM and Richardson
+    /// meshes. A cache of anything built from the scene keys on their bytes too.
+    pub fn input_files(&self) -> Vec<&Path> {
+        let mesh = match &self.mesh {
+            MeshSource::File(p) => Some(p.as_path()),
+            MeshSource::BuiltinLiver => None,
+        };
+        let (fem, richardson) = match &self.contact {
+            ContactModel::Sampled(s) => (
+                Some(s.fem_mesh.as_path()),
+                s.richardson.as_ref().map(|r| r.mesh.as_path()),
+            ),
+            _ => (None, None),
+        };
+        [mesh, fem, richardson].into_iter().flatten().collect()
+    }
+
     /// The bank's scene id: FNV-1a 64 over the scene file's bytes, then the mesh bytes' hash.
     pub fn scene_id(&self, mesh_hash: u64) -> u64 {
         fnv1a(self.text_hash, &mesh_hash.to_le_bytes())

@@ -256,6 +256,9 @@ fn full_tick_forces_match_the_host_f64_reference_on_the_liver_bank() {
         // The bank couples every pair one tool patch can load (the "tool" rule): no patch node
         // is dropped, so the tick's force is the untruncated patch's too.
         assert_eq!(*dropped, 0, "{nodes:?}");
-        assert!(*trunc <= 1e-4, "{nodes:?}: vs the untruncated patch {trunc:e}");
+        assert!(
+            *trunc <= 1e-4,
+            "{nodes:?}: vs the untruncated patch {trunc:e}"
+        );
     }
 }

@@ -289,10 +289,16 @@ fn random_walk_keeps_invariants() {
         }
         match expect {
             Expect::Out if r > rf + above => {
-                assert!(!touching, "a contact above the surface at tick {tick}, tip {tip:?}")
+                assert!(
+                    !touching,
+                    "a contact above the surface at tick {tick}, tip {tip:?}"
+                )
             }
             Expect::In if r < rf - sag => {
-                assert!(touching, "missed or lost contact at tick {tick}, tip {tip:?}")
+                assert!(
+                    touching,
+                    "missed or lost contact at tick {tick}, tip {tip:?}"
+                )
             }
             _ => {}
         }

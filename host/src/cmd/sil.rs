@@ -4,7 +4,6 @@
 
 use anyhow::{Context, Result, bail};
 use bank_format::{AlignedBytes, Bank};
-use host::bank::scene_bank;
 use host::fsio::write_atomic;
 use host::sil::cost::{CodePhaseMax, Phases};
 use host::sil::harness::{self, Run, Session, Setup};
@@ -66,7 +65,7 @@ impl SetupArgs {
         };
         let bank = match &self.bank {
             Some(p) => p.clone(),
-            None => cached_bank(&self.scene)?,
+            None => host::sil::bank::cached(&self.scene)?,
         };
         let raw =
             std::fs::read(&bank).with_context(|| format!("cannot read {}", bank.display()))?;
@@ -79,53 +78,6 @@ impl SetupArgs {
             AlignedBytes::new(&raw),
         ))
     }
-}
-
-/// `target/sil/<scene stem>-<key>.bank`, built when missing. The key hashes what the bank is made
-/// from: the scene file's bytes, the bank format version and the building executable (its path
-/// and modification time), so an edited scene, a new format or a rebuilt host never reuses a
-/// stale bank. Older cached banks of the same scene are removed.
-fn cached_bank(scene: &Path) -> Result<PathBuf> {
-    use std::hash::{Hash, Hasher};
-    let stem = scene
-        .file_stem()
-        .and_then(|s| s.to_str())
-        .with_context(|| format!("{}: not a scene file path", scene.display()))?;
-    let text = std::fs::read(scene)
-        .with_context(|| format!("cannot read the scene {}", scene.display()))?;
-    let mut key = std::collections::hash_map::DefaultHasher::new();
-    text.hash(&mut key);
-    (bank_format::VERSION_MAJOR, bank_format::VERSION_MINOR).hash(&mut key);
-    if let Ok(exe) = std::env::current_exe() {
-        exe.hash(&mut key);
-        std::fs::metadata(&exe)
-            .and_then(|m| m.modified())
-            .ok()
-            .hash(&mut key);
-    }
-    let dir = harness::repo_root().join("target/sil");
-    let name = format!("{stem}-{:016x}.bank", key.finish());
-    let out = dir.join(&name);
-    if !out.exists() {
-        let bytes = scene_bank(scene)?;
-        std::fs::create_dir_all(&dir)
-            .with_context(|| format!("cannot create {}", dir.display()))?;
-        write_atomic(&out, &bytes, &[scene])?;
-        // Best effort: a stale bank left behind costs disk, not correctness.
-        let stale = |n: &str| {
-            n != name
-                && n.strip_prefix(stem)
-                    .and_then(|r| r.strip_prefix('-'))
-                    .and_then(|r| r.strip_suffix(".bank"))
-                    .is_some_and(|k| k.len() == 16 && k.bytes().all(|b| b.is_ascii_hexdigit()))
-        };
-        for entry in std::fs::read_dir(&dir).into_iter().flatten().flatten() {
-            if entry.file_name().to_str().is_some_and(stale) {
-                let _ = std::fs::remove_file(entry.path());
-            }
-        }
-    }
-    Ok(out)
 }
 
 /// The JSON summary of a run.

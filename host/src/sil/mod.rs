@@ -3,8 +3,9 @@
 //! [`script`] the hand's scripted motions and [`harness`] starts QEMU, exchanges encoder counts
 //! and currents with the image every tick over a lockstep channel and collects its link
 //! traffic; [`cost`] groups instruction counts per tick and sizes the image; [`source`] shows a
-//! run in the display.
+//! run in the display; [`bank`] builds and caches the bank a run loads.
 
+pub mod bank;
 pub mod cost;
 pub mod harness;
 pub mod plant;
