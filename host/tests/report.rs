@@ -175,12 +175,15 @@ fn quick_report_renders_every_plot_and_agrees_with_the_references() {
             .sum();
         assert!((total - 100.0).abs() < 1e-6, "{}: {total}", s["name"]);
     }
-    // The worst tick fits its 1 ms period (125,000 instructions at 125 MIPS), as the SIL tests
-    // require (no overrun).
-    let worst_tick = find("worst-case tick on the MCU")["value"]
-        .as_f64()
-        .unwrap();
-    assert!(worst_tick > 0.0 && worst_tick < 125_000.0, "{worst_tick}");
+    // The worst tick (the report's scene bank is the nodal model's) within that model's goal,
+    // not only within its 1 ms period (125,000 instructions at 125 MIPS).
+    let worst = find("worst-case tick on the MCU");
+    let worst_tick = worst["value"].as_f64().unwrap();
+    assert!(
+        worst_tick > 0.0 && worst_tick <= f64::from(host::sil::cost::NODAL_TICK_GOAL),
+        "{worst_tick}"
+    );
+    assert_eq!(worst["verdict"], "bounded", "{worst}");
     // Every code phase ran (the scripts touch the organ, so patch and solve did too), and
     // the whole tick holds the link phase and the body's phases.
     let code_worst = knob("firmware-code-phases")["series"][0]["points"]

@@ -8,7 +8,8 @@
 
 use super::{HardCase, Knob, Point, Series, Verdict};
 use crate::sil::cost::{
-    CODE_PHASES, CodePhaseStats, CostStats, PhaseMax, Phases, code_phase_samples,
+    CODE_PHASES, CodePhaseStats, CostStats, NODAL_BODY_GOAL, NODAL_TICK_GOAL, PhaseMax, Phases,
+    code_phase_samples,
 };
 use crate::sil::harness::{self, INSTRUCTIONS_PER_TICK, Session, Setup, TickRecord};
 use crate::sil::script::Script;
@@ -185,14 +186,20 @@ pub fn section(sil: &SilRuns) -> (Vec<Knob>, HardCase) {
              ticks; {} overruns",
             sil.overruns
         ),
-        reference: format!("the {INSTRUCTIONS_PER_TICK} instructions of a 1 ms period"),
-        verdict: if worst_tick < INSTRUCTIONS_PER_TICK && sil.overruns == 0 {
+        reference: format!(
+            "the nodal model's goal: body <= {NODAL_BODY_GOAL}, whole tick <= \
+             {NODAL_TICK_GOAL} (of the {INSTRUCTIONS_PER_TICK} a 1 ms period holds)"
+        ),
+        verdict: if worst_body <= NODAL_BODY_GOAL
+            && worst_tick <= NODAL_TICK_GOAL
+            && sil.overruns == 0
+        {
             Verdict::Bounded
         } else {
             Verdict::Weakness
         },
         value: Some(f64::from(worst_tick)),
-        reference_value: Some(f64::from(INSTRUCTIONS_PER_TICK)),
+        reference_value: Some(f64::from(NODAL_TICK_GOAL)),
     };
     (vec![hist, by, code_hist, code_worst], row)
 }
