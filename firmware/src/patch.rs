@@ -3,8 +3,8 @@
 //! A point force on an elastic solid has unbounded displacement (Boussinesq), so with point
 //! contact (the paper's section 5) a node's compliance grows as the mesh is refined and the
 //! force for a given tool displacement falls: the result depends on the mesh. A real tip has a
-//! radius; spreading the load over the patch under it makes the force converge (design notes,
-//! "a trap worth knowing"; the refinement series is `host bench refinement`).
+//! radius; spreading the load over the patch under it makes the force converge (the
+//! refinement series is `host bench refinement`).
 //!
 //! The model: the tip presses the surface with the parabolic pressure `p(rho) = 1 - rho^2 / r^2`
 //! around the contact point (the anchor; `rho` the distance from it). The node loads are that

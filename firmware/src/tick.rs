@@ -1,5 +1,5 @@
-//! One tick of the 1 kHz haptic loop ([`HapticLoop::tick`]), assembled from the crate's pieces
-//! (design notes, "The 1 kHz loop"). Portable: no hardware, no heap, no panics, f32.
+//! One tick of the 1 kHz haptic loop ([`HapticLoop::tick`]), assembled from the crate's
+//! pieces. Portable: no hardware, no heap, no panics, f32.
 //!
 //! Per tick, in this order:
 //!

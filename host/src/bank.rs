@@ -1,5 +1,5 @@
 //! The bank stage of the pipeline: scene -> mesh and supports -> reachable region R ->
-//! factorised compliance -> bank bytes (the design notes' "model only what a scene needs").
+//! factorised compliance -> bank bytes: the bank models only what the scene's tool can reach.
 //!
 //! [`Prepared`] holds a scene with everything the later stages need (the compliance stays
 //! factorised, so the display can produce any column on demand); [`Prepared::build_bank`]

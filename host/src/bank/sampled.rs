@@ -2,8 +2,7 @@
 //! samples"): the tool's patch compliance `W(p) = B(p) C B(p)^T` computed on a FEM mesh of its
 //! own (any size, graded where the tool reaches; P1, ANP or P2) at the lattice points of the
 //! collision surface (the scene's `mesh`, R's triangles), so that the bank's size follows the
-//! reachable area and the lattice, not the FEM's resolution (the design notes' "three
-//! resolutions, not one").
+//! reachable area and the lattice, not the FEM's resolution: three resolutions, not one.
 //!
 //! Per lattice point `q` of a collision triangle: the closest point `p` of the FEM mesh's
 //! surface (their distance is the collision surface's depth error, reported), the tool's

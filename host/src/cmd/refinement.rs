@@ -1,5 +1,5 @@
 //! `host bench refinement`: the same tool press on one organ meshed at several sizes, with point
-//! contact and with the finite tool tip (design notes, "a trap worth knowing"). A point force
+//! contact and with the finite tool tip. A point force
 //! has unbounded displacement, so the point contact's force falls as the mesh is refined; the
 //! tip's pressure patch should converge. Prints a table (or JSON), asserts nothing. A patch
 //! with more nodes than the firmware carries is also solved capped as the firmware caps it (its
