@@ -30,4 +30,5 @@ pub mod script;
 pub mod sil;
 pub mod source;
 pub mod study;
+pub mod tick_bench;
 pub mod virtual_device;

@@ -6,7 +6,6 @@ use anyhow::{Context, Result};
 use fem::compliance::Compliance;
 use fem::elasticity::{DofMap, Elasticity, Element, FixedSet, Material};
 use fem::ordering::{Ordering, permutation};
-use host::kinematics::counts_for;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
@@ -419,100 +418,23 @@ fn measure(path: &Path, material: Material, args: &ComplianceArgs) -> Result<Rep
 }
 
 fn tick(args: TickArgs) -> Result<()> {
-    use firmware::tick::{HapticLoop, LoopInput};
     let bytes = std::fs::read(&args.bank)
         .with_context(|| format!("cannot read {}", args.bank.display()))?;
     let aligned = bank_format::AlignedBytes::new(&bytes);
     let bank = bank_format::Bank::parse(&aligned)
         .map_err(|e| anyhow::anyhow!("{}: invalid bank: {e}", args.bank.display()))?;
-    let cal = *bank.device();
-    let home = cal.home_joint.map(f64::from);
-    let input = |q: [f64; 3]| LoopInput {
-        encoder_counts: counts_for(&cal, q),
-        overrun: false,
-        link_silence_ticks: 0,
-        interlocks: firmware::hal::Interlocks::default(),
-    };
-    // Find first contact straight along the shaft at the home pose (disarmed probe).
-    let step = 5e-5;
-    let (lo, hi) = (f64::from(cal.joint_min[2]), f64::from(cal.joint_max[2]));
-    let mut probe = HapticLoop::new(&bank);
-    let mut ins = lo;
-    let mut contact_at = None;
-    while ins <= hi {
-        let out = probe.tick(input([home[0], home[1], ins]));
-        if out.contact_nodes > 0 {
-            contact_at = Some(ins);
-            break;
-        }
-        ins += step;
-    }
-    let Some(surface) = contact_at else {
-        anyhow::bail!("the tool never touches the organ along its rest axis; nothing to measure");
-    };
-    // Press to `depth`, slide in yaw and back, release; repeat.
-    let bottom = (surface + args.depth).min(hi);
-    let mut path = Vec::new();
-    let mut q = [home[0], home[1], surface - 0.005];
-    while q[2] < bottom {
-        q[2] += step;
-        path.push(q);
-    }
-    let sweep = 0.05;
-    for i in 0..2000 {
-        let phase = i as f64 / 2000.0 * std::f64::consts::TAU;
-        path.push([
-            home[0] + 0.3 * sweep * phase.sin(),
-            home[1] + sweep * phase.sin(),
-            q[2],
-        ]);
-    }
-    while q[2] > surface - 0.005 {
-        q[2] -= step;
-        path.push(q);
-    }
-    let mut haptic = HapticLoop::new(&bank);
-    // The path starts at the home pose (encoder zero): home there, as a host would.
-    haptic.zero_encoders();
-    haptic
-        .arm()
-        .map_err(|e| anyhow::anyhow!("the loop refused to arm: {e:?}"))?;
-    let mut times = Vec::with_capacity(args.ticks);
-    let (mut touching, mut max_nodes, mut peak) = (0usize, 0usize, 0.0f32);
-    let mut faults = 0;
-    for k in 0..args.ticks {
-        let inp = input(path[k % path.len()]);
-        let t = Instant::now();
-        let out = std::hint::black_box(haptic.tick(std::hint::black_box(inp)));
-        times.push(t.elapsed().as_nanos() as u64);
-        if out.contact_nodes > 0 {
-            touching += 1;
-            max_nodes = max_nodes.max(out.contact_nodes);
-        }
-        let f = out.tool_force_n;
-        peak = peak.max((f[0] * f[0] + f[1] * f[1] + f[2] * f[2]).sqrt());
-        if out.new_fault.is_some() {
-            faults += 1;
-        }
-    }
-    times.sort_unstable();
-    let pct = |p: f64| times[((times.len() - 1) as f64 * p) as usize];
-    let mean = times.iter().sum::<u64>() as f64 / times.len() as f64;
+    let r = host::tick_bench::run(&bank, args.ticks, args.depth)?;
     println!(
         "ticks {} ({} in contact, up to {} contact nodes), peak force {:.3} N, faults {}",
-        times.len(),
-        touching,
-        max_nodes,
-        peak,
-        faults
+        r.ticks, r.touching, r.max_contact_nodes, r.peak_force_n, r.faults
     );
     println!(
         "ns per tick (native, {}): mean {:.0}, median {}, p99 {}, max {}",
         std::env::consts::ARCH,
-        mean,
-        pct(0.5),
-        pct(0.99),
-        pct(1.0)
+        r.ns_mean,
+        r.ns_median,
+        r.ns_p99,
+        r.ns_max
     );
     Ok(())
 }
