@@ -17,6 +17,7 @@ pub mod deform;
 pub mod display;
 pub mod fsio;
 pub mod kinematics;
+pub mod mcu;
 pub mod meshing;
 pub mod probe;
 pub mod progress;

@@ -504,10 +504,9 @@ mod tests {
     /// The board's USB id here is the one the board image announces.
     #[test]
     fn board_usb_id_is_the_board_images() {
-        let board = std::fs::read_to_string(
-            crate::sil::harness::repo_root().join("firmware/board/src/board.rs"),
-        )
-        .unwrap();
+        let board =
+            std::fs::read_to_string(crate::mcu::repo_root().join("firmware/board/src/board.rs"))
+                .unwrap();
         let want = format!(
             "usb_vid_pid: ({:#06x}, {:#06x}),",
             BOARD_USB_ID.0, BOARD_USB_ID.1

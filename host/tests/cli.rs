@@ -310,7 +310,7 @@ fn malformed_msh41_prints_only_the_error() {
 fn elf32(sections: &[(u32, u32, u32, u32)], first_word: u32) -> Vec<u8> {
     let contents = 52 + 40 * (sections.len() as u32 + 1);
     let mut b = vec![0u8; 52];
-    b[..6].copy_from_slice(&[0x7f, b'E', b'L', b'F', 1, 1]);
+    b[..7].copy_from_slice(&[0x7f, b'E', b'L', b'F', 1, 1, 1]); // ELF32, little-endian, version 1
     b[0x20..0x24].copy_from_slice(&52u32.to_le_bytes()); // e_shoff
     b[0x2e..0x30].copy_from_slice(&40u16.to_le_bytes()); // e_shentsize
     let shnum = sections.len() as u16 + 1;
@@ -375,7 +375,7 @@ fn bench_image_prints_flash_and_static_ram_against_memory_x() {
     std::fs::write(&path, b"not an elf").unwrap();
     fails_with(
         &["bench", "image", path.to_str().unwrap()],
-        "not a little-endian ELF32",
+        "not an ELF32 file",
     );
     fails_with(&["bench", "image", "/nonexistent/image.elf"], "cannot read");
 }

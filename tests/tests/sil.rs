@@ -20,10 +20,10 @@ fn setup() -> (Setup, AlignedBytes) {
     static IMAGE: OnceLock<PathBuf> = OnceLock::new();
     static BANK: OnceLock<(PathBuf, Vec<u8>)> = OnceLock::new();
     let image = IMAGE
-        .get_or_init(|| harness::build_image().expect("building the QEMU image"))
+        .get_or_init(|| host::mcu::build_qemu_image().expect("building the QEMU image"))
         .clone();
     let (bank, raw) = BANK.get_or_init(|| {
-        let scene = harness::repo_root().join("host/scenes/liver.toml");
+        let scene = host::mcu::repo_root().join("host/scenes/liver.toml");
         let bytes = host::bank::scene_bank(&scene).expect("the liver scene's bank");
         let path = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("sil-liver.bank");
         host::fsio::write_atomic(&path, &bytes, &[]).expect("writing the bank for QEMU");
@@ -509,7 +509,7 @@ fn near_surface_file(bank: &Bank, dir: &std::path::Path, seed: u64) -> std::path
 /// The nodal liver (`scenes/liver-nodal.toml`: the tool's patch rebuilt under a sliding tip,
 /// 34 neighbours a node at most) on `grid_cell_m` cells: its bank, and the file QEMU loads.
 fn nodal_bank(grid_cell_m: f64, dir: &std::path::Path) -> Result<(PathBuf, AlignedBytes), String> {
-    let scene = harness::repo_root().join("host/scenes/liver-nodal.toml");
+    let scene = host::mcu::repo_root().join("host/scenes/liver-nodal.toml");
     let mut prep = host::bank::Prepared::load(&scene).map_err(|e| format!("{e:#}"))?;
     prep.scene.bank.grid_cell_m = Some(grid_cell_m);
     let bytes = prep.build_bank(None).map_err(|e| format!("{e:#}"))?.bytes;
@@ -787,7 +787,7 @@ fn presses_at_study_sites_render_the_converged_force_under_qemu() {
 #[test]
 fn press_hold_relaxes_as_the_scenes_qlv_law() {
     let (elastic_setup, elastic_raw) = setup();
-    let scene = harness::repo_root().join("host/scenes/liver-qlv.toml");
+    let scene = host::mcu::repo_root().join("host/scenes/liver-qlv.toml");
     let bytes = host::bank::scene_bank(&scene).expect("the liver-qlv scene's bank");
     let path = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("sil-liver-qlv.bank");
     host::fsio::write_atomic(&path, &bytes, &[]).expect("writing the bank for QEMU");

@@ -443,7 +443,7 @@ fn sil(args: SilArgs) -> Result<()> {
     use bank_format::region::{FIRMWARE_LEN, RAM_LEN, RAM_ORIGIN};
     use host::sil::cost::{
         BODY_GOAL, CODE_PHASES, CodePhaseStats, TICK_GOAL, against_goal, by_contact_nodes,
-        code_phase_samples, image_size,
+        code_phase_samples,
     };
     use host::sil::harness::{self, Session};
     use host::sil::script::Script;
@@ -479,7 +479,7 @@ fn sil(args: SilArgs) -> Result<()> {
         .zip(&samples)
         .map(|(&n, v)| (n, CodePhaseStats::of(v)))
         .collect();
-    let size = image_size(&setup.image, RAM_ORIGIN, RAM_LEN as u32)?;
+    let size = host::mcu::image_size(&setup.image, RAM_ORIGIN, RAM_LEN as u32)?;
     let worst = groups.values().map(|g| g.body_max).max().unwrap_or(0);
     let worst_tick = groups.values().map(|g| g.tick_max).max().unwrap_or(0);
     let (goal_body, goal_tick, met) = against_goal(&records.concat());
@@ -563,9 +563,8 @@ fn sil(args: SilArgs) -> Result<()> {
 
 fn image(args: ImageArgs) -> Result<()> {
     use bank_format::region::{RAM_LEN, RAM_ORIGIN};
-    let size = host::sil::cost::image_size(&args.elf, RAM_ORIGIN, RAM_LEN as u32)?;
-    let sp =
-        host::sil::cost::initial_stack_pointer(&args.elf, bank_format::region::FIRMWARE_ORIGIN)?;
+    let size = host::mcu::image_size(&args.elf, RAM_ORIGIN, RAM_LEN as u32)?;
+    let sp = host::mcu::initial_stack_pointer(&args.elf, bank_format::region::FIRMWARE_ORIGIN)?;
     println!("{}", size_line(&size));
     println!("initial stack pointer {sp:#010x}");
     Ok(())
@@ -573,7 +572,7 @@ fn image(args: ImageArgs) -> Result<()> {
 
 /// An image's flash and static RAM against the firmware and RAM regions of memory.x, as
 /// `bench sil` and `bench image` print it.
-fn size_line(size: &host::sil::cost::ImageSize) -> String {
+fn size_line(size: &host::mcu::ImageSize) -> String {
     use bank_format::region::{FIRMWARE_LEN, RAM_LEN};
     format!(
         "flash {} B of {} B ({:.1}%), static RAM {} B of {} B ({:.1}%)",
@@ -593,7 +592,7 @@ mod tests {
     #[test]
     fn size_line_against_the_regions() {
         use bank_format::region::{FIRMWARE_LEN, RAM_LEN};
-        let size = host::sil::cost::ImageSize {
+        let size = host::mcu::ImageSize {
             flash: FIRMWARE_LEN as u64 / 4,
             ram: 1_000,
         };

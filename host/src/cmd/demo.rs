@@ -194,7 +194,7 @@ pub fn run(args: Args) -> Result<()> {
             std::io::Write::write_all(file, &bank_bytes)?;
             let setup = host::sil::harness::Setup {
                 qemu: PathBuf::from("qemu-system-arm"),
-                image: host::sil::harness::build_image()?,
+                image: host::mcu::build_qemu_image()?,
                 bank: file.path().to_path_buf(),
             };
             let seconds = args

@@ -154,9 +154,9 @@ fn bank_bytes(args: &Args) -> Result<(Vec<u8>, String)> {
 /// `cargo build --release` in firmware/board (its own workspace; a no-op when up to date) and
 /// the path of its release image.
 fn build_board_image() -> Result<PathBuf> {
-    let dir = host::sil::harness::repo_root().join("firmware/board");
+    let dir = host::mcu::repo_root().join("firmware/board");
     eprintln!("building the board image in {} ...", dir.display());
-    host::sil::harness::cargo_build_release(&dir, "the board image", " (or pass --elf F)")?;
+    host::mcu::build_image(&dir, "the board image", " (or pass --elf F)")?;
     Ok(board_image(&dir))
 }
 

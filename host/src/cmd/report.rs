@@ -9,7 +9,7 @@ use host::report::{
     self, Report, bank, firmware, hard, law, locking, loops, mesh, pareto, precision, scale,
 };
 use host::scene::{Couplings, MeshSource, Scene};
-use host::sil::harness::{self, Setup};
+use host::sil::harness::Setup;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
@@ -407,7 +407,7 @@ fn qemu_image() -> Result<std::result::Result<Image, String>> {
         ));
     }
     eprintln!("building the QEMU image (firmware/qemu, cargo build --release) ...");
-    let image = match harness::build_image() {
+    let image = match host::mcu::build_qemu_image() {
         Ok(p) => p,
         Err(e) => return Ok(Err(format!("the QEMU image does not build: {e:#}"))),
     };

@@ -61,7 +61,7 @@ impl SetupArgs {
     pub fn resolve(&self) -> Result<(Setup, AlignedBytes)> {
         let image = match &self.image {
             Some(p) => p.clone(),
-            None => harness::build_image()?,
+            None => host::mcu::build_qemu_image()?,
         };
         let bank = match &self.bank {
             Some(p) => p.clone(),

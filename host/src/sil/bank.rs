@@ -19,7 +19,7 @@ pub fn cached(scene: &Path) -> Result<PathBuf> {
         .and_then(|s| s.to_str())
         .with_context(|| format!("{}: not a scene file path", scene.display()))?;
     let key = key(scene)?;
-    let dir = super::harness::repo_root().join("target/sil");
+    let dir = crate::mcu::repo_root().join("target/sil");
     let name = format!("{stem}-{key:016x}.bank");
     let out = dir.join(&name);
     if !out.exists() {

@@ -1,12 +1,10 @@
 //! Where the instructions go under QEMU: per-tick costs of a run grouped by contact-set size,
-//! by phase of a contact ([`Phases`]) and by phase of the code ([`CODE_PHASES`]), and the
-//! image's flash and RAM use read from its ELF section headers.
+//! by phase of a contact ([`Phases`]) and by phase of the code ([`CODE_PHASES`]) (the
+//! image's flash and RAM use: [`crate::mcu::image_size`]).
 
 use super::harness::TickRecord;
-use anyhow::{Context, Result, bail};
 use bank_format::State;
 use std::collections::BTreeMap;
-use std::path::Path;
 
 /// Instruction counts of one group of ticks.
 #[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]
@@ -246,105 +244,6 @@ impl CodePhaseMax {
     }
 }
 
-/// Bytes of flash (code, read-only data and the initial values of `.data`) and of statically
-/// allocated RAM (`.data`, `.bss`, `.uninit`; the stack takes the rest) of an ELF32 image.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
-pub struct ImageSize {
-    /// Flash bytes.
-    pub flash: u64,
-    /// Static RAM bytes.
-    pub ram: u64,
-}
-
-/// One section header of an ELF32 file.
-struct Section {
-    kind: u32,
-    flags: u32,
-    addr: u32,
-    offset: u32,
-    len: u32,
-}
-
-/// The bytes of the little-endian ELF32 file at `path` and its section headers.
-fn elf_sections(path: &Path) -> Result<(Vec<u8>, Vec<Section>)> {
-    let b = std::fs::read(path).with_context(|| format!("cannot read {}", path.display()))?;
-    if b.get(..6) != Some(&[0x7f, b'E', b'L', b'F', 1, 1][..]) {
-        bail!("{}: not a little-endian ELF32 file", path.display());
-    }
-    let bad = || anyhow::anyhow!("{}: truncated ELF section table", path.display());
-    let u16_at = |o: usize| {
-        b.get(o..o + 2)
-            .map(|s| u16::from_le_bytes([s[0], s[1]]))
-            .ok_or_else(bad)
-    };
-    let u32_at = |o: usize| {
-        b.get(o..o + 4)
-            .map(|s| u32::from_le_bytes([s[0], s[1], s[2], s[3]]))
-            .ok_or_else(bad)
-    };
-    let shoff = u32_at(0x20)? as usize;
-    let shentsize = usize::from(u16_at(0x2e)?);
-    let shnum = usize::from(u16_at(0x30)?);
-    let sections = (0..shnum)
-        .map(|i| {
-            let h = shoff + i * shentsize;
-            Ok(Section {
-                kind: u32_at(h + 4)?,
-                flags: u32_at(h + 8)?,
-                addr: u32_at(h + 12)?,
-                offset: u32_at(h + 16)?,
-                len: u32_at(h + 20)?,
-            })
-        })
-        .collect::<Result<Vec<_>>>()?;
-    Ok((b, sections))
-}
-
-/// Read [`ImageSize`] from the section headers of the little-endian ELF32 file at `path`;
-/// `ram_start..ram_start + ram_len` is the RAM region (allocated sections there count as RAM).
-pub fn image_size(path: &Path, ram_start: u32, ram_len: u32) -> Result<ImageSize> {
-    const SHF_ALLOC: u32 = 2;
-    const SHT_NOBITS: u32 = 8;
-    let mut size = ImageSize { flash: 0, ram: 0 };
-    for s in elf_sections(path)?.1 {
-        if s.flags & SHF_ALLOC == 0 {
-            continue;
-        }
-        if s.kind != SHT_NOBITS {
-            size.flash += u64::from(s.len);
-        }
-        if s.addr >= ram_start && u64::from(s.addr) < u64::from(ram_start) + u64::from(ram_len) {
-            size.ram += u64::from(s.len);
-        }
-    }
-    Ok(size)
-}
-
-/// The initial stack pointer of the ELF32 image at `path`: the first word of the vector
-/// table, the loaded section that starts at `flash_origin` (where the core reads it at reset).
-pub fn initial_stack_pointer(path: &Path, flash_origin: u32) -> Result<u32> {
-    const SHT_PROGBITS: u32 = 1;
-    let (b, sections) = elf_sections(path)?;
-    let table = sections
-        .iter()
-        .find(|s| s.kind == SHT_PROGBITS && s.addr == flash_origin)
-        .with_context(|| {
-            format!(
-                "{}: no section at the flash origin {flash_origin:#010x} (no vector table)",
-                path.display()
-            )
-        })?;
-    let o = table.offset as usize;
-    b.get(o..o + 4)
-        .map(|s| u32::from_le_bytes([s[0], s[1], s[2], s[3]]))
-        .with_context(|| {
-            format!(
-                "{}: the vector table is past the file's end",
-                path.display()
-            )
-        })
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -456,14 +355,5 @@ mod tests {
         assert_eq!((d.ticks, d.p50, d.max), (3, 900, 3000));
         assert!((d.mean - 4300.0 / 3.0).abs() < 1e-9);
         assert_eq!(CodePhaseStats::of(&[]), CodePhaseStats::default());
-    }
-
-    #[test]
-    fn image_size_rejects_a_non_elf_file() {
-        let dir = tempfile::tempdir().unwrap();
-        let p = dir.path().join("x");
-        std::fs::write(&p, b"not an elf").unwrap();
-        let e = image_size(&p, 0x2000_0000, 1024).unwrap_err().to_string();
-        assert!(e.contains("not a little-endian ELF32"), "{e}");
     }
 }

@@ -256,51 +256,6 @@ impl Run {
     }
 }
 
-/// The path of the image built by [`build_image`].
-pub fn image_path() -> PathBuf {
-    repo_root().join("firmware/qemu/target/thumbv7em-none-eabihf/release/firmware-qemu")
-}
-
-/// The repository root (parent of the `host` package).
-pub fn repo_root() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .parent()
-        .map_or_else(|| PathBuf::from("."), Path::to_path_buf)
-}
-
-/// Build the QEMU image (`cargo build --release` in `firmware/qemu`; a no-op when it is up to
-/// date) and return its path. Needs the `thumbv7em-none-eabihf` target.
-pub fn build_image() -> Result<PathBuf> {
-    cargo_build_release(&repo_root().join("firmware/qemu"), "the QEMU image", "")?;
-    Ok(image_path())
-}
-
-/// `cargo build --release --quiet` in `dir` (a firmware image's own workspace, with its own
-/// target dir), failing with its stderr; `what` names the image, `hint` follows "failed".
-pub fn cargo_build_release(dir: &Path, what: &str, hint: &str) -> Result<()> {
-    let cargo = std::env::var_os("CARGO").unwrap_or_else(|| "cargo".into());
-    let out = Command::new(&cargo)
-        .args(["build", "--release", "--quiet"])
-        .current_dir(dir)
-        .env_remove("CARGO_TARGET_DIR")
-        .output()
-        .with_context(|| {
-            format!(
-                "cannot run {} in {}",
-                cargo.to_string_lossy(),
-                dir.display()
-            )
-        })?;
-    if !out.status.success() {
-        bail!(
-            "building {what} in {} failed{hint}:\n{}",
-            dir.display(),
-            String::from_utf8_lossy(&out.stderr)
-        );
-    }
-    Ok(())
-}
-
 /// Run `session` on the image under QEMU. Errors are set-up failures (QEMU missing, pipes,
 /// socket); an image that stops early is a [`Run`] with `stopped` set.
 pub fn run(setup: &Setup, session: &Session) -> Result<Run> {
