@@ -124,8 +124,8 @@ fn repairs_and_units_are_said() {
     let (_, err) = text(&o);
     assert!(
         err.contains(
-            "repaired: filled 2 holes (boundary loops of 7, 5 edges) with a fan around each \
-             loop's centroid"
+            "repaired: filled 2 holes (boundary loops of 7, 5 edges) with the least-area \
+             triangulation of each loop"
         ),
         "{err}"
     );
