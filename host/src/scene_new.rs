@@ -4,6 +4,7 @@
 
 use crate::bank::Prepared;
 use crate::kinematics::Workspace;
+use crate::meshing::Units;
 use crate::scene::Scene;
 use anyhow::{Result, bail};
 use fem::mesh::TetMesh;
@@ -73,6 +74,9 @@ pub enum Support {
 pub struct NewScene {
     /// The mesh file, as the scene should name it (made relative to the scene's folder).
     pub mesh_path: PathBuf,
+    /// The mesh file's units (the scene's `mesh_units`; the mesh given to [`scene_text`] is
+    /// already scaled to metres).
+    pub mesh_units: Units,
     /// The trocar (fulcrum), m.
     pub trocar: [f64; 3],
     /// Supports.
@@ -189,7 +193,7 @@ fn r(x: f64) -> String {
     if s == "-0.0" { "0.0".into() } else { s }
 }
 
-/// The scene's text for `mesh` (already loaded and validated) and `spec`, checked as any
+/// The scene's text for `mesh` (already loaded, scaled to metres and validated) and `spec`, checked as any
 /// scene is before a bank is built ([`Prepared::from_scene`]: the trocar and the home tip
 /// outside the organ, supports that hold something but not everything and leave no rigid
 /// motion, a reachable region), as `out` would be read; also the reachable nodes' count and
@@ -227,8 +231,10 @@ pub fn scene_text(
 # --scene <this file>` shows it. Every key is explained in host/scenes/liver.toml; units are SI
 # (m, rad, Pa, N, A, N m/A). The organ's bounding box: {lo} to {hi} m.
 
-# Organ mesh, relative to this file (.msh v1/v2/v4.1, .vtu, .vtk, .mesh; coordinates in m).
+# Organ mesh, relative to this file (.msh v1/v2/v4.1, .vtu, .vtk, .mesh), and the units of
+# its coordinates (mesh_units: "m", "cm" or "mm"; scaled to metres on loading).
 mesh = "{mesh_name}"
+mesh_units = "{units}"
 
 [material]
 {sources}
@@ -274,6 +280,7 @@ precision = "bfp16"
 reach_margin_m = 0.002
 "#,
         tissue = spec.tissue.name(),
+        units = spec.mesh_units.name(),
         lo = v3(lo),
         hi = v3(hi),
         fulcrum = v3(w.fulcrum),
