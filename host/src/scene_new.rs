@@ -34,14 +34,25 @@ impl Tissue {
             ),
             Tissue::Kidney => (
                 5000.0,
-                "# Kidney preset. young_pa = 5000: a placeholder of the order of the liver's, with\n\
-# no checked source; measure it and fit the law with `host calibrate tissue`.",
+                "# Kidney preset. young_pa = 5000 has NO published source: it is a placeholder of the\n\
+# order of the liver's. A figure was searched for and none found in what could be read:\n\
+# Farshad et al. (1998 North American Congress on Biomechanics abstract, the fresh pig\n\
+# kidney's compression, tension and shear tests; their 1999 paper was not found), Johnson,\n\
+# Campbell and Campbell-Kyureghyan, Biomechanics 1(2):264-280, 2021 (human and porcine kidney\n\
+# in unconfined compression and probing, doi:10.3390/biomechanics1020022) and Zhang et al.,\n\
+# PLoS ONE 19:e0307778, 2024 (porcine kidney cortex, doi:10.1371/journal.pone.0307778) measure\n\
+# kidney moduli, but no value of theirs was read, so none is quoted. Measure the tissue and\n\
+# fit the law with `host calibrate tissue`.",
             ),
             Tissue::Brain => (
                 2526.0,
-                "# Brain preset. young_pa = 2526 = 3 mu0 with mu0 = 842 Pa, the small-strain shear\n\
-# modulus of K. Miller and K. Chinzei, J. Biomech. 35(4):483-490, 2002, as quoted by\n\
-# scripts/gen_brain_bench.py (the quote is not checked against the paper here).",
+                "# Brain preset. young_pa = 2526 = 3 mu0 (incompressible small-strain limit) with\n\
+# mu0 = 842 Pa, the Ogden shear parameter the project attributes to K. Miller and K. Chinzei,\n\
+# \"Mechanical properties of brain tissue in tension\", J. Biomech. 35(4):483-490, 2002\n\
+# (doi:10.1016/S0021-9290(01)00234-2: in vitro uniaxial tension of swine brain at strain rates\n\
+# 0.64 and 0.0064 /s, an Ogden-based hyper-viscoelastic model). The paper's identity is\n\
+# checked; the figure 842 Pa was not found in what could be read of it (scripts/\n\
+# gen_brain_bench.py quotes it): treat it as unverified.",
             ),
         };
         let poisson = "# poisson = 0.45: nearly incompressible soft tissue held at 0.45 because the P1\n\

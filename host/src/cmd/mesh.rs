@@ -10,6 +10,9 @@ use host::scene::Scene;
 use std::path::PathBuf;
 use std::time::Instant;
 
+/// Largest `--fill-holes`.
+const MAX_FILL_HOLES: usize = 1000;
+
 /// Arguments of `host mesh`.
 #[derive(clap::Args, Debug)]
 #[command(
@@ -48,7 +51,8 @@ pub struct Args {
     /// --fill-holes edges.
     #[arg(long)]
     repair: bool,
-    /// Largest hole --repair fills, in boundary edges.
+    /// Largest hole --repair fills, in boundary edges (at most 1000): by the least-area
+    /// triangulation of its boundary loop.
     #[arg(long, default_value_t = 32, value_name = "N")]
     fill_holes: usize,
     /// Vertices closer than this fraction of the bounding-box diagonal are duplicates.
@@ -80,6 +84,15 @@ pub fn run(a: Args) -> Result<()> {
     )?;
     if let Some(n) = note {
         eprintln!("{n}");
+    }
+    // The least-area filling is O(n^3) in time and O(n^2) in memory: 1,000 edges take about
+    // 10^8 steps and 16 MB.
+    if a.fill_holes > MAX_FILL_HOLES {
+        bail!(
+            "--fill-holes {}: at most {MAX_FILL_HOLES} edges (a larger hole is no small defect: \
+             close it where the surface was made)",
+            a.fill_holes
+        );
     }
     if !(a.merge_tolerance >= 0.0 && a.merge_tolerance < 0.01) {
         bail!(

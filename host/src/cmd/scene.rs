@@ -19,9 +19,10 @@ pub enum SceneCmd {
 pub enum TissueArg {
     /// Liver parenchyma (the default scene's 3 kPa).
     Liver,
-    /// Kidney (a placeholder figure, no checked source).
+    /// Kidney (a placeholder figure: no published source found).
     Kidney,
-    /// Brain (Miller and Chinzei 2002's small-strain modulus, as the project quotes it).
+    /// Brain (3 x 842 Pa, the shear parameter attributed to Miller and Chinzei 2002; the
+    /// figure is not verified against the paper).
     Brain,
 }
 

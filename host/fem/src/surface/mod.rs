@@ -297,7 +297,8 @@ impl fmt::Display for Shell {
 #[derive(Debug, Clone, Copy)]
 pub struct CheckOptions {
     /// Safe repairs: merge duplicate vertices, drop faces that use a vertex twice, make the
-    /// orientation consistent, fill holes of at most `fill_holes` edges.
+    /// orientation consistent, fill holes of at most `fill_holes` edges (O(n^3) time and
+    /// O(n^2) memory in a hole's edges).
     pub repair: bool,
     /// Vertices closer than this fraction of the bounding-box diagonal are duplicates.
     pub merge_tolerance: f64,
@@ -345,9 +346,12 @@ impl Sets {
 
 /// Check that `s` bounds a volume, repairing what `opts` allows; returns the surface (faces
 /// outward, unused vertices dropped) and one line per change made. The checks run in this
-/// order: vertex ids and finite coordinates, duplicate vertices, degenerate faces, non-manifold edges, non-manifold vertices,
-/// shells, holes, orientation, self-intersections. A surface whose faces all point
-/// inward is flipped whatever `opts` say (that is a convention, not a defect), and said.
+/// order: vertex ids and finite coordinates, duplicate vertices, degenerate faces,
+/// non-manifold edges, non-manifold vertices, shells, holes (filled by the least-area
+/// triangulation of each boundary loop), orientation, self-intersections (every pair of faces
+/// whose boxes overlap, with exact orientation predicates: faces that share a vertex or an
+/// edge and coplanar overlaps included). A surface whose faces all point inward is flipped
+/// whatever `opts` say (that is a convention, not a defect), and said.
 pub fn check(
     s: &TriSurface,
     opts: CheckOptions,
