@@ -51,8 +51,8 @@ impl Tissue {
 # \"Mechanical properties of brain tissue in tension\", J. Biomech. 35(4):483-490, 2002\n\
 # (doi:10.1016/S0021-9290(01)00234-2: in vitro uniaxial tension of swine brain at strain rates\n\
 # 0.64 and 0.0064 /s, an Ogden-based hyper-viscoelastic model). The paper's identity is\n\
-# checked; the figure 842 Pa was not found in what could be read of it (scripts/\n\
-# gen_brain_bench.py quotes it): treat it as unverified.",
+# checked; the figure 842 Pa, which scripts/gen_brain_bench.py quotes, was not found in what\n\
+# could be read of it: treat it as unverified.",
             ),
         };
         let poisson = "# poisson = 0.45: nearly incompressible soft tissue held at 0.45 because the P1\n\
