@@ -1746,6 +1746,41 @@ mod tests {
     }
 
     #[test]
+    fn mesh_units_are_checked() {
+        let (_, t) = shipped();
+        // The shipped scene: the embedded liver (metres) and a sampled [contact].
+        let (ok, _) = with_line(
+            &t,
+            "mesh",
+            "mesh = \"builtin:liver-1k4\"\nmesh_units = \"m\"",
+        );
+        let s = Scene::parse(Path::new("scene.toml"), &ok).unwrap();
+        assert_eq!(s.mesh_units, Some(Units::M));
+        for (mesh, units, why) in [
+            ("builtin:liver-1k4", "mm", "the embedded liver is in metres"),
+            ("organ.msh", "cm", "a sampled [contact]'s fem_mesh"),
+            (
+                "organ.msh",
+                "inch",
+                "must be \"m\", \"cm\" or \"mm\", got \"inch\"",
+            ),
+        ] {
+            let (bad, line) = with_line(
+                &t,
+                "mesh",
+                &format!("mesh = \"{mesh}\"\nmesh_units = \"{units}\""),
+            );
+            let e = err_of(&bad);
+            assert_eq!(
+                (e.key.as_str(), e.line),
+                ("mesh_units", Some(line + 1)),
+                "{e}"
+            );
+            assert!(e.to_string().contains(why), "{e}");
+        }
+    }
+
+    #[test]
     fn unknown_key_names_key_and_line() {
         let (_, t) = shipped();
         let (t, line) = with_line(&t, "poisson", "poisson = 0.45\nstiffness = 2");
