@@ -20,8 +20,8 @@ use std::process::Command;
 /// The meshing script, run by [`run_gmsh`].
 const SCRIPT: &str = include_str!("../../scripts/mesh_surface.py");
 
-/// Length units of a surface file.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+/// Length units of a surface or tetrahedral mesh file (`--units`, a scene's `mesh_units`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
 pub enum Units {
     /// Metres.
     M,
@@ -51,9 +51,26 @@ impl Units {
     }
 }
 
+impl std::str::FromStr for Units {
+    type Err = String;
+
+    /// "m", "cm" or "mm".
+    fn from_str(s: &str) -> Result<Self, String> {
+        [Units::M, Units::Cm, Units::Mm]
+            .into_iter()
+            .find(|u| u.name() == s)
+            .ok_or_else(|| format!("must be \"m\", \"cm\" or \"mm\", got {s:?}"))
+    }
+}
+
 /// Largest side of a whole organ's bounding box, m: 4 cm (a small kidney is 10 cm, a
 /// specimen is not an organ) to 40 cm (a large liver is about 25 cm).
 pub const ORGAN_SIDE_M: (f64, f64) = (0.04, 0.4);
+
+/// The largest side of the box `(lo, hi)`.
+pub fn largest_side((lo, hi): ([f64; 3], [f64; 3])) -> f64 {
+    (0..3).map(|k| hi[k] - lo[k]).fold(0.0, f64::max)
+}
 
 /// The units in which a bounding box whose largest side is `side` (file units) is an organ's,
 /// [`ORGAN_SIDE_M`]: the three ranges do not overlap, so the guess is unique; `Err` says why
@@ -67,12 +84,63 @@ pub fn guess_units(side: f64) -> Result<Units, String> {
     }
     Err(format!(
         "the largest side of the bounding box is {side:.4} file units: no unit makes that an \
-         organ's {} to {} m (in m: {side:.3} m, in cm: {:.3} m, in mm: {:.4} m); pass --units",
+         organ's {} to {} m (in m: {side:.3} m, in cm: {:.3} m, in mm: {:.4} m)",
         ORGAN_SIDE_M.0,
         ORGAN_SIDE_M.1,
         side * 0.01,
         side * 0.001
     ))
+}
+
+/// The units of the file `name` (a surface or a tetrahedral mesh) whose bounding box's largest
+/// side is `side` in file units: `given` when there is one, else the guess of [`guess_units`],
+/// with the line that says so (to print); no guess is an error that names the file and tells to
+/// set `option` (`--units`, or a scene's `mesh_units`).
+pub fn resolve_units(
+    given: Option<Units>,
+    side: f64,
+    name: &str,
+    option: &str,
+) -> Result<(Units, Option<String>)> {
+    if let Some(u) = given {
+        return Ok((u, None));
+    }
+    let u = guess_units(side).map_err(|e| anyhow::anyhow!("{name}: {e}; set {option}"))?;
+    let note = format!(
+        "units: {} (guessed: the largest side is {side:.4}, {:.3} m in {}; {option} overrides)",
+        u.name(),
+        side * u.to_metres(),
+        u.name()
+    );
+    Ok((u, Some(note)))
+}
+
+/// Reads the tetrahedral mesh file `path` (any format of [`fem::mesh::read_counted`]) in
+/// `given` units or, without them, the units [`resolve_units`] guesses (the guess's line is
+/// printed to stderr), scales it to metres and validates it; returns the mesh, the skipped
+/// lower-dimensional elements and the units. `option` names how to give the units.
+pub fn load_mesh_in_units(
+    path: &std::path::Path,
+    given: Option<Units>,
+    option: &str,
+) -> Result<(TetMesh, fem::mesh::Ignored, Units)> {
+    let (mut mesh, ignored) = fem::mesh::read_counted(path)?;
+    let name = path.display().to_string();
+    let (units, note) = resolve_units(given, largest_side(mesh.bounding_box()), &name, option)?;
+    if let Some(n) = note {
+        eprintln!("{name}: {n}");
+    }
+    scale_mesh(&mut mesh, units);
+    fem::mesh::validate(&mesh).map_err(|e| e.with_path(path))?;
+    Ok((mesh, ignored, units))
+}
+
+/// Multiplies every node of `mesh` by the metres per unit of `units`.
+pub fn scale_mesh(mesh: &mut TetMesh, units: Units) {
+    let s = units.to_metres();
+    if s != 1.0 {
+        mesh.nodes.iter_mut().flatten().for_each(|x| *x *= s);
+    }
 }
 
 /// The points of `surface` (metres; vertices and face centroids) within the tip radius plus
@@ -209,7 +277,22 @@ mod tests {
         assert_eq!(guess_units(14.0), Ok(Units::Cm));
         assert_eq!(guess_units(140.0), Ok(Units::Mm));
         // Between the ranges (1 m or 1 mm?) and outside them: refused.
-        assert!(guess_units(1.0).unwrap_err().contains("pass --units"));
+        assert!(
+            guess_units(1.0)
+                .unwrap_err()
+                .contains("no unit makes that an organ's")
+        );
+        let e = resolve_units(None, 1.0, "a.msh", "--units").unwrap_err();
+        assert!(e.to_string().starts_with("a.msh: ") && e.to_string().ends_with("set --units"));
+        let (u, note) = resolve_units(None, 140.0, "a.msh", "--units").unwrap();
+        assert_eq!(u, Units::Mm);
+        assert!(note.unwrap().contains("units: mm (guessed"));
+        assert_eq!(
+            resolve_units(Some(Units::M), 1.0, "a", "--units").unwrap(),
+            (Units::M, None)
+        );
+        assert_eq!("cm".parse::<Units>(), Ok(Units::Cm));
+        assert!("inch".parse::<Units>().is_err());
         assert!(guess_units(5000.0).is_err());
         assert!(guess_units(0.001).is_err());
     }

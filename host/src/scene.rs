@@ -7,12 +7,15 @@
 //! - Unknown keys are errors; so are missing required keys and out-of-range values. Every error
 //!   names the file, the line and the key.
 //! - `mesh` is a path relative to the scene file, or `"builtin:liver-1k4"` for the 1.4k-node
-//!   liver embedded in the binary.
+//!   liver embedded in the binary. Optional `mesh_units` ("m", "cm" or "mm") names the mesh
+//!   file's units; it is scaled to metres on loading. Without it the file is in metres, and a
+//!   mesh that is no organ in metres but one in cm or mm is refused (set `mesh_units`).
 //! - SI units everywhere (m, rad, Pa, N, A, N m/A); angles in radians.
 //! - The device maps onto [`bank_format::DeviceCalibration`]: joints are 0 = pitch, 1 = yaw,
 //!   2 = insertion, and `tip = fulcrum + insertion * Rot(yaw_axis, yaw) Rot(pitch_axis, pitch)
 //!   shaft_axis`.
 
+use crate::meshing::Units;
 use bank_format::{DeviceCalibration, TissueLaw};
 use fem::elasticity::{Element, FixedSet, Material};
 use fem::mesh::TetMesh;
@@ -66,6 +69,8 @@ pub struct SceneError {
 #[serde(deny_unknown_fields)]
 struct RawScene {
     mesh: Spanned<String>,
+    #[serde(default)]
+    mesh_units: Option<Spanned<String>>,
     material: RawMaterial,
     fixed: RawFixed,
     tool: RawTool,
@@ -453,6 +458,11 @@ pub struct Scene {
     pub path: PathBuf,
     /// Organ mesh.
     pub mesh: MeshSource,
+    /// Units of the mesh file's coordinates (`mesh_units`), scaled to metres on loading;
+    /// `None`: the key is absent, the file is in metres unless it is implausible in metres and
+    /// organ-sized in cm or mm ([`crate::meshing::guess_units`]), which [`Scene::load_mesh`]
+    /// refuses.
+    pub mesh_units: Option<Units>,
     /// Material.
     pub material: Material,
     /// Element formulation (`[material] element`, default the paper's P1).
@@ -634,6 +644,7 @@ impl Scene {
         };
         let raw = parse_toml(&ctx)?;
         let mesh = parse_mesh(&ctx, path, &raw.mesh)?;
+        let mesh_units = parse_mesh_units(&ctx, &raw, &mesh)?;
         let (material, element) = parse_material(&ctx, &raw.material)?;
         let (fix_boxes, fix_nodes, fix_nodes_line) = parse_fixed(&ctx, &raw.fixed)?;
         let tip_radius_m = parse_tool(&ctx, &raw.tool)?;
@@ -674,6 +685,7 @@ impl Scene {
         Ok(Scene {
             path: path.to_path_buf(),
             mesh,
+            mesh_units,
             material,
             element,
             fix_boxes,
@@ -705,11 +717,33 @@ impl Scene {
             MeshSource::File(p) => {
                 let bytes = std::fs::read(p)
                     .with_context(|| format!("{}: mesh {}", self.path.display(), p.display()))?;
-                Ok((
-                    fem::mesh::load(p)?,
-                    p.display().to_string(),
-                    fnv1a(FNV_OFFSET, &bytes),
-                ))
+                let mut mesh = fem::mesh::read(p)?;
+                let side = crate::meshing::largest_side(mesh.bounding_box());
+                let units = match self.mesh_units {
+                    Some(u) => u,
+                    None => match crate::meshing::guess_units(side) {
+                        Ok(u) if u != Units::M => anyhow::bail!(
+                            "{}: mesh {}: its largest side is {side:.4}, no organ in metres; in \
+                             {} it is {:.3} m: set mesh_units = \"{}\" (or \"m\" to keep \
+                             metres)",
+                            self.path.display(),
+                            p.display(),
+                            u.name(),
+                            side * u.to_metres(),
+                            u.name()
+                        ),
+                        _ => Units::M,
+                    },
+                };
+                crate::meshing::scale_mesh(&mut mesh, units);
+                fem::mesh::validate(&mesh).map_err(|e| e.with_path(p))?;
+                // Units other than metres are part of the mesh's identity (a bank is cached by
+                // it); metres keep the hash of the bytes alone.
+                let mut hash = fnv1a(FNV_OFFSET, &bytes);
+                if units != Units::M {
+                    hash = fnv1a(hash, units.name().as_bytes());
+                }
+                Ok((mesh, p.display().to_string(), hash))
             }
         }
     }
@@ -798,6 +832,54 @@ fn parse_mesh(ctx: &Ctx, path: &Path, mesh: &Spanned<String>) -> Result<MeshSour
         let dir = path.parent().unwrap_or(Path::new("."));
         Ok(MeshSource::File(dir.join(mesh.get_ref())))
     }
+}
+
+/// `mesh_units`: "m", "cm" or "mm", only for a mesh file (the embedded liver is in metres),
+/// and not with a sampled `[contact]` (its `fem_mesh` and `richardson_mesh` are read in
+/// metres, so the organ's meshes would disagree).
+fn parse_mesh_units(
+    ctx: &Ctx,
+    raw: &RawScene,
+    mesh: &MeshSource,
+) -> Result<Option<Units>, SceneError> {
+    let Some(u) = &raw.mesh_units else {
+        return Ok(None);
+    };
+    let units: Units = u
+        .get_ref()
+        .parse()
+        .map_err(|e| ctx.err(u.span(), "mesh_units", e))?;
+    if units == Units::M {
+        return Ok(Some(units));
+    }
+    if *mesh == MeshSource::BuiltinLiver {
+        return Err(ctx.err(
+            u.span(),
+            "mesh_units",
+            format!(
+                "the embedded liver is in metres: mesh_units must be \"m\", got {:?}",
+                units.name()
+            ),
+        ));
+    }
+    let sampled = raw.contact.as_ref().is_some_and(|c| {
+        c.model
+            .as_ref()
+            .is_none_or(|m| m.get_ref().as_str() == "sampled")
+    });
+    if sampled {
+        return Err(ctx.err(
+            u.span(),
+            "mesh_units",
+            format!(
+                "mesh_units = {:?} scales `mesh` only; a sampled [contact]'s fem_mesh (and \
+                 richardson_mesh) are read in metres: convert the meshes to metres, or use \
+                 [contact] model = \"nodal\"",
+                units.name()
+            ),
+        ));
+    }
+    Ok(Some(units))
 }
 
 /// `[contact]`: `model` "sampled" (default) or "nodal"; with "sampled", `fem_mesh` (required: a
@@ -1679,6 +1761,41 @@ mod tests {
 
     fn err_of(text: &str) -> SceneError {
         Scene::parse(Path::new("scene.toml"), text).unwrap_err()
+    }
+
+    #[test]
+    fn mesh_units_are_checked() {
+        let (_, t) = shipped();
+        // The shipped scene: the embedded liver (metres) and a sampled [contact].
+        let (ok, _) = with_line(
+            &t,
+            "mesh",
+            "mesh = \"builtin:liver-1k4\"\nmesh_units = \"m\"",
+        );
+        let s = Scene::parse(Path::new("scene.toml"), &ok).unwrap();
+        assert_eq!(s.mesh_units, Some(Units::M));
+        for (mesh, units, why) in [
+            ("builtin:liver-1k4", "mm", "the embedded liver is in metres"),
+            ("organ.msh", "cm", "a sampled [contact]'s fem_mesh"),
+            (
+                "organ.msh",
+                "inch",
+                "must be \"m\", \"cm\" or \"mm\", got \"inch\"",
+            ),
+        ] {
+            let (bad, line) = with_line(
+                &t,
+                "mesh",
+                &format!("mesh = \"{mesh}\"\nmesh_units = \"{units}\""),
+            );
+            let e = err_of(&bad);
+            assert_eq!(
+                (e.key.as_str(), e.line),
+                ("mesh_units", Some(line + 1)),
+                "{e}"
+            );
+            assert!(e.to_string().contains(why), "{e}");
+        }
     }
 
     #[test]

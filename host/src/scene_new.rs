@@ -4,6 +4,7 @@
 
 use crate::bank::Prepared;
 use crate::kinematics::Workspace;
+use crate::meshing::Units;
 use crate::scene::Scene;
 use anyhow::{Result, bail};
 use fem::mesh::TetMesh;
@@ -33,14 +34,25 @@ impl Tissue {
             ),
             Tissue::Kidney => (
                 5000.0,
-                "# Kidney preset. young_pa = 5000: a placeholder of the order of the liver's, with\n\
-# no checked source; measure it and fit the law with `host calibrate tissue`.",
+                "# Kidney preset. young_pa = 5000 has NO published source: it is a placeholder of the\n\
+# order of the liver's. A figure was searched for and none found in what could be read:\n\
+# Farshad et al. (1998 North American Congress on Biomechanics abstract, the fresh pig\n\
+# kidney's compression, tension and shear tests; their 1999 paper was not found), Johnson,\n\
+# Campbell and Campbell-Kyureghyan, Biomechanics 1(2):264-280, 2021 (human and porcine kidney\n\
+# in unconfined compression and probing, doi:10.3390/biomechanics1020022) and Zhang et al.,\n\
+# PLoS ONE 19:e0307778, 2024 (porcine kidney cortex, doi:10.1371/journal.pone.0307778) measure\n\
+# kidney moduli, but no value of theirs was read, so none is quoted. Measure the tissue and\n\
+# fit the law with `host calibrate tissue`.",
             ),
             Tissue::Brain => (
                 2526.0,
-                "# Brain preset. young_pa = 2526 = 3 mu0 with mu0 = 842 Pa, the small-strain shear\n\
-# modulus of K. Miller and K. Chinzei, J. Biomech. 35(4):483-490, 2002, as quoted by\n\
-# scripts/gen_brain_bench.py (the quote is not checked against the paper here).",
+                "# Brain preset. young_pa = 2526 = 3 mu0 (incompressible small-strain limit) with\n\
+# mu0 = 842 Pa, the Ogden shear parameter the project attributes to K. Miller and K. Chinzei,\n\
+# \"Mechanical properties of brain tissue in tension\", J. Biomech. 35(4):483-490, 2002\n\
+# (doi:10.1016/S0021-9290(01)00234-2: in vitro uniaxial tension of swine brain at strain rates\n\
+# 0.64 and 0.0064 /s, an Ogden-based hyper-viscoelastic model). The paper's identity is\n\
+# checked; the figure 842 Pa, which scripts/gen_brain_bench.py quotes, was not found in what\n\
+# could be read of it: treat it as unverified.",
             ),
         };
         let poisson = "# poisson = 0.45: nearly incompressible soft tissue held at 0.45 because the P1\n\
@@ -73,6 +85,9 @@ pub enum Support {
 pub struct NewScene {
     /// The mesh file, as the scene should name it (made relative to the scene's folder).
     pub mesh_path: PathBuf,
+    /// The mesh file's units (the scene's `mesh_units`; the mesh given to [`scene_text`] is
+    /// already scaled to metres).
+    pub mesh_units: Units,
     /// The trocar (fulcrum), m.
     pub trocar: [f64; 3],
     /// Supports.
@@ -189,7 +204,7 @@ fn r(x: f64) -> String {
     if s == "-0.0" { "0.0".into() } else { s }
 }
 
-/// The scene's text for `mesh` (already loaded and validated) and `spec`, checked as any
+/// The scene's text for `mesh` (already loaded, scaled to metres and validated) and `spec`, checked as any
 /// scene is before a bank is built ([`Prepared::from_scene`]: the trocar and the home tip
 /// outside the organ, supports that hold something but not everything and leave no rigid
 /// motion, a reachable region), as `out` would be read; also the reachable nodes' count and
@@ -227,8 +242,10 @@ pub fn scene_text(
 # --scene <this file>` shows it. Every key is explained in host/scenes/liver.toml; units are SI
 # (m, rad, Pa, N, A, N m/A). The organ's bounding box: {lo} to {hi} m.
 
-# Organ mesh, relative to this file (.msh v1/v2/v4.1, .vtu, .vtk, .mesh; coordinates in m).
+# Organ mesh, relative to this file (.msh v1/v2/v4.1, .vtu, .vtk, .mesh), and the units of
+# its coordinates (mesh_units: "m", "cm" or "mm"; scaled to metres on loading).
 mesh = "{mesh_name}"
+mesh_units = "{units}"
 
 [material]
 {sources}
@@ -274,6 +291,7 @@ precision = "bfp16"
 reach_margin_m = 0.002
 "#,
         tissue = spec.tissue.name(),
+        units = spec.mesh_units.name(),
         lo = v3(lo),
         hi = v3(hi),
         fulcrum = v3(w.fulcrum),

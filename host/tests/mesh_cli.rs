@@ -124,8 +124,8 @@ fn repairs_and_units_are_said() {
     let (_, err) = text(&o);
     assert!(
         err.contains(
-            "repaired: filled 2 holes (boundary loops of 7, 5 edges) with a fan around each \
-             loop's centroid"
+            "repaired: filled 2 holes (boundary loops of 7, 5 edges) with the least-area \
+             triangulation of each loop"
         ),
         "{err}"
     );
@@ -518,4 +518,120 @@ fn the_meshed_surface_has_the_compliance_of_a_direct_mesh() {
     }
     assert!(spread < 0.01, "the direct meshes disagree: {spread}");
     assert!(errors[1] < errors[0] && errors[1] < 0.06, "{errors:?}");
+}
+
+/// `host scene new` on the default liver in metres and the same mesh in millimetres (scaled
+/// here): the units are guessed and printed, the scenes differ only in `mesh_units` and the
+/// compliance is the same; a scene that does not name the units of a millimetre mesh, a mesh
+/// no unit makes an organ of, and a unit the scene does not know, are refused.
+#[test]
+fn a_tetrahedral_mesh_in_millimetres_is_the_same_organ() {
+    let dir = tempfile::tempdir().unwrap();
+    let liver = Path::new(env!("CARGO_MANIFEST_DIR")).join("meshes/liver-1k4.msh");
+    let mesh = fem::mesh::load(&liver).unwrap();
+    let write = |name: &str, s: f64| {
+        let mut m = mesh.clone();
+        m.nodes.iter_mut().flatten().for_each(|x| *x *= s);
+        let path = dir.path().join(name);
+        let mut bytes = Vec::new();
+        m.write_msh4_ascii(&mut bytes).unwrap();
+        std::fs::write(&path, bytes).unwrap();
+        path
+    };
+    let new_scene = |mesh: &Path, out: &str, extra: &[&str]| {
+        let out = dir.path().join(out);
+        let mut args = vec![
+            "scene",
+            "new",
+            "--mesh",
+            mesh.to_str().unwrap(),
+            "--trocar",
+            "0,0,0.16",
+            "--fix-below",
+            "0.01",
+            "-o",
+            out.to_str().unwrap(),
+        ];
+        args.extend_from_slice(extra);
+        (host(&args), out)
+    };
+    let (o, m_scene) = new_scene(&write("liver_m.msh", 1.0), "m.toml", &[]);
+    let (_, err) = text(&o);
+    assert!(o.status.success(), "{err}");
+    assert!(
+        err.contains("units: m (guessed: the largest side is 0.1394, 0.139 m in m"),
+        "{err}"
+    );
+    let (o, mm_scene) = new_scene(&write("liver_mm.msh", 1000.0), "mm.toml", &[]);
+    let (_, err) = text(&o);
+    assert!(o.status.success(), "{err}");
+    assert!(
+        err.contains("liver_mm.msh: units: mm (guessed: the largest side is 139.4")
+            && err.contains("--units overrides)"),
+        "{err}"
+    );
+    let (m_text, mm_text) = (
+        std::fs::read_to_string(&m_scene).unwrap(),
+        std::fs::read_to_string(&mm_scene).unwrap(),
+    );
+    assert!(mm_text.contains("mesh_units = \"mm\"") && m_text.contains("mesh_units = \"m\""));
+    let differ: Vec<(&str, &str)> = m_text
+        .lines()
+        .zip(mm_text.lines())
+        .filter(|(a, b)| a != b)
+        .collect();
+    assert_eq!(differ.len(), 3, "{differ:?}"); // the header's name, mesh and mesh_units
+    // The same compliance, to rounding (the coordinates are scaled by 1000 and back).
+    let pm = host::bank::Prepared::load(&m_scene).unwrap();
+    let pmm = host::bank::Prepared::load(&mm_scene).unwrap();
+    assert_eq!(pm.region, pmm.region);
+    let nodes: Vec<usize> = pm.region.iter().step_by(97).copied().collect();
+    let (a, b) = (
+        pm.compliance.blocks(&nodes, None).unwrap(),
+        pmm.compliance.blocks(&nodes, None).unwrap(),
+    );
+    let mut worst: f64 = 0.0;
+    let scale = a[0][0][0][0].abs();
+    for (ra, rb) in a.iter().zip(&b) {
+        for (ba, bb) in ra.iter().zip(rb) {
+            for (x, y) in ba.iter().flatten().zip(bb.iter().flatten()) {
+                worst = worst.max((x - y).abs() / scale);
+            }
+        }
+    }
+    assert!(scale > 0.0 && worst < 1e-9, "{worst}");
+    // The same scene without mesh_units: the millimetre mesh is refused, with the fix.
+    let bare = dir.path().join("bare.toml");
+    std::fs::write(&bare, mm_text.replace("mesh_units = \"mm\"\n", "")).unwrap();
+    let e = host::bank::Prepared::load(&bare).err().unwrap();
+    assert!(
+        format!("{e:#}").contains("no organ in metres; in mm it is 0.139 m")
+            && format!("{e:#}").contains("set mesh_units = \"mm\""),
+        "{e:#}"
+    );
+    // An unknown unit: the scene's error names the line and the key.
+    let inch = dir.path().join("inch.toml");
+    std::fs::write(
+        &inch,
+        mm_text.replace("mesh_units = \"mm\"", "mesh_units = \"in\""),
+    )
+    .unwrap();
+    let e = host::scene::Scene::load(&inch).unwrap_err().to_string();
+    assert!(
+        e.contains("mesh_units") && e.contains("must be \"m\", \"cm\" or \"mm\", got \"in\""),
+        "{e}"
+    );
+    // A mesh that is no organ in any unit (a 28 km liver): refused unless --units says.
+    let (o, huge) = new_scene(&write("liver_huge.msh", 1e5), "huge.toml", &[]);
+    let (_, err) = text(&o);
+    assert!(!o.status.success() && !huge.exists());
+    assert!(
+        err.contains("liver_huge.msh: the largest side of the bounding box is")
+            && err.contains("no unit makes that an organ's 0.04 to 0.4 m")
+            && err.contains("set --units"),
+        "{err}"
+    );
+    let (o, _) = new_scene(&write("liver_cm.msh", 100.0), "cm.toml", &["--units", "cm"]);
+    let (_, err) = text(&o);
+    assert!(o.status.success() && !err.contains("guessed"), "{err}");
 }

@@ -117,7 +117,9 @@ fn holes_are_refused_with_their_loop_sizes_or_filled() {
         Err(SurfaceError::NotClosed { .. })
     ));
     let (out, notes) = check(&s, repair()).unwrap();
-    assert_eq!(out.triangles.len(), 128 - 4 - 1 + 3 + 4);
+    // No vertex added: a 4-edge loop takes 2 faces, a 3-edge loop 1.
+    assert_eq!(out.triangles.len(), 128 - 4 - 1 + 2 + 1);
+    assert_eq!(out.vertices.len(), s.vertices.len() - 1);
     assert!(notes[0].starts_with("filled 2 holes"), "{notes:?}");
     // The filled surface is closed: checking it again changes nothing.
     assert!(check(&out, CheckOptions::default()).unwrap().1.is_empty());
@@ -282,6 +284,128 @@ fn a_vertex_pushed_through_is_a_self_intersection() {
         other => panic!("{other}"),
     }
     assert!(e.to_string().starts_with("self-intersecting: "), "{e}");
+}
+
+/// Whether `s` is closed and manifold with consistently oriented faces: every directed edge
+/// once, its reverse once.
+fn closed_oriented(s: &TriSurface) -> bool {
+    let mut directed = std::collections::HashMap::new();
+    for t in &s.triangles {
+        for k in 0..3 {
+            *directed.entry((t[k], t[(k + 1) % 3])).or_insert(0) += 1;
+        }
+    }
+    directed
+        .iter()
+        .all(|(&(a, b), &n)| n == 1 && directed.get(&(b, a)) == Some(&1))
+}
+
+#[test]
+fn a_cap_cut_from_a_sphere_is_filled_by_least_area() {
+    let s = sphere(4, [0.0; 3]);
+    let whole = s.signed_volume();
+    for (z, loop_edges) in [(0.93, 20), (0.8, 32)] {
+        let mut cut = s.clone();
+        cut.triangles
+            .retain(|t| t.iter().any(|&v| cut.vertices[v][2] < z));
+        let e = check(&cut, CheckOptions::default()).unwrap_err();
+        match &e {
+            SurfaceError::NotClosed { loops, .. } => assert_eq!(loops, &[loop_edges], "{e}"),
+            other => panic!("{other}"),
+        }
+        let (out, notes) = check(&cut, repair()).unwrap();
+        assert_eq!(
+            notes[0],
+            format!(
+                "filled 1 holes (boundary loops of {loop_edges} edges) with the least-area \
+                 triangulation of each loop"
+            )
+        );
+        assert!(closed_oriented(&out));
+        assert_eq!(out.triangles.len(), cut.triangles.len() + loop_edges - 2);
+        // Passes every check unchanged (closed, manifold, oriented, no self-intersection).
+        let (again, none) = check(&out, CheckOptions::default()).unwrap();
+        assert!(none.is_empty(), "{none:?}");
+        assert_eq!(again, out);
+        // The volume lost is about the cap above the loop (of the ball: an upper bound).
+        let removed = whole - out.signed_volume();
+        let h = 1.0 - z;
+        let cap = std::f64::consts::PI * h * h * (3.0 - h) / 3.0;
+        eprintln!(
+            "cap above z = {z}: loop of {loop_edges} edges, volume {:.5} of {whole:.5} \
+             ({:+.3}%), the ball's cap {cap:.5}",
+            out.signed_volume(),
+            100.0 * (out.signed_volume() / whole - 1.0)
+        );
+        assert!(removed > 0.0 && removed < 1.3 * cap, "{removed} {cap}");
+    }
+}
+
+#[test]
+fn a_pyramid_flattened_onto_its_base_overlaps_itself() {
+    // A closed square pyramid whose apex is pushed into the base plane: its side faces lie
+    // on the base's, folded over it (coplanar faces sharing an edge or a vertex).
+    let s = TriSurface {
+        vertices: vec![
+            [0.0, 0.0, 0.0],
+            [1.0, 0.0, 0.0],
+            [1.0, 1.0, 0.0],
+            [0.0, 1.0, 0.0],
+            [0.3, 0.4, 0.0],
+        ],
+        triangles: vec![
+            [0, 2, 1],
+            [0, 3, 2],
+            [0, 1, 4],
+            [1, 2, 4],
+            [2, 3, 4],
+            [3, 0, 4],
+        ],
+    };
+    let e = check(&s, CheckOptions::default()).unwrap_err();
+    match &e {
+        SurfaceError::SelfIntersection { count, .. } => assert!(*count >= 4, "{e}"),
+        other => panic!("{other}"),
+    }
+    // With the apex above the base, it passes.
+    let mut ok = s.clone();
+    ok.vertices[4][2] = 0.5;
+    assert!(check(&ok, CheckOptions::default()).is_ok());
+}
+
+#[test]
+fn faces_sharing_a_vertex_cross() {
+    // A triangular bipyramid (every two faces share a vertex) whose north apex is pulled below
+    // the equator, beside the south half: the north faces through a pass through the south
+    // half, crossing south faces they share a vertex with.
+    let mut s = TriSurface {
+        vertices: vec![
+            [1.0, 0.0, 0.0],
+            [-0.5, 0.875, 0.0],
+            [-0.5, -0.875, 0.0],
+            [0.0, 0.0, 1.0],
+            [0.0, 0.0, -1.0],
+        ],
+        triangles: vec![
+            [0, 1, 3],
+            [1, 2, 3],
+            [2, 0, 3],
+            [1, 0, 4],
+            [2, 1, 4],
+            [0, 2, 4],
+        ],
+    };
+    assert!(check(&s, CheckOptions::default()).unwrap().1.is_empty());
+    s.vertices[3] = [-0.5, 0.0, -0.5];
+    let e = check(&s, CheckOptions::default()).unwrap_err();
+    assert_eq!(
+        e.to_string(),
+        "self-intersecting: 2 pairs of faces cross, first faces 0 and 4 at \
+         (0.0000, 0.2917, -0.1667)"
+    );
+    // Above the equator again (beside the axis): no crossing.
+    s.vertices[3] = [-0.5, 0.0, 0.5];
+    assert!(check(&s, CheckOptions::default()).is_ok());
 }
 
 #[test]

@@ -32,11 +32,15 @@ pub struct Args {
     /// Scene file (default: the embedded host/scenes/liver.toml).
     #[arg(long)]
     scene: Option<PathBuf>,
-    /// Use this organ mesh instead of the scene's (.msh v1/v2/v4.1, .vtu, .vtk, .mesh; m),
+    /// Use this organ mesh instead of the scene's (.msh v1/v2/v4.1, .vtu, .vtk, .mesh),
     /// e.g. host/meshes/liver-10k.msh. The scene's [contact] stays (a sampled scene's FEM mesh
     /// is its own organ's): for another organ, make a scene with `host scene new`.
     #[arg(long)]
     mesh: Option<PathBuf>,
+    /// Units of --mesh's coordinates; default: guessed from its bounding box (an organ is 4 to
+    /// 40 cm across) and printed, refused when no unit fits.
+    #[arg(long, value_enum, requires = "mesh")]
+    units: Option<host::meshing::Units>,
     /// Telemetry source: `virtual` (the firmware loop on this PC), `sil` (the QEMU image) or
     /// `serial:<port>` (a device).
     #[arg(long, default_value = "virtual")]
@@ -90,7 +94,15 @@ pub fn run(args: Args) -> Result<()> {
         if !m.is_file() {
             bail!("--mesh {}: no such file", m.display());
         }
+        let mesh = fem::mesh::read(m)?;
+        let side = host::meshing::largest_side(mesh.bounding_box());
+        let (units, note) =
+            host::meshing::resolve_units(args.units, side, &m.display().to_string(), "--units")?;
+        if let Some(n) = note {
+            eprintln!("{}: {n}", m.display());
+        }
         scene.mesh = MeshSource::File(m.clone());
+        scene.mesh_units = Some(units);
     }
     let t = Instant::now();
     eprintln!(

@@ -10,16 +10,8 @@ use host::scene::Scene;
 use std::path::PathBuf;
 use std::time::Instant;
 
-/// Length units of the surface file.
-#[derive(clap::ValueEnum, Clone, Copy, Debug)]
-pub enum UnitsArg {
-    /// Metres.
-    M,
-    /// Centimetres.
-    Cm,
-    /// Millimetres.
-    Mm,
-}
+/// Largest `--fill-holes`.
+const MAX_FILL_HOLES: usize = 1000;
 
 /// Arguments of `host mesh`.
 #[derive(clap::Args, Debug)]
@@ -39,7 +31,7 @@ pub struct Args {
     /// Units of the surface's coordinates; default: guessed from the bounding box (an organ is
     /// 4 to 40 cm across) and printed, refused when no unit fits.
     #[arg(long, value_enum)]
-    units: Option<UnitsArg>,
+    units: Option<Units>,
     /// Element size in metres (away from the reach with --refine-near); default: the largest
     /// side of the bounding box / 15.
     #[arg(long, value_name = "M")]
@@ -59,7 +51,8 @@ pub struct Args {
     /// --fill-holes edges.
     #[arg(long)]
     repair: bool,
-    /// Largest hole --repair fills, in boundary edges.
+    /// Largest hole --repair fills, in boundary edges (at most 1000): by the least-area
+    /// triangulation of its boundary loop.
     #[arg(long, default_value_t = 32, value_name = "N")]
     fill_holes: usize,
     /// Vertices closer than this fraction of the bounding-box diagonal are duplicates.
@@ -83,24 +76,24 @@ pub fn run(a: Args) -> Result<()> {
         surface.vertices.len(),
         surface.triangles.len()
     );
-    let (lo, hi) = surface.bounding_box();
-    let side = (0..3).map(|k| hi[k] - lo[k]).fold(0.0, f64::max);
-    let units = match a.units {
-        Some(UnitsArg::M) => Units::M,
-        Some(UnitsArg::Cm) => Units::Cm,
-        Some(UnitsArg::Mm) => Units::Mm,
-        None => {
-            let u = meshing::guess_units(side).map_err(|e| anyhow::anyhow!("{name}: {e}"))?;
-            eprintln!(
-                "units: {} (guessed: the largest side is {side:.4}, {:.3} m in {}; --units \
-                 overrides)",
-                u.name(),
-                side * u.to_metres(),
-                u.name()
-            );
-            u
-        }
-    };
+    let (units, note) = meshing::resolve_units(
+        a.units,
+        meshing::largest_side(surface.bounding_box()),
+        &name,
+        "--units",
+    )?;
+    if let Some(n) = note {
+        eprintln!("{n}");
+    }
+    // The least-area filling is O(n^3) in time and O(n^2) in memory: 1,000 edges take about
+    // 10^8 steps and 16 MB.
+    if a.fill_holes > MAX_FILL_HOLES {
+        bail!(
+            "--fill-holes {}: at most {MAX_FILL_HOLES} edges (a larger hole is no small defect: \
+             close it where the surface was made)",
+            a.fill_holes
+        );
+    }
     if !(a.merge_tolerance >= 0.0 && a.merge_tolerance < 0.01) {
         bail!(
             "--merge-tolerance {}: must be in [0, 0.01)",
@@ -120,8 +113,7 @@ pub fn run(a: Args) -> Result<()> {
     }
     let surface_m = checked.scaled(units.to_metres());
     // The default size is the kept surface's (--largest may have dropped a far shell).
-    let (lo, hi) = surface_m.bounding_box();
-    let side_m = (0..3).map(|k| hi[k] - lo[k]).fold(0.0, f64::max);
+    let side_m = meshing::largest_side(surface_m.bounding_box());
     let volume = surface_m.signed_volume();
     eprintln!(
         "surface: closed, {} faces, volume {:.4e} m^3 ({:.1} cm^3), largest side {:.4} m",

@@ -1,6 +1,7 @@
 //! `host scene new`: a complete, commented scene for a tetrahedral organ mesh.
 
 use anyhow::{Context, Result, bail};
+use host::meshing::Units;
 use host::scene_new::{NewScene, Support, Tissue, relative_to, scene_text};
 use std::path::PathBuf;
 
@@ -18,9 +19,10 @@ pub enum SceneCmd {
 pub enum TissueArg {
     /// Liver parenchyma (the default scene's 3 kPa).
     Liver,
-    /// Kidney (a placeholder figure, no checked source).
+    /// Kidney (a placeholder figure: no published source found).
     Kidney,
-    /// Brain (Miller and Chinzei 2002's small-strain modulus, as the project quotes it).
+    /// Brain (3 x 842 Pa, the shear parameter attributed to Miller and Chinzei 2002; the
+    /// figure is not verified against the paper).
     Brain,
 }
 
@@ -28,9 +30,14 @@ pub enum TissueArg {
 #[derive(clap::Args, Debug)]
 #[command(allow_negative_numbers = true)]
 pub struct NewArgs {
-    /// Tetrahedral mesh (.msh, .vtu, .vtk, .mesh), metres: e.g. the output of `host mesh`.
+    /// Tetrahedral mesh (.msh v1/v2/v4.1, .vtu, .vtk, .mesh): e.g. the output of `host mesh`.
     #[arg(long)]
     mesh: PathBuf,
+    /// Units of the mesh's coordinates (written to the scene as mesh_units); default: guessed
+    /// from the bounding box (an organ is 4 to 40 cm across) and printed, refused when no unit
+    /// fits. The trocar and supports are in metres whatever the mesh's units.
+    #[arg(long, value_enum)]
+    units: Option<Units>,
     /// The trocar (the gimbal's fulcrum), m: `X,Y,Z`, outside the organ.
     #[arg(long, value_name = "X,Y,Z")]
     trocar: String,
@@ -76,8 +83,7 @@ fn numbers<const N: usize>(s: &str, what: &str) -> Result<[f64; N]> {
 }
 
 fn new(a: NewArgs) -> Result<()> {
-    let (mesh, ignored) = fem::mesh::read_counted(&a.mesh)?;
-    fem::mesh::validate(&mesh).map_err(|e| e.with_path(&a.mesh))?;
+    let (mesh, ignored, units) = host::meshing::load_mesh_in_units(&a.mesh, a.units, "--units")?;
     let skipped = if ignored.total() > 0 {
         format!(" (skipped: {ignored})")
     } else {
@@ -107,6 +113,7 @@ fn new(a: NewArgs) -> Result<()> {
         .unwrap_or(std::path::Path::new("."));
     let spec = NewScene {
         mesh_path: relative_to(&a.mesh, dir),
+        mesh_units: units,
         trocar,
         support,
         tissue,

@@ -99,6 +99,7 @@ pub fn measure(
     drop(file);
     let mut s = scene.clone();
     s.mesh = MeshSource::File(path);
+    s.mesh_units = Some(crate::meshing::Units::M);
     let q = Prepared::from_scene(s).with_context(|| format!("the scene on {name}"))?;
     let t = Instant::now();
     let bank = q.build_bank(None)?;

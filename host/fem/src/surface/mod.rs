@@ -7,9 +7,12 @@
 //! id counts triangles).
 
 use crate::vec3::{add, cross, dot, norm, scale, sub};
+use predicates::{orient2d, orient3d};
+use std::cmp::Ordering;
 use std::collections::{HashMap, HashSet};
 use std::fmt;
 
+mod predicates;
 mod read;
 
 pub use read::{SurfaceFormat, read_surface, read_surface_bytes};
@@ -294,7 +297,8 @@ impl fmt::Display for Shell {
 #[derive(Debug, Clone, Copy)]
 pub struct CheckOptions {
     /// Safe repairs: merge duplicate vertices, drop faces that use a vertex twice, make the
-    /// orientation consistent, fill holes of at most `fill_holes` edges.
+    /// orientation consistent, fill holes of at most `fill_holes` edges (O(n^3) time and
+    /// O(n^2) memory in a hole's edges).
     pub repair: bool,
     /// Vertices closer than this fraction of the bounding-box diagonal are duplicates.
     pub merge_tolerance: f64,
@@ -342,9 +346,12 @@ impl Sets {
 
 /// Check that `s` bounds a volume, repairing what `opts` allows; returns the surface (faces
 /// outward, unused vertices dropped) and one line per change made. The checks run in this
-/// order: vertex ids and finite coordinates, duplicate vertices, degenerate faces, non-manifold edges, non-manifold vertices,
-/// shells, holes, orientation, self-intersections. A surface whose faces all point
-/// inward is flipped whatever `opts` say (that is a convention, not a defect), and said.
+/// order: vertex ids and finite coordinates, duplicate vertices, degenerate faces,
+/// non-manifold edges, non-manifold vertices, shells, holes (filled by the least-area
+/// triangulation of each boundary loop), orientation, self-intersections (every pair of faces
+/// whose boxes overlap, with exact orientation predicates: faces that share a vertex or an
+/// edge and coplanar overlaps included). A surface whose faces all point inward is flipped
+/// whatever `opts` say (that is a convention, not a defect), and said.
 pub fn check(
     s: &TriSurface,
     opts: CheckOptions,
@@ -681,20 +688,33 @@ fn holes(
             hint,
         });
     }
-    // A fan around the loop's centroid; each boundary edge a -> b gets the face (b, a, c).
+    let mut existing: HashSet<[usize; 2]> = edge_faces(s).into_keys().collect();
     for lp in &loops {
-        let mut c = [0.0; 3];
-        for e in lp {
-            c = add(c, s.vertices[e[0]]);
-        }
-        s.vertices.push(scale(c, 1.0 / lp.len() as f64));
-        let c = s.vertices.len() - 1;
-        for &[a, b] in lp {
-            s.triangles.push([b, a, c]);
+        let ring: Vec<usize> = lp.iter().map(|e| e[0]).collect();
+        let Some(faces) = fill_loop(&s.vertices, &ring, &existing) else {
+            return Err(SurfaceError::NotClosed {
+                loops: sizes.clone(),
+                first_vertex: ring[0],
+                location: at(s.vertices[ring[0]]),
+                hint: format!(
+                    "; the hole of {} edges at vertex {} cannot be filled without an edge the \
+                     surface already has (its boundary touches itself): fill it by hand",
+                    ring.len(),
+                    ring[0]
+                ),
+            });
+        };
+        for t in faces {
+            for k in 0..3 {
+                let (a, b) = (t[k], t[(k + 1) % 3]);
+                existing.insert([a.min(b), a.max(b)]);
+            }
+            s.triangles.push(t);
         }
     }
     notes.push(format!(
-        "filled {} holes (boundary loops of {} edges) with a fan around each loop's centroid",
+        "filled {} holes (boundary loops of {} edges) with the least-area triangulation of each \
+         loop",
         loops.len(),
         sizes
             .iter()
@@ -703,6 +723,76 @@ fn holes(
             .join(", ")
     ));
     Ok(())
+}
+
+/// The triangulation of the boundary loop `ring` (vertex ids in the direction of its faces'
+/// boundary edges: edge `ring[i] -> ring[i + 1]`) of least total area, by dynamic programming
+/// over its sub-polygons (Barequet and Sharir 1995; Liepa 2003 without the dihedral term),
+/// O(n^3) time and O(n^2) memory; no vertex is added. The faces run against the loop, so they
+/// agree with the faces around the hole. A triangle that would use a vertex twice, or a
+/// diagonal that is an edge of `existing` or of the ring itself (it would be non-manifold), is
+/// not allowed; `None` when no triangulation avoids them.
+fn fill_loop(
+    v: &[[f64; 3]],
+    ring: &[usize],
+    existing: &HashSet<[usize; 2]>,
+) -> Option<Vec<[usize; 3]>> {
+    let n = ring.len();
+    if n < 3 {
+        return None;
+    }
+    let key = |a: usize, b: usize| [a.min(b), a.max(b)];
+    // A diagonal i - j (not a side of the loop) is allowed when it is no edge yet.
+    let allowed = |i: usize, j: usize| {
+        j == i + 1
+            || (i == 0 && j == n - 1)
+            || (ring[i] != ring[j] && !existing.contains(&key(ring[i], ring[j])))
+    };
+    let area = |i: usize, m: usize, j: usize| {
+        let [a, b, c] = [ring[i], ring[m], ring[j]].map(|x| v[x]);
+        0.5 * norm(cross(sub(b, a), sub(c, a)))
+    };
+    // best[i][j]: least area of the polygon ring[i..=j] closed by the diagonal i - j, with
+    // the middle vertex of its triangle on i - j in split[i][j].
+    let mut best = vec![vec![f64::INFINITY; n]; n];
+    let mut split = vec![vec![usize::MAX; n]; n];
+    for i in 0..n - 1 {
+        best[i][i + 1] = 0.0;
+    }
+    for len in 2..n {
+        for i in 0..n - len {
+            let j = i + len;
+            if !allowed(i, j) {
+                continue;
+            }
+            for m in i + 1..j {
+                let (ri, rm, rj) = (ring[i], ring[m], ring[j]);
+                if ri == rm || rm == rj {
+                    continue;
+                }
+                let w = best[i][m] + best[m][j] + area(i, m, j);
+                if w < best[i][j] {
+                    best[i][j] = w;
+                    split[i][j] = m;
+                }
+            }
+        }
+    }
+    if !best[0][n - 1].is_finite() {
+        return None;
+    }
+    let mut faces = Vec::with_capacity(n - 2);
+    let mut stack = vec![(0, n - 1)];
+    while let Some((i, j)) = stack.pop() {
+        if j <= i + 1 {
+            continue;
+        }
+        let m = split[i][j];
+        faces.push([ring[j], ring[m], ring[i]]);
+        stack.push((i, m));
+        stack.push((m, j));
+    }
+    Some(faces)
 }
 
 fn non_manifold_vertices(s: &TriSurface) -> Result<(), SurfaceError> {
@@ -828,24 +918,139 @@ fn orient(
     Ok(())
 }
 
-/// Whether segment `p q` crosses the interior of triangle `a b c`.
-fn segment_hits_triangle(p: [f64; 3], q: [f64; 3], a: [f64; 3], b: [f64; 3], c: [f64; 3]) -> bool {
-    let d = sub(q, p);
-    let e1 = sub(b, a);
-    let e2 = sub(c, a);
-    let h = cross(d, e2);
-    let det = dot(e1, h);
-    let scale_ = norm(d) * norm(e1) * norm(e2);
-    if det.abs() <= 1e-12 * scale_ {
-        return false; // parallel or coplanar
+/// Signs as -1, 0, 1.
+fn sgn(o: Ordering) -> i8 {
+    o as i8
+}
+
+/// Whether the convex polygons `p` and `q` (a triangle, or a segment given as two points) in
+/// one plane overlap: they do unless a line through an edge of one (a segment's own line
+/// counts, with either side) leaves the other on its far side. With `touch`, sharing only
+/// boundary points counts as overlapping (the far side is then strict), else it does not.
+/// Exact ([`orient2d`]).
+fn overlap_2d(p: &[[f64; 2]], q: &[[f64; 2]], touch: bool) -> bool {
+    let separated_by = |a: &[[f64; 2]], b: &[[f64; 2]]| {
+        (0..a.len()).any(|i| {
+            let (u, v) = (a[i], a[(i + 1) % a.len()]);
+            // The side of the edge's line that `a` occupies (a segment: both).
+            let sides: Vec<i8> = match a.len() {
+                2 => vec![1, -1],
+                _ => vec![sgn(orient2d(u, v, a[(i + 2) % a.len()]))],
+            };
+            sides.iter().any(|&side| {
+                b.iter().all(|&w| {
+                    let o = sgn(orient2d(u, v, w)) * side;
+                    if touch { o < 0 } else { o <= 0 }
+                })
+            })
+        })
+    };
+    !separated_by(p, q) && !separated_by(q, p)
+}
+
+/// `x` with the coordinate `drop` left out.
+fn project(x: [f64; 3], drop: usize) -> [f64; 2] {
+    match drop {
+        0 => [x[1], x[2]],
+        1 => [x[2], x[0]],
+        _ => [x[0], x[1]],
     }
-    let inv = 1.0 / det;
-    let sv = sub(p, a);
-    let u = dot(sv, h) * inv;
-    let qv = cross(sv, e1);
-    let v = dot(d, qv) * inv;
-    let t = dot(e2, qv) * inv;
-    u > 0.0 && v > 0.0 && u + v < 1.0 && t > 0.0 && t < 1.0
+}
+
+/// The axis to drop to see the plane of `t` without collapsing it: its normal's largest
+/// component.
+fn drop_axis(t: &[[f64; 3]; 3]) -> usize {
+    let n = cross(sub(t[1], t[0]), sub(t[2], t[0])).map(f64::abs);
+    if n[0] >= n[1] && n[0] >= n[2] {
+        0
+    } else if n[1] >= n[2] {
+        1
+    } else {
+        2
+    }
+}
+
+/// Whether the faces `tf` and `tg` (vertex ids into `v`, each of positive area) intersect
+/// anywhere but where their shared vertices or shared edge make them meet. Exact in its
+/// decisions ([`orient3d`], [`orient2d`]): coplanar faces overlap when their interiors do
+/// (or, sharing no vertex, when they touch); faces sharing an edge can meet elsewhere only
+/// when coplanar and folded onto each other; faces sharing one vertex `s` meet elsewhere
+/// when each crosses the other's plane along the rays from `s` in the same direction;
+/// faces sharing nothing meet when an edge of one meets the other (closed) face.
+fn faces_intersect(v: &[[f64; 3]], tf: [usize; 3], tg: [usize; 3]) -> bool {
+    let pf = tf.map(|i| v[i]);
+    let pg = tg.map(|i| v[i]);
+    // Signs of g's vertices against f's plane, and of f's against g's.
+    let sg = pg.map(|x| sgn(orient3d(pf[0], pf[1], pf[2], x)));
+    let sf = pf.map(|x| sgn(orient3d(pg[0], pg[1], pg[2], x)));
+    let shared = tf.iter().filter(|i| tg.contains(i)).count();
+    if sg == [0; 3] {
+        let k = drop_axis(&pf);
+        let qf = pf.map(|x| project(x, k));
+        let qg = pg.map(|x| project(x, k));
+        return overlap_2d(&qf, &qg, shared == 0);
+    }
+    match shared {
+        // Not coplanar: they meet on the shared edge's line only.
+        2 => false,
+        1 => {
+            // f = (c, a, b) and g = (c, d, e) with c the shared vertex. Each face meets the
+            // other's plane along a ray from c (or at c only, when its other two vertices lie
+            // strictly on one side), towards the point of its opposite edge on that plane; the
+            // faces meet beyond c when both rays exist and point the same way (they lie on
+            // the line where the planes cross: the dot product's sign is well conditioned).
+            let c = tf.iter().copied().find(|i| tg.contains(i)).unwrap_or(tf[0]);
+            let rot = |t: [usize; 3], s: [i8; 3]| {
+                let k = t.iter().position(|&x| x == c).unwrap_or(0);
+                let (i, j) = ((k + 1) % 3, (k + 2) % 3);
+                ([t[k], t[i], t[j]], [s[i], s[j]])
+            };
+            let (f, sf) = rot(tf, sf);
+            let (g, sg) = rot(tg, sg);
+            let ray = |t: [usize; 3], s: [i8; 2], other: [usize; 3]| {
+                let (a, b) = (sub(v[t[1]], v[t[0]]), sub(v[t[2]], v[t[0]]));
+                match s {
+                    [0, _] => Some(a),
+                    [_, 0] => Some(b),
+                    [x, y] if x == y => None,
+                    _ => {
+                        // The zero of the signed distance along a -> b.
+                        let n = cross(sub(v[other[1]], v[other[0]]), sub(v[other[2]], v[other[0]]));
+                        let (da, db) = (dot(n, a), dot(n, b));
+                        Some(add(scale(a, db.abs()), scale(b, da.abs())))
+                    }
+                }
+            };
+            match (ray(f, sf, g), ray(g, sg, f)) {
+                (Some(rf), Some(rg)) => dot(rf, rg) > 0.0,
+                _ => false,
+            }
+        }
+        _ => {
+            // One face wholly on one side of the other's plane: they do not meet.
+            let one_side = |s: [i8; 3]| s.iter().all(|&x| x > 0) || s.iter().all(|&x| x < 0);
+            if one_side(sf) || one_side(sg) {
+                return false;
+            }
+            let edge_hits = |e: [[f64; 3]; 3], se: [i8; 3], t: [[f64; 3]; 3]| {
+                (0..3).any(|k| {
+                    let (p, q) = (e[k], e[(k + 1) % 3]);
+                    let (sp, sq) = (se[k], se[(k + 1) % 3]);
+                    if sp == 0 && sq == 0 {
+                        let d = drop_axis(&t);
+                        let seg = [project(p, d), project(q, d)];
+                        return overlap_2d(&seg, &t.map(|x| project(x, d)), true);
+                    }
+                    if sp * sq > 0 {
+                        return false;
+                    }
+                    let o = [0, 1, 2].map(|i| sgn(orient3d(p, q, t[i], t[(i + 1) % 3])));
+                    o.iter().all(|&x| x >= 0) || o.iter().all(|&x| x <= 0)
+                })
+            };
+            edge_hits(pf, sf, pg) || edge_hits(pg, sg, pf)
+        }
+    }
 }
 
 fn self_intersections(s: &TriSurface) -> Result<(), SurfaceError> {
@@ -891,10 +1096,7 @@ fn self_intersections(s: &TriSurface) -> Result<(), SurfaceError> {
         for (x, &f) in list.iter().enumerate() {
             for &g in &list[x + 1..] {
                 let (f, g) = (f.min(g), f.max(g));
-                let tf = s.triangles[f];
-                let tg = s.triangles[g];
-                // Faces sharing a vertex are not tested (they meet there by construction).
-                if tf.iter().any(|v| tg.contains(v)) || !seen.insert((f, g)) {
+                if !seen.insert((f, g)) {
                     continue;
                 }
                 let (lf, hf) = boxes[f];
@@ -902,12 +1104,7 @@ fn self_intersections(s: &TriSurface) -> Result<(), SurfaceError> {
                 if (0..3).any(|a| lf[a] > hg[a] || lg[a] > hf[a]) {
                     continue;
                 }
-                let pf = tf.map(|v| s.vertices[v]);
-                let pg = tg.map(|v| s.vertices[v]);
-                let cross_ = |e: &[[f64; 3]; 3], t: &[[f64; 3]; 3]| {
-                    (0..3).any(|k| segment_hits_triangle(e[k], e[(k + 1) % 3], t[0], t[1], t[2]))
-                };
-                if cross_(&pf, &pg) || cross_(&pg, &pf) {
+                if faces_intersect(&s.vertices, s.triangles[f], s.triangles[g]) {
                     hits.push((f, g));
                 }
             }
@@ -950,4 +1147,101 @@ fn drop_unused(s: &mut TriSurface, notes: &mut Vec<String>) {
         notes.push(format!("dropped {dropped} vertices that no face uses"));
     }
     s.vertices = vertices;
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// `faces_intersect` on faces 0 1 2 and `g` of `v`.
+    fn meet(v: &[[f64; 3]], g: [usize; 3]) -> bool {
+        let a = faces_intersect(v, [0, 1, 2], g);
+        // The answer does not depend on the order of the faces nor on their orientation.
+        assert_eq!(a, faces_intersect(v, g, [0, 1, 2]));
+        assert_eq!(a, faces_intersect(v, [0, 2, 1], [g[0], g[2], g[1]]));
+        a
+    }
+
+    #[test]
+    fn faces_sharing_one_vertex() {
+        // f in z = 0 around +x from the origin; g's wedge in y = 0.
+        let f = [[0.0, 0.0, 0.0], [2.0, -1.0, 0.0], [2.0, 1.0, 0.0]];
+        let case = |d: [f64; 3], e: [f64; 3]| {
+            let v = [f[0], f[1], f[2], d, e];
+            meet(&v, [0, 3, 4])
+        };
+        // g around +x too: they cross along the x axis from the origin to x = 1.
+        assert!(case([1.0, 0.0, -1.0], [1.0, 0.0, 1.0]));
+        // g around -x: they touch at the shared vertex only.
+        assert!(!case([-1.0, 0.0, -1.0], [-1.0, 0.0, 1.0]));
+        // g wholly above f's plane.
+        assert!(!case([1.0, 0.0, 1.0], [1.0, 1.0, 1.0]));
+        // g's edge from the origin lies in f's plane inside f's wedge.
+        assert!(case([1.0, 0.0, 0.0], [1.0, 0.0, 1.0]));
+        // ... or outside it.
+        assert!(!case([-1.0, 0.5, 0.0], [1.0, 0.0, 1.0]));
+        // Nearly coplanar and crossing: g tilted by 1e-12 about the x axis, wedge inside f's.
+        assert!(case([1.0, -0.1, -1e-12], [1.0, 0.1, 1e-12]));
+    }
+
+    #[test]
+    fn coplanar_faces() {
+        let base = [[0.0, 0.0, 0.0], [2.0, 0.0, 0.0], [0.0, 2.0, 0.0]];
+        let with = |extra: &[[f64; 3]]| {
+            let mut v = base.to_vec();
+            v.extend_from_slice(extra);
+            v
+        };
+        // Sharing nothing: overlapping, apart, touching at a point.
+        let v = with(&[[0.5, 0.5, 0.0], [3.0, 0.5, 0.0], [0.5, 3.0, 0.0]]);
+        assert!(meet(&v, [3, 4, 5]));
+        let v = with(&[[3.0, 3.0, 0.0], [5.0, 3.0, 0.0], [3.0, 5.0, 0.0]]);
+        assert!(!meet(&v, [3, 4, 5]));
+        let v = with(&[[1.0, 1.0, 0.0], [3.0, 1.0, 0.0], [3.0, 3.0, 0.0]]);
+        assert!(meet(&v, [3, 4, 5]));
+        // Sharing an edge: folded onto f, or unfolded.
+        let v = with(&[[1.0, 0.5, 0.0]]);
+        assert!(meet(&v, [1, 0, 3]));
+        let v = with(&[[1.0, -0.5, 0.0]]);
+        assert!(!meet(&v, [1, 0, 3]));
+        // Sharing a vertex: wedges overlapping, or apart.
+        let v = with(&[[3.0, 0.5, 0.0], [0.5, 3.0, 0.0]]);
+        assert!(meet(&v, [0, 3, 4]));
+        let v = with(&[[-1.0, 0.0, 0.0], [-1.0, -1.0, 0.0]]);
+        assert!(!meet(&v, [0, 3, 4]));
+        // Off the axis planes: a tilted plane through exactly representable points.
+        let p = |x: f64, y: f64| [x, y, 0.5 * x + 0.25 * y];
+        let v = vec![
+            p(0.0, 0.0),
+            p(2.0, 0.0),
+            p(0.0, 2.0),
+            p(0.5, 0.5),
+            p(3.0, 0.5),
+            p(0.5, 3.0),
+        ];
+        assert!(meet(&v, [3, 4, 5]));
+    }
+
+    #[test]
+    fn faces_sharing_nothing_or_an_edge() {
+        let f = [[0.0, 0.0, 0.0], [2.0, 0.0, 0.0], [0.0, 2.0, 0.0]];
+        let with = |extra: &[[f64; 3]]| {
+            let mut v = f.to_vec();
+            v.extend_from_slice(extra);
+            v
+        };
+        // A face piercing f, one passing beside it, one touching it with a vertex.
+        let v = with(&[[0.5, 0.5, -1.0], [0.5, 0.5, 1.0], [0.6, 0.4, 1.0]]);
+        assert!(meet(&v, [3, 4, 5]));
+        let v = with(&[[3.0, 3.0, -1.0], [3.0, 3.0, 1.0], [3.1, 2.9, 1.0]]);
+        assert!(!meet(&v, [3, 4, 5]));
+        let v = with(&[[0.5, 0.5, 0.0], [0.5, 0.5, 1.0], [0.6, 0.4, 1.0]]);
+        assert!(meet(&v, [3, 4, 5]));
+        // An edge of g lying in f's plane across f.
+        let v = with(&[[-1.0, 0.5, 0.0], [3.0, 0.5, 0.0], [1.0, 0.5, 1.0]]);
+        assert!(meet(&v, [3, 4, 5]));
+        // Sharing an edge at a dihedral angle: they meet on the edge only.
+        let v = with(&[[1.0, -0.5, 1.0]]);
+        assert!(!meet(&v, [1, 0, 3]));
+    }
 }
