@@ -313,15 +313,13 @@ fn relaxation_cmd(a: RelaxationArgs) -> Result<()> {
                 .collect(),
         ));
     }
-    let file_names = a
-        .csv
-        .iter()
-        .map(|p| {
-            p.file_name()
-                .map_or(String::new(), |n| n.to_string_lossy().into_owned())
-        })
-        .collect::<Vec<_>>()
-        .join(", ");
+    // One file by its name; several by their count (the legend names their ramps).
+    let file_names = match &a.csv[..] {
+        [one] => one
+            .file_name()
+            .map_or(String::new(), |n| n.to_string_lossy().into_owned()),
+        several => format!("{} tests", several.len()),
+    };
     let spec = PlotSpec {
         title: format!(
             "QLV relaxation: {file_names} (g_inf {:.3}, {} term(s), RMS {:.3e} N)",
