@@ -13,7 +13,7 @@
 //! firmware's recursion), with the contact's unilateral rule of `firmware::relax` (no force
 //! without an elastic one, no pull against it). The worst difference over every tick and axis
 //! is reported relative to the peak elastic force (the SIL test `press_hold_relaxes_as_the_
-//! scenes_qlv_law` holds it to 1e-4).
+//! scenes_qlv_law` holds it to 1e-4). The elastic force itself is plotted beside them.
 //!
 //! **Instructions per tick against terms.** The same script on the same bank with 0 (the
 //! relaxation section left out), 1, 3 and 4 terms (the relaxation record rewritten in place
@@ -171,8 +171,8 @@ impl TermCost {
 pub struct Measured {
     /// Seconds of `press-hold` run.
     pub seconds: f64,
-    /// Per tick: time (s), rendered |F| and analytic |F| (N).
-    pub trace: Vec<(f64, f64, f64)>,
+    /// Per tick: time (s), rendered |F|, analytic |F| and the elastic |Q_e| (N).
+    pub trace: Vec<(f64, f64, f64, f64)>,
     /// The elastic force's largest magnitude, N.
     pub peak: f64,
     /// The worst |rendered - analytic| over every tick and axis, relative to `peak`.
@@ -262,7 +262,7 @@ pub fn measure(
         for i in 0..3 {
             worst = worst.max((got[i] - want[i]).abs() / peak);
         }
-        trace.push((k as f64 * DT_S, norm(got), norm(*want)));
+        trace.push((k as f64 * DT_S, norm(got), norm(*want), norm(q[k])));
     }
     let g_inf = 1.0 - law.terms().map(|(g, _)| f64::from(g)).sum::<f64>();
     Ok(Measured {
@@ -331,7 +331,7 @@ fn qlv_response(q: &[[f64; 3]], law: &Relaxation) -> Vec<[f64; 3]> {
 
 /// The two knobs (force against time; instructions against terms) and the hard-case row.
 pub fn section(m: &Measured) -> (Vec<Knob>, HardCase) {
-    let sampled = |pick: fn(&(f64, f64, f64)) -> f64| -> Vec<Point> {
+    let sampled = |pick: fn(&(f64, f64, f64, f64)) -> f64| -> Vec<Point> {
         m.trace
             .iter()
             .step_by(PLOT_EVERY)
@@ -364,6 +364,10 @@ pub fn section(m: &Measured) -> (Vec<Knob>, HardCase) {
             Series {
                 name: "analytic QLV (scene's G(t) on the elastic force, f64)".into(),
                 points: sampled(|p| p.2),
+            },
+            Series {
+                name: "elastic force of the same motion (G = 1, liver.toml's bank)".into(),
+                points: sampled(|p| p.3),
             },
         ],
         chosen: None,
