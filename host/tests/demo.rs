@@ -523,6 +523,24 @@ fn viewer_renders_the_liver_and_the_press_deforms_it_under_the_tool() {
     });
     let force = status(&addr)["frame"]["tool_force_n"].clone();
     let (after, report) = shot("after", true);
+    // The HUD's force trace holds the frames it received, and its newest point is the
+    // settled force the frames carry (the same |F|, to f32).
+    let trace = &report["trace"];
+    let magnitude = force
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| v.as_f64().unwrap().powi(2))
+        .sum::<f64>()
+        .sqrt();
+    assert!(trace["points"].as_u64() >= Some(3), "{report}");
+    assert!(trace["span_s"].as_f64().unwrap() > 0.0, "{report}");
+    let last = trace["last_n"].as_f64().unwrap();
+    assert!(
+        magnitude > 0.0 && (last / magnitude - 1.0).abs() < 0.05,
+        "trace's newest |F| {last} N, the frame's {magnitude} N: {report}"
+    );
+    assert!(trace["max_n"].as_f64().unwrap() >= last);
     let tip = &report["tip_px"];
     let (tx, ty) = (tip[0].as_f64().unwrap(), tip[1].as_f64().unwrap());
 
@@ -532,8 +550,9 @@ fn viewer_renders_the_liver_and_the_press_deforms_it_under_the_tool() {
     // half the largest change, the indented, most displaced surface.
     assert_eq!((after.width, after.height), (before.width, before.height));
     let change = |a: &[u8; 3], b: &[u8; 3]| (0..3).map(|c| a[c].abs_diff(b[c])).max().unwrap_or(0);
-    // The HUD text (force, tick rate) changes too: only count the pixels below it.
-    let below_hud = |i: usize| i % before.width > 460 || i / before.width > 170;
+    // The HUD (force, tick rate, the force trace) changes too: only count the pixels beside or
+    // below it (it ends about 250 px down).
+    let below_hud = |i: usize| i % before.width > 460 || i / before.width > 270;
     let pairs = || {
         before
             .pixels

@@ -41,9 +41,11 @@ pub enum Calibrate {
 #[derive(clap::Args, Debug)]
 pub struct RelaxationArgs {
     /// Bench CSV: a header row, then one row per sample (times increasing); `#` lines are
-    /// comments.
-    #[arg(long)]
-    csv: PathBuf,
+    /// comments. Repeat it for several tests (e.g. ramps at several speeds): one G(t) and one
+    /// instantaneous law are fitted to all of them together, each test's own ramp in its
+    /// hereditary integral, and the rate dependence the law cannot explain is reported.
+    #[arg(long, required = true)]
+    csv: Vec<PathBuf>,
     /// Column of the time, s.
     #[arg(long, default_value = "t_s")]
     t: String,
@@ -61,8 +63,8 @@ pub struct RelaxationArgs {
     /// and fit, residuals below).
     #[arg(long, default_value = "calibration-relaxation")]
     plot: PathBuf,
-    /// Print one JSON object (g_inf, g, tau_s, the elastic law, residuals) instead of the
-    /// table.
+    /// Print one JSON object (g_inf, g, tau_s, the elastic law, residuals, per test in
+    /// `tests`, `warnings`) instead of the table.
     #[arg(long)]
     json: bool,
 }
@@ -203,6 +205,9 @@ struct RelaxationReport<'a> {
     g_inf: f64,
     g: &'a [f64],
     tau_s: &'a [f64],
+    /// Linearised standard errors of g and tau_s.
+    g_se: &'a [f64],
+    tau_s_se: &'a [f64],
     /// `Q_e(x) = sum_j c_j (x / x_max)^j`, j = 1.., N.
     elastic_coeffs_n: &'a [f64],
     x_max_m: f64,
@@ -210,36 +215,114 @@ struct RelaxationReport<'a> {
     elastic_only_rms_n: f64,
     noise_n: f64,
     survey: Vec<[f64; 2]>,
+    /// Rows of all tests.
     rows: usize,
+    tests: Vec<RelaxationTestReport<'a>>,
+    /// Slope of the relative peak-force error per decade of ramp speed (null for one speed).
+    peak_error_per_decade: Option<f64>,
+    warnings: &'a [String],
     scene: Option<&'a Path>,
     plot: [PathBuf; 2],
 }
 
+/// One test of `RelaxationReport`.
+#[derive(serde::Serialize)]
+struct RelaxationTestReport<'a> {
+    csv: &'a Path,
+    rows: usize,
+    ramp_s: f64,
+    ramp_speed_m_s: f64,
+    rms_n: f64,
+    noise_n: f64,
+    rms_over_noise: f64,
+    unexplained_n: f64,
+    peak_force_n: f64,
+    peak_error_n: f64,
+    peak_error_se_n: f64,
+}
+
 fn relaxation_cmd(a: RelaxationArgs) -> Result<()> {
-    use host::calibrate::relaxation;
-    let table = csv::read(&a.csv, &[&a.t, &a.x, &a.f])?;
-    table.require_rows(20, "a ramp and a hold")?;
-    let t = table.numbers(0)?;
-    table.require_increasing(0, &t)?;
-    let x = table.numbers(1)?;
-    let f = table.numbers(2)?;
-    let fit = relaxation::fit(&t, &x, &f).with_context(|| {
-        format!(
-            "{}: fitting the relaxation; nothing was written",
-            a.csv.display()
-        )
-    })?;
-    let residuals: Vec<(f64, f64)> = t
+    use host::calibrate::relaxation::{self, Test};
+    let mut tests = Vec::with_capacity(a.csv.len());
+    for path in &a.csv {
+        let table = csv::read(path, &[&a.t, &a.x, &a.f])?;
+        table.require_rows(20, "a ramp and a hold")?;
+        let t = table.numbers(0)?;
+        table.require_increasing(0, &t)?;
+        tests.push(Test {
+            name: path.display().to_string(),
+            t,
+            x: table.numbers(1)?,
+            f: table.numbers(2)?,
+        });
+    }
+    let names = a
+        .csv
         .iter()
-        .zip(f.iter().zip(&fit.model))
-        .map(|(&ti, (&fi, &mi))| (ti, 1e3 * (fi - mi)))
+        .map(|p| p.display().to_string())
+        .collect::<Vec<_>>()
+        .join(", ");
+    let fit = relaxation::fit_tests(&tests)
+        .with_context(|| format!("{names}: fitting the relaxation; nothing was written"))?;
+    let residuals: Vec<(f64, f64)> = tests
+        .iter()
+        .zip(&fit.tests)
+        .flat_map(|(test, tf)| {
+            test.t
+                .iter()
+                .zip(test.f.iter().zip(&tf.model))
+                .map(|(&ti, (&fi, &mi))| (ti, 1e3 * (fi - mi)))
+        })
         .collect();
+    let rounded = |v: &[f64]| {
+        v.iter()
+            .map(|v| (v * 1e3).round() / 1e3)
+            .collect::<Vec<_>>()
+    };
+    let law = format!(
+        "g = {:?}, tau = {:?} s",
+        rounded(&fit.g),
+        rounded(&fit.tau_s)
+    );
+    let mut curves: Vec<(String, Vec<(f64, f64)>)> = tests
+        .iter()
+        .zip(&fit.tests)
+        .map(|(test, tf)| {
+            let name = if tests.len() == 1 {
+                format!("QLV fit: {law}")
+            } else {
+                format!("joint QLV fit, ramp {:.3} s", tf.ramp_s)
+            };
+            (
+                name,
+                test.t
+                    .iter()
+                    .copied()
+                    .zip(tf.model.iter().copied())
+                    .collect(),
+            )
+        })
+        .collect();
+    if let [test] = &tests[..] {
+        curves.push((
+            "instantaneous elastic response Q_e(x(t))".into(),
+            test.t
+                .iter()
+                .zip(&test.x)
+                .map(|(&ti, &xi)| (ti, fit.elastic_at(xi)))
+                .collect(),
+        ));
+    }
+    // One file by its name; several by their count (the legend names their ramps).
+    let file_names = match &a.csv[..] {
+        [one] => one
+            .file_name()
+            .map_or(String::new(), |n| n.to_string_lossy().into_owned()),
+        several => format!("{} tests", several.len()),
+    };
     let spec = PlotSpec {
         title: format!(
-            "QLV relaxation: {} (g_inf {:.3}, {} term(s), RMS {:.3e} N)",
-            a.csv
-                .file_name()
-                .map_or(String::new(), |n| n.to_string_lossy().into_owned()),
+            "QLV relaxation: {file_names} (g_inf {:.3}, {} term(s), RMS {:.3e} N)",
             fit.g_inf,
             fit.g.len(),
             fit.rms
@@ -247,46 +330,35 @@ fn relaxation_cmd(a: RelaxationArgs) -> Result<()> {
         x_label: format!("time ({}), s", a.t),
         y_label: format!("force ({}), N", a.f),
         data: (
-            "bench data".into(),
-            t.iter().copied().zip(f.iter().copied()).collect(),
+            if tests.len() == 1 {
+                "bench data".into()
+            } else {
+                format!("bench data, {} tests ({law})", tests.len())
+            },
+            tests
+                .iter()
+                .flat_map(|test| test.t.iter().copied().zip(test.f.iter().copied()))
+                .collect(),
         ),
-        curves: vec![
-            (
-                format!(
-                    "QLV fit: g = {:?}, tau = {:?} s",
-                    fit.g
-                        .iter()
-                        .map(|v| (v * 1e3).round() / 1e3)
-                        .collect::<Vec<_>>(),
-                    fit.tau_s
-                        .iter()
-                        .map(|v| (v * 1e3).round() / 1e3)
-                        .collect::<Vec<_>>()
-                ),
-                t.iter().copied().zip(fit.model.iter().copied()).collect(),
-            ),
-            (
-                "instantaneous elastic response Q_e(x(t))".into(),
-                t.iter()
-                    .zip(&x)
-                    .map(|(&ti, &xi)| (ti, fit.elastic_at(xi)))
-                    .collect(),
-            ),
-        ],
+        curves,
         residual_label: "residual, mN".into(),
         residuals,
     };
     let plots = plot::write(&a.plot, &spec)?;
     if let Some(scene) = &a.scene {
         let source = format!(
-            "{}, columns {}, {}, {}: g_inf {:.4}, RMS residual {:.3e} N (noise {:.3e} N)",
-            a.csv.display(),
+            "{names}, columns {}, {}, {}: g_inf {:.4}, RMS residual {:.3e} N (noise {:.3e} N){}",
             a.t,
             a.x,
             a.f,
             fit.g_inf,
             fit.rms,
-            fit.noise
+            fit.noise,
+            if fit.warnings.is_empty() {
+                String::new()
+            } else {
+                "; WARNING: rate dependence not explained (see the calibration's output)".into()
+            }
         );
         write_scene(scene, |text| {
             Ok(scene_edit::set_viscoelastic(
@@ -294,18 +366,43 @@ fn relaxation_cmd(a: RelaxationArgs) -> Result<()> {
             )?)
         })?;
     }
+    for w in &fit.warnings {
+        eprintln!("warning: {w}");
+    }
     if a.json {
         let report = RelaxationReport {
             g_inf: fit.g_inf,
             g: &fit.g,
             tau_s: &fit.tau_s,
+            g_se: &fit.g_se,
+            tau_s_se: &fit.tau_se,
             elastic_coeffs_n: &fit.elastic,
             x_max_m: fit.x_max,
             rms_n: fit.rms,
             elastic_only_rms_n: fit.elastic_rms,
             noise_n: fit.noise,
             survey: fit.survey.iter().map(|&(n, r)| [n as f64, r]).collect(),
-            rows: t.len(),
+            rows: tests.iter().map(|t| t.t.len()).sum(),
+            tests: a
+                .csv
+                .iter()
+                .zip(&fit.tests)
+                .map(|(csv, tf)| RelaxationTestReport {
+                    csv,
+                    rows: tf.rows,
+                    ramp_s: tf.ramp_s,
+                    ramp_speed_m_s: tf.rate_m_s,
+                    rms_n: tf.rms,
+                    noise_n: tf.noise,
+                    rms_over_noise: tf.rms_over_noise(),
+                    unexplained_n: tf.unexplained(),
+                    peak_force_n: tf.peak_force,
+                    peak_error_n: tf.peak_error,
+                    peak_error_se_n: tf.peak_error_se,
+                })
+                .collect(),
+            peak_error_per_decade: fit.peak_error_per_decade,
+            warnings: &fit.warnings,
             scene: a.scene.as_deref(),
             plot: plots,
         };
@@ -323,12 +420,35 @@ fn relaxation_cmd(a: RelaxationArgs) -> Result<()> {
     );
     println!("g_inf = {:.5}", fit.g_inf);
     for (k, (g, tau)) in fit.g.iter().zip(&fit.tau_s).enumerate() {
-        println!("term {k}: g = {g:.5}, tau = {tau:.5} s");
+        println!(
+            "term {k}: g = {g:.5} +- {:.1e}, tau = {tau:.5} +- {:.1e} s (standard errors)",
+            fit.g_se[k], fit.tau_se[k]
+        );
     }
     println!(
         "instantaneous elastic law: Q_e(x) = sum_j c_j (x / {:.4e} m)^j, c = {:?} N",
         fit.x_max, fit.elastic
     );
+    println!("test  ramp (s)  speed (m/s)  rms (N)    rms/noise  peak error (N, %, std errors)");
+    for (i, tf) in fit.tests.iter().enumerate() {
+        println!(
+            "{i:>4}  {:>8.3}  {:>11.3e}  {:.3e}  {:>9.2}  {:+.3e} ({:+.2} %, {:+.1})  {}",
+            tf.ramp_s,
+            tf.rate_m_s,
+            tf.rms,
+            tf.rms_over_noise(),
+            tf.peak_error,
+            100.0 * tf.peak_error / tf.peak_force,
+            tf.peak_error / tf.peak_error_se,
+            tf.name
+        );
+    }
+    if let Some(s) = fit.peak_error_per_decade {
+        println!(
+            "peak-force error against ramp speed: {:+.3} % per decade",
+            100.0 * s
+        );
+    }
     println!("plot: {} and {}", plots[0].display(), plots[1].display());
     if let Some(scene) = &a.scene {
         println!("wrote [viscoelastic] into {}", scene.display());

@@ -202,6 +202,37 @@ pub fn run(args: Args) -> Result<()> {
     };
     let instructions = |nodes: usize| groups.as_ref().and_then(|g| firmware::body_worst(g, nodes));
 
+    // Viscoelastic relaxation (issue 30): press-hold on the shipped QLV scene, on the image.
+    let skipped = match (&image, report::relaxation::shipped_scenes()) {
+        (Ok(image), Ok((qlv_scene, elastic_scene))) => {
+            step("relaxation: the QLV scene's banks (elastic and relaxing)");
+            let banks = report::relaxation::banks(&qlv_scene, &elastic_scene)?;
+            // The whole script, quick or not (5 runs of 11.5 s take about 40 s here).
+            let seconds = report::relaxation::PRESS_HOLD_S;
+            let measured = report::relaxation::measure(
+                &banks,
+                &|bytes: &[u8]| image.with_bank(bytes),
+                seconds,
+                &step,
+            )?;
+            let (relax_knobs, row) = report::relaxation::section(&measured);
+            knobs.extend(relax_knobs);
+            cases.push(row);
+            None
+        }
+        (Err(why), _) => Some(why.clone()),
+        (_, Err(why)) => Some(format!("{why:#}")),
+    };
+    if let Some(why) = skipped {
+        step(&format!("relaxation knobs skipped: {why}"));
+        not_measured.push(format!(
+            "press-hold's force against time on the QLV scene and instructions per tick \
+             against Prony terms (QEMU image): {why}; the SIL test \
+             press_hold_relaxes_as_the_scenes_qlv_law measures both (README, \
+             \"Viscoelastic tissue\")"
+        ));
+    }
+
     if let Some(sampled_scene) = &sampled_scene {
         let mut variants = report::sampled::measure(sampled_scene, args.quick, &step)?;
         if let Ok(image) = &image {

@@ -21,7 +21,10 @@
 //! - [`loops`]: the force loop's hard cases, through the firmware's own code;
 //! - [`pareto`]: the combinations no other beats on error, bytes and instructions;
 //! - [`sampled`]: the sampled patch compliance's FEM and sample spacing against the converged
-//!   reference, with the nodal bank on the same axis and their Pareto front.
+//!   reference, with the nodal bank on the same axis and their Pareto front;
+//! - [`relaxation`]: viscoelastic relaxation (issue 30): `press-hold` on the QLV scene, the
+//!   image's force against the analytic QLV response, and instructions per tick against the
+//!   number of Prony terms.
 
 pub mod bank;
 pub mod firmware;
@@ -33,6 +36,7 @@ pub mod loops;
 pub mod mesh;
 pub mod pareto;
 pub mod precision;
+pub mod relaxation;
 pub mod sampled;
 pub mod scale;
 

@@ -1,6 +1,8 @@
 // WebGL viewer of the host display (see host/src/display/mod.rs for the wire format).
 // Plain WebGL, no build step: the organ surface (shaded, tinted by displacement), the tool
-// (shaft from the trocar, tip sphere), the force arrow with its magnitude in newtons, and a HUD.
+// (shaft from the trocar, tip sphere), the force arrow with its magnitude in newtons, and a HUD
+// with a scrolling trace of the tool force's magnitude against time (the last TRACE_S seconds,
+// so a press and hold shows a viscoelastic scene's relaxation).
 "use strict";
 (async function main() {
   const params = new URLSearchParams(location.search);
@@ -10,6 +12,8 @@
   const hudForce = document.getElementById("force");
   const hudStats = document.getElementById("stats");
   const label = document.getElementById("label");
+  const traceCanvas = document.getElementById("trace");
+  const traceCtx = traceCanvas.getContext("2d");
   if (!gl || !gl.getExtension("OES_element_index_uint")) {
     hudStats.textContent = "WebGL (with 32-bit indices) is not available in this browser";
     return;
@@ -203,6 +207,39 @@
 
   camera();
 
+  // ---- force trace: |F| (N) against the device's time, one point per frame ----
+  // Time is the frame's device tick times the loop's nominal 1 ms period (the firmware's
+  // 1 kHz tick); points older than TRACE_S are dropped, and a tick that goes back (a new
+  // session) starts the trace afresh.
+  const TRACE_S = 12, TICK_S = 1e-3;
+  const trace = [];
+  function traceAdd(tick, force) {
+    const t = tick * TICK_S;
+    if (trace.length && t < trace[trace.length - 1][0]) trace.length = 0;
+    trace.push([t, len(force)]);
+    while (trace.length && trace[0][0] < t - TRACE_S) trace.shift();
+  }
+  function traceMax() { return trace.reduce((m, p) => Math.max(m, p[1]), 0); }
+  function traceDraw() {
+    const w = traceCanvas.width, h = traceCanvas.height, top = 14, bottom = h - 4;
+    traceCtx.clearRect(0, 0, w, h);
+    // Full scale: 0.05 N or the trace's largest force rounded up to 1-2-5.
+    const max = traceMax();
+    let full = 0.05;
+    for (const step of [1, 2, 5, 10, 20, 50, 100, 200, 500, 1000]) { full = 0.05 * step; if (full >= max) break; }
+    traceCtx.strokeStyle = "rgba(255,255,255,0.35)"; traceCtx.lineWidth = 1;
+    traceCtx.beginPath(); traceCtx.moveTo(0, bottom + 0.5); traceCtx.lineTo(w, bottom + 0.5); traceCtx.stroke();
+    traceCtx.fillStyle = "#cfd3da"; traceCtx.font = "11px monospace";
+    traceCtx.fillText(`|F| 0-${full.toPrecision(2)} N, last ${TRACE_S} s`, 2, 10);
+    if (trace.length < 2) return;
+    const tEnd = trace[trace.length - 1][0];
+    const x = (t) => w * (1 - (tEnd - t) / TRACE_S), y = (f) => bottom - (bottom - top) * f / full;
+    traceCtx.strokeStyle = "#7fe37f"; traceCtx.lineWidth = 1.5;
+    traceCtx.beginPath();
+    trace.forEach((p, i) => (i ? traceCtx.lineTo(x(p[0]), y(p[1])) : traceCtx.moveTo(x(p[0]), y(p[1]))));
+    traceCtx.stroke();
+  }
+
   // ---- frames ----
   let tipPx = null;
   let frame = null, framesReceived = 0, dirty = true;
@@ -220,6 +257,7 @@
     };
     pos.set(new Float32Array(b, 64, 3 * nv));
     tipPx = project(frame.tip);
+    traceAdd(frame.tick, frame.force);
     framesReceived++; dirty = true;
   };
   ws.onclose = () => { hudStats.textContent = "disconnected from the host"; };
@@ -327,6 +365,7 @@
         }
       }
       hudForce.textContent = "force " + mag.toFixed(3) + " N";
+      traceDraw();
       hudStats.textContent =
         `contact  ${frame.contacts ? frame.contacts + " nodes" + (frame.exact ? "" : " (columns loading)") : "free"}\n` +
         `state    ${frame.state}\n` +
@@ -340,7 +379,9 @@
   setInterval(() => {
     if (ws.readyState === 1) {
       ws.send(JSON.stringify({ report: { tag: params.get("tag"), frames: framesReceived, rendered, seq: frame ? frame.seq : null,
-        contacts: frame ? frame.contacts : 0, tip_px: tipPx, width: canvas.clientWidth, height: canvas.clientHeight } }));
+        contacts: frame ? frame.contacts : 0, tip_px: tipPx, width: canvas.clientWidth, height: canvas.clientHeight,
+        trace: { points: trace.length, span_s: trace.length ? trace[trace.length - 1][0] - trace[0][0] : 0,
+          last_n: trace.length ? trace[trace.length - 1][1] : null, max_n: traceMax() } } }));
     }
   }, 250);
 })();
