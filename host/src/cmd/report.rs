@@ -23,7 +23,8 @@ pub struct Args {
     /// Scene whose mesh is measured and whose choices are marked (default: the embedded liver).
     #[arg(long)]
     scene: Option<PathBuf>,
-    /// Coarse sweeps: under 3 minutes on a 2-core machine (the test command runs this).
+    /// Coarse sweeps, its QEMU runs included: about 4 minutes on a 2-core machine (the test
+    /// command runs this).
     #[arg(long)]
     quick: bool,
     /// Output directory (created when missing): index.html, report.json, headline.png.
