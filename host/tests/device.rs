@@ -23,40 +23,40 @@ use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
 /// A pseudo-terminal: (master, slave path, slave). The test plays the device on the master.
+/// Both descriptors are opened close-on-exec (`O_CLOEXEC`), not marked so afterwards: the tests
+/// run in parallel threads, and a `host` child spawned by another test in between would
+/// inherit them and keep this terminal open (a test once failed to open its port, "Unable to
+/// acquire exclusive lock", that way).
 fn pty() -> (File, String, File) {
-    let (mut m, mut s) = (0, 0);
-    // SAFETY: openpty writes two new descriptors into `m` and `s`; null name/termios/winsize
-    // are allowed.
-    let rc = unsafe {
-        libc::openpty(
-            &mut m,
-            &mut s,
-            std::ptr::null_mut(),
-            std::ptr::null(),
-            std::ptr::null(),
-        )
-    };
-    assert_eq!(rc, 0, "openpty failed");
-    // SAFETY: `s` is a valid descriptor; ttyname returns NULL or a NUL-terminated static buffer,
-    // read at once.
-    let name = unsafe {
-        let p = libc::ttyname(s);
-        assert!(!p.is_null(), "ttyname of the pseudo-terminal failed");
-        std::ffi::CStr::from_ptr(p).to_string_lossy().into_owned()
-    };
-    // SAFETY: fcntl(2) on the two fresh descriptors: close-on-exec (the `host` child must not
-    // hold them), and a non-blocking master (the fake device polls it and can stop).
+    // SAFETY: posix_openpt(3), grantpt(3), unlockpt(3), ptsname_r(3) and open(2) on a fresh
+    // descriptor, each checked; ptsname_r writes a NUL-terminated name into the buffer given.
     unsafe {
-        libc::fcntl(m, libc::F_SETFD, libc::FD_CLOEXEC);
-        libc::fcntl(s, libc::F_SETFD, libc::FD_CLOEXEC);
+        let m = libc::posix_openpt(libc::O_RDWR | libc::O_NOCTTY | libc::O_CLOEXEC);
+        assert!(m >= 0, "posix_openpt failed");
+        assert_eq!(libc::grantpt(m), 0, "grantpt failed");
+        assert_eq!(libc::unlockpt(m), 0, "unlockpt failed");
+        let mut buf = [0 as libc::c_char; 64];
+        assert_eq!(
+            libc::ptsname_r(m, buf.as_mut_ptr(), buf.len()),
+            0,
+            "ptsname_r failed"
+        );
+        let name = std::ffi::CStr::from_ptr(buf.as_ptr())
+            .to_string_lossy()
+            .into_owned();
+        let s = libc::open(
+            buf.as_ptr(),
+            libc::O_RDWR | libc::O_NOCTTY | libc::O_CLOEXEC,
+        );
+        assert!(s >= 0, "opening {name} failed");
+        // A non-blocking master: the fake device polls it and can stop.
         libc::fcntl(
             m,
             libc::F_SETFL,
             libc::fcntl(m, libc::F_GETFL) | libc::O_NONBLOCK,
         );
+        (File::from_raw_fd(m), name, File::from_raw_fd(s))
     }
-    // SAFETY: both descriptors are fresh and owned by the returned files only.
-    unsafe { (File::from_raw_fd(m), name, File::from_raw_fd(s)) }
 }
 
 /// How the fake device behaves.
