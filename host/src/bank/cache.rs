@@ -2,7 +2,9 @@
 //! `host contact probe`, `host sil`) pays the FEM precompute once per set of inputs.
 //!
 //! The key is FNV-1a 64 over the scene file's bytes, the collision mesh's, the FEM mesh's and
-//! the Richardson mesh's bytes (the bank's scene id already covers them), the bank format version and the source
+//! the Richardson mesh's bytes (the bank's scene id already covers them), the validated scene
+//! itself (its `Debug` text without its path: a scene edited in memory after loading, say
+//! without its `[viscoelastic]` table, is not its file's), the bank format version and the source
 //! text of the code that computes and writes the samples ([`SAMPLING_SOURCES`], compiled in),
 //! so a build whose sampling differs never reuses another's bank, while every binary of one
 //! source tree (the CLI, each test) shares it.
@@ -62,6 +64,9 @@ fn bank_key(prep: &Prepared, spec: &crate::scene::SampledContact) -> u64 {
         let bytes = std::fs::read(mesh).unwrap_or_default();
         key = fnv1a(key, &fnv1a(FNV_OFFSET, &bytes).to_le_bytes());
     }
+    let mut scene = prep.scene.clone();
+    scene.path = PathBuf::new();
+    key = fnv1a(key, format!("{scene:?}").as_bytes());
     key = fnv1a(key, &bank_format::VERSION_MAJOR.to_le_bytes());
     key = fnv1a(key, &bank_format::VERSION_MINOR.to_le_bytes());
     fnv1a(key, &code_hash().to_le_bytes())
@@ -147,5 +152,25 @@ fn store(f: &std::path::Path, bytes: &[u8]) {
         .and_then(|_| crate::fsio::write_atomic(f, bytes, &[]).ok());
     if written.is_none() {
         eprintln!("note: could not write the cache file {}", f.display());
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A scene edited in memory after loading gets its own key, not its file's.
+    #[test]
+    fn the_key_covers_a_scene_edited_in_memory() {
+        let file = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/liver-qlv.toml");
+        let mut prep = Prepared::load(&file).unwrap();
+        let ContactModel::Sampled(spec) = prep.scene.contact.clone() else {
+            panic!("liver-qlv.toml is a sampled scene");
+        };
+        let with = bank_key(&prep, &spec);
+        assert_eq!(bank_key(&prep, &spec), with);
+        assert!(prep.scene.viscoelastic.is_some());
+        prep.scene.viscoelastic = None;
+        assert_ne!(bank_key(&prep, &spec), with);
     }
 }

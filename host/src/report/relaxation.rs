@@ -56,10 +56,10 @@ pub struct Banks {
 
 /// Both banks (from the bank cache when their scenes are unchanged): `qlv_scene` relaxes,
 /// `elastic_scene` is the same scene without `[viscoelastic]` (`liver-qlv.toml` is
-/// `liver.toml` with the table, as its header says and the SIL test takes it). The cache is
-/// keyed by the scene file's text, so the elastic bank comes from its own file, not from the
-/// QLV scene edited in memory; the two banks must differ by the relaxation section alone (its
-/// directory entry and record, within a section alignment), else the pair is refused.
+/// `liver.toml` with the table, as its header says and the SIL test takes it), each from its
+/// own file (the bank the SIL test and `host sil` load); the two banks must differ by the
+/// relaxation section alone (its directory entry and record, within a section alignment),
+/// else the pair is refused.
 pub fn banks(qlv_scene: &Path, elastic_scene: &Path) -> Result<Banks> {
     let qlv = crate::bank::scene_bank(qlv_scene)?;
     let elastic = crate::bank::scene_bank(elastic_scene)?;
