@@ -8,6 +8,7 @@ use bank_format::{
     Mode, State, encode_frame, reseal,
 };
 use firmware::tick::{HapticLoop, LoopInput};
+use host::report::relaxation;
 use host::sil::cost::{CodePhaseMax, Phases};
 use host::sil::harness::{self, ARM_TICK, LinkSend, Run, Session, Setup};
 use host::sil::script::{Script, Trajectory, surface_insertion};
@@ -806,80 +807,22 @@ fn press_hold_relaxes_as_the_scenes_qlv_law() {
     );
     assert!(assert_matches_native(&qlv_bank, &run) > 5000);
 
-    // The elastic force of the same motion (forces on the tool; QLV is linear in it).
-    let mut elastic = HapticLoop::new(&elastic_bank);
-    elastic.zero_encoders();
-    let q: Vec<[f64; 3]> = run
-        .ticks
-        .iter()
-        .map(|rec| {
-            elastic
-                .tick(LoopInput {
-                    encoder_counts: rec.encoder_counts,
-                    overrun: false,
-                    link_silence_ticks: 0,
-                    interlocks: firmware::hal::Interlocks::default(),
-                })
-                .tool_force_n
-                .map(f64::from)
-        })
-        .collect();
-    let dt = 1.0e-3;
-    let terms: Vec<(f64, f64)> = law
-        .terms()
-        .map(|(g, tau)| (f64::from(g), f64::from(tau)))
-        .collect();
-    let g_inf = 1.0 - terms.iter().map(|t| t.0).sum::<f64>();
-    let n = q.len();
-    // Per term: e^{-m dt / tau} for every age m, and the segment weight (tau/dt)(1 - e^{-dt/tau}).
-    let decay: Vec<(f64, Vec<f64>, f64)> = terms
-        .iter()
-        .map(|&(g, tau)| {
-            let pow = (0..n).map(|m| (-(m as f64) * dt / tau).exp()).collect();
-            (g, pow, tau / dt * (1.0 - (-dt / tau).exp()))
-        })
-        .collect();
-    let dq: Vec<[f64; 3]> = (0..n)
-        .map(|j| {
-            let prev = if j == 0 { [0.0; 3] } else { q[j - 1] };
-            std::array::from_fn(|i| q[j][i] - prev[i])
-        })
-        .collect();
-    let peak = q
-        .iter()
-        .map(|v| v.iter().map(|x| x * x).sum::<f64>().sqrt())
-        .fold(0.0, f64::max);
+    // The elastic force of the same motion (forces on the tool; QLV is linear in it), and
+    // QLV's response to it (`host::report::relaxation`, which the report plots too).
+    let q = relaxation::elastic_replay(&elastic_bank, &run.ticks);
+    let want = relaxation::qlv_response(&q, &law);
+    let g_inf = 1.0 - law.terms().map(|(g, _)| f64::from(g)).sum::<f64>();
+    let norm = |v: &[f64; 3]| v.iter().map(|x| x * x).sum::<f64>().sqrt();
+    let peak = q.iter().map(norm).fold(0.0, f64::max);
     assert!(peak > 0.02, "peak elastic force {peak} N");
     let mut worst = 0.0f64;
-    let mut hold_ratio = 0.0;
-    for (k, rec) in run.ticks.iter().enumerate() {
-        let mut f = q[k].map(|v| g_inf * v);
-        for (g, pow, seg) in &decay {
-            for j in 0..=k {
-                let w = g * seg * pow[k - j];
-                for (fi, d) in f.iter_mut().zip(dq[j]) {
-                    *fi += w * d;
-                }
-            }
-        }
-        // The unilateral rule: nothing without an elastic force, no pull against it.
-        let qq: f64 = q[k].iter().map(|v| v * v).sum();
-        let along: f64 = (0..3).map(|i| f[i] * q[k][i]).sum();
-        let want = if qq == 0.0 {
-            [0.0; 3]
-        } else if along < 0.0 {
-            std::array::from_fn(|i| f[i] - along / qq * q[k][i])
-        } else {
-            f
-        };
+    for (rec, want) in run.ticks.iter().zip(&want) {
         for (got, want) in rec.force_n.iter().zip(want) {
             worst = worst.max((f64::from(*got) - want).abs() / peak);
         }
-        // Near the end of the hold (10.9 s), the force relative to the elastic one.
-        if k == 10_900 {
-            hold_ratio = f64::from(rec.force_n[2]) / q[k][2];
-        }
     }
+    // Near the end of the hold (10.9 s), the force relative to the elastic one.
+    let hold_ratio = f64::from(run.ticks[10_900].force_n[2]) / q[10_900][2];
     eprintln!(
         "press-hold: peak elastic {peak:.5} N, worst |QEMU - QLV| / peak {worst:.2e}, force / \
          elastic at 10.9 s {hold_ratio:.4} (g_inf {g_inf:.4})"
@@ -893,29 +836,15 @@ fn press_hold_relaxes_as_the_scenes_qlv_law() {
         &elastic_setup,
         &Session::new(&elastic_bank, Script::PressHold, seconds).unwrap(),
     );
-    let mut four = bytes.clone();
-    let count = usize::from(u16::from_le_bytes([four[14], four[15]]));
-    let entry = (0..count)
-        .map(|i| 32 + 16 * i)
-        .find(|&e| four[e..e + 4] == 26u32.to_le_bytes())
-        .expect("a relaxation section");
-    let off = u32::from_le_bytes(four[entry + 4..entry + 8].try_into().unwrap()) as usize;
+    let four = relaxation::with_terms(&bytes, 4).unwrap();
+    let four_raw = AlignedBytes::new(&four);
+    let four_bank = Bank::parse(&four_raw).unwrap();
     let law4 = bank_format::Relaxation {
         count: 4,
         reserved: 0,
         g: [0.3, 0.2, 0.15, 0.1],
         tau_s: [0.05, 0.5, 5.0, 50.0],
     };
-    let mut record = Vec::new();
-    record.extend(law4.count.to_le_bytes());
-    record.extend(law4.reserved.to_le_bytes());
-    for v in law4.g.iter().chain(&law4.tau_s) {
-        record.extend(v.to_le_bytes());
-    }
-    four[off..off + 40].copy_from_slice(&record);
-    assert!(reseal(&mut four));
-    let four_raw = AlignedBytes::new(&four);
-    let four_bank = Bank::parse(&four_raw).unwrap();
     assert_eq!(four_bank.relaxation(), Some(&law4));
     let four_path = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("sil-liver-qlv4.bank");
     host::fsio::write_atomic(&four_path, &four, &[]).unwrap();

@@ -23,7 +23,7 @@
 //! worst.
 
 use super::{HardCase, Knob, Point, Series, Verdict};
-use crate::sil::harness::{self, Run, Session, Setup};
+use crate::sil::harness::{self, Run, Session, Setup, TickRecord};
 use crate::sil::script::Script;
 use anyhow::{Result, anyhow, bail};
 use bank_format::{AlignedBytes, Bank, Relaxation, SectionKind};
@@ -86,8 +86,9 @@ pub fn banks(qlv_scene: &Path, elastic_scene: &Path) -> Result<Banks> {
 }
 
 /// `bytes` (a bank with a relaxation section) with its relaxation record replaced by the
-/// first `terms` of the generic law, resealed.
-fn with_terms(bytes: &[u8], terms: usize) -> Result<Vec<u8>> {
+/// first `terms` (1 to 4) of the generic law (`g = (0.3, 0.2, 0.15, 0.1)`, `tau = (0.05, 0.5,
+/// 5, 50)` s), resealed: the same bank relaxing with another number of terms.
+pub fn with_terms(bytes: &[u8], terms: usize) -> Result<Vec<u8>> {
     let mut out = bytes.to_vec();
     let count = usize::from(u16::from_le_bytes([out[14], out[15]]));
     let kind = SectionKind::Relaxation.code();
@@ -233,23 +234,7 @@ pub fn measure(
     }
     costs.sort_by_key(|c| c.terms);
 
-    // The elastic force of the same motion, natively.
-    let mut lp = HapticLoop::new(&elastic);
-    lp.zero_encoders();
-    let q: Vec<[f64; 3]> = run
-        .ticks
-        .iter()
-        .map(|rec| {
-            lp.tick(LoopInput {
-                encoder_counts: rec.encoder_counts,
-                overrun: false,
-                link_silence_ticks: 0,
-                interlocks: Interlocks::default(),
-            })
-            .tool_force_n
-            .map(f64::from)
-        })
-        .collect();
+    let q = elastic_replay(&elastic, &run.ticks);
     let analytic = qlv_response(&q, &law);
     let peak = q.iter().map(|v| norm(*v)).fold(0.0, f64::max);
     if peak <= 0.0 {
@@ -280,9 +265,31 @@ fn norm(v: [f64; 3]) -> f64 {
     v.iter().map(|x| x * x).sum::<f64>().sqrt()
 }
 
-/// Fung's QLV response to the per-tick elastic force `q` (module notes: direct sum in f64,
-/// then the unilateral rule).
-fn qlv_response(q: &[[f64; 3]], law: &Relaxation) -> Vec<[f64; 3]> {
+/// The elastic tool force of a run's motion, per tick: the encoder counts the image read,
+/// replayed through the firmware's loop natively on `elastic` (the scene's bank without its
+/// relaxation section), homed at the first tick as the run was.
+pub fn elastic_replay(elastic: &Bank, ticks: &[TickRecord]) -> Vec<[f64; 3]> {
+    let mut lp = HapticLoop::new(elastic);
+    lp.zero_encoders();
+    ticks
+        .iter()
+        .map(|rec| {
+            lp.tick(LoopInput {
+                encoder_counts: rec.encoder_counts,
+                overrun: false,
+                link_silence_ticks: 0,
+                interlocks: Interlocks::default(),
+            })
+            .tool_force_n
+            .map(f64::from)
+        })
+        .collect()
+}
+
+/// Fung's QLV response to the per-tick elastic force `q` under the reduced relaxation function
+/// of `law` (module notes: the hereditary integral summed directly in f64, then the
+/// unilateral rule): the reference the firmware's recursion is held to.
+pub fn qlv_response(q: &[[f64; 3]], law: &Relaxation) -> Vec<[f64; 3]> {
     let terms: Vec<(f64, f64)> = law
         .terms()
         .map(|(g, tau)| (f64::from(g), f64::from(tau)))
