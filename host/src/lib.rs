@@ -24,6 +24,7 @@ pub mod progress;
 pub mod reach;
 pub mod record;
 pub mod report;
+pub mod rng;
 pub mod rss;
 pub mod scene;
 pub mod scene_new;

@@ -14,9 +14,7 @@ use host::scene::Scene;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
-#[path = "support/noise.rs"]
-mod noise;
-use noise::Noise;
+use host::rng::SplitMix64;
 
 fn monomial(c: &[f64], x: f64) -> f64 {
     c.iter().rev().fold(0.0, |acc, &ci| acc * x + ci)
@@ -30,7 +28,7 @@ const BRAIN: &str = "data/brain-compression-500mm-min.csv";
 
 #[test]
 fn recovers_known_polynomials_from_noisy_data() {
-    let mut noise = Noise(7);
+    let mut noise = SplitMix64::new(7);
     // An increasing quintic on [0.2, 3], given by its Chebyshev coefficients on that interval
     // (every term well above the noise), sampled with 0.5 % noise of full scale.
     let domain = [0.2, 3.0];
@@ -96,7 +94,7 @@ fn chebyshev_qr_survives_degree_10_where_monomial_normal_equations_fail() {
     // A smooth degree-10 curve on [1, 3] plus noise (sigma = 0.001): the least-squares fit
     // minimises the residual, so whichever solver leaves the smaller residual is the better
     // one, and the exact least-squares residual RMS is sigma sqrt((n - p) / n).
-    let mut noise = Noise(3);
+    let mut noise = SplitMix64::new(3);
     let domain = [1.0, 3.0];
     let truth = fit::ChebFit {
         degree: 10,
@@ -182,7 +180,7 @@ fn chebyshev_qr_survives_degree_10_where_monomial_normal_equations_fail() {
 
 #[test]
 fn recovers_known_motor_constants() {
-    let mut noise = Noise(11);
+    let mut noise = SplitMix64::new(11);
     let kt: f64 = 0.025;
     let gear = [12.0, -12.0, 400.0];
     let friction = [0.004, 0.006, 0.9];
@@ -494,7 +492,7 @@ fn a_fit_to_noise_or_a_pulling_law_is_refused() {
     let scene = dir.path().join("scene.toml");
     let original = std::fs::read_to_string(manifest("scenes/liver.toml")).unwrap();
     std::fs::write(&scene, &original).unwrap();
-    let mut noise = Noise(7);
+    let mut noise = SplitMix64::new(7);
     let rows: String = (0..200)
         .map(|i| {
             let x = 5.0 * f64::from(i) / 199.0;

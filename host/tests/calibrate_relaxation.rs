@@ -38,9 +38,7 @@ fn columns(text: &str) -> (Vec<f64>, Vec<f64>, Vec<f64>) {
     (col(0), col(1), col(2))
 }
 
-#[path = "support/noise.rs"]
-mod noise;
-use noise::Noise;
+use host::rng::SplitMix64;
 
 #[test]
 fn the_fit_recovers_the_published_brain_law_within_the_noise() {
@@ -245,7 +243,7 @@ fn rate_dependence_qlv_cannot_explain_is_reported() {
 /// refused, each with its reason.
 #[test]
 fn noise_and_elastic_data_are_refused() {
-    let mut noise = Noise(11);
+    let mut noise = SplitMix64::new(11);
     let t: Vec<f64> = (0..3000).map(|i| 0.01 * i as f64).collect();
     let x: Vec<f64> = t.iter().map(|&s| (s / 0.5).min(1.0) * 2e-3).collect();
     let elastic: Vec<f64> = x
@@ -323,7 +321,7 @@ fn the_command_writes_the_scene_or_nothing() {
     let written = std::fs::read(&scene).unwrap();
     let noisy = dir.path().join("noise.csv");
     let mut text = String::from("t_s,x_m,force_n\n");
-    let mut noise = Noise(3);
+    let mut noise = SplitMix64::new(3);
     for i in 0..500 {
         let t = 0.01 * i as f64;
         text += &format!(

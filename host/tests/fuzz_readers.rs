@@ -10,6 +10,7 @@
 
 use fem::mesh::{self, Format};
 use fem::surface::{CheckOptions, SurfaceFormat, check};
+use host::rng::SplitMix64;
 use std::path::Path;
 use std::sync::mpsc;
 use std::time::Duration;
@@ -19,25 +20,8 @@ const MUTANTS: usize = 300;
 /// Longest a reader may take on one small input.
 const LIMIT: Duration = Duration::from_secs(5);
 
-/// splitmix64: deterministic, no dependency.
-struct Rng(u64);
-
-impl Rng {
-    fn next(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9e37_79b9_7f4a_7c15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
-        z ^ (z >> 31)
-    }
-
-    fn below(&mut self, n: usize) -> usize {
-        (self.next() % n.max(1) as u64) as usize
-    }
-}
-
 /// One to four mutations of `seed`.
-fn mutate(seed: &[u8], rng: &mut Rng) -> Vec<u8> {
+fn mutate(seed: &[u8], rng: &mut SplitMix64) -> Vec<u8> {
     let mut b = seed.to_vec();
     for _ in 0..1 + rng.below(4) {
         let at = rng.below(b.len());
@@ -47,7 +31,7 @@ fn mutate(seed: &[u8], rng: &mut Rng) -> Vec<u8> {
                     *x ^= 1 << rng.below(8);
                 }
             }
-            1 => b.insert(at, rng.next() as u8),
+            1 => b.insert(at, rng.next_u64() as u8),
             2 => {
                 let end = (at + 1 + rng.below(64)).min(b.len());
                 b.drain(at..end);
@@ -98,7 +82,7 @@ struct Tally {
 }
 
 /// Runs `parse` on every mutant of `seed` in a thread with [`LIMIT`].
-fn fuzz(name: &str, seed: &[u8], rng: &mut Rng, parse: Parse) -> Tally {
+fn fuzz(name: &str, seed: &[u8], rng: &mut SplitMix64, parse: Parse) -> Tally {
     let mut t = Tally::default();
     for _ in 0..MUTANTS {
         let input = mutate(seed, rng);
@@ -121,7 +105,7 @@ fn fuzz(name: &str, seed: &[u8], rng: &mut Rng, parse: Parse) -> Tally {
 #[test]
 fn every_reader_survives_mutated_input() {
     let data = Path::new(env!("CARGO_MANIFEST_DIR")).join("fem/tests/data");
-    let mut rng = Rng(2026);
+    let mut rng = SplitMix64::new(2026);
     let mut total = Tally::default();
     let mut add = |t: Tally| {
         total.read += t.read;

@@ -110,24 +110,6 @@ pub struct SweepConfig {
     pub precisions: Vec<Precision>,
 }
 
-/// SplitMix64: a deterministic stream for placing sites.
-struct Stream(u64);
-
-impl Stream {
-    fn next(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9e37_79b9_7f4a_7c15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
-        z ^ (z >> 31)
-    }
-
-    /// Uniform in [0, 1).
-    fn unit(&mut self) -> f64 {
-        (self.next() >> 11) as f64 / (1u64 << 53) as f64
-    }
-}
-
 /// `count` sites: triangles of R chosen with probability proportional to their area, anchors
 /// uniform in them, pressed `depth_m` along the inward normal (from `bank`'s f32 positions).
 pub fn sites(bank: &Bank, count: usize, depth_m: f64, seed: u64) -> Vec<Site> {
@@ -145,7 +127,7 @@ pub fn sites(bank: &Bank, count: usize, depth_m: f64, seed: u64) -> Vec<Site> {
         })
         .collect();
     let total: f64 = geo.iter().map(|g| g.1).sum();
-    let mut rng = Stream(seed);
+    let mut rng = crate::rng::SplitMix64::new(seed);
     let mut out = Vec::with_capacity(count);
     if total.is_nan() || total <= 0.0 {
         return out;
