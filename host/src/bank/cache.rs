@@ -1,8 +1,9 @@
 //! A cache of sampled banks, so that a command that needs a sampled scene's bank (`host demo`,
 //! `host contact probe`, `host sil`) pays the FEM precompute once per set of inputs.
 //!
-//! The key is FNV-1a 64 over the scene file's bytes, the collision mesh's, the FEM mesh's and
-//! the Richardson mesh's bytes (the bank's scene id already covers them), the validated scene
+//! The key is FNV-1a 64 over the bank's scene id (the scene file's bytes and its collision
+//! mesh's), the bytes of every file the scene reads ([`crate::scene::Scene::input_files`]: the
+//! collision, FEM and Richardson meshes, the list `host sil`'s bank key uses too), the validated scene
 //! itself (its `Debug` text without its path: a scene edited in memory after loading, say
 //! without its `[viscoelastic]` table, is not its file's), the bank format version and the source
 //! text of the code that computes and writes the samples ([`SAMPLING_SOURCES`], compiled in),
@@ -57,10 +58,9 @@ fn code_hash() -> u64 {
 }
 
 /// The cache key of a sampled scene's bank (module notes).
-fn bank_key(prep: &Prepared, spec: &crate::scene::SampledContact) -> u64 {
+fn bank_key(prep: &Prepared) -> u64 {
     let mut key = prep.scene_id;
-    let meshes = std::iter::once(&spec.fem_mesh).chain(spec.richardson.as_ref().map(|r| &r.mesh));
-    for mesh in meshes {
+    for mesh in prep.scene.input_files() {
         let bytes = std::fs::read(mesh).unwrap_or_default();
         key = fnv1a(key, &fnv1a(FNV_OFFSET, &bytes).to_le_bytes());
     }
@@ -79,10 +79,10 @@ pub fn scene_bank_cached(
     prep: &Prepared,
     progress: Option<&dyn Progress>,
 ) -> Result<(BuiltBank, bool)> {
-    let ContactModel::Sampled(spec) = &prep.scene.contact else {
+    let ContactModel::Sampled(_) = &prep.scene.contact else {
         return Ok((prep.build_bank(progress)?, false));
     };
-    let key = bank_key(prep, spec);
+    let key = bank_key(prep);
     let file = cache_dir().map(|d| d.join(format!("bank-{key:016x}.bin")));
     if let Some(f) = &file
         && let Ok(bytes) = std::fs::read(f)
@@ -119,13 +119,14 @@ pub fn display_fields_cached(
     bank: &Bank,
     progress: Option<&dyn Progress>,
 ) -> Result<Option<(DisplayFields, bool)>> {
-    let (ContactModel::Sampled(spec), Some(_)) = (&prep.scene.contact, bank.samples()) else {
+    let (ContactModel::Sampled(_), Some(_)) = (&prep.scene.contact, bank.samples()) else {
         return Ok(None);
     };
-    let key = FIELDS_SOURCES.iter().fold(
-        fnv1a(bank_key(prep, spec), &bank.crc().to_le_bytes()),
-        |h, s| fnv1a(h, s.as_bytes()),
-    );
+    let key = FIELDS_SOURCES
+        .iter()
+        .fold(fnv1a(bank_key(prep), &bank.crc().to_le_bytes()), |h, s| {
+            fnv1a(h, s.as_bytes())
+        });
     let file = cache_dir().map(|d| d.join(format!("fields-{key:016x}.bin")));
     if let Some(f) = &file
         && let Ok(bytes) = std::fs::read(f)
@@ -164,13 +165,11 @@ mod tests {
     fn the_key_covers_a_scene_edited_in_memory() {
         let file = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/liver-qlv.toml");
         let mut prep = Prepared::load(&file).unwrap();
-        let ContactModel::Sampled(spec) = prep.scene.contact.clone() else {
-            panic!("liver-qlv.toml is a sampled scene");
-        };
-        let with = bank_key(&prep, &spec);
-        assert_eq!(bank_key(&prep, &spec), with);
+        assert!(matches!(prep.scene.contact, ContactModel::Sampled(_)));
+        let with = bank_key(&prep);
+        assert_eq!(bank_key(&prep), with);
         assert!(prep.scene.viscoelastic.is_some());
         prep.scene.viscoelastic = None;
-        assert_ne!(bank_key(&prep, &spec), with);
+        assert_ne!(bank_key(&prep), with);
     }
 }
