@@ -7,9 +7,11 @@
 //! - Unknown keys are errors; so are missing required keys and out-of-range values. Every error
 //!   names the file, the line and the key.
 //! - `mesh` is a path relative to the scene file, or `"builtin:liver-1k4"` for the 1.4k-node
-//!   liver embedded in the binary. Optional `mesh_units` ("m", "cm" or "mm") names the mesh
-//!   file's units; it is scaled to metres on loading. Without it the file is in metres, and a
-//!   mesh that is no organ in metres but one in cm or mm is refused (set `mesh_units`).
+//!   liver embedded in the binary. Optional `mesh_units` ("m", "cm" or "mm") names the units of
+//!   the organ's mesh files (`mesh`, and a sampled `[contact]`'s `fem_mesh` and
+//!   `richardson_mesh`); they are scaled to metres on loading. Without it the files are in
+//!   metres, and a mesh that is no organ in metres but one in cm or mm is refused (set
+//!   `mesh_units`).
 //! - SI units everywhere (m, rad, Pa, N, A, N m/A); angles in radians.
 //! - The device maps onto [`bank_format::DeviceCalibration`]: joints are 0 = pitch, 1 = yaw,
 //!   2 = insertion, and `tip = fulcrum + insertion * Rot(yaw_axis, yaw) Rot(pitch_axis, pitch)
@@ -715,37 +717,46 @@ impl Scene {
                 fnv1a(FNV_OFFSET, BUILTIN_LIVER),
             )),
             MeshSource::File(p) => {
-                let bytes = std::fs::read(p)
-                    .with_context(|| format!("{}: mesh {}", self.path.display(), p.display()))?;
-                let mut mesh = fem::mesh::read(p)?;
-                let side = crate::meshing::largest_side(mesh.bounding_box());
-                let units = match self.mesh_units {
-                    Some(u) => u,
-                    None => match crate::meshing::guess_units(side) {
-                        Ok(u) if u != Units::M => anyhow::bail!(
-                            "{}: mesh {}: its largest side is {side:.4}, no organ in metres; in \
-                             {} it is {:.3} m: set mesh_units = \"{}\" (or \"m\" to keep \
-                             metres)",
-                            self.path.display(),
-                            p.display(),
-                            u.name(),
-                            side * u.to_metres(),
-                            u.name()
-                        ),
-                        _ => Units::M,
-                    },
-                };
-                crate::meshing::scale_mesh(&mut mesh, units);
-                fem::mesh::validate(&mesh).map_err(|e| e.with_path(p))?;
-                // Units other than metres are part of the mesh's identity (a bank is cached by
-                // it); metres keep the hash of the bytes alone.
-                let mut hash = fnv1a(FNV_OFFSET, &bytes);
-                if units != Units::M {
-                    hash = fnv1a(hash, units.name().as_bytes());
-                }
+                let (mesh, hash) = self.read_organ_mesh(p, "mesh")?;
                 Ok((mesh, p.display().to_string(), hash))
             }
         }
+    }
+
+    /// Reads a tetrahedral mesh file of the scene's organ (`mesh`, or a sampled `[contact]`'s
+    /// `fem_mesh` and `richardson_mesh`; `key` names it in errors) in the scene's `mesh_units`,
+    /// scaled to metres and validated. Without `mesh_units` a mesh too small or too large to be
+    /// an organ in metres is refused with the unit that fits. Returns the mesh and the hash of
+    /// its bytes (and of its units, when not metres: they are part of its identity, a bank is
+    /// cached by it).
+    pub fn read_organ_mesh(&self, p: &Path, key: &str) -> anyhow::Result<(TetMesh, u64)> {
+        use anyhow::Context;
+        let bytes = std::fs::read(p)
+            .with_context(|| format!("{}: {key} {}", self.path.display(), p.display()))?;
+        let mut mesh = fem::mesh::read(p)?;
+        let side = crate::meshing::largest_side(mesh.bounding_box());
+        let units = match self.mesh_units {
+            Some(u) => u,
+            None => match crate::meshing::guess_units(side) {
+                Ok(u) if u != Units::M => anyhow::bail!(
+                    "{}: {key} {}: its largest side is {side:.4}, no organ in metres; in {} it \
+                     is {:.3} m: set mesh_units = \"{}\" (or \"m\" to keep metres)",
+                    self.path.display(),
+                    p.display(),
+                    u.name(),
+                    side * u.to_metres(),
+                    u.name()
+                ),
+                _ => Units::M,
+            },
+        };
+        crate::meshing::scale_mesh(&mut mesh, units);
+        fem::mesh::validate(&mesh).map_err(|e| e.with_path(p))?;
+        let mut hash = fnv1a(FNV_OFFSET, &bytes);
+        if units != Units::M {
+            hash = fnv1a(hash, units.name().as_bytes());
+        }
+        Ok((mesh, hash))
     }
 
     /// The fixed set on `mesh`; errors name the scene line of the box or node list.
@@ -834,9 +845,9 @@ fn parse_mesh(ctx: &Ctx, path: &Path, mesh: &Spanned<String>) -> Result<MeshSour
     }
 }
 
-/// `mesh_units`: "m", "cm" or "mm", only for a mesh file (the embedded liver is in metres),
-/// and not with a sampled `[contact]` (its `fem_mesh` and `richardson_mesh` are read in
-/// metres, so the organ's meshes would disagree).
+/// `mesh_units`: "m", "cm" or "mm", only for a mesh file (the embedded liver is in metres). It
+/// holds for every mesh of the organ: `mesh` and a sampled `[contact]`'s `fem_mesh` and
+/// `richardson_mesh` ([`Scene::read_organ_mesh`]).
 fn parse_mesh_units(
     ctx: &Ctx,
     raw: &RawScene,
@@ -858,23 +869,6 @@ fn parse_mesh_units(
             "mesh_units",
             format!(
                 "the embedded liver is in metres: mesh_units must be \"m\", got {:?}",
-                units.name()
-            ),
-        ));
-    }
-    let sampled = raw.contact.as_ref().is_some_and(|c| {
-        c.model
-            .as_ref()
-            .is_none_or(|m| m.get_ref().as_str() == "sampled")
-    });
-    if sampled {
-        return Err(ctx.err(
-            u.span(),
-            "mesh_units",
-            format!(
-                "mesh_units = {:?} scales `mesh` only; a sampled [contact]'s fem_mesh (and \
-                 richardson_mesh) are read in metres: convert the meshes to metres, or use \
-                 [contact] model = \"nodal\"",
                 units.name()
             ),
         ));
@@ -1776,7 +1770,6 @@ mod tests {
         assert_eq!(s.mesh_units, Some(Units::M));
         for (mesh, units, why) in [
             ("builtin:liver-1k4", "mm", "the embedded liver is in metres"),
-            ("organ.msh", "cm", "a sampled [contact]'s fem_mesh"),
             (
                 "organ.msh",
                 "inch",

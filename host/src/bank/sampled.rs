@@ -12,7 +12,7 @@
 //! lattice points ([`bank_format::Samples::interpolate`]) and renders `f = W^-1 d` (the paper's
 //! eq. 8 for one rigid tool, in compliance form), with Q on top.
 
-use crate::scene::{FemElement, SampledContact, Scene, fnv1a};
+use crate::scene::{FemElement, SampledContact, Scene};
 use anyhow::{Context, Result, bail};
 use bank_format::{ContactSamples, SharedLattice};
 use fem::compliance::{Block3, Compliance, FactorStats};
@@ -82,14 +82,7 @@ impl SampledFem {
     /// [`SampledFem::new`] on the mesh file `path` with `element`.
     pub fn load(scene: &Scene, path: &Path, element: FemElement) -> Result<SampledFem> {
         let t0 = Instant::now();
-        let bytes = std::fs::read(path).with_context(|| {
-            format!(
-                "{}: [contact] fem_mesh {}",
-                scene.path.display(),
-                path.display()
-            )
-        })?;
-        let mesh = fem::mesh::load(path)?;
+        let (mesh, mesh_hash) = scene.read_organ_mesh(path, "[contact] mesh")?;
         let boundary = fem::mesh::boundary(&mesh)?;
         let name = path.display().to_string();
         let (compliance, surface, nodes) = match element {
@@ -117,7 +110,7 @@ impl SampledFem {
         };
         Ok(SampledFem {
             mesh_name: name,
-            mesh_hash: fnv1a(crate::scene::FNV_OFFSET, &bytes),
+            mesh_hash,
             vertices: mesh.nodes.len(),
             nodes,
             element,
@@ -273,4 +266,71 @@ pub fn spd(m: &Block3) -> bool {
     let c = (m[2][1] - b * m[1][0]) / p1;
     let p2 = m[2][2] - b * m[2][0] - c * (m[2][1] - b * m[1][0]);
     above(p2)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The shipped scene with its meshes replaced by `mesh` (`mesh` and `[contact] fem_mesh`,
+    /// P1, no Richardson mesh) in `units`, written beside it in `dir`.
+    fn scene_on(dir: &Path, name: &str, mesh: &TetMesh, units: &str) -> Scene {
+        let mut bytes = Vec::new();
+        mesh.write_msh4_ascii(&mut bytes).unwrap();
+        std::fs::write(dir.join(format!("{name}.msh")), bytes).unwrap();
+        let mut text = String::new();
+        for line in include_str!("../../scenes/liver.toml").lines() {
+            let key = line.split('=').next().unwrap_or("").trim();
+            match key {
+                "mesh" => text += &format!("mesh = \"{name}.msh\"\nmesh_units = \"{units}\"\n"),
+                "fem_mesh" => text += &format!("fem_mesh = \"{name}.msh\"\n"),
+                "fem_element" => text += "fem_element = \"p1\"\n",
+                k if k.starts_with("richardson") => {}
+                _ => text += &format!("{line}\n"),
+            }
+        }
+        Scene::parse(&dir.join(format!("{name}.toml")), &text).unwrap()
+    }
+
+    /// One organ, one unit: with `mesh_units = "mm"` a sampled contact's `fem_mesh` is read in
+    /// millimetres as the scene's `mesh` is, and its patch compliance is the one the same
+    /// meshes give in metres.
+    #[test]
+    fn millimetre_meshes_give_the_compliance_of_metres() {
+        let dir = tempfile::tempdir().unwrap();
+        let metres = fem::mesh::parse_msh(include_bytes!("../../meshes/liver-1k4.msh")).unwrap();
+        let mut millimetres = metres.clone();
+        millimetres
+            .nodes
+            .iter_mut()
+            .flatten()
+            .for_each(|x| *x *= 1e3);
+        let m_scene = scene_on(dir.path(), "m", &metres, "m");
+        let in_m = SampledFem::new(&m_scene, spec(&m_scene)).unwrap();
+        let mm_scene = scene_on(dir.path(), "mm", &millimetres, "mm");
+        let in_mm = SampledFem::new(&mm_scene, spec(&mm_scene)).unwrap();
+        assert_ne!(in_m.mesh_hash, in_mm.mesh_hash);
+        // The five highest boundary nodes: on the liver's free top, where the tool presses.
+        let boundary = fem::mesh::boundary(&metres).unwrap();
+        let mut top = boundary.nodes.clone();
+        top.sort_by(|&a, &b| metres.nodes[b][2].total_cmp(&metres.nodes[a][2]));
+        let points: Vec<[f64; 3]> = top[..5].iter().map(|&n| metres.nodes[n]).collect();
+        let (w_m, ..) = in_m.patch_compliance(&points, 0.003, None).unwrap();
+        let (w_mm, ..) = in_mm.patch_compliance(&points, 0.003, None).unwrap();
+        for (a, b) in w_m.iter().zip(&w_mm) {
+            let scale = a.iter().flatten().fold(0.0f64, |m, x| m.max(x.abs()));
+            assert!(scale > 0.0);
+            for (x, y) in a.iter().flatten().zip(b.iter().flatten()) {
+                assert!((x - y).abs() <= 1e-9 * scale, "{a:?} vs {b:?}");
+            }
+        }
+    }
+
+    /// The scene's sampled `[contact]`.
+    fn spec(scene: &Scene) -> &SampledContact {
+        match &scene.contact {
+            crate::scene::ContactModel::Sampled(spec) => spec,
+            crate::scene::ContactModel::Nodal => panic!("the scene is sampled"),
+        }
+    }
 }

@@ -75,7 +75,7 @@ impl DisplayFields {
                 points.len()
             );
         }
-        let mesh = fem::mesh::load(fem_mesh)?;
+        let (mesh, _) = scene.read_organ_mesh(fem_mesh, "[contact] fem_mesh")?;
         let boundary = fem::mesh::boundary(&mesh)?;
         let name = fem_mesh.display();
         let fixed = scene.fixed_set(&mesh)?;
