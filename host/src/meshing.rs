@@ -135,6 +135,59 @@ pub fn load_mesh_in_units(
     Ok((mesh, ignored, units))
 }
 
+/// Whether `path` names a tetrahedral mesh rather than a surface: `.msh`, `.mesh` or `.vtu`,
+/// or a legacy `.vtk` whose header (its first 1 KiB) declares an `UNSTRUCTURED_GRID`.
+pub fn is_volume_mesh(path: &std::path::Path) -> bool {
+    let ext = path
+        .extension()
+        .map(|e| e.to_string_lossy().to_ascii_lowercase())
+        .unwrap_or_default();
+    match ext.as_str() {
+        "msh" | "mesh" | "vtu" => true,
+        "vtk" => {
+            use std::io::Read;
+            let mut head = Vec::new();
+            std::fs::File::open(path)
+                .and_then(|f| f.take(1024).read_to_end(&mut head))
+                .is_ok_and(|_| {
+                    head.windows(b"UNSTRUCTURED_GRID".len())
+                        .any(|w| w.eq_ignore_ascii_case(b"UNSTRUCTURED_GRID"))
+                })
+        }
+        _ => false,
+    }
+}
+
+/// A tetrahedral mesh file as `host mesh --check` reports it: read in its units, scaled to
+/// metres, validated, its boundary closed and manifold.
+pub struct VolumeCheck {
+    /// The mesh, in metres.
+    pub mesh: TetMesh,
+    /// Lower-dimensional elements the file holds, skipped.
+    pub ignored: fem::mesh::Ignored,
+    /// The file's units (given or guessed).
+    pub units: Units,
+    /// The sum of the tetrahedra's volumes, m^3.
+    pub volume_m3: f64,
+    /// Faces and nodes of the boundary surface.
+    pub boundary: (usize, usize),
+}
+
+/// Reads and checks the tetrahedral mesh file `path` ([`load_mesh_in_units`], then its boundary
+/// surface, which must be closed and manifold).
+pub fn check_volume(path: &std::path::Path, given: Option<Units>) -> Result<VolumeCheck> {
+    let (mesh, ignored, units) = load_mesh_in_units(path, given, "--units")?;
+    let surface = fem::mesh::boundary(&mesh).map_err(|e| e.with_path(path))?;
+    let volume_m3 = (0..mesh.tets.len()).map(|t| mesh.signed_volume(t)).sum();
+    Ok(VolumeCheck {
+        boundary: (surface.triangles.len(), surface.nodes.len()),
+        mesh,
+        ignored,
+        units,
+        volume_m3,
+    })
+}
+
 /// Multiplies every node of `mesh` by the metres per unit of `units`.
 pub fn scale_mesh(mesh: &mut TetMesh, units: Units) {
     let s = units.to_metres();

@@ -635,3 +635,85 @@ fn a_tetrahedral_mesh_in_millimetres_is_the_same_organ() {
     let (_, err) = text(&o);
     assert!(o.status.success() && !err.contains("guessed"), "{err}");
 }
+
+/// `host mesh --check` on tetrahedral meshes: the default liver (metres) and the same in
+/// millimetres as legacy VTK (units guessed, the same volume), each described with its counts,
+/// boundary and quality; without --check a tetrahedral mesh is refused as no surface; a mesh
+/// with two tetrahedra on one side of their common face is refused naming them.
+#[test]
+fn check_reads_tetrahedral_meshes_in_their_units() {
+    let dir = tempfile::tempdir().unwrap();
+    let liver = Path::new(env!("CARGO_MANIFEST_DIR")).join("meshes/liver-1k4.msh");
+    let mesh = fem::mesh::load(&liver).unwrap();
+    let volume: f64 = (0..mesh.tets.len()).map(|t| mesh.signed_volume(t)).sum();
+    let o = host(&["mesh", "--check", liver.to_str().unwrap()]);
+    let (out, err) = text(&o);
+    assert!(o.status.success(), "{err}");
+    let head = format!(
+        "tetrahedral mesh, {} nodes, {} tetrahedra; units m; volume {volume:.4e} m^3",
+        mesh.nodes.len(),
+        mesh.tets.len()
+    );
+    assert!(out.contains(&head), "{out}");
+    assert!(
+        out.contains("boundary closed and manifold")
+            && out.contains("\nquality: worst dihedral angle"),
+        "{out}"
+    );
+    assert!(
+        err.contains("units: m (guessed") && err.contains("--check: the tetrahedral mesh passes"),
+        "{err}"
+    );
+
+    // The same organ in millimetres, as a legacy VTK unstructured grid.
+    let mut mm = mesh.clone();
+    mm.nodes.iter_mut().flatten().for_each(|x| *x *= 1e3);
+    let vtk = dir.path().join("liver_mm.vtk");
+    let mut text_vtk = format!(
+        "# vtk DataFile Version 3.0\nliver in mm\nASCII\nDATASET UNSTRUCTURED_GRID\nPOINTS {} double\n",
+        mm.nodes.len()
+    );
+    for p in &mm.nodes {
+        text_vtk += &format!("{} {} {}\n", p[0], p[1], p[2]);
+    }
+    text_vtk += &format!("CELLS {} {}\n", mm.tets.len(), 5 * mm.tets.len());
+    for t in &mm.tets {
+        text_vtk += &format!("4 {} {} {} {}\n", t[0], t[1], t[2], t[3]);
+    }
+    text_vtk += &format!("CELL_TYPES {}\n", mm.tets.len());
+    text_vtk += &"10\n".repeat(mm.tets.len());
+    std::fs::write(&vtk, text_vtk).unwrap();
+    let o = host(&["mesh", "--check", vtk.to_str().unwrap()]);
+    let (out, err) = text(&o);
+    assert!(o.status.success(), "{err}");
+    assert!(out.contains(&head.replace("units m", "units mm")), "{out}");
+    assert!(err.contains("units: mm (guessed"), "{err}");
+
+    // Not a surface: refused without --check, nothing written.
+    let out_msh = dir.path().join("out.msh");
+    let o = host(&[
+        "mesh",
+        liver.to_str().unwrap(),
+        "-o",
+        out_msh.to_str().unwrap(),
+    ]);
+    let (_, err) = text(&o);
+    assert!(!o.status.success() && !out_msh.exists());
+    assert!(err.contains("a tetrahedral mesh, not a surface"), "{err}");
+
+    // A tetrahedron folded onto its neighbour: refused with the mesh's own message.
+    let mut bad = mesh.clone();
+    let t = bad.tets[0];
+    bad.tets[0] = [t[1], t[0], t[2], t[3]];
+    let bad_path = dir.path().join("inverted.msh");
+    let mut bytes = Vec::new();
+    bad.write_msh4_ascii(&mut bytes).unwrap();
+    std::fs::write(&bad_path, bytes).unwrap();
+    let o = host(&["mesh", "--check", bad_path.to_str().unwrap()]);
+    let (_, err) = text(&o);
+    assert!(!o.status.success(), "{err}");
+    assert!(
+        err.contains("inverted.msh") && err.contains("tetrahedron"),
+        "{err}"
+    );
+}

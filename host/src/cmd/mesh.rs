@@ -3,7 +3,7 @@
 //! scene's tool reaches, quality, an atomic write.
 
 use anyhow::{Context, Result, bail};
-use fem::mesh::quality::SLIVER_DIHEDRAL_DEG;
+use fem::mesh::quality::{QualitySummary, SLIVER_DIHEDRAL_DEG};
 use fem::surface::{CheckOptions, read_surface};
 use host::meshing::{self, Sizes, Units};
 use host::scene::Scene;
@@ -24,6 +24,8 @@ pinned Python module gmsh==4.15.2 (scripts/test-all.sh installs it)."
 )]
 pub struct Args {
     /// Closed triangulated surface: .stl (ASCII or binary), .obj, .ply, .vtk (POLYDATA), .vtp.
+    /// With --check also a tetrahedral mesh (.msh versions 1, 2 and 4.1, Medit .mesh, .vtu,
+    /// .vtk UNSTRUCTURED_GRID): read in its units, validated, its quality printed.
     surface: PathBuf,
     /// Output tetrahedral mesh (.msh, Gmsh 4.1 ASCII, metres), written atomically.
     #[arg(short, long, required_unless_present = "check")]
@@ -69,6 +71,16 @@ pub struct Args {
 /// Runs the command.
 pub fn run(a: Args) -> Result<()> {
     let t0 = Instant::now();
+    if meshing::is_volume_mesh(&a.surface) {
+        if !a.check {
+            bail!(
+                "{}: a tetrahedral mesh, not a surface: `host mesh` meshes surfaces; check this \
+                 one with --check, or give it to `host scene new --mesh` or a scene's `mesh`",
+                a.surface.display()
+            );
+        }
+        return check_volume(&a);
+    }
     let surface = read_surface(&a.surface)?;
     let name = a.surface.display().to_string();
     eprintln!(
@@ -178,19 +190,59 @@ pub fn run(a: Args) -> Result<()> {
         100.0 * (tet_volume / volume - 1.0),
         t0.elapsed().as_secs_f64()
     );
-    if let Some(q) = mesh.quality_summary() {
-        println!(
-            "quality: worst dihedral angle {:.2} deg (tetrahedron {}), largest {:.1} deg; \
-             radius ratio min {:.3} (tetrahedron {}), mean {:.3}; {} slivers (a dihedral angle \
-             below {SLIVER_DIHEDRAL_DEG} deg) after Gmsh's and Netgen's optimisation",
-            q.min_dihedral_deg.0,
-            q.min_dihedral_deg.1,
-            q.max_dihedral_deg,
-            q.min_radius_ratio.0,
-            q.min_radius_ratio.1,
-            q.mean_radius_ratio,
-            q.slivers
+    print_quality(&mesh, " after Gmsh's and Netgen's optimisation");
+    Ok(())
+}
+
+/// `--check` on a tetrahedral mesh file: what it holds, its volume and boundary, its quality;
+/// slivers are a warning (the FEM takes them, with a worse conditioned stiffness).
+fn check_volume(a: &Args) -> Result<()> {
+    let name = a.surface.display();
+    let c = meshing::check_volume(&a.surface, a.units)?;
+    let skipped = if c.ignored.total() > 0 {
+        format!(" (skipped: {})", c.ignored)
+    } else {
+        String::new()
+    };
+    println!(
+        "{name}: tetrahedral mesh, {} nodes, {} tetrahedra{skipped}; units {}; volume {:.4e} m^3 \
+         ({:.1} cm^3), largest side {:.4} m; boundary closed and manifold, {} faces on {} nodes",
+        c.mesh.nodes.len(),
+        c.mesh.tets.len(),
+        c.units.name(),
+        c.volume_m3,
+        c.volume_m3 * 1e6,
+        meshing::largest_side(c.mesh.bounding_box()),
+        c.boundary.0,
+        c.boundary.1
+    );
+    if let Some(q) = print_quality(&c.mesh, "")
+        && q.slivers > 0
+    {
+        eprintln!(
+            "warning: {name}: {} slivers (worst dihedral angle {:.2} deg, tetrahedron {}); \
+             remesh, or improve it with Gmsh's optimiser",
+            q.slivers, q.min_dihedral_deg.0, q.min_dihedral_deg.1
         );
     }
+    eprintln!("--check: the tetrahedral mesh passes");
     Ok(())
+}
+
+/// Prints the quality line of `mesh` (`after` ends its sentence), and returns the summary.
+fn print_quality(mesh: &fem::mesh::TetMesh, after: &str) -> Option<QualitySummary> {
+    let q = mesh.quality_summary()?;
+    println!(
+        "quality: worst dihedral angle {:.2} deg (tetrahedron {}), largest {:.1} deg; radius \
+         ratio min {:.3} (tetrahedron {}), mean {:.3}; {} slivers (a dihedral angle below \
+         {SLIVER_DIHEDRAL_DEG} deg){after}",
+        q.min_dihedral_deg.0,
+        q.min_dihedral_deg.1,
+        q.max_dihedral_deg,
+        q.min_radius_ratio.0,
+        q.min_radius_ratio.1,
+        q.mean_radius_ratio,
+        q.slivers
+    );
+    Some(q)
 }
