@@ -94,6 +94,10 @@ pub struct NewScene {
     pub support: Support,
     /// Tissue preset.
     pub tissue: Tissue,
+    /// A finer mesh of the same organ in the same units, as the scene should name it: the
+    /// scene's `[contact]` then samples the tool's patch compliance on it (P2), the converged
+    /// force; without it the scene uses the nodal model on `mesh_path`.
+    pub fem_mesh: Option<PathBuf>,
 }
 
 /// `path` relative to `dir` (both made absolute against the current directory first).
@@ -204,6 +208,41 @@ fn r(x: f64) -> String {
     if s == "-0.0" { "0.0".into() } else { s }
 }
 
+/// The scene's `[contact]` (with `fem_mesh`: the sampled patch compliance on it) and `[bank]`.
+fn contact_text(fem_mesh: Option<&Path>) -> String {
+    match fem_mesh {
+        None => "[bank]
+# The nodal contact model on the mesh's nodes (no [contact] table): pairs within 12 mm, 16-bit
+# blocks (see host/scenes/liver-nodal.toml for the alternatives).
+couplings = \"radius\"
+truncation_radius_m = 0.012
+precision = \"bfp16\"
+reach_margin_m = 0.002
+"
+        .into(),
+        Some(f) => format!(
+            "[contact]
+# The converged force: the tool's patch compliance W(p) computed on fem_mesh (a finer mesh of
+# the same organ, in mesh_units) with 10-node tetrahedra at the lattice points of the collision
+# triangles of `mesh` (sample_level steps per side), stored in the bank and interpolated in the
+# tick (see host/scenes/liver.toml).
+model = \"sampled\"
+fem_mesh = \"{}\"
+fem_element = \"p2\"
+sample_level = 2
+
+[bank]
+# A sampled bank keeps only the collision triangles' edges as couplings.
+couplings = \"radius\"
+truncation_radius_m = 0.0
+precision = \"bfp16\"
+reach_margin_m = 0.002
+",
+            f.display().to_string().replace('\\', "/")
+        ),
+    }
+}
+
 /// The scene's text for `mesh` (already loaded, scaled to metres and validated) and `spec`, checked as any
 /// scene is before a bank is built ([`Prepared::from_scene`]: the trocar and the home tip
 /// outside the organ, supports that hold something but not everything and leave no rigid
@@ -282,14 +321,8 @@ max_tip_speed_m_s = 1.0
 [law]
 kind = "linear"   # fit a Chebyshev Q on bench data with `host calibrate tissue`
 
-[bank]
-# The nodal contact model on the mesh's nodes (no [contact] table): pairs within 12 mm, 16-bit
-# blocks (see host/scenes/liver-nodal.toml for the alternatives).
-couplings = "radius"
-truncation_radius_m = 0.012
-precision = "bfp16"
-reach_margin_m = 0.002
-"#,
+{contact}"#,
+        contact = contact_text(spec.fem_mesh.as_deref()),
         tissue = spec.tissue.name(),
         units = spec.mesh_units.name(),
         lo = v3(lo),

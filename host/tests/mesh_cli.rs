@@ -717,3 +717,68 @@ fn check_reads_tetrahedral_meshes_in_their_units() {
         "{err}"
     );
 }
+
+/// `host scene new --fem-mesh`: the scene samples the tool's patch compliance on the finer
+/// mesh (the converged force, P2), its bank builds with contact samples; a fine mesh of another
+/// size (the liver in millimetres read as metres) is refused as not the same organ.
+#[test]
+fn a_fem_mesh_makes_a_sampled_scene_whose_bank_builds() {
+    let dir = tempfile::tempdir().unwrap();
+    let meshes = Path::new(env!("CARGO_MANIFEST_DIR")).join("meshes");
+    let (coarse, fine) = (
+        meshes.join("liver-1k4.msh"),
+        meshes.join("liver-reach-4mm.msh"),
+    );
+    let out = dir.path().join("sampled.toml");
+    let args = |fem: &Path, out: &Path| {
+        host(&[
+            "scene",
+            "new",
+            "--mesh",
+            coarse.to_str().unwrap(),
+            "--fem-mesh",
+            fem.to_str().unwrap(),
+            "--trocar",
+            "0,0,0.16",
+            "--fix-below",
+            "0.01",
+            "-o",
+            out.to_str().unwrap(),
+        ])
+    };
+    let o = args(&fine, &out);
+    let (_, err) = text(&o);
+    assert!(o.status.success(), "{err}");
+    assert!(
+        err.contains("4751 nodes, 21394 tetrahedra (the FEM mesh of the sampled contact)"),
+        "{err}"
+    );
+    let prep = host::bank::Prepared::load(&out).unwrap();
+    let host::scene::ContactModel::Sampled(spec) = &prep.scene.contact else {
+        panic!("--fem-mesh makes a sampled scene");
+    };
+    assert_eq!(
+        std::fs::canonicalize(&spec.fem_mesh).unwrap(),
+        std::fs::canonicalize(&fine).unwrap()
+    );
+    assert_eq!(spec.element, host::scene::FemElement::Quadratic);
+    let built = prep.sampled_bank(spec, None).unwrap();
+    let aligned = bank_format::AlignedBytes::new(&built.bytes);
+    let bank = bank_format::Bank::parse(&aligned).unwrap();
+    assert!(bank.samples().unwrap().count() > 100);
+
+    let mut mm = fem::mesh::load(&fine).unwrap();
+    mm.nodes.iter_mut().flatten().for_each(|x| *x *= 1e3);
+    let mm_path = dir.path().join("fine_mm.msh");
+    let mut bytes = Vec::new();
+    mm.write_msh4_ascii(&mut bytes).unwrap();
+    std::fs::write(&mm_path, bytes).unwrap();
+    let refused = dir.path().join("refused.toml");
+    let o = args(&mm_path, &refused);
+    let (_, err) = text(&o);
+    assert!(!o.status.success() && !refused.exists(), "{err}");
+    assert!(
+        err.contains("fine_mm.msh") && err.contains("not the same organ in the same units (m)"),
+        "{err}"
+    );
+}

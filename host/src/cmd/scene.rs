@@ -52,6 +52,12 @@ pub struct NewArgs {
     /// Hold the nodes in this box (m): `XMIN,YMIN,ZMIN,XMAX,YMAX,ZMAX`.
     #[arg(long, value_name = "X0,Y0,Z0,X1,Y1,Z1")]
     fix_box: Option<String>,
+    /// A finer tetrahedral mesh of the same organ, in the same units (e.g. `host mesh SURFACE
+    /// --refine-near <a scene of --mesh> -o fine.msh`): the scene then renders the converged
+    /// force, the tool's patch compliance sampled on it with 10-node tetrahedra ([contact]
+    /// model "sampled"; building its bank takes minutes). Without it: the nodal model on --mesh.
+    #[arg(long, value_name = "MESH")]
+    fem_mesh: Option<PathBuf>,
     /// Material preset (Young's modulus, Poisson's ratio; sources in the scene's comments).
     #[arg(long, value_enum, default_value = "liver")]
     tissue: TissueArg,
@@ -95,6 +101,9 @@ fn new(a: NewArgs) -> Result<()> {
         mesh.nodes.len(),
         mesh.tets.len()
     );
+    if let Some(f) = &a.fem_mesh {
+        check_same_organ(&mesh, f, units)?;
+    }
     let trocar = numbers::<3>(&a.trocar, "--trocar")?;
     let support = match (a.fix_below, &a.fix_box) {
         (Some(z), _) => Support::Below(z),
@@ -117,15 +126,55 @@ fn new(a: NewArgs) -> Result<()> {
         trocar,
         support,
         tissue,
+        fem_mesh: a.fem_mesh.as_deref().map(|f| relative_to(f, dir)),
     };
     let (text, reachable, warnings) = scene_text(&mesh, &spec, &a.output)?;
     warnings.iter().for_each(|w| eprintln!("{w}"));
-    host::fsio::write_atomic(&a.output, text.as_bytes(), &[&a.mesh])?;
+    let mut inputs = vec![a.mesh.as_path()];
+    inputs.extend(a.fem_mesh.as_deref());
+    host::fsio::write_atomic(&a.output, text.as_bytes(), &inputs)?;
     println!(
         "{}: scene for {} ({} tissue); the tool reaches {reachable} surface nodes",
         a.output.display(),
         a.mesh.display(),
         tissue.name()
+    );
+    Ok(())
+}
+
+/// `--fem-mesh`: read in the mesh's units, valid, and of the same organ (its bounding box within
+/// 5 % of the largest side of --mesh's).
+fn check_same_organ(
+    mesh: &fem::mesh::TetMesh,
+    fem_mesh: &std::path::Path,
+    units: Units,
+) -> Result<()> {
+    let (fine, _, _) = host::meshing::load_mesh_in_units(fem_mesh, Some(units), "--units")?;
+    let ((lo, hi), (flo, fhi)) = (mesh.bounding_box(), fine.bounding_box());
+    let side = host::meshing::largest_side((lo, hi));
+    let off = (0..3)
+        .map(|i| (lo[i] - flo[i]).abs().max((hi[i] - fhi[i]).abs()))
+        .fold(0.0f64, f64::max);
+    if off > 0.05 * side {
+        bail!(
+            "--fem-mesh {}: its bounding box [{:.4}, {:.4}, {:.4}] to [{:.4}, {:.4}, {:.4}] m is \
+             {off:.4} m from --mesh's (largest side {side:.4} m): not the same organ in the same \
+             units ({})",
+            fem_mesh.display(),
+            flo[0],
+            flo[1],
+            flo[2],
+            fhi[0],
+            fhi[1],
+            fhi[2],
+            units.name()
+        );
+    }
+    eprintln!(
+        "{}: {} nodes, {} tetrahedra (the FEM mesh of the sampled contact)",
+        fem_mesh.display(),
+        fine.nodes.len(),
+        fine.tets.len()
     );
     Ok(())
 }
