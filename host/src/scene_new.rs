@@ -61,6 +61,21 @@ impl Tissue {
         (young, 0.45, format!("{source}\n{poisson}"))
     }
 
+    /// What the preset's Young's modulus rests on, in one line for `host scene new` to print:
+    /// none of the three is a measurement this project has checked.
+    pub fn caveat(self) -> &'static str {
+        match self {
+            Tissue::Liver => {
+                "young_pa = 3000 Pa is the default scene's figure, not a checked measurement"
+            }
+            Tissue::Kidney => "young_pa = 5000 Pa is a placeholder with no published source",
+            Tissue::Brain => {
+                "young_pa = 2526 Pa = 3 x 842 Pa, a shear figure attributed to Miller and \
+                 Chinzei (2002), not verified against the paper"
+            }
+        }
+    }
+
     /// The preset's name.
     pub fn name(self) -> &'static str {
         match self {

@@ -368,6 +368,10 @@ fn the_organ_is_meshed_graded_near_the_reach_and_becomes_a_scene() {
     let (stdout, err) = text(&o);
     assert!(o.status.success(), "{err}");
     assert!(stdout.contains("the tool reaches"), "{stdout}");
+    assert!(
+        err.contains("warning: --tissue kidney: young_pa = 5000 Pa is a placeholder"),
+        "{err}"
+    );
     let text_ = std::fs::read_to_string(&scene_path).unwrap();
     assert!(
         text_.contains("mesh = \"organ.msh\"") && text_.contains("young_pa = 5000.0"),

@@ -130,6 +130,12 @@ fn new(a: NewArgs) -> Result<()> {
     };
     let (text, reachable, warnings) = scene_text(&mesh, &spec, &a.output)?;
     warnings.iter().for_each(|w| eprintln!("{w}"));
+    eprintln!(
+        "warning: --tissue {}: {}; measure the tissue and fit the law with `host calibrate \
+         tissue` before trusting the force",
+        tissue.name(),
+        tissue.caveat()
+    );
     let mut inputs = vec![a.mesh.as_path()];
     inputs.extend(a.fem_mesh.as_deref());
     host::fsio::write_atomic(&a.output, text.as_bytes(), &inputs)?;
