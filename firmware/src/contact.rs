@@ -639,23 +639,10 @@ fn finite(p: [f32; 3]) -> bool {
 mod tests {
     extern crate std;
     use super::*;
-    use bank_format::{AlignedBytes, BankBuilder, TissueLaw};
+    use bank_format::AlignedBytes;
     use std::vec::Vec;
 
     const SPACING: f64 = 0.01;
-
-    fn block(p: &[[f64; 3]], k: usize, l: usize) -> [[f64; 3]; 3] {
-        let d = (0..3)
-            .map(|i| (p[k][i] - p[l][i]).powi(2))
-            .sum::<f64>()
-            .sqrt();
-        let kern = (-d / 0.02).exp() * 1.0e-3 + if k == l { 0.3e-3 } else { 0.0 };
-        let mut m = [[0.0; 3]; 3];
-        for (i, row) in m.iter_mut().enumerate() {
-            row[i] = kern;
-        }
-        m
-    }
 
     /// A flat 5 x 5 patch at z = 0, 1 cm spacing, outward normal +z.
     fn patch() -> AlignedBytes {
@@ -690,32 +677,13 @@ mod tests {
                 triangles.push([a, c, d]);
             }
         }
-        let radius = 0.015;
-        let n = p.len();
-        let mut couplings = Vec::new();
-        for k in 0..n {
-            for l in k + 1..n {
-                let d2: f64 = (0..3).map(|i| (p[k][i] - p[l][i]).powi(2)).sum();
-                if d2.sqrt() < radius * 1.01 {
-                    couplings.push((k as u32, l as u32, block(&p, k, l)));
-                }
-            }
-        }
-        let b = BankBuilder {
-            c_kk: (0..n).map(|k| block(&p, k, k)).collect(),
-            couplings,
-            mesh_ids: (0..n as u32).collect(),
+        let b = crate::fixtures::surface_builder(
+            p,
             triangles,
-            positions_m: p,
-            grid_cell_size_m: cell,
-            truncation_radius_m: radius,
-            scene_id: 3,
-            law: TissueLaw::chebyshev(&[2.6, 2.5, 0.1], [0.0, 5.0]).unwrap(),
-            gravity: None,
-            relaxation: None,
-            samples: None,
-            device: crate::fixtures::bench_device([0.02, 0.02, 0.1]),
-        };
+            0.015,
+            cell,
+            crate::fixtures::bench_device([0.02, 0.02, 0.1]),
+        );
         AlignedBytes::new(&b.build().unwrap())
     }
 

@@ -321,33 +321,7 @@ fn rotate_derivative(a: [f32; 3], s: f32, c: f32, v: [f32; 3]) -> [f32; 3] {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::fixtures::liver_device;
-
-    /// A tilted, non-axis-aligned frame with a negative transmission.
-    fn tilted() -> DeviceCalibration {
-        // Orthonormal triad: rotate the standard basis by 0.4 rad about (1, 1, 1)/sqrt 3.
-        let k = 1.0 / 3.0f32.sqrt();
-        let axis = [k, k, k];
-        let (s, c) = sin_cos(0.4);
-        let r = |v| rotate(axis, s, c, v);
-        DeviceCalibration {
-            fulcrum_m: [0.02, -0.01, 0.2],
-            shaft_axis: r([0.0, 0.0, -1.0]),
-            pitch_axis: r([0.0, 1.0, 0.0]),
-            yaw_axis: r([1.0, 0.0, 0.0]),
-            joint_min: [-1.2, -2.5, 0.0],
-            joint_max: [1.2, 2.5, 0.2],
-            home_joint: [0.1, -0.2, 0.05],
-            counts_per_rev: [2000, 1024, 500],
-            transmission: [-8.0, 20.0, -250.0],
-            torque_constant_nm_per_a: [0.03, 0.05, 0.02],
-            current_limit_a: [1.5, 3.0, 2.5],
-            max_force_n: 8.0,
-            tip_radius_m: 0.002,
-            max_tip_speed_m_s: 1.0,
-            max_joint_speed: [10.0, 10.0, 1.0],
-        }
-    }
+    use crate::fixtures::{liver_device, tilted_device};
 
     fn close(a: [f32; 3], b: [f32; 3], tol: f32) -> bool {
         a.iter().zip(&b).all(|(x, y)| (x - y).abs() <= tol)
@@ -376,12 +350,12 @@ mod tests {
     #[test]
     fn calibrations_are_valid() {
         assert_eq!(bank_format::validate_device(&liver_device()), Ok(()));
-        assert_eq!(bank_format::validate_device(&tilted()), Ok(()));
+        assert_eq!(bank_format::validate_device(&tilted_device()), Ok(()));
     }
 
     #[test]
     fn rest_pose_is_along_the_shaft() {
-        for cal in [liver_device(), tilted()] {
+        for cal in [liver_device(), tilted_device()] {
             let dev = Device::new(&cal);
             let q = Joints::from_array([0.0, 0.0, 0.1]);
             let want = core::array::from_fn(|i| cal.fulcrum_m[i] + 0.1 * cal.shaft_axis[i]);
@@ -424,7 +398,7 @@ mod tests {
         assert!((q.yaw + 2.0 * PI / 12.0).abs() < 1e-6);
         assert!((q.insertion - (0.03 + 2.0 * PI / 400.0)).abs() < 1e-7);
         // A negative transmission reverses the direction.
-        let cal = tilted();
+        let cal = tilted_device();
         let dev = Device::new(&cal);
         let q = dev.joints([2000, 0, -500]);
         assert!((q.pitch - (0.1 - 2.0 * PI / 8.0)).abs() < 1e-6);
@@ -444,7 +418,7 @@ mod tests {
 
     #[test]
     fn jacobian_matches_central_differences() {
-        for cal in [liver_device(), tilted()] {
+        for cal in [liver_device(), tilted_device()] {
             let dev = Device::new(&cal);
             for q0 in poses() {
                 let jac = dev.jacobian(&Joints::from_array(q0));
@@ -475,7 +449,7 @@ mod tests {
     #[test]
     fn efforts_do_the_same_virtual_work() {
         let forces = [[1.0, -2.0, 0.5], [0.0, 0.0, 3.0], [-0.7, 0.2, -1.5]];
-        for cal in [liver_device(), tilted()] {
+        for cal in [liver_device(), tilted_device()] {
             let dev = Device::new(&cal);
             for q0 in poses() {
                 let q = Joints::from_array(q0);
@@ -517,7 +491,7 @@ mod tests {
 
     #[test]
     fn currents_and_clamps() {
-        let cal = tilted();
+        let cal = tilted_device();
         let dev = Device::new(&cal);
         let tau = [0.01, -0.05, 0.3];
         let i = dev.requested_currents(tau);

@@ -55,6 +55,42 @@ pub fn bench_device(fulcrum_m: [f32; 3]) -> DeviceCalibration {
     }
 }
 
+/// A tilted gimbal: the liver-like frame turned 0.4 rad about (1, 1, 1) / sqrt(3), the
+/// fulcrum away from the origin, wide joint ranges, unequal encoders and transmissions (one of
+/// them reversed): the kinematics' hard case.
+pub fn tilted_device() -> DeviceCalibration {
+    let k = 1.0 / libm::sqrt(3.0);
+    let (s, c) = (libm::sin(0.4), libm::cos(0.4));
+    // Rodrigues' rotation about the unit axis (k, k, k), in f64.
+    let r = |v: [f64; 3]| -> [f32; 3] {
+        let a = [k, k, k];
+        let dot = a[0] * v[0] + a[1] * v[1] + a[2] * v[2];
+        let cross = [
+            a[1] * v[2] - a[2] * v[1],
+            a[2] * v[0] - a[0] * v[2],
+            a[0] * v[1] - a[1] * v[0],
+        ];
+        core::array::from_fn(|i| (v[i] * c + cross[i] * s + a[i] * dot * (1.0 - c)) as f32)
+    };
+    DeviceCalibration {
+        fulcrum_m: [0.12, -0.05, 0.3],
+        shaft_axis: r([0.0, 0.0, -1.0]),
+        pitch_axis: r([0.0, 1.0, 0.0]),
+        yaw_axis: r([1.0, 0.0, 0.0]),
+        joint_min: [-1.5, -3.1, 0.0],
+        joint_max: [1.5, 3.1, 0.25],
+        home_joint: [0.1, -0.2, 0.05],
+        counts_per_rev: [2000, 1024, 500],
+        transmission: [-8.0, 20.0, -250.0],
+        torque_constant_nm_per_a: [0.03, 0.05, 0.02],
+        current_limit_a: [1.5, 3.0, 2.5],
+        max_force_n: 8.0,
+        tip_radius_m: 0.002,
+        max_tip_speed_m_s: 1.0,
+        max_joint_speed: [10.0, 10.0, 1.0],
+    }
+}
+
 /// Spacing of [`flat_patch`], m.
 pub const PATCH_SPACING_M: f64 = 0.01;
 /// Nodes per side of [`flat_patch`].
@@ -203,25 +239,48 @@ pub fn grid_builder(
             triangles.push([a, c, d]);
         }
     }
+    surface_builder(p, triangles, truncation_m, h, device)
+}
+
+/// The builder of a bank on any triangulated surface (nodes `p`, m; `triangles` outward
+/// counter-clockwise): every triangle edge and every pair of nodes closer than `truncation_m`
+/// coupled by [`kernel_block`], grid cells of `cell_m`, a Chebyshev law, for a test to alter before
+/// building.
+pub fn surface_builder(
+    p: Vec<[f64; 3]>,
+    triangles: Vec<[u32; 3]>,
+    truncation_m: f64,
+    cell_m: f64,
+    device: DeviceCalibration,
+) -> BankBuilder {
     let n = p.len();
-    let mut couplings = Vec::new();
+    let mut pairs = alloc::collections::BTreeSet::new();
+    for t in &triangles {
+        for (a, b) in [(t[0], t[1]), (t[1], t[2]), (t[2], t[0])] {
+            pairs.insert((a.min(b) as usize, a.max(b) as usize));
+        }
+    }
     for k in 0..n {
         for l in k + 1..n {
             let d2: f64 = (0..3)
                 .map(|i| (p[k][i] - p[l][i]) * (p[k][i] - p[l][i]))
                 .sum();
             if d2 < truncation_m * truncation_m {
-                couplings.push((k as u32, l as u32, kernel_block(&p, k, l)));
+                pairs.insert((k, l));
             }
         }
     }
+    let couplings = pairs
+        .into_iter()
+        .map(|(k, l)| (k as u32, l as u32, kernel_block(&p, k, l)))
+        .collect();
     BankBuilder {
         c_kk: (0..n).map(|k| kernel_block(&p, k, k)).collect(),
         couplings,
         mesh_ids: (0..n as u32).collect(),
         triangles,
         positions_m: p,
-        grid_cell_size_m: h,
+        grid_cell_size_m: cell_m,
         truncation_radius_m: truncation_m,
         scene_id: 7,
         law: TissueLaw::chebyshev(&[2.6, 2.5, -0.1], [0.0, 5.0]).expect("valid law"),

@@ -4,7 +4,7 @@
 
 #![allow(clippy::needless_range_loop)]
 
-use bank_format::{AlignedBytes, Bank, BankBuilder, TissueLaw};
+use bank_format::{AlignedBytes, Bank};
 use firmware::contact::{ContactState, ContactTracker};
 
 const R: f64 = 0.05;
@@ -17,15 +17,6 @@ fn cap_z(x: f64, y: f64) -> f64 {
 
 /// Centre of the sphere.
 const C: [f32; 3] = [0.0, 0.0, -R as f32];
-
-fn block(p: &[[f64; 3]], k: usize, l: usize) -> [[f64; 3]; 3] {
-    let d = (0..3)
-        .map(|i| (p[k][i] - p[l][i]).powi(2))
-        .sum::<f64>()
-        .sqrt();
-    let kern = (-d / 0.015).exp() * 1.0e-3 + if k == l { 0.3e-3 } else { 0.0 };
-    std::array::from_fn(|i| std::array::from_fn(|j| if i == j { kern } else { 0.0 }))
-}
 
 fn cap() -> AlignedBytes {
     let mut p = Vec::new();
@@ -50,32 +41,13 @@ fn cap() -> AlignedBytes {
             }
         }
     }
-    let radius = 0.012;
-    let n = p.len();
-    let mut couplings = Vec::new();
-    for k in 0..n {
-        for l in k + 1..n {
-            let d2: f64 = (0..3).map(|i| (p[k][i] - p[l][i]).powi(2)).sum();
-            if d2.sqrt() < radius * 1.01 {
-                couplings.push((k as u32, l as u32, block(&p, k, l)));
-            }
-        }
-    }
-    let b = BankBuilder {
-        c_kk: (0..n).map(|k| block(&p, k, k)).collect(),
-        couplings,
-        mesh_ids: (0..n as u32).collect(),
+    let b = firmware::fixtures::surface_builder(
+        p,
         triangles,
-        positions_m: p,
-        grid_cell_size_m: H,
-        truncation_radius_m: radius,
-        scene_id: 11,
-        law: TissueLaw::chebyshev(&[2.6, 2.5, 0.1], [0.0, 5.0]).unwrap(),
-        gravity: None,
-        relaxation: None,
-        samples: None,
-        device: firmware::fixtures::bench_device([0.0, 0.0, 0.1]),
-    };
+        0.012,
+        H,
+        firmware::fixtures::bench_device([0.0, 0.0, 0.1]),
+    );
     AlignedBytes::new(&b.build().expect("valid cap bank"))
 }
 

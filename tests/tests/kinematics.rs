@@ -5,7 +5,7 @@
 
 use bank_format::DeviceCalibration;
 use firmware::device::{Device, Joints};
-use firmware::fixtures::liver_device;
+use firmware::fixtures::{liver_device, tilted_device};
 
 fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
     [
@@ -37,33 +37,10 @@ fn tip_f64(cal: &DeviceCalibration, q: [f64; 3]) -> [f64; 3] {
     std::array::from_fn(|i| f64::from(cal.fulcrum_m[i]) + q[2] * d[i])
 }
 
-/// A tilted frame, wide ranges, the fulcrum away from the origin.
-fn tilted() -> DeviceCalibration {
-    let k = 1.0 / 3.0f64.sqrt();
-    let r = |v: [f64; 3]| rotate([k, k, k], 0.4, v).map(|x| x as f32);
-    DeviceCalibration {
-        fulcrum_m: [0.12, -0.05, 0.3],
-        shaft_axis: r([0.0, 0.0, -1.0]),
-        pitch_axis: r([0.0, 1.0, 0.0]),
-        yaw_axis: r([1.0, 0.0, 0.0]),
-        joint_min: [-1.5, -3.1, 0.0],
-        joint_max: [1.5, 3.1, 0.25],
-        home_joint: [0.0, 0.0, 0.05],
-        counts_per_rev: [2000, 1024, 500],
-        transmission: [-8.0, 20.0, -250.0],
-        torque_constant_nm_per_a: [0.03, 0.05, 0.02],
-        current_limit_a: [1.5, 3.0, 2.5],
-        max_force_n: 8.0,
-        tip_radius_m: 0.002,
-        max_tip_speed_m_s: 1.0,
-        max_joint_speed: [10.0, 10.0, 1.0],
-    }
-}
-
 #[test]
 fn f32_forward_kinematics_matches_f64_over_the_ranges() {
     const N: usize = 21;
-    for (name, cal) in [("liver", liver_device()), ("tilted", tilted())] {
+    for (name, cal) in [("liver", liver_device()), ("tilted", tilted_device())] {
         assert_eq!(bank_format::validate_device(&cal), Ok(()));
         let dev = Device::new(&cal);
         let lerp = |j: usize, k: usize| {
