@@ -799,6 +799,34 @@ impl Scene {
         [mesh, fem, richardson].into_iter().flatten().collect()
     }
 
+    /// FNV-1a 64 over everything a bank is built from: the scene file's text, the validated
+    /// scene (its `Debug` text without its path: a scene edited in memory after loading is not
+    /// its file's), the bytes of every file it reads ([`Scene::input_files`]) or of the
+    /// embedded liver, and the bank format version. The bank caches key on it
+    /// ([`crate::bank::cache`] and [`crate::sil::bank`], each adding the code that builds).
+    pub fn inputs_hash(&self) -> anyhow::Result<u64> {
+        use anyhow::Context;
+        let mut h = self.text_hash;
+        if self.mesh == MeshSource::BuiltinLiver {
+            h = fnv1a(h, BUILTIN_LIVER);
+        }
+        for file in self.input_files() {
+            let bytes = std::fs::read(file).with_context(|| {
+                format!(
+                    "cannot read {}, named by {}",
+                    file.display(),
+                    self.path.display()
+                )
+            })?;
+            h = fnv1a(h, &fnv1a(FNV_OFFSET, &bytes).to_le_bytes());
+        }
+        let mut scene = self.clone();
+        scene.path = PathBuf::new();
+        h = fnv1a(h, format!("{scene:?}").as_bytes());
+        h = fnv1a(h, &bank_format::VERSION_MAJOR.to_le_bytes());
+        Ok(fnv1a(h, &bank_format::VERSION_MINOR.to_le_bytes()))
+    }
+
     /// The bank's scene id: FNV-1a 64 over the scene file's bytes, then the mesh bytes' hash.
     pub fn scene_id(&self, mesh_hash: u64) -> u64 {
         fnv1a(self.text_hash, &mesh_hash.to_le_bytes())

@@ -1,14 +1,13 @@
 //! A cache of sampled banks, so that a command that needs a sampled scene's bank (`host demo`,
 //! `host contact probe`, `host sil`) pays the FEM precompute once per set of inputs.
 //!
-//! The key is FNV-1a 64 over the bank's scene id (the scene file's bytes and its collision
-//! mesh's), the bytes of every file the scene reads ([`crate::scene::Scene::input_files`]: the
-//! collision, FEM and Richardson meshes, the list `host sil`'s bank key uses too), the validated scene
-//! itself (its `Debug` text without its path: a scene edited in memory after loading, say
-//! without its `[viscoelastic]` table, is not its file's), the bank format version and the source
-//! text of the code that computes and writes the samples ([`SAMPLING_SOURCES`], compiled in),
-//! so a build whose sampling differs never reuses another's bank, while every binary of one
-//! source tree (the CLI, each test) shares it.
+//! The key is FNV-1a 64 over [`crate::scene::Scene::inputs_hash`] (the scene file's text, the
+//! validated scene itself, say without the `[viscoelastic]` table a caller removed in memory,
+//! the bytes of the collision, FEM and Richardson meshes, the bank format version: the hash
+//! `host sil`'s bank key starts from too) and the source text of the code that computes and
+//! writes the samples ([`SAMPLING_SOURCES`], compiled in), so a build whose sampling differs
+//! never reuses another's bank, while every binary of one source tree (the CLI, each test)
+//! shares it.
 //! Files live in `$HAPTIC_CACHE_DIR`, else `$XDG_CACHE_HOME/haptic-host`, else
 //! `~/.cache/haptic-host`, named `bank-<key>.bin`, written atomically; a cached file is
 //! validated by the bank reader before use, and one that fails is rebuilt. A sampled scene's
@@ -58,18 +57,8 @@ fn code_hash() -> u64 {
 }
 
 /// The cache key of a sampled scene's bank (module notes).
-fn bank_key(prep: &Prepared) -> u64 {
-    let mut key = prep.scene_id;
-    for mesh in prep.scene.input_files() {
-        let bytes = std::fs::read(mesh).unwrap_or_default();
-        key = fnv1a(key, &fnv1a(FNV_OFFSET, &bytes).to_le_bytes());
-    }
-    let mut scene = prep.scene.clone();
-    scene.path = PathBuf::new();
-    key = fnv1a(key, format!("{scene:?}").as_bytes());
-    key = fnv1a(key, &bank_format::VERSION_MAJOR.to_le_bytes());
-    key = fnv1a(key, &bank_format::VERSION_MINOR.to_le_bytes());
-    fnv1a(key, &code_hash().to_le_bytes())
+fn bank_key(prep: &Prepared) -> Result<u64> {
+    Ok(fnv1a(prep.scene.inputs_hash()?, &code_hash().to_le_bytes()))
 }
 
 /// The scene's bank ([`Prepared::build_bank`]); a sampled scene's comes from the cache when
@@ -82,7 +71,7 @@ pub fn scene_bank_cached(
     let ContactModel::Sampled(_) = &prep.scene.contact else {
         return Ok((prep.build_bank(progress)?, false));
     };
-    let key = bank_key(prep);
+    let key = bank_key(prep)?;
     let file = cache_dir().map(|d| d.join(format!("bank-{key:016x}.bin")));
     if let Some(f) = &file
         && let Ok(bytes) = std::fs::read(f)
@@ -124,7 +113,7 @@ pub fn display_fields_cached(
     };
     let key = FIELDS_SOURCES
         .iter()
-        .fold(fnv1a(bank_key(prep), &bank.crc().to_le_bytes()), |h, s| {
+        .fold(fnv1a(bank_key(prep)?, &bank.crc().to_le_bytes()), |h, s| {
             fnv1a(h, s.as_bytes())
         });
     let file = cache_dir().map(|d| d.join(format!("fields-{key:016x}.bin")));
@@ -166,10 +155,10 @@ mod tests {
         let file = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/liver-qlv.toml");
         let mut prep = Prepared::load(&file).unwrap();
         assert!(matches!(prep.scene.contact, ContactModel::Sampled(_)));
-        let with = bank_key(&prep);
-        assert_eq!(bank_key(&prep), with);
+        let with = bank_key(&prep).unwrap();
+        assert_eq!(bank_key(&prep).unwrap(), with);
         assert!(prep.scene.viscoelastic.is_some());
         prep.scene.viscoelastic = None;
-        assert_ne!(bank_key(&prep), with);
+        assert_ne!(bank_key(&prep).unwrap(), with);
     }
 }

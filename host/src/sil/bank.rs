@@ -3,15 +3,14 @@
 
 use crate::bank::scene_bank;
 use crate::fsio::write_atomic;
-use crate::scene::Scene;
+use crate::scene::{Scene, fnv1a};
 use anyhow::{Context, Result};
-use std::hash::{Hash, Hasher};
 use std::path::{Path, PathBuf};
 
 /// `target/sil/<scene stem>-<key>.bank`, built when missing. The key hashes what the bank is made
-/// from: the scene file's bytes and those of every file it reads ([`Scene::input_files`]: the
-/// meshes), the bank format version and the building executable (its path and modification
-/// time), so an edited scene or mesh, a new format or a rebuilt host never reuses a stale bank.
+/// from ([`Scene::inputs_hash`]: the scene, every file it reads, the bank format version) and
+/// the building executable (its path and modification time), so an edited scene or mesh, a new
+/// format or a rebuilt host never reuses a stale bank.
 /// Older cached banks of the same scene are removed.
 pub fn cached(scene: &Path) -> Result<PathBuf> {
     let stem = scene
@@ -44,33 +43,20 @@ pub fn cached(scene: &Path) -> Result<PathBuf> {
     Ok(out)
 }
 
-/// The cache key of `scene`'s bank ([`cached`]).
+/// The cache key of `scene`'s bank ([`cached`]): the scene's [`Scene::inputs_hash`], then the
+/// building executable's path and modification time.
 fn key(scene: &Path) -> Result<u64> {
-    let text = std::fs::read(scene)
-        .with_context(|| format!("cannot read the scene {}", scene.display()))?;
-    let mut key = std::collections::hash_map::DefaultHasher::new();
-    text.hash(&mut key);
-    let parsed = Scene::parse(scene, &String::from_utf8_lossy(&text))?;
-    for input in parsed.input_files() {
-        std::fs::read(input)
-            .with_context(|| {
-                format!(
-                    "cannot read {}, named by {}",
-                    input.display(),
-                    scene.display()
-                )
-            })?
-            .hash(&mut key);
-    }
-    (bank_format::VERSION_MAJOR, bank_format::VERSION_MINOR).hash(&mut key);
+    let mut key = Scene::load(scene)?.inputs_hash()?;
     if let Ok(exe) = std::env::current_exe() {
-        exe.hash(&mut key);
-        std::fs::metadata(&exe)
+        key = fnv1a(key, exe.as_os_str().as_encoded_bytes());
+        let modified = std::fs::metadata(&exe)
             .and_then(|m| m.modified())
             .ok()
-            .hash(&mut key);
+            .and_then(|t| t.duration_since(std::time::UNIX_EPOCH).ok())
+            .map_or(0, |d| d.as_nanos());
+        key = fnv1a(key, &modified.to_le_bytes());
     }
-    Ok(key.finish())
+    Ok(key)
 }
 
 #[cfg(test)]
