@@ -340,6 +340,11 @@ pub fn run(setup: &Setup, session: &Session) -> Result<Run> {
     })
 }
 
+/// How long QEMU may take to start and connect its serial port and plant pipes: a few hundred
+/// milliseconds on an idle machine, seconds on a loaded 2-core one (a suite's parallel tests);
+/// reached only when something is wrong, so generous.
+const QEMU_START_TIMEOUT: Duration = Duration::from_secs(60);
+
 type Exchanged = (Vec<TickRecord>, Vec<LinkEvent>, FrameStats, Option<String>);
 
 /// Connect the link and the plant pipes, run the ticks, close everything.
@@ -350,7 +355,7 @@ fn exchange(
     out_path: &Path,
     session: &Session,
 ) -> Result<Exchanged> {
-    let deadline = Instant::now() + Duration::from_secs(20);
+    let deadline = Instant::now() + QEMU_START_TIMEOUT;
     let link = accept_until(listener, child, deadline)?;
     // The image opens its output first, then its input; open them in the same order.
     let mut from_image = File::options()
@@ -587,7 +592,10 @@ fn alive_before(child: &mut Child, deadline: Instant, what: &str) -> Result<()> 
         bail!("QEMU exited ({status}) before it could {what}");
     }
     if Instant::now() > deadline {
-        bail!("QEMU did not {what} within 20 s");
+        bail!(
+            "QEMU did not {what} within {} s",
+            QEMU_START_TIMEOUT.as_secs()
+        );
     }
     Ok(())
 }
