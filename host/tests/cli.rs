@@ -57,8 +57,12 @@ fn compliance_prints_one_json_object_matching_the_library() {
         for b in 0..3 {
             assert_eq!(blocks[a][b].as_array().unwrap().len(), 9);
             for i in 0..9 {
+                // Not bit-equal: the parallel assembly and factorisation may sum in another
+                // order from one run to the next (one suite run under load differed by more
+                // than 1e-15 of the diagonal); 1e-12 still tells the library's numbers from any
+                // other solve.
                 assert!(
-                    (get(a, b, i) - lib[a][b][i / 3][i % 3]).abs() <= 1e-15 * get(a, a, 0).abs()
+                    (get(a, b, i) - lib[a][b][i / 3][i % 3]).abs() <= 1e-12 * get(a, a, 0).abs()
                 );
                 assert!(
                     (get(a, b, i) - get(b, a, (i % 3) * 3 + i / 3)).abs() <= 1e-12 * get(a, a, 0)
