@@ -9,7 +9,7 @@
 use super::{HardCase, Knob, Point, Series, Verdict};
 use crate::sil::cost::{
     CODE_PHASES, CodePhaseStats, CostStats, NODAL_BODY_GOAL, NODAL_TICK_GOAL, PhaseMax, Phases,
-    code_phase_samples_of_runs,
+    by_contact_nodes_of_runs, code_phase_samples_of_runs,
 };
 use crate::sil::harness::{self, INSTRUCTIONS_PER_TICK, Session, Setup, TickRecord};
 use crate::sil::script::Script;
@@ -33,19 +33,7 @@ pub struct SilRuns {
 impl SilRuns {
     /// Every tick of every run, grouped by contact-set size.
     pub fn by_contact_nodes(&self) -> BTreeMap<u8, CostStats> {
-        let mut all = BTreeMap::<u8, Vec<(&TickRecord, u32)>>::new();
-        for (_, ticks) in &self.runs {
-            for w in ticks.windows(2) {
-                if w[0].state == bank_format::State::Armed {
-                    all.entry(w[0].contact_nodes)
-                        .or_default()
-                        .push((&w[0], w[1].tick_instructions));
-                }
-            }
-        }
-        all.into_iter()
-            .map(|(k, v)| (k, CostStats::of(v.into_iter())))
-            .collect()
+        by_contact_nodes_of_runs(self.runs.iter().map(|(_, ticks)| &ticks[..]))
     }
 }
 

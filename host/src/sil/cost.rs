@@ -83,8 +83,16 @@ pub fn against_goal(records: &[TickRecord]) -> (u32, u32, bool) {
 /// `tick_instructions` belongs to the tick before it, so each tick's whole cost is read from
 /// its successor.
 pub fn by_contact_nodes(records: &[TickRecord]) -> BTreeMap<u8, CostStats> {
+    by_contact_nodes_of_runs([records])
+}
+
+/// [`by_contact_nodes`] over several runs, together (each tick's whole cost from its successor
+/// in its own run).
+pub fn by_contact_nodes_of_runs<'a>(
+    runs: impl IntoIterator<Item = &'a [TickRecord]>,
+) -> BTreeMap<u8, CostStats> {
     let mut groups: BTreeMap<u8, Vec<(&TickRecord, u32)>> = BTreeMap::new();
-    for w in records.windows(2) {
+    for w in runs.into_iter().flat_map(|r| r.windows(2)) {
         if w[0].state == State::Armed {
             groups
                 .entry(w[0].contact_nodes)
@@ -293,6 +301,12 @@ mod tests {
             (6000, 6000, 6000)
         );
         assert_eq!((three.tick_mean, three.tick_max), (8000.0, 9000));
+        // Two runs, split after tick 3: tick 3 has no successor in its run (its whole cost is
+        // not tick 4's), so only tick 4 has three nodes.
+        let split = by_contact_nodes_of_runs([&r[..3], &r[3..]]);
+        assert_eq!(split[&3].ticks, 1);
+        assert_eq!((split[&3].body_p50, split[&3].tick_max), (6000, 9000));
+        assert_eq!(split[&0].ticks, 1);
     }
 
     #[test]
