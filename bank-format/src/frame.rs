@@ -226,8 +226,22 @@ pub struct PhaseCycles {
 }
 
 impl PhaseCycles {
-    /// The parts in order: kinematics, detection, patch, solve, law, supervisor.
-    pub fn to_array(&self) -> [u32; 6] {
+    /// Number of phases.
+    pub const COUNT: usize = 6;
+
+    /// The phases' names, in order (the fields' names).
+    pub const NAMES: [&'static str; Self::COUNT] = [
+        "kinematics",
+        "detection",
+        "patch",
+        "solve",
+        "law",
+        "supervisor",
+    ];
+
+    /// The parts in order ([`PhaseCycles::NAMES`]): kinematics, detection, patch, solve, law,
+    /// supervisor.
+    pub fn to_array(&self) -> [u32; Self::COUNT] {
         [
             self.kinematics,
             self.detection,
@@ -236,6 +250,19 @@ impl PhaseCycles {
             self.law,
             self.supervisor,
         ]
+    }
+
+    /// The parts from an array in [`PhaseCycles::to_array`]'s order.
+    pub fn from_array(p: [u32; Self::COUNT]) -> Self {
+        let [kinematics, detection, patch, solve, law, supervisor] = p;
+        PhaseCycles {
+            kinematics,
+            detection,
+            patch,
+            solve,
+            law,
+            supervisor,
+        }
     }
 
     /// The sum of the parts (wrapping, as the counts are).

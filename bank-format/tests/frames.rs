@@ -440,3 +440,33 @@ fn plant_messages_are_a_length_byte_and_postcard() {
     let mut buf = [0u8; 256];
     assert_eq!(encode_plant(&reply, &mut buf).unwrap().len(), 1 + 72);
 }
+
+/// The phases' array form, names and fields agree (the host's code-phase tables index by it).
+#[test]
+fn phase_cycles_array_order_is_the_names_order() {
+    let p = bank_format::PhaseCycles::from_array([1, 2, 3, 4, 5, 6]);
+    assert_eq!(
+        (
+            p.kinematics,
+            p.detection,
+            p.patch,
+            p.solve,
+            p.law,
+            p.supervisor
+        ),
+        (1, 2, 3, 4, 5, 6)
+    );
+    assert_eq!(p.to_array(), [1, 2, 3, 4, 5, 6]);
+    assert_eq!(p.total(), 21);
+    assert_eq!(
+        bank_format::PhaseCycles::NAMES,
+        [
+            "kinematics",
+            "detection",
+            "patch",
+            "solve",
+            "law",
+            "supervisor"
+        ]
+    );
+}

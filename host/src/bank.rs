@@ -4,11 +4,13 @@
 //! [`Prepared`] holds a scene with everything the later stages need (the compliance stays
 //! factorised, so the display can produce any column on demand); [`Prepared::build_bank`]
 //! writes the scene's bank. `host bank`, `host demo`, `host sil` and the tests all go through
-//! here.
+//! here. [`stats`] measures what a built bank gives the firmware (tool patches, detection
+//! candidates).
 
 pub mod cache;
 pub mod precompute;
 pub mod sampled;
+pub mod stats;
 pub mod sweep;
 
 use crate::kinematics::Workspace;

@@ -2,7 +2,10 @@
 //! firmware images (each its own workspace, `firmware/qemu` and `firmware/board`) and of
 //! `no_std` crates for the MCU target, rustup's `llvm-objdump`, and what an image's ELF file
 //! says about its size and its stack (read with the `object` crate, as `flash` reads the
-//! segments it programs).
+//! segments it programs). [`law_cost`] counts what evaluating the tissue law costs on the MCU,
+//! on the disassembly of `bank-format` built for it.
+
+pub mod law_cost;
 
 use anyhow::{Context, Result, bail};
 use object::elf::{FileHeader32, SHF_ALLOC, SHT_NOBITS, SHT_PROGBITS};

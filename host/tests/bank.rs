@@ -77,10 +77,34 @@ fn shipped_scene_builds_a_valid_bank_and_inspect_refuses_damaged_copies() {
         text.contains("overspeed tip 1 m/s; joints 10 rad/s, 10 rad/s, 1 m/s"),
         "{text}"
     );
+    // The tool patches at the triangles' centroids, as the build printed them: the 3 mm tip
+    // covers a few nodes, never more than the firmware's solve takes.
+    let patches = host::bank::stats::tool_patches(&bank);
+    assert!(
+        (1..=firmware::solve::MAX_CONTACT_NODES).contains(&patches.max_nodes),
+        "{patches:?}"
+    );
+    assert!((0.0..=1.0).contains(&patches.max_dropped), "{patches:?}");
+    assert!(
+        summary.contains(&format!(
+            "patches of up to {} nodes at the triangles' centroids; at most {:.1}% of a patch's \
+             load dropped",
+            patches.max_nodes,
+            100.0 * patches.max_dropped
+        )),
+        "{summary}"
+    );
     let o = host(&["bank", "inspect", s(&out), "--json"]);
     assert!(o.status.success(), "{}", stderr(&o));
     let v: serde_json::Value = serde_json::from_slice(&o.stdout).expect("one JSON object");
     assert_eq!(v["nodes"], n);
+    let candidates = host::bank::stats::grid_candidates(&bank);
+    assert!(candidates.max >= 1 && candidates.mean_near_surface > 0.0);
+    assert_eq!(v["grid"]["max_candidates"], candidates.max);
+    assert_eq!(
+        v["grid"]["mean_candidates_near_surface"],
+        candidates.mean_near_surface
+    );
     assert_eq!(v["crc32"], format!("{:08x}", bank.crc()));
     assert_eq!(v["device"]["max_tip_speed_m_s"], 1.0);
     assert_eq!(

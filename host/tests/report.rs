@@ -1,10 +1,15 @@
-//! `host report --quick`: the page renders in headless Chromium with every plot drawn and no
-//! console error; `report.json` holds each knob's series with at least three finite points; and
-//! its numbers agree with the tests' references (the relaxation section's with the SIL test's).
+//! The quick report ([`host::report::pipeline::run`], what `host report --quick` runs): the page
+//! renders in headless Chromium with every plot drawn and no console error; `report.json` holds
+//! each knob's series with at least three finite points; and its numbers agree with the tests'
+//! references (the relaxation section's with the SIL test's). `host report`'s own refusal of
+//! an `--out` that is a file is checked on the binary.
 
 mod support;
 use support::chromium;
 
+use host::bank::Prepared;
+use host::report::pipeline::{self, ReportConfig};
+use host::sil::cost::CODE_PHASES;
 use std::path::Path;
 use std::process::Command;
 
@@ -38,20 +43,47 @@ fn render(page: &Path) -> (String, String) {
 }
 
 #[test]
-fn quick_report_renders_every_plot_and_agrees_with_the_references() {
+fn report_refuses_an_out_that_is_a_file() {
     let dir = tempfile::tempdir().unwrap();
-    let out = dir.path().join("report");
+    let file = dir.path().join("report");
+    std::fs::write(&file, "not a directory").unwrap();
     let run = Command::new(env!("CARGO_BIN_EXE_host"))
-        .args(["report", "--quick", "--scene"])
-        .arg(Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/liver-nodal.toml"))
-        .arg("--out")
-        .arg(&out)
+        .args(["report", "--quick", "--out"])
+        .arg(&file)
         .output()
         .unwrap();
     let stderr = String::from_utf8_lossy(&run.stderr);
-    assert!(run.status.success(), "host report failed: {stderr}");
-    let stdout = String::from_utf8_lossy(&run.stdout);
-    assert!(stdout.contains("hard cases:"), "{stdout}");
+    assert_eq!(run.status.code(), Some(1), "{stderr}");
+    assert!(
+        stderr.contains(&format!(
+            "--out {}: exists and is not a directory",
+            file.display()
+        )),
+        "{stderr}"
+    );
+    assert_eq!(
+        std::fs::read_to_string(&file).unwrap(),
+        "not a directory",
+        "the file is left alone"
+    );
+}
+
+#[test]
+fn quick_report_renders_every_plot_and_agrees_with_the_references() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("report");
+    let scene = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/liver-nodal.toml");
+    let config = ReportConfig {
+        scene: Some(scene.clone()),
+        quick: true,
+        out: out.clone(),
+    };
+    let report = pipeline::run(&config, &|what: &str| eprintln!("{what}")).unwrap();
+    let summary = report.summary();
+    assert!(
+        summary.last().unwrap().starts_with("hard cases:"),
+        "{summary:?}"
+    );
 
     let json: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap();
@@ -192,9 +224,10 @@ fn quick_report_renders_every_plot_and_agrees_with_the_references() {
         .iter()
         .map(|p| p["y"].as_f64().unwrap())
         .collect::<Vec<_>>();
-    assert_eq!(code_worst.len(), 7);
+    assert_eq!(code_worst.len(), CODE_PHASES.len());
     assert!(code_worst.iter().all(|&w| w > 0.0), "{code_worst:?}");
-    assert!(code_worst[6] < worst_tick, "{code_worst:?} {worst_tick}");
+    let link = code_worst[CODE_PHASES.len() - 1];
+    assert!(link < worst_tick, "{code_worst:?} {worst_tick}");
     // Viscoelastic relaxation (issue 30): press-hold on liver-qlv under QEMU follows the
     // analytic QLV response (the SIL test's 1e-4 of the peak), the force relaxes during the
     // hold (the rendered force at the end below its peak, above g_inf of it), and the cost is
@@ -228,22 +261,9 @@ fn quick_report_renders_every_plot_and_agrees_with_the_references() {
         "{terms:?}"
     );
     // The scene's bank on the plot is the one `host bank build` writes.
-    let scene = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/liver-nodal.toml");
-    let bank = dir.path().join("liver.bank");
-    let built = Command::new(env!("CARGO_BIN_EXE_host"))
-        .args(["bank", "build"])
-        .arg(&scene)
-        .arg("-o")
-        .arg(&bank)
-        .output()
-        .unwrap();
-    assert!(
-        built.status.success(),
-        "{}",
-        String::from_utf8_lossy(&built.stderr)
-    );
+    let built = Prepared::load(&scene).unwrap().build_bank(None).unwrap();
     let chosen = knob("mesh-bank")["chosen"]["y"].as_f64().unwrap();
-    assert_eq!(chosen, std::fs::metadata(&bank).unwrap().len() as f64);
+    assert_eq!(chosen, built.bytes.len() as f64);
 
     let png = std::fs::read(out.join("headline.png")).unwrap();
     assert_eq!(&png[..8], b"\x89PNG\r\n\x1a\n");

@@ -122,22 +122,17 @@ impl PlantChannel {
         // The report counts virtual core cycles (`InstructionCounter`); the harness gets
         // instructions. Each phase ends where the cumulative count since the body's start
         // does, so the converted phases still sum to the converted body.
-        let p = out.phase_cycles.to_array();
-        let mut ends = [0u32; 6];
         let mut at = 0u32;
-        for (end, part) in ends.iter_mut().zip(p) {
+        let ends = out.phase_cycles.to_array().map(|part| {
             at = at.wrapping_add(part);
-            *end = instructions(at);
-        }
-        let [k, d, pa, s, l, su] = ends;
-        let phase_cycles = PhaseCycles {
-            kinematics: k,
-            detection: d.wrapping_sub(k),
-            patch: pa.wrapping_sub(d),
-            solve: s.wrapping_sub(pa),
-            law: l.wrapping_sub(s),
-            supervisor: su.wrapping_sub(l),
-        };
+            instructions(at)
+        });
+        let mut start = 0u32;
+        let phase_cycles = PhaseCycles::from_array(ends.map(|end| {
+            let part = end.wrapping_sub(start);
+            start = end;
+            part
+        }));
         let msg = DeviceToHost::Plant {
             tick: out.tick,
             currents_a: out.currents_a,

@@ -7,13 +7,13 @@
 //! the degree choice by cross-validation and the monotonicity check, [`motor`] the per-axis
 //! torque-constant fit, [`scene_edit`] writes results into a scene file without disturbing its
 //! comments, [`specimen`] computes the linear model's prediction for a compression specimen, and
-//! [`plot`] draws data, fit and residuals (PNG and SVG); [`cost`] estimates what evaluating a law
-//! costs on the MCU; [`gravity`] fits the feed-forward for the instrument's own weight to the
-//! currents that hold it at a few poses; [`relaxation`] fits Fung's quasi-linear
-//! viscoelasticity (Prony terms and the instantaneous elastic law) to a ramp-and-hold test.
+//! [`plot`] draws data, fit and residuals (PNG and SVG); [`gravity`] fits the feed-forward for
+//! the instrument's own weight to the currents that hold it at a few poses; [`relaxation`] fits
+//! Fung's quasi-linear viscoelasticity (Prony terms and the instantaneous elastic law) to a
+//! ramp-and-hold test. (What evaluating a fitted law costs on the MCU is
+//! [`crate::mcu::law_cost`]'s.)
 
 pub mod cheb;
-pub mod cost;
 pub mod csv;
 pub mod fit;
 pub mod gravity;

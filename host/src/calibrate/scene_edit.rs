@@ -33,7 +33,7 @@ pub enum EditError {
 }
 
 /// Which law a fit goes to.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Law {
     /// Tissue force law Q: table `[law]`, domain key `domain_n` (N).
     Q,

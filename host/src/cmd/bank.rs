@@ -3,7 +3,7 @@
 use anyhow::{Context, Result, bail};
 use bank_format::region::BANK_LEN;
 use bank_format::{AlignedBytes, Bank, LawKind, SectionKind};
-use firmware::patch::tool_patch;
+use host::bank::stats;
 use host::bank::sweep::{self, SweepConfig};
 use host::bank::{BuiltBank, Prepared};
 use host::fsio::write_atomic;
@@ -89,30 +89,6 @@ pub fn run(cmd: BankCmd) -> Result<()> {
     }
 }
 
-/// `(kind name, offset, len, count)` of each entry of the bank's section table.
-/// The largest candidate list of the grid's cells, and the mean over the cells of clearance
-/// at most 1 (those where detection tests candidates).
-fn candidate_stats(bank: &bank_format::Bank) -> (usize, f64) {
-    let g = bank.grid();
-    let (mut max, mut sum, mut near) = (0, 0usize, 0usize);
-    for c in 0..g.cell_count() {
-        let k = g.cell_triangles(c).len();
-        max = max.max(k);
-        if g.clearance(c) <= 1 {
-            sum += k;
-            near += 1;
-        }
-    }
-    (
-        max,
-        if near > 0 {
-            sum as f64 / near as f64
-        } else {
-            0.0
-        },
-    )
-}
-
 /// What `bank build` prints of a nodal bank: its coupling rule and the tool patches it holds.
 fn print_nodal(prep: &Prepared, bank: &Bank, pairs: usize) {
     let radius = prep.scene.bank.truncation_radius_m;
@@ -131,30 +107,16 @@ fn print_nodal(prep: &Prepared, bank: &Bank, pairs: usize) {
         "couplings {pairs} pairs kept ({rule}), {} neighbour entries",
         2 * pairs
     );
-    let (mut most, mut dropped) = (0, 0.0f32);
-    for (t, tri) in bank.triangles().iter().enumerate() {
-        let p = bank.positions();
-        let v = tri.map(|k| p[usize::from(k)]);
-        let centroid = std::array::from_fn(|i| (v[0][i] + v[1][i] + v[2][i]) / 3.0);
-        let patch = tool_patch(
-            bank,
-            t as u32,
-            *tri,
-            [1.0 / 3.0; 3],
-            centroid,
-            bank.device().tip_radius_m,
-        );
-        most = most.max(patch.nodes().len());
-        dropped = dropped.max(patch.dropped);
-    }
+    let patches = stats::tool_patches(bank);
     println!(
-        "tool      tip radius {} m: patches of up to {most} nodes at the triangles' centroids; at \
+        "tool      tip radius {} m: patches of up to {} nodes at the triangles' centroids; at \
          most {:.1}% of a patch's load dropped (nodes the bank does not couple, or beyond {} \
          nodes){}",
         prep.scene.tip_radius_m,
-        100.0 * dropped,
+        patches.max_nodes,
+        100.0 * patches.max_dropped,
         firmware::solve::MAX_CONTACT_NODES,
-        if dropped > 0.01 {
+        if patches.max_dropped > 0.01 {
             ": raise bank.truncation_radius_m (see `host bank sweep`)"
         } else {
             ""
@@ -162,6 +124,7 @@ fn print_nodal(prep: &Prepared, bank: &Bank, pairs: usize) {
     );
 }
 
+/// `(kind name, offset, len, count)` of each entry of the bank's section table.
 fn section_table(bank: &Bank) -> Vec<(&'static str, u32, u32, u32)> {
     bank.sections()
         .iter()
@@ -320,7 +283,7 @@ fn inspect(args: InspectArgs) -> Result<()> {
         .sum::<usize>()
         / 2;
     let sections = section_table(&bank);
-    let cand = candidate_stats(&bank);
+    let cand = stats::grid_candidates(&bank);
     if args.json {
         let v = serde_json::json!({
             "file": args.bank.display().to_string(),
@@ -334,7 +297,7 @@ fn inspect(args: InspectArgs) -> Result<()> {
             "truncation_radius_m": bank.truncation_radius_m(),
             "grid": {
                 "cell_size_m": bank.grid().cell_size_m(), "dims": bank.grid().dims(),
-                "max_candidates": cand.0, "mean_candidates_near_surface": cand.1,
+                "max_candidates": cand.max, "mean_candidates_near_surface": cand.mean_near_surface,
             },
             "law": { "kind": law_kind, "coeffs": law.coeffs(), "domain_n": law.domain() },
             "device": {
@@ -374,8 +337,8 @@ fn inspect(args: InspectArgs) -> Result<()> {
          where the surface is near (clearance <= 1)",
         bank.grid().cell_size_m(),
         bank.grid().dims(),
-        cand.0,
-        cand.1
+        cand.max,
+        cand.mean_near_surface
     );
     println!(
         "law       {law_kind}, coefficients {:?}, domain {:?} N",

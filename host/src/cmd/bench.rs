@@ -443,7 +443,7 @@ fn sil(args: SilArgs) -> Result<()> {
     use bank_format::region::{FIRMWARE_LEN, RAM_LEN, RAM_ORIGIN};
     use host::sil::cost::{
         BODY_GOAL, CODE_PHASES, CodePhaseStats, TICK_GOAL, against_goal, by_contact_nodes,
-        code_phase_samples,
+        code_phase_samples_of_runs,
     };
     use host::sil::harness::{self, Session};
     use host::sil::script::Script;
@@ -468,12 +468,7 @@ fn sil(args: SilArgs) -> Result<()> {
     }
     let groups = by_contact_nodes(&records.concat());
     // Per code phase over every tick of every run (each run's link samples from its own ticks).
-    let mut samples: [Vec<u32>; 7] = Default::default();
-    for run in &records {
-        for (all, v) in samples.iter_mut().zip(code_phase_samples(run)) {
-            all.extend(v);
-        }
-    }
+    let samples = code_phase_samples_of_runs(records.iter().map(Vec::as_slice));
     let code: Vec<(&str, CodePhaseStats)> = CODE_PHASES
         .iter()
         .zip(&samples)

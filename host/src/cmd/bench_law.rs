@@ -1,11 +1,10 @@
 //! `host bench law`: instructions one in-domain evaluation of the tissue law Q costs on the
 //! MCU, per degree, from the thumbv7em disassembly of `TissueLaw::eval`
-//! ([`host::calibrate::cost`] explains the count: instructions on the path, not cycles).
+//! ([`host::mcu::law_cost`] explains the count: instructions on the path, not cycles).
 
-use anyhow::{Context, Result, bail};
-use host::calibrate::cost;
+use anyhow::Result;
+use host::mcu::law_cost;
 use std::path::PathBuf;
-use std::process::Command;
 
 /// Arguments of `host bench law`.
 #[derive(clap::Args, Debug)]
@@ -22,44 +21,9 @@ pub struct LawArgs {
     json: bool,
 }
 
-/// The cost model of `TissueLaw::eval` from the thumbv7em disassembly: `rlib` (default: build
-/// bank-format for the MCU) read by `objdump` (default: rustup's llvm-tools). Returns the rlib
-/// read and the cost.
-pub fn measure(
-    rlib: Option<PathBuf>,
-    objdump: Option<PathBuf>,
-) -> Result<(PathBuf, cost::EvalCost)> {
-    let rlib = match rlib {
-        Some(p) => p,
-        None => host::mcu::build_rlib("bank-format")?,
-    };
-    let objdump = match objdump {
-        Some(p) => p,
-        None => host::mcu::objdump()?,
-    };
-    let out = Command::new(&objdump)
-        .args(["-d", "-C", "--no-show-raw-insn"])
-        .arg(&rlib)
-        .output()
-        .with_context(|| format!("running {}", objdump.display()))?;
-    if !out.status.success() {
-        bail!(
-            "{} failed on {}: {}",
-            objdump.display(),
-            rlib.display(),
-            String::from_utf8_lossy(&out.stderr).trim()
-        );
-    }
-    let text = String::from_utf8_lossy(&out.stdout);
-    let insns = cost::function(&text, "TissueLaw::eval");
-    let c =
-        cost::estimate(&insns).with_context(|| format!("TissueLaw::eval in {}", rlib.display()))?;
-    Ok((rlib, c))
-}
-
-/// Runs the estimate and prints it.
+/// Runs the estimate ([`law_cost::measure`]) and prints it.
 pub fn run(args: LawArgs) -> Result<()> {
-    let (rlib, c) = measure(args.rlib, args.objdump)?;
+    let (rlib, c) = law_cost::measure(args.rlib, args.objdump)?;
     let degrees: Vec<(usize, Option<usize>)> = (1..=10)
         .map(|d| (d, c.instructions_for_degree(d)))
         .collect();

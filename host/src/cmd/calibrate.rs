@@ -87,8 +87,8 @@ pub struct TissueArgs {
     #[arg(long, default_value = "auto")]
     degree: String,
     /// Which law: Q (force, scene table [law]) or P (radial displacement, [display_law]).
-    #[arg(long, value_enum, default_value_t = Law::Q, ignore_case = true)]
-    law: Law,
+    #[arg(long, value_enum, default_value_t = LawArg::Q, ignore_case = true)]
+    law: LawArg,
     /// `auto` is content with this cross-validated RMS error relative to full scale.
     #[arg(long, default_value_t = fit::DEFAULT_TARGET_RMS)]
     target_rms: f64,
@@ -121,6 +121,24 @@ pub struct TissueArgs {
     /// Print one JSON object instead of the tables.
     #[arg(long)]
     json: bool,
+}
+
+/// `--law` of `host calibrate tissue`: which law a fit goes to ([`Law`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum LawArg {
+    /// Tissue force law Q: table `[law]`, domain key `domain_n` (N).
+    Q,
+    /// Display (radial displacement) law P: table `[display_law]`, domain key `domain_m` (m).
+    P,
+}
+
+impl From<LawArg> for Law {
+    fn from(a: LawArg) -> Law {
+        match a {
+            LawArg::Q => Law::Q,
+            LawArg::P => Law::P,
+        }
+    }
 }
 
 /// Arguments of `host calibrate motor`.
@@ -480,6 +498,7 @@ struct TissueReport<'a> {
 }
 
 fn tissue(a: TissueArgs) -> Result<()> {
+    let which_law = Law::from(a.law);
     let degree = parse_degree(&a.degree)?;
     if !(a.target_rms.is_finite() && a.target_rms >= 0.0) {
         bail!("--target-rms must be >= 0, got {}", a.target_rms);
@@ -493,7 +512,7 @@ fn tissue(a: TissueArgs) -> Result<()> {
     if let (Some(mesh), Some(young), Some(poisson)) = (&a.specimen, a.young, a.poisson) {
         let r = specimen::compress(&fem::mesh::load(mesh)?, Material::new(young, poisson)?)
             .with_context(|| format!("{}: specimen compression", mesh.display()))?;
-        let per_m = match a.law {
+        let per_m = match which_law {
             Law::Q => r.force_per_m,
             Law::P => r.radial_per_m,
         };
@@ -504,7 +523,7 @@ fn tissue(a: TissueArgs) -> Result<()> {
         bail!("--max-rms must be > 0, got {}", a.max_rms);
     }
     let (f, law, survey) = fit::fit_law(&x, &y, degree, a.target_rms)
-        .with_context(|| format!("{}: fitting {:?}", a.csv.display(), a.law))?;
+        .with_context(|| format!("{}: fitting {:?}", a.csv.display(), which_law))?;
     let errors = f.errors(&x, &y);
     let poor = errors.rms_rel > a.max_rms;
     if poor && !a.accept_poor_fit {
@@ -519,7 +538,7 @@ fn tissue(a: TissueArgs) -> Result<()> {
             100.0 * a.max_rms
         );
     }
-    if matches!(a.law, Law::Q)
+    if matches!(which_law, Law::Q)
         && let Some(q0) = host::scene::pull_at_first_contact(&law)
     {
         bail!(
@@ -530,7 +549,7 @@ fn tissue(a: TissueArgs) -> Result<()> {
             100.0 * host::scene::PULL_TOLERANCE
         );
     }
-    let name = match a.law {
+    let name = match which_law {
         Law::Q => "Q",
         Law::P => "P",
     };
@@ -542,7 +561,7 @@ fn tissue(a: TissueArgs) -> Result<()> {
         .map(|i| lo + (hi - lo) * 1.08 * f64::from(i) / 400.0)
         .map(|v| (v, f64::from(law.eval(v as f32))))
         .collect();
-    let (unit, what) = match a.law {
+    let (unit, what) = match which_law {
         Law::Q => ("N", "force"),
         Law::P => ("m", "radial displacement"),
     };
@@ -603,7 +622,7 @@ fn tissue(a: TissueArgs) -> Result<()> {
         );
         write_scene(scene, |text| {
             Ok(scene_edit::set_law(
-                scene, text, a.law, &f.coeffs, f.domain, &source,
+                scene, text, which_law, &f.coeffs, f.domain, &source,
             )?)
         })?;
     }
@@ -694,7 +713,7 @@ fn print_tissue(
     );
     println!("coefficients: {:?}", f.coeffs);
     if let Some(s) = &a.scene {
-        println!("wrote [{}] of {}", a.law.table(), s.display());
+        println!("wrote [{}] of {}", Law::from(a.law).table(), s.display());
     }
     println!("plots: {} {}", plots[0].display(), plots[1].display());
 }

@@ -3,11 +3,11 @@
 //! data in `host/data/` (model-generated, see its header); error: the 10-fold interleaved
 //! cross-validation of [`crate::calibrate::fit::cross_validate`]; instructions: the path of one
 //! in-domain evaluation of `TissueLaw::eval` in the thumbv7em disassembly
-//! ([`crate::calibrate::cost`]).
+//! ([`crate::mcu::law_cost`]).
 
 use super::{Knob, Point, Series};
-use crate::calibrate::cost::EvalCost;
 use crate::calibrate::fit;
+use crate::mcu::law_cost::EvalCost;
 use anyhow::{Result, anyhow};
 
 /// The knob from data `(x, y)` (linear model force, measured force) and the evaluation cost.

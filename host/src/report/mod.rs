@@ -4,19 +4,20 @@
 //!
 //! The measurements are sections of this module, each returning [`Knob`]s (a plot of error
 //! against cost, one series per variant) and [`HardCase`] rows (a measurement with a
-//! verdict). [`html`] renders them. Sections:
+//! verdict). [`html`] renders them; [`pipeline`] runs every section on a scene and writes the
+//! page. Sections:
 //!
-//! - [`bank`]: the bank's couplings (truncation rule and radius) against force error and
+//! - [`couplings`]: the bank's couplings (truncation rule and radius) against force error and
 //!   bytes;
 //! - [`locking`]: the element (P1, ANP) under near-incompressibility, against 10-node
 //!   tetrahedra on the same mesh (the punch of `fem::reference`);
-//! - [`mesh`]: precompute time and factor size against mesh size, per element;
+//! - [`precompute_cost`]: precompute time and factor size against mesh size, per element;
 //! - [`law`]: the tissue law's degree, held-out fit error against MCU instructions per
 //!   evaluation;
 //! - [`hard`]: the hard cases that are a refusal or an exact reference;
 //! - [`precision`]: f32 on the MCU against f64 on the host, and the near-incompressible
 //!   condition numbers;
-//! - [`firmware`]: instructions per tick of the QEMU image over the SIL scripts;
+//! - [`tick_cost`]: instructions per tick of the QEMU image over the SIL scripts;
 //! - [`scale`]: contact models under refinement, bank size and display cost per mesh;
 //! - [`loops`]: the force loop's hard cases, through the firmware's own code;
 //! - [`pareto`]: the combinations no other beats on error, bytes and instructions;
@@ -26,19 +27,20 @@
 //!   image's force against the analytic QLV response, and instructions per tick against the
 //!   number of Prony terms.
 
-pub mod bank;
-pub mod firmware;
+pub mod couplings;
 pub mod hard;
 pub mod html;
 pub mod law;
 pub mod locking;
 pub mod loops;
-pub mod mesh;
 pub mod pareto;
+pub mod pipeline;
 pub mod precision;
+pub mod precompute_cost;
 pub mod relaxation;
 pub mod sampled;
 pub mod scale;
+pub mod tick_cost;
 
 use serde::Serialize;
 

@@ -1,8 +1,8 @@
 //! Where the knobs combine: the scene's mesh with each contact model ([`super::scale`]) and
-//! each swept bank ([`super::bank`]: truncation rule, radius and storage precision), against
-//! force error,
-//! bank bytes and the MCU's worst loop-body instructions measured on that very bank (QEMU,
-//! [`super::firmware`]). The front is the set of combinations no other beats on all three.
+//! each swept bank ([`super::couplings`]: truncation rule, radius and storage precision),
+//! against force error, bank bytes and the MCU's worst loop-body instructions measured on that
+//! very bank (QEMU, [`super::tick_cost`]). The front is the set of combinations no other beats
+//! on all three.
 //!
 //! **Error.** The reference is the most converged answer this run has: the finest mesh's
 //! tool patch at the scene's tip radius (f64, untruncated). A combination's error is bounded
@@ -68,7 +68,7 @@ pub fn section(runs: &[MeshRun], banks: &[RunBank], scene_bank: (&str, f64, &str
         }
         let e_model = relative(f.force_n);
         for b in banks.iter().filter(|b| b.row.fits_region) {
-            let Some(worst) = super::firmware::body_worst(&b.costs, f.nodes) else {
+            let Some(worst) = super::tick_cost::body_worst(&b.costs, f.nodes) else {
                 continue;
             };
             let e_bank = if i == scene_model {

@@ -3,7 +3,7 @@
 //! image's flash and RAM use: [`crate::mcu::image_size`]).
 
 use super::harness::TickRecord;
-use bank_format::State;
+use bank_format::{PhaseCycles, State};
 use std::collections::BTreeMap;
 
 /// Instruction counts of one group of ticks.
@@ -83,8 +83,16 @@ pub fn against_goal(records: &[TickRecord]) -> (u32, u32, bool) {
 /// `tick_instructions` belongs to the tick before it, so each tick's whole cost is read from
 /// its successor.
 pub fn by_contact_nodes(records: &[TickRecord]) -> BTreeMap<u8, CostStats> {
+    by_contact_nodes_of_runs([records])
+}
+
+/// [`by_contact_nodes`] over several runs, together (each tick's whole cost from its successor
+/// in its own run).
+pub fn by_contact_nodes_of_runs<'a>(
+    runs: impl IntoIterator<Item = &'a [TickRecord]>,
+) -> BTreeMap<u8, CostStats> {
     let mut groups: BTreeMap<u8, Vec<(&TickRecord, u32)>> = BTreeMap::new();
-    for w in records.windows(2) {
+    for w in runs.into_iter().flat_map(|r| r.windows(2)) {
         if w[0].state == State::Armed {
             groups
                 .entry(w[0].contact_nodes)
@@ -146,30 +154,48 @@ impl Phases {
     }
 }
 
-/// The code phases of a tick, in order: the loop body's six (`firmware::tick`'s phase
-/// boundaries, [`bank_format::PhaseCycles`]) and `link`, the rest of the whole tick (the plant exchange,
-/// the link queues and the executor: whole tick less body).
-pub const CODE_PHASES: [&str; 7] = [
-    "kinematics",
-    "detection",
-    "patch",
-    "solve",
-    "law",
-    "supervisor",
-    "link",
-];
+/// The code phases of a tick, in order: the loop body's ([`PhaseCycles::NAMES`],
+/// `firmware::tick`'s phase boundaries) and `link`, the rest of the whole tick (the plant
+/// exchange, the link queues and the executor: whole tick less body).
+pub const CODE_PHASES: [&str; PhaseCycles::COUNT + 1] = {
+    let mut names = ["link"; PhaseCycles::COUNT + 1];
+    let mut i = 0;
+    while i < PhaseCycles::COUNT {
+        names[i] = PhaseCycles::NAMES[i];
+        i += 1;
+    }
+    names
+};
+
+/// Instructions per tick of each code phase, in [`CODE_PHASES`] order.
+pub type CodePhaseSamples = [Vec<u32>; CODE_PHASES.len()];
 
 /// Instructions of each code phase ([`CODE_PHASES`]) over every tick of `records` (in tick
 /// order, armed or not). A record's whole tick is read from its successor, so the last record
 /// has no `link` sample.
-pub fn code_phase_samples(records: &[TickRecord]) -> [Vec<u32>; 7] {
-    let mut out: [Vec<u32>; 7] = Default::default();
+pub fn code_phase_samples(records: &[TickRecord]) -> CodePhaseSamples {
+    let mut out = CodePhaseSamples::default();
     for (i, r) in records.iter().enumerate() {
         for (v, x) in out.iter_mut().zip(r.phase_instructions.to_array()) {
             v.push(x);
         }
         if let Some(next) = records.get(i + 1) {
-            out[6].push(next.tick_instructions.saturating_sub(r.body_instructions));
+            out[PhaseCycles::COUNT]
+                .push(next.tick_instructions.saturating_sub(r.body_instructions));
+        }
+    }
+    out
+}
+
+/// [`code_phase_samples`] over several runs, together (each run's `link` samples from its own
+/// ticks).
+pub fn code_phase_samples_of_runs<'a>(
+    runs: impl IntoIterator<Item = &'a [TickRecord]>,
+) -> CodePhaseSamples {
+    let mut out = CodePhaseSamples::default();
+    for run in runs {
+        for (all, v) in out.iter_mut().zip(code_phase_samples(run)) {
+            all.extend(v);
         }
     }
     out
@@ -209,21 +235,13 @@ impl CodePhaseStats {
     }
 }
 
-/// The largest instructions of each code phase in a run (`host sil --json`'s `code_phases`).
+/// The largest instructions of each code phase in a run (`host sil --json`'s `code_phases`:
+/// one object, the body's phases then `link`).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]
 pub struct CodePhaseMax {
-    /// Encoder counts to joints, tip and Jacobian.
-    pub kinematics: u32,
-    /// The contact tracker (detection on the tip's path, or following the anchor).
-    pub detection: u32,
-    /// The contact patch and its factored `B C B^T`.
-    pub patch: u32,
-    /// The 3 x 3 solve and the node forces.
-    pub solve: u32,
-    /// The law Q, the force cap and the requested currents.
-    pub law: u32,
-    /// The supervisor and the tick's outputs.
-    pub supervisor: u32,
+    /// The loop body's phases.
+    #[serde(flatten)]
+    pub body: PhaseCycles,
     /// Whole tick less body: plant exchange, link queues, executor.
     pub link: u32,
 }
@@ -233,13 +251,8 @@ impl CodePhaseMax {
     pub fn of(records: &[TickRecord]) -> CodePhaseMax {
         let m = code_phase_samples(records).map(|v| v.into_iter().max().unwrap_or(0));
         CodePhaseMax {
-            kinematics: m[0],
-            detection: m[1],
-            patch: m[2],
-            solve: m[3],
-            law: m[4],
-            supervisor: m[5],
-            link: m[6],
+            body: PhaseCycles::from_array(std::array::from_fn(|i| m[i])),
+            link: m[PhaseCycles::COUNT],
         }
     }
 }
@@ -247,7 +260,6 @@ impl CodePhaseMax {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use bank_format::PhaseCycles;
 
     fn rec(tick: u32, nodes: u8, body: u32, prev_tick: u32, state: State) -> TickRecord {
         TickRecord {
@@ -289,6 +301,12 @@ mod tests {
             (6000, 6000, 6000)
         );
         assert_eq!((three.tick_mean, three.tick_max), (8000.0, 9000));
+        // Two runs, split after tick 3: tick 3 has no successor in its run (its whole cost is
+        // not tick 4's), so only tick 4 has three nodes.
+        let split = by_contact_nodes_of_runs([&r[..3], &r[3..]]);
+        assert_eq!(split[&3].ticks, 1);
+        assert_eq!((split[&3].body_p50, split[&3].tick_max), (6000, 9000));
+        assert_eq!(split[&0].ticks, 1);
     }
 
     #[test]
@@ -317,14 +335,7 @@ mod tests {
 
     #[test]
     fn code_phases_take_the_link_from_the_successors_whole_tick() {
-        let split = |p: [u32; 6]| PhaseCycles {
-            kinematics: p[0],
-            detection: p[1],
-            patch: p[2],
-            solve: p[3],
-            law: p[4],
-            supervisor: p[5],
-        };
+        let split = PhaseCycles::from_array;
         let mut r = [
             rec(1, 0, 1000, 0, State::Armed),
             rec(2, 3, 6000, 4000, State::Armed),
@@ -337,20 +348,33 @@ mod tests {
         assert_eq!(s[1], [400, 3000, 900]);
         // Tick 1's whole tick is 4000 (tick 2's report), its body 1000; tick 2's 9000 - 6000;
         // tick 3 has no successor.
-        assert_eq!(s[6], [3000, 3000]);
+        assert_eq!(s[PhaseCycles::COUNT], [3000, 3000]);
         let m = CodePhaseMax::of(&r);
+        assert_eq!(m.body.to_array(), [300, 3000, 1500, 400, 300, 500]);
+        assert_eq!(m.link, 3000);
+        // `host sil --json`'s object: the body's phases, then link, flat.
         assert_eq!(
-            (
-                m.kinematics,
-                m.detection,
-                m.patch,
-                m.solve,
-                m.law,
-                m.supervisor,
-                m.link
-            ),
-            (300, 3000, 1500, 400, 300, 500, 3000)
+            serde_json::to_value(m).unwrap(),
+            serde_json::json!({
+                "kinematics": 300, "detection": 3000, "patch": 1500, "solve": 400,
+                "law": 300, "supervisor": 500, "link": 3000
+            })
         );
+        assert_eq!(
+            CODE_PHASES,
+            [
+                "kinematics",
+                "detection",
+                "patch",
+                "solve",
+                "law",
+                "supervisor",
+                "link"
+            ]
+        );
+        let two = code_phase_samples_of_runs([&r[..2], &r[2..]]);
+        assert_eq!(two[1], [400, 3000, 900]);
+        assert_eq!(two[PhaseCycles::COUNT], [3000]);
         let d = CodePhaseStats::of(&s[1]);
         assert_eq!((d.ticks, d.p50, d.max), (3, 900, 3000));
         assert!((d.mean - 4300.0 / 3.0).abs() < 1e-9);

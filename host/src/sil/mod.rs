@@ -2,8 +2,9 @@
 //! simulated haptic device. [`plant`] is the gimbal (rigid joints, motors, the user's hand),
 //! [`script`] the hand's scripted motions and [`harness`] starts QEMU, exchanges encoder counts
 //! and currents with the image every tick over a lockstep channel and collects its link
-//! traffic; [`cost`] groups instruction counts per tick and sizes the image; [`source`] shows a
-//! run in the display; [`bank`] builds and caches the bank a run loads.
+//! traffic; [`cost`] groups instruction counts per tick (the image's size is
+//! [`crate::mcu::image_size`]'s); [`source`] shows a run in the display; [`bank`] builds and
+//! caches the bank a run loads.
 
 pub mod bank;
 pub mod cost;

@@ -1,5 +1,7 @@
 //! What evaluating a fitted law costs on the MCU, counted on the cross-compiled disassembly of
-//! [`bank_format::TissueLaw::eval`] (thumbv7em, `llvm-objdump -d`).
+//! [`bank_format::TissueLaw::eval`] (thumbv7em, `llvm-objdump -d`): [`measure`] builds
+//! `bank-format` for the MCU ([`super::build_rlib`]), disassembles it ([`super::objdump`]) and
+//! counts.
 //!
 //! The evaluation is straight-line code (the Clenshaw recurrence runs in passes of a fixed
 //! number of coefficients over a zero-padded copy, each pass laid out in full; a pass is
@@ -10,7 +12,10 @@
 //! the instruction count; where several paths tie, the longest is taken (an upper bound).
 //! A loop in the function (a back edge) is reported as an error rather than guessed at.
 
+use anyhow::{Context, bail};
 use std::collections::HashMap;
+use std::path::PathBuf;
+use std::process::Command;
 
 /// One decoded instruction.
 #[derive(Debug, Clone, PartialEq)]
@@ -211,6 +216,40 @@ pub fn estimate(insns: &[Insn]) -> Result<EvalCost, CostError> {
         instructions: n,
         paths,
     })
+}
+
+/// The cost model of `TissueLaw::eval` from the thumbv7em disassembly: `rlib` (default: build
+/// bank-format for the MCU) read by `objdump` (default: rustup's llvm-tools). Returns the rlib
+/// read and the cost.
+pub fn measure(
+    rlib: Option<PathBuf>,
+    objdump: Option<PathBuf>,
+) -> anyhow::Result<(PathBuf, EvalCost)> {
+    let rlib = match rlib {
+        Some(p) => p,
+        None => super::build_rlib("bank-format")?,
+    };
+    let objdump = match objdump {
+        Some(p) => p,
+        None => super::objdump()?,
+    };
+    let out = Command::new(&objdump)
+        .args(["-d", "-C", "--no-show-raw-insn"])
+        .arg(&rlib)
+        .output()
+        .with_context(|| format!("running {}", objdump.display()))?;
+    if !out.status.success() {
+        bail!(
+            "{} failed on {}: {}",
+            objdump.display(),
+            rlib.display(),
+            String::from_utf8_lossy(&out.stderr).trim()
+        );
+    }
+    let text = String::from_utf8_lossy(&out.stdout);
+    let insns = function(&text, "TissueLaw::eval");
+    let c = estimate(&insns).with_context(|| format!("TissueLaw::eval in {}", rlib.display()))?;
+    Ok((rlib, c))
 }
 
 #[cfg(test)]

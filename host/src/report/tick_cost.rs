@@ -9,7 +9,7 @@
 use super::{HardCase, Knob, Point, Series, Verdict};
 use crate::sil::cost::{
     CODE_PHASES, CodePhaseStats, CostStats, NODAL_BODY_GOAL, NODAL_TICK_GOAL, PhaseMax, Phases,
-    code_phase_samples,
+    by_contact_nodes_of_runs, code_phase_samples_of_runs,
 };
 use crate::sil::harness::{self, INSTRUCTIONS_PER_TICK, Session, Setup, TickRecord};
 use crate::sil::script::Script;
@@ -33,19 +33,7 @@ pub struct SilRuns {
 impl SilRuns {
     /// Every tick of every run, grouped by contact-set size.
     pub fn by_contact_nodes(&self) -> BTreeMap<u8, CostStats> {
-        let mut all = BTreeMap::<u8, Vec<(&TickRecord, u32)>>::new();
-        for (_, ticks) in &self.runs {
-            for w in ticks.windows(2) {
-                if w[0].state == bank_format::State::Armed {
-                    all.entry(w[0].contact_nodes)
-                        .or_default()
-                        .push((&w[0], w[1].tick_instructions));
-                }
-            }
-        }
-        all.into_iter()
-            .map(|(k, v)| (k, CostStats::of(v.into_iter())))
-            .collect()
+        by_contact_nodes_of_runs(self.runs.iter().map(|(_, ticks)| &ticks[..]))
     }
 }
 
@@ -231,12 +219,7 @@ fn histogram(name: String, values: &[u32], (lo, hi): (u32, u32), prefix: &str) -
 /// phase's instructions per tick (its own bins between its least and largest, log axis) and
 /// the worst, 99th percentile and mean per phase.
 fn code_phase_knobs(sil: &SilRuns) -> (Knob, Knob) {
-    let mut samples: [Vec<u32>; 7] = Default::default();
-    for (_, ticks) in &sil.runs {
-        for (all, v) in samples.iter_mut().zip(code_phase_samples(ticks)) {
-            all.extend(v);
-        }
-    }
+    let samples = code_phase_samples_of_runs(sil.runs.iter().map(|(_, ticks)| &ticks[..]));
     let histogram = CODE_PHASES
         .iter()
         .zip(&samples)
