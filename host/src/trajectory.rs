@@ -139,22 +139,19 @@ impl Stroke {
         let depth = [-above_m, depth_m, depth_m, -above_m];
         let depth_m = through(&waypoints(at_s, depth), self.blend, t)[0];
         let lateral = match self.sweep {
-            None => 0.0,
             Some(Sweep::Sine {
                 start_s,
                 period_s,
                 amplitude,
-            }) => {
-                if (start_s..start_s + period_s).contains(&t) {
-                    amplitude * (std::f64::consts::TAU * (t - start_s) / period_s).sin()
-                } else {
-                    0.0
-                }
+            }) if (start_s..start_s + period_s).contains(&t) => {
+                amplitude * (std::f64::consts::TAU * (t - start_s) / period_s).sin()
             }
             Some(Sweep::Waypoints { at_s, amplitude }) => {
                 let offsets = [0.0, amplitude, -amplitude, 0.0];
                 through(&waypoints(at_s, offsets), self.blend, t)[0]
             }
+            // No sweep, or outside the sine's period.
+            None | Some(Sweep::Sine { .. }) => 0.0,
         };
         Point { depth_m, lateral }
     }
