@@ -304,6 +304,43 @@ pub fn surface_insertion(bank: &Bank, angles: [f64; 2]) -> Result<f64> {
 mod tests {
     use super::*;
 
+    /// The SIL strike (module notes): from 10 mm above the surface to 8 mm below it between
+    /// 0.5 s and 0.52 s into its cycle by smoothstep, so its peak speed, half way down, is 1.5
+    /// times the mean: 1.5 x 18 mm / 20 ms = 1.35 m/s; held to 0.8 s, back above by 1.2 s.
+    #[test]
+    fn the_strike_descends_18_mm_in_20_ms_at_a_peak_of_1_35_m_s() {
+        let s = sil_stroke(Script::Strike);
+        let depth = |t| s.at(t).depth_m;
+        assert_eq!(depth(0.0), -0.01);
+        assert_eq!(depth(0.5), -0.01);
+        assert!((depth(0.52) - 0.008).abs() < 1e-12);
+        assert!((depth(0.7) - 0.008).abs() < 1e-12);
+        assert!((depth(1.2) + 0.01).abs() < 1e-12);
+        assert!((depth(0.51) + 0.001).abs() < 1e-12);
+        let h = 1e-7;
+        let v = (depth(0.51 + h) - depth(0.51 - h)) / (2.0 * h);
+        assert!((v - 1.35).abs() < 1e-6, "{v}");
+        assert_eq!(s.period_s(), 1.5);
+    }
+
+    /// The SIL press through [`Trajectory::at`] on the flat patch: the approach ends 5 mm above
+    /// the surface straight below the trocar, the bottom is 6 mm below it 1 s later.
+    #[test]
+    fn the_press_starts_above_the_surface_and_reaches_6_mm() {
+        let bytes = patch_bank();
+        let bank = Bank::parse(bytes.as_slice()).unwrap();
+        let t = Trajectory::new(&bank, Script::Press).unwrap();
+        let s0 = t.surface_insertion_m();
+        let home = bank.device().home_joint.map(f64::from);
+        assert_eq!(t.at(0.0), home);
+        assert_eq!(t.at(0.5), [0.0, 0.0, s0 - 0.005]);
+        let bottom = t.at(1.5);
+        assert!((bottom[2] - (s0 + 0.006)).abs() < 1e-12, "{bottom:?}");
+        assert_eq!(t.depth_m(), 0.006);
+        // A cycle later (2.5 s), the same.
+        assert!((t.at(4.0)[2] - bottom[2]).abs() < 1e-12);
+    }
+
     fn patch_bank() -> bank_format::AlignedBytes {
         firmware::fixtures::flat_patch()
     }
