@@ -9,7 +9,7 @@
 //! displacement from the contact forces), [`record`] (ParaView series) and [`script`] (aiming
 //! and the scripted hand motions, on [`trajectory`]'s tool paths). [`link`] is the client of a
 //! device's serial link (port, frames, greeting). [`sil`] runs the firmware image under QEMU,
-//! [`calibrate`] fits the tissue laws and the motor constants; [`bench`] measures.
+//! [`calibrate`] fits the tissue laws and the motor constants; [`mod@bench`] measures.
 
 pub mod bank;
 pub mod bench;
