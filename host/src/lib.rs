@@ -4,19 +4,22 @@
 //! Pipeline, in module order: [`scene`] (scene files), [`kinematics`] (the gimbal on the host)
 //! and [`reach`] (the region the tool can touch) feed [`bank`], the bank stage (scene ->
 //! reachable region -> compliance -> bank bytes); [`contact`] is the tool patch in f64, the
-//! reference for the firmware's. The display side: [`source`] (telemetry from the
-//! [`virtual_device`] or a real one), [`deform`] (surface displacement from the contact
-//! forces), [`display`] (frames and the browser viewer), [`record`] (ParaView series) and
-//! [`script`] (aiming and scripted hand motions). [`sil`] runs the firmware image under QEMU,
-//! [`calibrate`] fits the tissue laws and the motor constants.
+//! reference for the firmware's. The display side: [`display`] (its sources of telemetry, from
+//! the [`virtual_device`] or a real one, frames and the browser viewer), [`deform`] (surface
+//! displacement from the contact forces), [`record`] (ParaView series) and [`script`] (aiming
+//! and the scripted hand motions, on [`trajectory`]'s tool paths). [`link`] is the client of a
+//! device's serial link (port, frames, greeting). [`sil`] runs the firmware image under QEMU,
+//! [`calibrate`] fits the tissue laws and the motor constants; [`mod@bench`] measures.
 
 pub mod bank;
+pub mod bench;
 pub mod calibrate;
 pub mod contact;
 pub mod deform;
 pub mod display;
 pub mod fsio;
 pub mod kinematics;
+pub mod link;
 pub mod mcu;
 pub mod meshing;
 pub mod probe;
@@ -30,7 +33,6 @@ pub mod scene;
 pub mod scene_new;
 pub mod script;
 pub mod sil;
-pub mod source;
 pub mod study;
-pub mod tick_bench;
+pub mod trajectory;
 pub mod virtual_device;

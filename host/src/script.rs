@@ -1,17 +1,31 @@
 //! Aiming the tool at the organ, and the demo's scripted hand motions (`press`, `slide`,
-//! `strike`), as joint targets `[pitch, yaw, insertion]` for [`crate::source::Steering`].
+//! `strike`, `press-hold`: [`Script`]), as joint targets `[pitch, yaw, insertion]` for
+//! [`crate::display::source::Steering`].
 //!
 //! Depth is measured along the shaft from the organ's rest surface: `insertion = |aim -
 //! fulcrum| + depth`, with `(pitch, yaw)` pointing the shaft at the aimed surface point
-//! ([`Workspace::joints_for_tip`]); positive depth presses in, negative hovers above.
+//! ([`Workspace::joints_for_tip`]); positive depth presses in, negative hovers above. The
+//! paths are [`crate::trajectory`]'s strokes with the demo's numbers (linear ramps); a slide
+//! sweeps the yaw.
 
 use crate::kinematics::Workspace;
+use crate::trajectory::{Blend, Press, Script, Stroke, Sweep};
 use fem::vec3::{cross, dot, sub};
 
 /// Joint target that points the shaft at `aim` (m) and pushes `depth` (m) beyond it.
 pub fn aim_joints(ws: &Workspace, aim: [f64; 3], depth: f64) -> [f64; 3] {
     let [pitch, yaw, reach] = ws.joints_for_tip(aim);
     [pitch, yaw, reach + depth]
+}
+
+/// Where the scripts and the page's first view aim: the point of the surface (`triangles` over
+/// `mesh`'s nodes) straight under the centre of the mesh's bounding box, seen from above;
+/// `None` when the vertical through that centre misses the surface.
+pub fn press_point(mesh: &fem::mesh::TetMesh, triangles: &[[usize; 3]]) -> Option<[f64; 3]> {
+    let (lo, hi) = mesh.bounding_box();
+    let from = [0.5 * (lo[0] + hi[0]), 0.5 * (lo[1] + hi[1]), hi[2] + 1.0];
+    let d = ray_hit(&mesh.nodes, triangles, from, [0.0, 0.0, -1.0])?;
+    Some([from[0], from[1], from[2] - d])
 }
 
 /// Distance along the unit ray `origin + t dir` to the nearest triangle it crosses (t > 0);
@@ -54,24 +68,48 @@ pub fn ray_triangle(
     (u >= 0.0 && v >= 0.0 && u + v <= 1.0 && t > 0.0).then_some(t)
 }
 
-/// A scripted hand motion, repeated for as long as the demo runs (the demo's steering, below;
-/// the SIL plant's hand in `sil::script`).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum, serde::Serialize)]
-#[serde(rename_all = "lowercase")]
-pub enum Script {
-    /// Every 3 s: hover 5 mm above the aim point, press 8 mm in over 1 s, hold, release.
-    Press,
-    /// Every 4 s: press 6 mm in, slide +-0.08 rad in yaw (about +-9 mm on the organ) and back,
-    /// release.
-    Slide,
-    /// Every 1.5 s: from 20 mm above, strike 8 mm in at the hand's top speed, hold 0.25 s,
-    /// withdraw.
-    Strike,
-    /// Every 12 s: from 5 mm above, press 5 mm in over 0.5 s, hold 10 s, release: what a
-    /// viscoelastic tissue's relaxation shows (`[viscoelastic]`, `firmware::relax`).
-    #[value(name = "press-hold")]
-    #[serde(rename = "press-hold")]
-    PressHold,
+/// The demo's path for `script`, repeated for as long as the demo runs (depth along the shaft;
+/// the lateral offset is the fraction of [`SLIDE_YAW`] swept):
+///
+/// - `press`: every 3 s, hover 5 mm above the aim point, press 8 mm in over 1 s, hold, release;
+/// - `slide`: every 4 s, press 6 mm in, slide +-0.08 rad in yaw (about +-9 mm on the organ) and
+///   back, release;
+/// - `strike`: every 1.5 s, from 20 mm above, strike 8 mm in at the hand's top speed, hold
+///   0.25 s, withdraw;
+/// - `press-hold`: every 12 s, from 5 mm above, press 5 mm in over 0.5 s, hold 10 s, release.
+fn demo_stroke(script: Script) -> Stroke {
+    let press = |above_m, depth_m, at_s| Press {
+        above_m,
+        depth_m,
+        at_s,
+    };
+    match script {
+        Script::Press => Stroke::press(
+            press(0.005, 0.008, [0.5, 1.5, 2.2, 2.8]),
+            Blend::Linear,
+            3.0,
+        ),
+        Script::Slide => Stroke::slide(
+            press(0.005, 0.006, [0.4, 1.0, 3.0, 3.5]),
+            Sweep::Sine {
+                start_s: 1.0,
+                period_s: 2.0,
+                amplitude: 1.0,
+            },
+            Blend::Linear,
+            4.0,
+        ),
+        Script::Strike => Stroke::press(
+            press(0.020, 0.008, [0.5, 0.556, 0.806, 1.0]),
+            Blend::Linear,
+            1.5,
+        ),
+        Script::PressHold => Stroke::press(
+            press(0.005, 0.005, [0.3, 0.8, 10.8, 11.3]),
+            Blend::Linear,
+            12.0,
+        ),
+    }
 }
 
 /// Samples of the rest surface's distance from the fulcrum along the shaft across the slide's
@@ -83,7 +121,7 @@ const SLIDE_YAW: f64 = 0.08;
 /// A script bound to a scene: the aim direction and the surface distances along the sweep.
 #[derive(Debug, Clone)]
 pub struct Scripted {
-    script: Script,
+    stroke: Stroke,
     pitch: f64,
     yaw: f64,
     /// Surface distance for yaw `yaw + SLIDE_YAW * (2 i / (n - 1) - 1)`.
@@ -110,7 +148,7 @@ impl Scripted {
             })
             .collect::<Option<Vec<f64>>>()?;
         Some(Scripted {
-            script,
+            stroke: demo_stroke(script),
             pitch,
             yaw,
             sweep,
@@ -127,56 +165,11 @@ impl Scripted {
 
     /// Joint target at time `t` (s) since the start.
     pub fn joints(&self, t: f64) -> [f64; 3] {
-        let ramp = |t: f64, t0: f64, t1: f64, a: f64, b: f64| {
-            a + (b - a) * ((t - t0) / (t1 - t0)).clamp(0.0, 1.0)
-        };
-        let (yaw_offset, depth) = match self.script {
-            Script::Press => {
-                let t = t % 3.0;
-                let d = if t < 1.6 {
-                    ramp(t, 0.5, 1.5, -0.005, 0.008)
-                } else {
-                    ramp(t, 2.2, 2.8, 0.008, -0.005)
-                };
-                (0.0, d)
-            }
-            Script::Slide => {
-                let t = t % 4.0;
-                let d = if t < 2.0 {
-                    ramp(t, 0.4, 1.0, -0.005, 0.006)
-                } else {
-                    ramp(t, 3.0, 3.5, 0.006, -0.005)
-                };
-                let s = if (1.0..3.0).contains(&t) {
-                    (std::f64::consts::PI * (t - 1.0)).sin()
-                } else {
-                    0.0
-                };
-                (s, d)
-            }
-            Script::Strike => {
-                let t = t % 1.5;
-                let d = if t < 0.6 {
-                    ramp(t, 0.5, 0.556, -0.020, 0.008)
-                } else {
-                    ramp(t, 0.806, 1.0, 0.008, -0.020)
-                };
-                (0.0, d)
-            }
-            Script::PressHold => {
-                let t = t % 12.0;
-                let d = if t < 11.0 {
-                    ramp(t, 0.3, 0.8, -0.005, 0.005)
-                } else {
-                    ramp(t, 10.8, 11.3, 0.005, -0.005)
-                };
-                (0.0, d)
-            }
-        };
+        let p = self.stroke.at(t);
         [
             self.pitch,
-            self.yaw + SLIDE_YAW * yaw_offset,
-            self.surface(yaw_offset) + depth,
+            self.yaw + SLIDE_YAW * p.lateral,
+            self.surface(p.lateral) + p.depth_m,
         ]
     }
 }
@@ -229,6 +222,20 @@ mod tests {
             [-0.1, 0.1, 0.0],
         ];
         (p, vec![[0, 1, 2], [0, 2, 3]])
+    }
+
+    /// The press point of a tetrahedron under a plane's two triangles: the top centre of the
+    /// bounding box dropped onto the plane.
+    #[test]
+    fn the_press_point_is_under_the_top_centre() {
+        let (mut p, t) = plane();
+        p.push([0.04, 0.02, -0.05]);
+        let mesh = fem::mesh::TetMesh {
+            nodes: p,
+            tets: vec![[0, 1, 2, 4]],
+        };
+        assert_eq!(press_point(&mesh, &t), Some([0.0, 0.0, 0.0]));
+        assert_eq!(press_point(&mesh, &[]), None);
     }
 
     #[test]

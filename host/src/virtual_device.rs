@@ -14,8 +14,8 @@
 //! scheduling (SCHED_FIFO) and runs without it when refused. A fault raised anyway (e.g. a solve error)
 //! is cleared and the loop re-armed after 0.5 s, so the demo continues.
 
+use crate::display::source::{LoopStats, Mailbox, Sample, Source, Steering};
 use crate::kinematics::{clamp_joints, counts_for};
-use crate::source::{LoopStats, Mailbox, Sample, Source, Steering};
 use anyhow::{Result, anyhow};
 use bank_format::{AlignedBytes, Bank, DeviceCalibration};
 use firmware::hal::Interlocks;

@@ -418,7 +418,7 @@ fn the_firmware_loop_runs_on_the_shipped_bank_without_faults() {
     let bytes = host::bank::scene_bank(&scene()).unwrap();
     let aligned = AlignedBytes::new(&bytes);
     let bank = Bank::parse(&aligned).unwrap();
-    let r = host::tick_bench::run(&bank, 3000, 0.005).unwrap();
+    let r = host::bench::tick::run(&bank, 3000, 0.005).unwrap();
     assert_eq!((r.ticks, r.faults), (3000, 0), "{r:?}");
     // The path (0.05 mm a tick): 100 ticks down to the surface, 100 more to 5 mm, 2,000 of
     // sweep at that depth, 200 back out, then again: 300 of the 3,000 ticks are above the

@@ -11,8 +11,9 @@ use bank_format::{
     Mode, PROTOCOL_VERSION, ResetCause, State, Telemetry, encode_frame,
 };
 use firmware::tick::Contacts;
+use host::display::source::{SerialSource, Source};
 use host::kinematics::{Workspace, counts_for};
-use host::source::{Identity, SerialSource, Source, await_identity};
+use host::link::{Identity, await_identity};
 use std::fs::File;
 use std::io::{Read, Write};
 use std::os::fd::FromRawFd;

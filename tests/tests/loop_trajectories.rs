@@ -298,7 +298,8 @@ fn sliding_faster_than_the_tip_threshold_faults_overspeed() {
 fn the_sil_strike_trips_overspeed_before_contact() {
     use host::sil::harness::ARM_TICK;
     use host::sil::plant::{Gimbal, PlantParams, TICK_S};
-    use host::sil::script::{Script, Trajectory};
+    use host::sil::script::Trajectory;
+    use host::trajectory::Script;
     let scene = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../host/scenes/liver.toml");
     let raw = host::bank::scene_bank(&scene).unwrap();
     let bytes = bank_format::AlignedBytes::new(&raw);

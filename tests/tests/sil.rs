@@ -11,7 +11,8 @@ use firmware::tick::{HapticLoop, LoopInput};
 use host::report::relaxation;
 use host::sil::cost::{CodePhaseMax, Phases};
 use host::sil::harness::{self, ARM_TICK, LinkSend, Run, Session, Setup};
-use host::sil::script::{Script, Trajectory, surface_insertion};
+use host::sil::script::{Trajectory, surface_insertion};
+use host::trajectory::Script;
 use std::path::PathBuf;
 use std::sync::{Mutex, OnceLock};
 

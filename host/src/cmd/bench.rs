@@ -1,13 +1,12 @@
-//! `host bench …`: benchmarks that measure and print figures (speed is measured here, never
-//! asserted by tests; tests check behaviour).
+//! `host bench …`: parses a benchmark's arguments, runs it ([`host::bench`],
+//! [`host::bank::precompute`]) and prints its figures (speed is measured, never asserted by
+//! tests; tests check behaviour).
 
 use super::organ::{OrganArgs, default_meshes};
 use anyhow::{Context, Result};
-use fem::compliance::Compliance;
-use fem::elasticity::{DofMap, Elasticity, Element, FixedSet, Material};
-use fem::ordering::{Ordering, permutation};
-use std::path::{Path, PathBuf};
-use std::time::Instant;
+use fem::elasticity::{Element, Material};
+use fem::ordering::Ordering;
+use std::path::PathBuf;
 
 /// Benchmarks.
 #[derive(clap::Subcommand, Debug)]
@@ -167,25 +166,6 @@ pub struct ComplianceArgs {
     json: bool,
 }
 
-#[derive(serde::Serialize)]
-struct Report {
-    mesh: String,
-    element: String,
-    nodes: usize,
-    tets: usize,
-    free_dofs: usize,
-    columns: usize,
-    pairs: usize,
-    load_s: f64,
-    assemble_s: f64,
-    factor_s: f64,
-    columns_s: f64,
-    nnz_k: usize,
-    nnz_l: usize,
-    peak_rss_mib: f64,
-    factor_peak_rss_mib: f64,
-}
-
 /// Runs a benchmark.
 pub fn run(bench: Bench) -> Result<()> {
     match bench {
@@ -296,7 +276,14 @@ fn compliance(args: ComplianceArgs) -> Result<()> {
     } else {
         args.mesh.clone()
     };
-    let material = Material::new(args.organ.young, args.organ.poisson)?;
+    let config = host::bench::compliance::Config {
+        material: Material::new(args.organ.young, args.organ.poisson)?,
+        bed_m: args.organ.bed,
+        max_nodes: args.max_nodes,
+        radius_m: args.radius,
+        ordering: args.ordering,
+        element: args.element,
+    };
     if !args.json {
         println!(
             "{:<22} {:>7} {:>8} {:>7} {:>6} {:>8} {:>8} {:>8} {:>9} {:>10} {:>9}",
@@ -314,7 +301,7 @@ fn compliance(args: ComplianceArgs) -> Result<()> {
         );
     }
     for path in meshes {
-        let r = measure(&path, material, &args)
+        let r = host::bench::compliance::run(&path, &config)
             .with_context(|| format!("benchmark on {}", path.display()))?;
         if args.json {
             println!("{}", serde_json::to_string(&r)?);
@@ -339,91 +326,13 @@ fn compliance(args: ComplianceArgs) -> Result<()> {
     Ok(())
 }
 
-fn measure(path: &Path, material: Material, args: &ComplianceArgs) -> Result<Report> {
-    let t = Instant::now();
-    let mesh = fem::mesh::load(path)?;
-    let surface = fem::mesh::boundary(&mesh)?;
-    let load_s = t.elapsed().as_secs_f64();
-
-    let (lo, hi) = mesh.bounding_box();
-    let mut fixed = FixedSet::none(mesh.nodes.len());
-    let top = lo[2] + args.organ.bed;
-    fixed.fix_box(&mesh, [lo[0], lo[1], lo[2], hi[0], hi[1], top], [true; 3])?;
-
-    let centre = [0.5 * (lo[0] + hi[0]), 0.5 * (lo[1] + hi[1]), hi[2]];
-    let mut candidates: Vec<usize> = surface
-        .nodes
-        .iter()
-        .copied()
-        .filter(|&i| (0..3).all(|c| !fixed.is_fixed(i, c)))
-        .collect();
-    let dist = |i: usize| {
-        (0..3)
-            .map(|a| (mesh.nodes[i][a] - centre[a]).powi(2))
-            .sum::<f64>()
-    };
-    candidates.sort_by(|&a, &b| dist(a).total_cmp(&dist(b)));
-    candidates.truncate(args.max_nodes);
-
-    host::rss::reset_peak();
-    let t = Instant::now();
-    let body = Elasticity::with_element(&mesh, material, args.element)?;
-    body.check_rigid_motions(&fixed)?;
-    let dofs = DofMap::new(&fixed);
-    let k = body.stiffness(&dofs);
-    let assemble_s = t.elapsed().as_secs_f64();
-
-    let t = Instant::now();
-    let perm = permutation(args.ordering, &body, &dofs).map_err(anyhow::Error::msg)?;
-    let c = Compliance::factorize_matrix(dofs, &k, perm.as_ref())?;
-    drop((k, perm));
-    let factor_s = t.elapsed().as_secs_f64();
-    let factor_peak_rss_mib = host::rss::peak_mib();
-
-    let bar = host::progress::Bar::new("supernodes");
-    let t = Instant::now();
-    let pairs = match args.radius {
-        None => c.blocks(&candidates, Some(&bar))?.len().pow(2),
-        Some(radius) => {
-            let positions: Vec<[f64; 3]> = candidates.iter().map(|&k| mesh.nodes[k]).collect();
-            c.blocks_within(&candidates, &positions, radius, Some(&bar))?
-                .iter()
-                .map(Vec::len)
-                .sum()
-        }
-    };
-    let columns_s = t.elapsed().as_secs_f64();
-    bar.finish();
-    let stats = c.stats();
-    Ok(Report {
-        mesh: path.file_name().map_or_else(
-            || path.display().to_string(),
-            |n| n.to_string_lossy().into(),
-        ),
-        element: args.element.name().into(),
-        nodes: mesh.nodes.len(),
-        tets: mesh.tets.len(),
-        free_dofs: stats.free_dofs,
-        columns: candidates.len(),
-        pairs,
-        load_s,
-        assemble_s,
-        factor_s,
-        columns_s,
-        nnz_k: stats.nnz_k,
-        nnz_l: stats.nnz_l,
-        peak_rss_mib: host::rss::peak_mib(),
-        factor_peak_rss_mib,
-    })
-}
-
 fn tick(args: TickArgs) -> Result<()> {
     let bytes = std::fs::read(&args.bank)
         .with_context(|| format!("cannot read {}", args.bank.display()))?;
     let aligned = bank_format::AlignedBytes::new(&bytes);
     let bank = bank_format::Bank::parse(&aligned)
         .map_err(|e| anyhow::anyhow!("{}: invalid bank: {e}", args.bank.display()))?;
-    let r = host::tick_bench::run(&bank, args.ticks, args.depth)?;
+    let r = host::bench::tick::run(&bank, args.ticks, args.depth)?;
     println!(
         "ticks {} ({} in contact, up to {} contact nodes), peak force {:.3} N, faults {}",
         r.ticks, r.touching, r.max_contact_nodes, r.peak_force_n, r.faults
@@ -440,44 +349,23 @@ fn tick(args: TickArgs) -> Result<()> {
 }
 
 fn sil(args: SilArgs) -> Result<()> {
-    use bank_format::region::{FIRMWARE_LEN, RAM_LEN, RAM_ORIGIN};
-    use host::sil::cost::{
-        BODY_GOAL, CODE_PHASES, CodePhaseStats, TICK_GOAL, against_goal, by_contact_nodes,
-        code_phase_samples_of_runs,
-    };
-    use host::sil::harness::{self, Session};
-    use host::sil::script::Script;
+    use bank_format::region::{FIRMWARE_LEN, RAM_LEN};
+    use host::sil::cost::{BODY_GOAL, TICK_GOAL};
+    use host::sil::harness;
     let (setup, bytes) = args.setup.resolve()?;
     let bank = bank_format::Bank::parse(&bytes)
         .map_err(|e| anyhow::anyhow!("{}: invalid bank: {e}", setup.bank.display()))?;
-    let mut records = Vec::new();
-    let mut scripts = Vec::new();
-    for script in [Script::Press, Script::Slide, Script::Strike] {
-        let run = harness::run(&setup, &Session::new(&bank, script, args.seconds)?)?;
-        if let Some(why) = &run.stopped {
-            anyhow::bail!("{script:?}: the image stopped early: {why}\n{}", run.stderr);
-        }
-        scripts.push(serde_json::json!({
-            "script": script,
-            "ticks": run.ticks.len(),
-            "overruns": run.overruns(),
-            "faults": run.faults().len(),
-            "wall_s": run.wall_s,
-        }));
-        records.push(run.ticks);
-    }
-    let groups = by_contact_nodes(&records.concat());
-    // Per code phase over every tick of every run (each run's link samples from its own ticks).
-    let samples = code_phase_samples_of_runs(records.iter().map(Vec::as_slice));
-    let code: Vec<(&str, CodePhaseStats)> = CODE_PHASES
-        .iter()
-        .zip(&samples)
-        .map(|(&n, v)| (n, CodePhaseStats::of(v)))
-        .collect();
-    let size = host::mcu::image_size(&setup.image, RAM_ORIGIN, RAM_LEN as u32)?;
-    let worst = groups.values().map(|g| g.body_max).max().unwrap_or(0);
-    let worst_tick = groups.values().map(|g| g.tick_max).max().unwrap_or(0);
-    let (goal_body, goal_tick, met) = against_goal(&records.concat());
+    let host::bench::sil::Figures {
+        by_contact_nodes: groups,
+        code_phases: code,
+        worst_body: worst,
+        worst_tick,
+        goal_body,
+        goal_tick,
+        met,
+        size,
+        runs,
+    } = host::bench::sil::run(&setup, &bank, args.seconds)?;
     if args.json {
         let by: serde_json::Map<String, serde_json::Value> = groups
             .iter()
@@ -500,7 +388,13 @@ fn sil(args: SilArgs) -> Result<()> {
             "flash_region_bytes": FIRMWARE_LEN,
             "ram_static_bytes": size.ram,
             "ram_region_bytes": RAM_LEN,
-            "runs": scripts,
+            "runs": runs.iter().map(|r| serde_json::json!({
+                "script": r.script,
+                "ticks": r.ticks,
+                "overruns": r.overruns,
+                "faults": r.faults,
+                "wall_s": r.wall_s,
+            })).collect::<Vec<_>>(),
         });
         println!("{out}");
         return Ok(());

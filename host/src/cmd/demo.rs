@@ -7,18 +7,20 @@
 //! `--seconds` pass or the process is stopped. With `--headless --script ...` it runs a
 //! scripted hand motion without a browser and prints the loop and display figures.
 
+use super::script_arg::ScriptArg;
 use anyhow::{Context, Result, bail};
 use bank_format::{AlignedBytes, Bank};
 use host::bank::{BuiltBank, Prepared};
 use host::deform::Deformer;
 use host::display::server::{Server, SteerFn};
-use host::display::{DisplayMesh, DisplayStats, Pipeline, SurfaceModel};
+use host::display::source::{LoopStats, SerialSource, Source, SourceSpec};
+use host::display::{DisplayMesh, DisplayStats, Pipeline, SurfaceModel, surface_neighbours};
 use host::kinematics::Workspace;
 use host::record::{Recorded, Recorder};
 use host::scene::{MeshSource, Scene};
-use host::script::{Script, Scripted, aim_joints, ray_hit};
+use host::script::{Scripted, aim_joints, press_point};
 use host::sil::source::SilSource;
-use host::source::{LoopStats, SerialSource, Source, SourceSpec};
+use host::trajectory::Script;
 use host::virtual_device::VirtualDevice;
 use std::collections::HashMap;
 use std::path::PathBuf;
@@ -63,7 +65,7 @@ pub struct Args {
     seconds: Option<f64>,
     /// Scripted hand motion (virtual source: the mouse's stand-in; sil: the plant's hand).
     #[arg(long, value_enum)]
-    script: Option<Script>,
+    script: Option<ScriptArg>,
     /// Print the figures as one JSON object.
     #[arg(long)]
     json: bool,
@@ -89,6 +91,7 @@ pub fn run(args: Args) -> Result<()> {
     {
         bail!("--seconds must be a positive number, got {s}");
     }
+    let script_arg = args.script.map(Script::from);
     let mut scene = Scene::load_or_default(args.scene.as_deref())?;
     if let Some(m) = &args.mesh {
         if !m.is_file() {
@@ -191,9 +194,12 @@ pub fn run(args: Args) -> Result<()> {
     } = prep;
     let (display, neighbours) = match &fields {
         Some(f) => (f.mesh.clone(), HashMap::new()),
-        None => display_mesh(&mesh.nodes, &surface),
+        None => (
+            DisplayMesh::of_surface(&mesh.nodes, &surface),
+            surface_neighbours(&surface.triangles),
+        ),
     };
-    let aim = press_point(&mesh.nodes, &surface.triangles)
+    let aim = press_point(&mesh, &surface.triangles)
         .context("the organ's surface has no point under its top centre")?;
 
     let mut sil_bank: Option<tempfile::NamedTempFile> = None;
@@ -212,7 +218,7 @@ pub fn run(args: Args) -> Result<()> {
             let seconds = args
                 .seconds
                 .unwrap_or(if args.headless { 10.0 } else { 60.0 });
-            let script = args.script.unwrap_or(Script::Press);
+            let script = script_arg.unwrap_or(Script::Press);
             let session = host::sil::harness::Session::new(&bank, script, seconds + 1.0)?;
             Box::new(SilSource::start(setup, session)?)
         }
@@ -230,16 +236,16 @@ pub fn run(args: Args) -> Result<()> {
         )?),
     };
     let steering = source.steering();
-    let script = match (args.script, args.headless) {
+    let script = match (script_arg, args.headless) {
         (Some(s), _) => Some(s),
         (None, true) => Some(Script::Press),
         (None, false) => None,
     };
-    if args.script.is_some() && steering.is_none() && args.source != SourceSpec::Sil {
+    if script_arg.is_some() && steering.is_none() && args.source != SourceSpec::Sil {
         bail!("--script needs a source that can be steered (--source virtual) or sil");
     }
 
-    let (lo, hi) = bounds(&display.rest);
+    let (lo, hi) = display.bounding_box();
     let info = serde_json::json!({
         "mesh": display_name, "collision_mesh": mesh_name, "mesh_nodes": mesh.nodes.len(), "display_nodes": display.rest.len(),
         "triangles": display.triangles.len(), "fulcrum_m": cal.fulcrum_m,
@@ -405,64 +411,4 @@ fn mean_batch_ms(d: &DisplayStats) -> f64 {
     } else {
         d.columns.seconds * 1e3 / d.columns.batches as f64
     }
-}
-
-/// The display surface (boundary nodes, remapped triangles) and each surface node's
-/// neighbours along the triangles (mesh ids).
-fn display_mesh(
-    nodes: &[[f64; 3]],
-    surface: &fem::mesh::Surface,
-) -> (DisplayMesh, HashMap<usize, Vec<usize>>) {
-    let index: HashMap<usize, u32> = surface
-        .nodes
-        .iter()
-        .enumerate()
-        .map(|(i, &k)| (k, i as u32))
-        .collect();
-    let mut neighbours: HashMap<usize, Vec<usize>> = HashMap::new();
-    for t in &surface.triangles {
-        for i in 0..3 {
-            let (a, b) = (t[i], t[(i + 1) % 3]);
-            neighbours.entry(a).or_default().push(b);
-            neighbours.entry(b).or_default().push(a);
-        }
-    }
-    for v in neighbours.values_mut() {
-        v.sort_unstable();
-        v.dedup();
-    }
-    let mesh = DisplayMesh {
-        rest: surface
-            .nodes
-            .iter()
-            .map(|&k| nodes[k].map(|x| x as f32))
-            .collect(),
-        triangles: surface
-            .triangles
-            .iter()
-            .map(|t| t.map(|k| index.get(&k).copied().unwrap_or(0)))
-            .collect(),
-    };
-    (mesh, neighbours)
-}
-
-/// Where the scripts and the page's first view aim: the surface point straight under the
-/// centre of the organ's bounding box, seen from above.
-fn press_point(nodes: &[[f64; 3]], triangles: &[[usize; 3]]) -> Option<[f64; 3]> {
-    let (lo, hi) = bounds(nodes);
-    let from = [0.5 * (lo[0] + hi[0]), 0.5 * (lo[1] + hi[1]), hi[2] + 1.0];
-    let d = ray_hit(nodes, triangles, from, [0.0, 0.0, -1.0])?;
-    Some([from[0], from[1], from[2] - d])
-}
-
-fn bounds<T: Copy + Into<f64>>(p: &[[T; 3]]) -> ([f64; 3], [f64; 3]) {
-    let mut lo = [f64::INFINITY; 3];
-    let mut hi = [f64::NEG_INFINITY; 3];
-    for q in p {
-        for a in 0..3 {
-            lo[a] = lo[a].min(q[a].into());
-            hi[a] = hi[a].max(q[a].into());
-        }
-    }
-    (lo, hi)
 }

@@ -6,8 +6,8 @@
 
 use anyhow::{Context, Result, bail};
 use bank_format::{AlignedBytes, Bank, DeviceCalibration, FaultReason, HostToDevice, Mode, State};
+use host::display::source::{Sample, SerialSource, Source};
 use host::kinematics::{Workspace, counts_for};
-use host::source::{Sample, SerialSource, Source};
 use std::path::PathBuf;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};

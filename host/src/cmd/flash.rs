@@ -6,8 +6,8 @@ use anyhow::{Context, Result, bail};
 use bank_format::region::BANK_LEN;
 use fem::progress::Progress as _;
 use flash::{Layout, Part, Phase, Plan, Progress, What};
+use host::link::{await_identity, check_identity, open_device_port};
 use host::progress::Bar;
-use host::source::{await_identity, check_identity, open_device_port};
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 

@@ -15,4 +15,5 @@ pub mod organ;
 pub mod refinement;
 pub mod report;
 pub mod scene;
+pub mod script_arg;
 pub mod sil;

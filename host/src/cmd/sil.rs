@@ -2,20 +2,22 @@
 //! or recorded (`--trajectory FILE`) hand motion and print a summary (one JSON object with
 //! `--json`).
 
+use super::script_arg::ScriptArg;
 use anyhow::{Context, Result, bail};
 use bank_format::{AlignedBytes, Bank};
 use host::fsio::write_atomic;
 use host::sil::cost::{CodePhaseMax, Phases};
 use host::sil::harness::{self, Run, Session, Setup};
-use host::sil::script::{Script, Trajectory};
+use host::sil::script::Trajectory;
+use host::trajectory::Script;
 use std::path::{Path, PathBuf};
 
 /// Arguments of `host sil`.
 #[derive(clap::Args, Debug)]
 pub struct Args {
     /// The hand's scripted motion.
-    #[arg(long, value_enum, default_value_t = Script::Press)]
-    pub script: Script,
+    #[arg(long, value_enum, default_value_t = ScriptArg::Press)]
+    pub script: ScriptArg,
     /// Replay a recorded hand motion instead of a script: a CSV file with a header, either
     /// `t_s,x_m,y_m,z_m` (tip targets, m, the bank's frame) or
     /// `t_s,pitch_rad,yaw_rad,insertion_m` (joints); `#` lines are comments. The hand blends
@@ -192,7 +194,7 @@ pub fn run(args: Args) -> Result<()> {
                 .unwrap_or(trajectory.recorded_end_s().unwrap_or(0.0) + 0.2);
             Session::with_trajectory(&bank, trajectory, seconds)?
         }
-        None => Session::new(&bank, args.script, args.seconds.unwrap_or(5.0))?,
+        None => Session::new(&bank, args.script.into(), args.seconds.unwrap_or(5.0))?,
     };
     let run = harness::run(&setup, &session)?;
     if let Some(path) = &args.trace {
@@ -207,7 +209,7 @@ pub fn run(args: Args) -> Result<()> {
             &[&args.setup.scene, &setup.bank, &setup.image],
         )?;
     }
-    let script = args.trajectory.is_none().then_some(args.script);
+    let script = args.trajectory.is_none().then_some(args.script.into());
     let s = Summary::new(script, args.trajectory.as_deref(), &run);
     if args.json {
         println!("{}", serde_json::to_string(&s)?);

@@ -1,5 +1,7 @@
 //! The host display: from telemetry samples to deformed-surface frames for the browser viewer.
 //!
+//! [`source`] is where the samples come from (the [`Source`] trait: the virtual device, a
+//! device on a serial port, the QEMU image).
 //! [`Pipeline::run`] takes the newest [`Sample`] of a [`Source`] at a fixed frame rate, maps its
 //! contact set to mesh nodes, computes the surface displacement ([`SurfaceModel`]: the nodal
 //! [`Deformer`], or a sampled scene's precomputed fields on its fine mesh), and publishes
@@ -13,10 +15,12 @@
 
 pub mod fields;
 pub mod server;
+pub mod source;
 
 use crate::deform::{Coverage, Deformer, SolveStats};
-use crate::source::{LoopStats, Sample, Source};
 use bank_format::State;
+use source::{LoopStats, Sample, Source};
+use std::collections::HashMap;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
@@ -36,6 +40,43 @@ pub struct DisplayMesh {
 }
 
 impl DisplayMesh {
+    /// The boundary `surface` of a volume mesh (node positions `nodes`, m) as the display shows
+    /// it: the surface nodes' rest positions, in the order of `surface.nodes`, and the surface's
+    /// triangles renumbered onto them.
+    pub fn of_surface(nodes: &[[f64; 3]], surface: &fem::mesh::Surface) -> DisplayMesh {
+        let index: HashMap<usize, u32> = surface
+            .nodes
+            .iter()
+            .enumerate()
+            .map(|(i, &k)| (k, i as u32))
+            .collect();
+        DisplayMesh {
+            rest: surface
+                .nodes
+                .iter()
+                .map(|&k| nodes[k].map(|x| x as f32))
+                .collect(),
+            triangles: surface
+                .triangles
+                .iter()
+                .map(|t| t.map(|k| index.get(&k).copied().unwrap_or(0)))
+                .collect(),
+        }
+    }
+
+    /// The smallest box around the rest positions: `(lowest, highest)` corner, m.
+    pub fn bounding_box(&self) -> ([f64; 3], [f64; 3]) {
+        let mut lo = [f64::INFINITY; 3];
+        let mut hi = [f64::NEG_INFINITY; 3];
+        for p in &self.rest {
+            for a in 0..3 {
+                lo[a] = lo[a].min(f64::from(p[a]));
+                hi[a] = hi[a].max(f64::from(p[a]));
+            }
+        }
+        (lo, hi)
+    }
+
     /// The `/mesh.bin` bytes.
     pub fn encode(&self) -> Vec<u8> {
         let mut b = Vec::with_capacity(8 + 12 * self.rest.len() + 12 * self.triangles.len());
@@ -51,6 +92,25 @@ impl DisplayMesh {
             .for_each(|x| b.extend(x.to_le_bytes()));
         b
     }
+}
+
+/// Each node's neighbours along `triangles` (node ids as in the triangles, each list sorted
+/// and without repeats): the ring of a contact node whose columns the nodal display prefetches
+/// ([`SurfaceModel::Nodal`]).
+pub fn surface_neighbours(triangles: &[[usize; 3]]) -> HashMap<usize, Vec<usize>> {
+    let mut neighbours: HashMap<usize, Vec<usize>> = HashMap::new();
+    for t in triangles {
+        for i in 0..3 {
+            let (a, b) = (t[i], t[(i + 1) % 3]);
+            neighbours.entry(a).or_default().push(b);
+            neighbours.entry(b).or_default().push(a);
+        }
+    }
+    for v in neighbours.values_mut() {
+        v.sort_unstable();
+        v.dedup();
+    }
+    neighbours
 }
 
 /// What a frame says besides the positions.
@@ -138,7 +198,7 @@ pub enum SurfaceModel {
         deformer: Box<Deformer>,
         /// Surface neighbours of each mesh node (for prefetching columns); empty lists
         /// allowed.
-        neighbours: std::collections::HashMap<usize, Vec<usize>>,
+        neighbours: HashMap<usize, Vec<usize>>,
     },
     /// `u = U(p) F` on a sampled scene's fine FEM surface, from precomputed fields: no solve
     /// after a contact ([`fields::DisplayFields`]).
@@ -320,5 +380,33 @@ mod tests {
         let m = mesh.encode();
         assert_eq!(m.len(), 8 + 12 + 12);
         assert_eq!(&m[0..8], &[1, 0, 0, 0, 1, 0, 0, 0]);
+    }
+
+    /// Two triangles over nodes 2, 5, 7 and 9 of a ten-node mesh: the display keeps those four
+    /// nodes, in the surface's order, and renumbers the triangles onto them.
+    #[test]
+    fn a_surface_is_renumbered_onto_its_nodes() {
+        let nodes: Vec<[f64; 3]> = (0..10).map(|i| [i as f64, 0.0, 0.5 * i as f64]).collect();
+        let surface = fem::mesh::Surface {
+            triangles: vec![[2, 5, 7], [7, 5, 9]],
+            nodes: vec![2, 5, 7, 9],
+        };
+        let m = DisplayMesh::of_surface(&nodes, &surface);
+        assert_eq!(
+            m.rest,
+            vec![
+                [2.0, 0.0, 1.0],
+                [5.0, 0.0, 2.5],
+                [7.0, 0.0, 3.5],
+                [9.0, 0.0, 4.5]
+            ]
+        );
+        assert_eq!(m.triangles, vec![[0, 1, 2], [2, 1, 3]]);
+        assert_eq!(m.bounding_box(), ([2.0, 0.0, 1.0], [9.0, 0.0, 4.5]));
+        let n = surface_neighbours(&surface.triangles);
+        assert_eq!(n[&2], vec![5, 7]);
+        assert_eq!(n[&5], vec![2, 7, 9]);
+        assert_eq!(n[&9], vec![5, 7]);
+        assert_eq!(n.len(), 4);
     }
 }

@@ -24,7 +24,7 @@
 
 use super::{HardCase, Knob, Point, Series, Verdict};
 use crate::sil::harness::{self, Run, Session, Setup, TickRecord};
-use crate::sil::script::Script;
+use crate::trajectory::Script;
 use anyhow::{Result, anyhow, bail};
 use bank_format::{AlignedBytes, Bank, Relaxation, SectionKind};
 use firmware::hal::Interlocks;

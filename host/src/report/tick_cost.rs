@@ -12,7 +12,7 @@ use crate::sil::cost::{
     by_contact_nodes_of_runs, code_phase_samples_of_runs,
 };
 use crate::sil::harness::{self, INSTRUCTIONS_PER_TICK, Session, Setup, TickRecord};
-use crate::sil::script::Script;
+use crate::trajectory::Script;
 use anyhow::{Result, bail};
 use bank_format::Bank;
 use std::collections::BTreeMap;

@@ -20,7 +20,8 @@
 //!   pipes) and its diagnostics on stderr.
 
 use super::plant::{Gimbal, PlantParams, TICK_S};
-use super::script::{Script, Trajectory};
+use super::script::Trajectory;
+use crate::trajectory::Script;
 use anyhow::{Context, Result, bail};
 use bank_format::region::BANK_ORIGIN;
 use bank_format::{

@@ -9,8 +9,9 @@
 //! - `press-hold`: down to 5 mm below the surface in 0.5 s, hold 10 s, back up in 0.5 s (a
 //!   viscoelastic tissue's relaxation, issue 30).
 //!
-//! Waypoints are joined by smoothstep (`3 s^2 - 2 s^3`) blends, so the hand's speed is
-//! continuous.
+//! These are [`crate::trajectory`]'s strokes with the SIL hand's numbers ([`sil_stroke`]):
+//! waypoints joined by smoothstep (`3 s^2 - 2 s^3`) blends, so the hand's speed is continuous;
+//! the slide's lateral offset is the pitch.
 //!
 //! A recorded hand motion ([`Trajectory::from_csv`], `host sil --trajectory FILE`) replays a
 //! CSV file instead: a header, then `t_s,x_m,y_m,z_m` (tip targets in the bank's frame, turned
@@ -28,10 +29,7 @@ use std::path::Path;
 use crate::calibrate::csv;
 use crate::kinematics::Workspace;
 use crate::script::ray_triangle;
-
-/// The scripted hand motions (the demo's names; the plant's hand follows its own version of
-/// each, below).
-pub use crate::script::Script;
+use crate::trajectory::{Blend, Press, Script, Stroke, Sweep, through};
 
 /// Time before the first cycle: rest, then the approach to above the surface, s.
 const APPROACH_END_S: f64 = 0.5;
@@ -49,7 +47,8 @@ pub struct Trajectory {
 /// What the hand follows after its approach.
 #[derive(Clone, Debug)]
 enum Motion {
-    Script(Script),
+    /// A script and its stroke ([`sil_stroke`]).
+    Script(Script, Stroke),
     /// Recorded samples: times (s, from 0 at the first sample) and joints.
     Recorded(Vec<(f64, [f64; 3])>),
 }
@@ -68,7 +67,7 @@ impl Trajectory {
         let t = Trajectory {
             home,
             surface,
-            path: Motion::Script(script),
+            path: Motion::Script(script, sil_stroke(script)),
         };
         let (lo, hi) = (f64::from(cal.joint_min[2]), f64::from(cal.joint_max[2]));
         let (deepest, highest) = (t.surface + t.depth_m(), t.surface - 0.01);
@@ -163,14 +162,14 @@ impl Trajectory {
     pub fn recorded_end_s(&self) -> Option<f64> {
         match &self.path {
             Motion::Recorded(s) => s.last().map(|l| APPROACH_END_S + l.0),
-            Motion::Script(_) => None,
+            Motion::Script(..) => None,
         }
     }
 
     /// The script, `None` for a recorded motion.
     pub fn script(&self) -> Option<Script> {
         match self.path {
-            Motion::Script(s) => Some(s),
+            Motion::Script(s, _) => Some(s),
             Motion::Recorded(_) => None,
         }
     }
@@ -183,73 +182,25 @@ impl Trajectory {
 
     /// Deepest point of the script below the surface, m (0 for a recorded motion).
     pub fn depth_m(&self) -> f64 {
-        match self.path {
-            Motion::Script(Script::Press) => 0.006,
-            Motion::Script(Script::Slide) => 0.004,
-            Motion::Script(Script::Strike) => 0.008,
-            Motion::Script(Script::PressHold) => 0.005,
+        match &self.path {
+            Motion::Script(_, stroke) => stroke.depth_m(),
             Motion::Recorded(_) => 0.0,
         }
     }
 
     /// The hand's target joints at time `t` (s).
     pub fn at(&self, t: f64) -> [f64; 3] {
-        let script = match &self.path {
-            Motion::Script(s) => *s,
+        let stroke = match &self.path {
+            Motion::Script(_, stroke) => stroke,
             Motion::Recorded(samples) => return self.recorded_at(samples, t),
         };
         let s0 = self.surface;
-        let pose = |pitch: f64, depth: f64| [pitch, 0.0, s0 + depth];
-        let start = match script {
-            Script::Strike => pose(0.0, -0.01),
-            _ => pose(0.0, -0.005),
-        };
         if t < APPROACH_END_S {
-            return blend(&[(REST_S, self.home), (APPROACH_END_S, start)], t);
+            let start = [0.0, 0.0, s0 + stroke.at(0.0).depth_m];
+            return approach(self.home, start, t);
         }
-        let d = self.depth_m();
-        let (period, points): (f64, Vec<(f64, [f64; 3])>) = match script {
-            Script::Press => (
-                2.5,
-                vec![
-                    (0.0, start),
-                    (1.0, pose(0.0, d)),
-                    (1.5, pose(0.0, d)),
-                    (2.5, start),
-                ],
-            ),
-            Script::Slide => (
-                3.0,
-                vec![
-                    (0.0, start),
-                    (0.8, pose(0.0, d)),
-                    (1.4, pose(0.05, d)),
-                    (2.2, pose(-0.05, d)),
-                    (2.6, pose(0.0, d)),
-                    (3.0, start),
-                ],
-            ),
-            Script::Strike => (
-                1.5,
-                vec![
-                    (0.0, start),
-                    (0.5, start),
-                    (0.52, pose(0.0, d)),
-                    (0.8, pose(0.0, d)),
-                    (1.2, start),
-                ],
-            ),
-            Script::PressHold => (
-                11.5,
-                vec![
-                    (0.0, start),
-                    (0.5, pose(0.0, d)),
-                    (10.5, pose(0.0, d)),
-                    (11.0, start),
-                ],
-            ),
-        };
-        blend(&points, (t - APPROACH_END_S).rem_euclid(period))
+        let p = stroke.at(t - APPROACH_END_S);
+        [p.lateral, 0.0, s0 + p.depth_m]
     }
 
     /// A recorded motion at `t`: the approach blend, then linear interpolation of the samples.
@@ -258,7 +209,7 @@ impl Trajectory {
             return self.home;
         };
         if t < APPROACH_END_S {
-            return blend(&[(REST_S, self.home), (APPROACH_END_S, first)], t);
+            return approach(self.home, first, t);
         }
         let t = t - APPROACH_END_S;
         let i = samples.partition_point(|s| s.0 <= t);
@@ -273,23 +224,50 @@ impl Trajectory {
     }
 }
 
-/// Smoothstep between the waypoints around `t` (held before the first and after the last).
-fn blend(points: &[(f64, [f64; 3])], t: f64) -> [f64; 3] {
-    let Some(&(t_first, first)) = points.first() else {
-        return [0.0; 3];
+/// The hand's path from `home` to `start` before the first cycle: at rest until [`REST_S`],
+/// then a smoothstep blend to `start` by [`APPROACH_END_S`].
+fn approach(home: [f64; 3], start: [f64; 3], t: f64) -> [f64; 3] {
+    through(
+        &[(REST_S, home), (APPROACH_END_S, start)],
+        Blend::Smoothstep,
+        t,
+    )
+}
+
+/// The SIL hand's stroke for `script` (see the module notes; the lateral offset is the pitch,
+/// rad), each cycle starting above the surface where the approach ends.
+pub fn sil_stroke(script: Script) -> Stroke {
+    let press = |above_m, depth_m, at_s| Press {
+        above_m,
+        depth_m,
+        at_s,
     };
-    if t <= t_first {
-        return first;
+    match script {
+        Script::Press => Stroke::press(
+            press(0.005, 0.006, [0.0, 1.0, 1.5, 2.5]),
+            Blend::Smoothstep,
+            2.5,
+        ),
+        Script::Slide => Stroke::slide(
+            press(0.005, 0.004, [0.0, 0.8, 2.6, 3.0]),
+            Sweep::Waypoints {
+                at_s: [0.8, 1.4, 2.2, 2.6],
+                amplitude: 0.05,
+            },
+            Blend::Smoothstep,
+            3.0,
+        ),
+        Script::Strike => Stroke::press(
+            press(0.01, 0.008, [0.5, 0.52, 0.8, 1.2]),
+            Blend::Smoothstep,
+            1.5,
+        ),
+        Script::PressHold => Stroke::press(
+            press(0.005, 0.005, [0.0, 0.5, 10.5, 11.0]),
+            Blend::Smoothstep,
+            11.5,
+        ),
     }
-    for w in points.windows(2) {
-        let ((t0, a), (t1, b)) = (w[0], w[1]);
-        if t <= t1 {
-            let s = ((t - t0) / (t1 - t0)).clamp(0.0, 1.0);
-            let k = s * s * (3.0 - 2.0 * s);
-            return std::array::from_fn(|j| a[j] + k * (b[j] - a[j]));
-        }
-    }
-    points.last().map_or(first, |p| p.1)
 }
 
 /// Insertion (m) at which the shaft at `[pitch, yaw]` meets the bank's surface: the nearest
@@ -326,15 +304,41 @@ pub fn surface_insertion(bank: &Bank, angles: [f64; 2]) -> Result<f64> {
 mod tests {
     use super::*;
 
+    /// The SIL strike (module notes): from 10 mm above the surface to 8 mm below it between
+    /// 0.5 s and 0.52 s into its cycle by smoothstep, so its peak speed, half way down, is 1.5
+    /// times the mean: 1.5 x 18 mm / 20 ms = 1.35 m/s; held to 0.8 s, back above by 1.2 s.
     #[test]
-    fn blend_is_smooth_and_holds_the_ends() {
-        let pts = [(1.0, [0.0; 3]), (2.0, [1.0, 2.0, 4.0])];
-        assert_eq!(blend(&pts, 0.0), [0.0; 3]);
-        assert_eq!(blend(&pts, 1.5), [0.5, 1.0, 2.0]);
-        assert_eq!(blend(&pts, 3.0), [1.0, 2.0, 4.0]);
-        // Zero slope at the waypoints.
-        let d = blend(&pts, 1.0 + 1e-4)[2] - blend(&pts, 1.0)[2];
-        assert!(d < 1e-6, "{d}");
+    fn the_strike_descends_18_mm_in_20_ms_at_a_peak_of_1_35_m_s() {
+        let s = sil_stroke(Script::Strike);
+        let depth = |t| s.at(t).depth_m;
+        assert_eq!(depth(0.0), -0.01);
+        assert_eq!(depth(0.5), -0.01);
+        assert!((depth(0.52) - 0.008).abs() < 1e-12);
+        assert!((depth(0.7) - 0.008).abs() < 1e-12);
+        assert!((depth(1.2) + 0.01).abs() < 1e-12);
+        assert!((depth(0.51) + 0.001).abs() < 1e-12);
+        let h = 1e-7;
+        let v = (depth(0.51 + h) - depth(0.51 - h)) / (2.0 * h);
+        assert!((v - 1.35).abs() < 1e-6, "{v}");
+        assert_eq!(s.period_s(), 1.5);
+    }
+
+    /// The SIL press through [`Trajectory::at`] on the flat patch: the approach ends 5 mm above
+    /// the surface straight below the trocar, the bottom is 6 mm below it 1 s later.
+    #[test]
+    fn the_press_starts_above_the_surface_and_reaches_6_mm() {
+        let bytes = patch_bank();
+        let bank = Bank::parse(bytes.as_slice()).unwrap();
+        let t = Trajectory::new(&bank, Script::Press).unwrap();
+        let s0 = t.surface_insertion_m();
+        let home = bank.device().home_joint.map(f64::from);
+        assert_eq!(t.at(0.0), home);
+        assert_eq!(t.at(0.5), [0.0, 0.0, s0 - 0.005]);
+        let bottom = t.at(1.5);
+        assert!((bottom[2] - (s0 + 0.006)).abs() < 1e-12, "{bottom:?}");
+        assert_eq!(t.depth_m(), 0.006);
+        // A cycle later (2.5 s), the same.
+        assert!((t.at(4.0)[2] - bottom[2]).abs() < 1e-12);
     }
 
     fn patch_bank() -> bank_format::AlignedBytes {

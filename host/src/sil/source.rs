@@ -1,9 +1,9 @@
 //! The QEMU image as a display source: [`SilSource`] runs a SIL session in real time and reads
 //! the image's telemetry from its emulated USART, decoded exactly as from a board
-//! ([`crate::source`]'s serial path).
+//! ([`crate::display::source`]'s serial source).
 
 use super::harness;
-use crate::source::{Absorber, LoopStats, Mailbox, Sample, Source};
+use crate::display::source::{Absorber, LoopStats, Mailbox, Sample, Source};
 use anyhow::{Result, anyhow};
 use bank_format::DeviceToHost;
 use std::sync::{Arc, Mutex};

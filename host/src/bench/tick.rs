@@ -4,10 +4,40 @@
 //! it checks is that the loop runs the bank without a fault and touches the organ.
 
 use crate::kinematics::counts_for;
+use crate::trajectory::{Blend, Press, Stroke, Sweep};
 use anyhow::{Result, anyhow, bail};
 use bank_format::Bank;
 use firmware::tick::{HapticLoop, LoopInput};
 use std::time::Instant;
+
+/// Ticks per second.
+const TICK_HZ: f64 = firmware::TICK_HZ as f64;
+/// The path's speed in and out, m/s (0.05 mm a tick).
+const SPEED_M_S: f64 = 0.05;
+/// Where the path starts and ends above the surface, m.
+const ABOVE_M: f64 = 0.005;
+/// Yaw amplitude of the sweep, rad (the pitch sweeps 0.3 of it).
+const SWEEP_RAD: f64 = 0.05;
+/// Duration of the sweep at depth, s.
+const SWEEP_S: f64 = 2.0;
+
+/// The bench's path ([`crate::trajectory`]) with its bottom `depth_m` below the surface: in
+/// from [`ABOVE_M`] above at [`SPEED_M_S`], one sine sweep of [`SWEEP_S`] at depth (lateral
+/// offset 1 at the sweep's largest), out at the same speed; linear between the waypoints.
+fn stroke(depth_m: f64) -> Stroke {
+    let down_s = (depth_m + ABOVE_M) / SPEED_M_S;
+    let press = Press {
+        above_m: ABOVE_M,
+        depth_m,
+        at_s: [0.0, down_s, down_s + SWEEP_S, 2.0 * down_s + SWEEP_S],
+    };
+    let sweep = Sweep::Sine {
+        start_s: down_s,
+        period_s: SWEEP_S,
+        amplitude: 1.0,
+    };
+    Stroke::slide(press, sweep, Blend::Linear, 2.0 * down_s + SWEEP_S)
+}
 
 /// What a run did and how long its ticks took.
 #[derive(Clone, Debug, PartialEq)]
@@ -36,8 +66,8 @@ pub struct TickBench {
 
 /// Run `ticks` ticks of the loop on `bank`: from the home pose straight along the shaft until
 /// the tool touches, then `depth_m` further in, a yaw and pitch sweep at that depth and back
-/// out, repeated. Refuses a bank whose tool never touches along its rest axis, and `ticks` of
-/// zero.
+/// out, repeated (a [`crate::trajectory`] stroke). Refuses a bank whose tool never touches along
+/// its rest axis, and `ticks` of zero.
 pub fn run(bank: &Bank, ticks: usize, depth_m: f64) -> Result<TickBench> {
     if ticks == 0 {
         bail!("--ticks must be at least 1");
@@ -54,7 +84,7 @@ pub fn run(bank: &Bank, ticks: usize, depth_m: f64) -> Result<TickBench> {
         interlocks: firmware::hal::Interlocks::default(),
     };
     // Find first contact straight along the shaft at the home pose (disarmed probe).
-    let step = 5e-5;
+    let step = SPEED_M_S / TICK_HZ;
     let (lo, hi) = (f64::from(cal.joint_min[2]), f64::from(cal.joint_max[2]));
     let mut probe = HapticLoop::new(bank);
     let mut ins = lo;
@@ -72,25 +102,20 @@ pub fn run(bank: &Bank, ticks: usize, depth_m: f64) -> Result<TickBench> {
     };
     // Press to `depth`, slide in yaw and back, release; repeat.
     let bottom = (surface + depth_m).min(hi);
-    let mut path = Vec::new();
-    let mut q = [home[0], home[1], surface - 0.005];
-    while q[2] < bottom {
-        q[2] += step;
-        path.push(q);
-    }
-    let sweep = 0.05;
-    for i in 0..2000 {
-        let phase = i as f64 / 2000.0 * std::f64::consts::TAU;
-        path.push([
-            home[0] + 0.3 * sweep * phase.sin(),
-            home[1] + sweep * phase.sin(),
-            q[2],
-        ]);
-    }
-    while q[2] > surface - 0.005 {
-        q[2] -= step;
-        path.push(q);
-    }
+    let path: Vec<[f64; 3]> = {
+        let stroke = stroke(bottom - surface);
+        let cycle = (stroke.period_s() * TICK_HZ).round() as usize;
+        (0..cycle)
+            .map(|k| {
+                let p = stroke.at(k as f64 / TICK_HZ);
+                [
+                    home[0] + 0.3 * SWEEP_RAD * p.lateral,
+                    home[1] + SWEEP_RAD * p.lateral,
+                    surface + p.depth_m,
+                ]
+            })
+            .collect()
+    };
     let mut haptic = HapticLoop::new(bank);
     // The path starts at the home pose (encoder zero): home there, as a host would.
     haptic.zero_encoders();

@@ -1,0 +1,103 @@
+//! `host bench sil`: instructions per tick of the firmware image under QEMU (idle and per
+//! contact-set size, loop body and whole tick, and per code phase) along the press, slide and
+//! strike scripts, against the goal, and the image's flash and static RAM.
+
+use crate::mcu::ImageSize;
+use crate::sil::cost::{
+    CODE_PHASES, CodePhaseStats, CostStats, against_goal, by_contact_nodes_of_runs,
+    code_phase_samples_of_runs,
+};
+use crate::sil::harness::{self, Session, Setup};
+use crate::trajectory::Script;
+use anyhow::{Result, bail};
+use bank_format::Bank;
+use bank_format::region::{RAM_LEN, RAM_ORIGIN};
+use std::collections::BTreeMap;
+
+/// The scripts each run measures, in order.
+pub const SCRIPTS: [Script; 3] = [Script::Press, Script::Slide, Script::Strike];
+
+/// One script's run.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ScriptRun {
+    /// The script.
+    pub script: Script,
+    /// Ticks run.
+    pub ticks: usize,
+    /// Ticks that overran their period.
+    pub overruns: u32,
+    /// Faults the image reported.
+    pub faults: usize,
+    /// Wall time of the run, s.
+    pub wall_s: f64,
+}
+
+/// The figures of [`run`].
+#[derive(Clone, Debug, PartialEq)]
+pub struct Figures {
+    /// Every tick of every run, grouped by contact-set size (0: idle).
+    pub by_contact_nodes: BTreeMap<u8, CostStats>,
+    /// Per code phase ([`CODE_PHASES`]) over every tick of every run.
+    pub code_phases: Vec<(&'static str, CodePhaseStats)>,
+    /// The largest loop body of any group, instructions.
+    pub worst_body: u32,
+    /// The largest whole tick of any group, instructions.
+    pub worst_tick: u32,
+    /// The largest loop body over every tick (armed or not), instructions
+    /// ([`against_goal`]).
+    pub goal_body: u32,
+    /// The largest whole tick over every tick (armed or not), instructions.
+    pub goal_tick: u32,
+    /// Whether both are within the goal ([`crate::sil::cost::BODY_GOAL`],
+    /// [`crate::sil::cost::TICK_GOAL`]).
+    pub met: bool,
+    /// The image's flash and static RAM.
+    pub size: ImageSize,
+    /// The runs, one per script of [`SCRIPTS`].
+    pub runs: Vec<ScriptRun>,
+}
+
+/// Runs each of [`SCRIPTS`] for `seconds` (virtual) on the image and bank of `setup` (`bank`
+/// parsed), and sizes the image. A run the image stops early is an error.
+pub fn run(setup: &Setup, bank: &Bank, seconds: f64) -> Result<Figures> {
+    let mut records = Vec::new();
+    let mut runs = Vec::new();
+    for script in SCRIPTS {
+        let run = harness::run(setup, &Session::new(bank, script, seconds)?)?;
+        if let Some(why) = &run.stopped {
+            bail!("{script:?}: the image stopped early: {why}\n{}", run.stderr);
+        }
+        runs.push(ScriptRun {
+            script,
+            ticks: run.ticks.len(),
+            overruns: run.overruns(),
+            faults: run.faults().len(),
+            wall_s: run.wall_s,
+        });
+        records.push(run.ticks);
+    }
+    let all = records.concat();
+    // Each run's whole-tick costs from its own ticks (a run's last tick has no successor).
+    let groups = by_contact_nodes_of_runs(records.iter().map(Vec::as_slice));
+    let samples = code_phase_samples_of_runs(records.iter().map(Vec::as_slice));
+    let code_phases = CODE_PHASES
+        .iter()
+        .zip(&samples)
+        .map(|(&n, v)| (n, CodePhaseStats::of(v)))
+        .collect();
+    let size = crate::mcu::image_size(&setup.image, RAM_ORIGIN, RAM_LEN as u32)?;
+    let worst_body = groups.values().map(|g| g.body_max).max().unwrap_or(0);
+    let worst_tick = groups.values().map(|g| g.tick_max).max().unwrap_or(0);
+    let (goal_body, goal_tick, met) = against_goal(&all);
+    Ok(Figures {
+        by_contact_nodes: groups,
+        code_phases,
+        worst_body,
+        worst_tick,
+        goal_body,
+        goal_tick,
+        met,
+        size,
+        runs,
+    })
+}
