@@ -27,7 +27,8 @@ pub struct Args {
     /// command runs this).
     #[arg(long)]
     quick: bool,
-    /// Output directory (created when missing): index.html, report.json, headline.png.
+    /// Output directory (created when missing): index.html, report.json, headline.png,
+    /// figures.md (the figures the user guide quotes).
     #[arg(long)]
     out: PathBuf,
 }
@@ -397,7 +398,7 @@ pub fn run(args: Args) -> Result<()> {
         println!("{line}");
     }
     println!(
-        "wrote {} (index.html, report.json, headline.png) in {:.0} s",
+        "wrote {} (index.html, report.json, headline.png, figures.md) in {:.0} s",
         args.out.display(),
         started.elapsed().as_secs_f64()
     );
@@ -446,7 +447,7 @@ fn qemu_image() -> Result<std::result::Result<Image, String>> {
     Ok(Ok(Image { qemu, image }))
 }
 
-/// Writes the three files, each atomically.
+/// Writes the four files, each atomically.
 fn write(report: &Report, dir: &Path) -> Result<()> {
     std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
     let page = report::html::page(report)?;
@@ -460,5 +461,8 @@ fn write(report: &Report, dir: &Path) -> Result<()> {
     write_atomic(&dir.join("report.json"), json.as_bytes(), &[])?;
     write_atomic(&dir.join("headline.png"), &headline, &[])?;
     write_atomic(&dir.join("index.html"), page.as_bytes(), &[])?;
+    // The guide's measured figures (docs/figures.md is this file, copied by gen-figures.sh).
+    let figures = report::figures::markdown(report);
+    write_atomic(&dir.join("figures.md"), figures.as_bytes(), &[])?;
     Ok(())
 }

@@ -27,6 +27,7 @@
 //!   number of Prony terms.
 
 pub mod bank;
+pub mod figures;
 pub mod firmware;
 pub mod hard;
 pub mod html;
