@@ -1,8 +1,9 @@
 //! The quick report ([`host::report::pipeline::run`], what `host report --quick` runs): the page
 //! renders in headless Chromium with every plot drawn and no console error; `report.json` holds
 //! each knob's series with at least three finite points; and its numbers agree with the tests'
-//! references (the relaxation section's with the SIL test's). `host report`'s own refusal of
-//! an `--out` that is a file is checked on the binary.
+//! references (the relaxation section's with the SIL test's), and with the user guide's figures
+//! file (`docs/figures.md`), each to its stated tolerance. `host report`'s own refusal of an
+//! `--out` that is a file is checked on the binary.
 
 mod support;
 use support::chromium;
@@ -287,4 +288,18 @@ fn quick_report_renders_every_plot_and_agrees_with_the_references() {
     // `INFO:CONSOLE`, without its level; the page writes none when all is well.
     let console: Vec<&str> = log.lines().filter(|l| l.contains(":CONSOLE")).collect();
     assert!(console.is_empty(), "console messages: {console:?}");
+
+    // The user guide's measured figures (docs/figures.md, written by scripts/gen-figures.sh
+    // from this same command) are this run's, each to the tolerance its row states.
+    let fresh = std::fs::read_to_string(out.join("figures.md")).unwrap();
+    let committed =
+        std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("../docs/figures.md"))
+            .unwrap();
+    let problems = host::report::figures::compare(&committed, &fresh);
+    assert!(
+        problems.is_empty(),
+        "docs/figures.md disagrees with this report (run scripts/gen-figures.sh if the change \
+         is meant):\n{}",
+        problems.join("\n")
+    );
 }

@@ -17,7 +17,8 @@ pub struct Args {
     /// command runs this).
     #[arg(long)]
     quick: bool,
-    /// Output directory (created when missing): index.html, report.json, headline.png.
+    /// Output directory (created when missing): index.html, report.json, headline.png,
+    /// figures.md (the figures the user guide quotes).
     #[arg(long)]
     out: PathBuf,
 }
@@ -42,7 +43,7 @@ pub fn run(args: Args) -> Result<()> {
         println!("{line}");
     }
     println!(
-        "wrote {} (index.html, report.json, headline.png) in {:.0} s",
+        "wrote {} (index.html, report.json, headline.png, figures.md) in {:.0} s",
         cfg.out.display(),
         started.elapsed().as_secs_f64()
     );

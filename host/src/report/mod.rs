@@ -28,6 +28,7 @@
 //!   number of Prony terms.
 
 pub mod couplings;
+pub mod figures;
 pub mod hard;
 pub mod html;
 pub mod law;

@@ -434,7 +434,7 @@ fn qemu_image() -> std::result::Result<Image, String> {
     Ok(Image { qemu, image })
 }
 
-/// Writes the three files, each atomically.
+/// Writes the four files, each atomically.
 fn write(report: &Report, dir: &Path) -> Result<()> {
     std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
     let page = html::page(report)?;
@@ -448,5 +448,8 @@ fn write(report: &Report, dir: &Path) -> Result<()> {
     write_atomic(&dir.join("report.json"), json.as_bytes(), &[])?;
     write_atomic(&dir.join("headline.png"), &headline, &[])?;
     write_atomic(&dir.join("index.html"), page.as_bytes(), &[])?;
+    // The guide's measured figures (docs/figures.md is this file, copied by gen-figures.sh).
+    let figures = super::figures::markdown(report);
+    write_atomic(&dir.join("figures.md"), figures.as_bytes(), &[])?;
     Ok(())
 }
