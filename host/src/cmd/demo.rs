@@ -60,7 +60,8 @@ pub struct Args {
     /// Run without a browser: a scripted hand motion (default `press`), then print figures.
     #[arg(long)]
     headless: bool,
-    /// Stop after this many seconds (default: run until stopped; 10 when headless).
+    /// Stop after this many seconds of the loop, counted from its first sample (a SIL image's
+    /// boot is not counted; default: run until stopped; 10 when headless).
     #[arg(long)]
     seconds: Option<f64>,
     /// Scripted hand motion (virtual source: the mouse's stand-in; sil: the plant's hand).
@@ -292,7 +293,7 @@ pub fn run(args: Args) -> Result<()> {
     };
 
     let seconds = args.seconds.or(args.headless.then_some(10.0));
-    let until = seconds.map(|s| Instant::now() + Duration::from_secs_f64(s));
+    let run_for = seconds.map(Duration::from_secs_f64);
     let mesh = Arc::new(mesh);
     let compliance = Arc::new(compliance);
     let mut recorder = match &args.record {
@@ -331,7 +332,7 @@ pub fn run(args: Args) -> Result<()> {
     };
     let (display_stats, loop_stats) = pipeline.run(
         &stop,
-        until,
+        run_for,
         recorder
             .as_mut()
             .map(|r| r as &mut dyn host::display::FrameSink),

@@ -221,16 +221,23 @@ pub struct Pipeline<'a> {
     pub fps: f64,
 }
 
+/// How long [`Pipeline::run`] waits for a source's first sample beyond its run time.
+pub const FIRST_SAMPLE_GRACE: Duration = Duration::from_secs(60);
+
 impl Pipeline<'_> {
-    /// Produces frames until `stop` is set or `until` passes; `sink` sees every frame.
+    /// Produces frames until `stop` is set or `run_for` has passed since the source's first
+    /// sample (a SIL image's first tick comes after QEMU's boot: the run is `run_for` of the
+    /// loop, whatever the start-up took); a source that sends no sample at all stops
+    /// [`FIRST_SAMPLE_GRACE`] after `run_for`. `sink` sees every frame.
     pub fn run(
         &mut self,
         stop: &AtomicBool,
-        until: Option<Instant>,
+        run_for: Option<Duration>,
         mut sink: Option<&mut dyn FrameSink>,
     ) -> anyhow::Result<(DisplayStats, LoopStats)> {
         let period = Duration::from_secs_f64(1.0 / self.fps.max(1.0));
         let start = Instant::now();
+        let mut until = run_for.map(|d| start + d + FIRST_SAMPLE_GRACE);
         let mut next = start;
         let mut stats = DisplayStats::default();
         let mut busy = Duration::ZERO;
@@ -251,6 +258,9 @@ impl Pipeline<'_> {
             }
             let began = Instant::now();
             if let Some(s) = self.source.latest(Duration::ZERO)? {
+                if current.is_none() {
+                    until = run_for.map(|d| Instant::now() + d);
+                }
                 current = Some(s);
             }
             let Some(sample) = &current else {

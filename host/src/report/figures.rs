@@ -5,7 +5,7 @@
 //! loop-body instructions under QEMU to 2 %, whole-tick and link instructions (which vary with
 //! the link bytes that land in a tick) to 30 %, the rest (forces, errors, fits) to 5 %, and
 //! rounding errors of exact solutions only below 1e-9. Wall-clock times are not in the file,
-//! and labels drop what varies from run to run (see [`stable`]).
+//! and labels drop what varies from run to run (see `stable`).
 
 use std::collections::BTreeMap;
 

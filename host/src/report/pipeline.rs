@@ -1,7 +1,7 @@
 //! The report's pipeline: every section of [`super`] measured on one scene in page order, the
 //! firmware's under QEMU when `qemu-system-arm` is installed and the SIL image builds (else
-//! the page says what was not measured and why), and the three files written: `index.html`,
-//! `report.json` and `headline.png`.
+//! the page says what was not measured and why), and the four files written: `index.html`,
+//! `report.json`, `headline.png` and `figures.md` (the user guide's measured figures).
 
 use super::{
     Report, couplings, hard, html, law, locking, loops, pareto, precision, precompute_cost,
@@ -54,10 +54,6 @@ pub fn run(cfg: &ReportConfig, step: &dyn Fn(&str)) -> Result<Report> {
     let mut knobs = Vec::new();
     let mut cases = Vec::new();
     let mut not_measured = vec![
-        "the split of the firmware's loop body into kinematics, detection, patch, solve, law \
-         and supervisor: the image counts the body and the whole tick only, so the page shows \
-         cost by contact-set size and the link/executor share"
-            .to_string(),
         "the 100k liver's precompute (ANP needs about 12 GiB there: `host bench compliance \
          --element anp`)"
             .to_string(),
