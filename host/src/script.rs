@@ -78,19 +78,14 @@ pub fn ray_triangle(
 ///   0.25 s, withdraw;
 /// - `press-hold`: every 12 s, from 5 mm above, press 5 mm in over 0.5 s, hold 10 s, release.
 fn demo_stroke(script: Script) -> Stroke {
-    let press = |above_m, depth_m, at_s| Press {
-        above_m,
-        depth_m,
-        at_s,
-    };
     match script {
         Script::Press => Stroke::press(
-            press(0.005, 0.008, [0.5, 1.5, 2.2, 2.8]),
+            Press::new(0.005, 0.008, [0.5, 1.5, 2.2, 2.8]),
             Blend::Linear,
             3.0,
         ),
         Script::Slide => Stroke::slide(
-            press(0.005, 0.006, [0.4, 1.0, 3.0, 3.5]),
+            Press::new(0.005, 0.006, [0.4, 1.0, 3.0, 3.5]),
             Sweep::Sine {
                 start_s: 1.0,
                 period_s: 2.0,
@@ -100,12 +95,12 @@ fn demo_stroke(script: Script) -> Stroke {
             4.0,
         ),
         Script::Strike => Stroke::press(
-            press(0.020, 0.008, [0.5, 0.556, 0.806, 1.0]),
+            Press::new(0.020, 0.008, [0.5, 0.556, 0.806, 1.0]),
             Blend::Linear,
             1.5,
         ),
         Script::PressHold => Stroke::press(
-            press(0.005, 0.005, [0.3, 0.8, 10.8, 11.3]),
+            Press::new(0.005, 0.005, [0.3, 0.8, 10.8, 11.3]),
             Blend::Linear,
             12.0,
         ),

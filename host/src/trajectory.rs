@@ -53,6 +53,18 @@ pub struct Press {
     pub at_s: [f64; 4],
 }
 
+impl Press {
+    /// `above_m` above the surface, `depth_m` below it at the bottom, at the cycle's times
+    /// `at_s` (leaving the height, reaching the depth, leaving the depth, back at the height).
+    pub const fn new(above_m: f64, depth_m: f64, at_s: [f64; 4]) -> Press {
+        Press {
+            above_m,
+            depth_m,
+            at_s,
+        }
+    }
+}
+
 /// The lateral motion of a slide, in the caller's unit.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum Sweep {

@@ -58,15 +58,31 @@ pub struct Figures {
 }
 
 /// Runs each of [`SCRIPTS`] for `seconds` (virtual) on the image and bank of `setup` (`bank`
-/// parsed), and sizes the image. A run the image stops early is an error.
+/// parsed), telling `step` which script starts. A run the image stops early is an error.
+pub fn run_scripts(
+    setup: &Setup,
+    bank: &Bank,
+    seconds: f64,
+    step: &dyn Fn(Script),
+) -> Result<Vec<(Script, harness::Run)>> {
+    SCRIPTS
+        .iter()
+        .map(|&script| {
+            step(script);
+            let run = harness::run(setup, &Session::new(bank, script, seconds)?)?;
+            if let Some(why) = &run.stopped {
+                bail!("{script:?}: the image stopped early: {why}\n{}", run.stderr);
+            }
+            Ok((script, run))
+        })
+        .collect()
+}
+
+/// [`run_scripts`], measured, and the image sized.
 pub fn run(setup: &Setup, bank: &Bank, seconds: f64) -> Result<Figures> {
     let mut records = Vec::new();
     let mut runs = Vec::new();
-    for script in SCRIPTS {
-        let run = harness::run(setup, &Session::new(bank, script, seconds)?)?;
-        if let Some(why) = &run.stopped {
-            bail!("{script:?}: the image stopped early: {why}\n{}", run.stderr);
-        }
+    for (script, run) in run_scripts(setup, bank, seconds, &|_| {})? {
         runs.push(ScriptRun {
             script,
             ticks: run.ticks.len(),

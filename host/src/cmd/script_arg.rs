@@ -7,15 +7,16 @@ use host::trajectory::Script;
 /// plant's hand).
 #[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
 pub enum ScriptArg {
-    /// Every 3 s: hover 5 mm above the aim point, press 8 mm in over 1 s, hold, release.
+    /// Hover above the aim point, press in, hold, release (demo: 8 mm every 3 s; sil: 6 mm
+    /// every 2.5 s).
     Press,
-    /// Every 4 s: press 6 mm in, slide +-0.08 rad in yaw (about +-9 mm on the organ) and back,
-    /// release.
+    /// Press in, slide sideways and back, release (demo: 6 mm deep, +-0.08 rad in yaw, about
+    /// +-9 mm on the organ, every 4 s; sil: 4 mm deep, +-0.05 rad in pitch, every 3 s).
     Slide,
-    /// Every 1.5 s: from 20 mm above, strike 8 mm in at the hand's top speed, hold 0.25 s,
-    /// withdraw.
+    /// Strike in at the hand's top speed, hold, withdraw (demo: from 20 mm above, 8 mm in,
+    /// every 1.5 s; sil: from 10 mm above, 8 mm in, every 1.5 s).
     Strike,
-    /// Every 12 s: from 5 mm above, press 5 mm in over 0.5 s, hold 10 s, release: what a
+    /// Press 5 mm in over 0.5 s, hold 10 s, release, every 12 s (sil: 11.5 s): what a
     /// viscoelastic tissue's relaxation shows (`[viscoelastic]`, `firmware::relax`).
     #[value(name = "press-hold")]
     PressHold,

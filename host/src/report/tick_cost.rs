@@ -11,9 +11,9 @@ use crate::sil::cost::{
     CODE_PHASES, CodePhaseStats, CostStats, NODAL_BODY_GOAL, NODAL_TICK_GOAL, PhaseMax, Phases,
     by_contact_nodes_of_runs, code_phase_samples_of_runs,
 };
-use crate::sil::harness::{self, INSTRUCTIONS_PER_TICK, Session, Setup, TickRecord};
+use crate::sil::harness::{INSTRUCTIONS_PER_TICK, Setup, TickRecord};
 use crate::trajectory::Script;
-use anyhow::{Result, bail};
+use anyhow::Result;
 use bank_format::Bank;
 use std::collections::BTreeMap;
 
@@ -37,21 +37,19 @@ impl SilRuns {
     }
 }
 
-/// Runs the three scripts for `seconds` each on the image.
+/// Runs the three scripts ([`crate::bench::sil::SCRIPTS`]) for `seconds` each on the image.
 pub fn measure(setup: &Setup, bank: &Bank, seconds: f64, step: &dyn Fn(&str)) -> Result<SilRuns> {
     let mut out = SilRuns {
         runs: Vec::new(),
         faults: 0,
         overruns: 0,
     };
-    for script in [Script::Press, Script::Slide, Script::Strike] {
+    let say = |script: Script| {
         step(&format!(
             "firmware: {script:?} for {seconds} s on the QEMU image"
-        ));
-        let run = harness::run(setup, &Session::new(bank, script, seconds)?)?;
-        if let Some(why) = &run.stopped {
-            bail!("{script:?}: the image stopped early: {why}\n{}", run.stderr);
-        }
+        ))
+    };
+    for (script, run) in crate::bench::sil::run_scripts(setup, bank, seconds, &say)? {
         out.faults += run.faults().len();
         out.overruns += run.overruns();
         out.runs.push((script, run.ticks));

@@ -237,19 +237,14 @@ fn approach(home: [f64; 3], start: [f64; 3], t: f64) -> [f64; 3] {
 /// The SIL hand's stroke for `script` (see the module notes; the lateral offset is the pitch,
 /// rad), each cycle starting above the surface where the approach ends.
 pub fn sil_stroke(script: Script) -> Stroke {
-    let press = |above_m, depth_m, at_s| Press {
-        above_m,
-        depth_m,
-        at_s,
-    };
     match script {
         Script::Press => Stroke::press(
-            press(0.005, 0.006, [0.0, 1.0, 1.5, 2.5]),
+            Press::new(0.005, 0.006, [0.0, 1.0, 1.5, 2.5]),
             Blend::Smoothstep,
             2.5,
         ),
         Script::Slide => Stroke::slide(
-            press(0.005, 0.004, [0.0, 0.8, 2.6, 3.0]),
+            Press::new(0.005, 0.004, [0.0, 0.8, 2.6, 3.0]),
             Sweep::Waypoints {
                 at_s: [0.8, 1.4, 2.2, 2.6],
                 amplitude: 0.05,
@@ -258,12 +253,12 @@ pub fn sil_stroke(script: Script) -> Stroke {
             3.0,
         ),
         Script::Strike => Stroke::press(
-            press(0.01, 0.008, [0.5, 0.52, 0.8, 1.2]),
+            Press::new(0.01, 0.008, [0.5, 0.52, 0.8, 1.2]),
             Blend::Smoothstep,
             1.5,
         ),
         Script::PressHold => Stroke::press(
-            press(0.005, 0.005, [0.0, 0.5, 10.5, 11.0]),
+            Press::new(0.005, 0.005, [0.0, 0.5, 10.5, 11.0]),
             Blend::Smoothstep,
             11.5,
         ),
