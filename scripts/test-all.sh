@@ -4,9 +4,11 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
+# Each step's heading says how long the run has taken so far (bash's SECONDS), so a log shows
+# where the time goes.
 step() {
     current_step="$*"
-    printf '\n== %s\n' "$*"
+    printf '\n== [%d:%02d] %s\n' $((SECONDS / 60)) $((SECONDS % 60)) "$*"
 }
 # A failure names its step and command, so a log's last lines say what broke.
 trap 'echo "test-all.sh: failed in step \"${current_step:-set-up}\" at line $LINENO: $BASH_COMMAND" >&2' ERR
@@ -137,5 +139,6 @@ trap 'rm -f "$log"; report_removed' EXIT
 status=0
 cargo test --workspace --profile checked --no-fail-fast 2>&1 | tee "$log" || status=$?
 # One closing line for the whole suite (cargo prints one per test binary).
-awk '/^test result:/ { p += $4; f += $6 } END { printf "\nsuite: %d passed, %d failed\n", p, f }' "$log"
+awk '/^test result:/ { p += $4; f += $6 } END { printf "\nsuite: %d passed, %d failed", p, f }' "$log"
+printf ' in %d min %02d s\n' $((SECONDS / 60)) $((SECONDS % 60))
 exit "$status"

@@ -22,6 +22,7 @@ pub mod kinematics;
 pub mod link;
 pub mod mcu;
 pub mod meshing;
+pub mod organ;
 pub mod probe;
 pub mod progress;
 pub mod reach;

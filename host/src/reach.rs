@@ -24,7 +24,10 @@
 //! when they lie in the sector; the scene's insertion range is what keeps R to the near surface.
 
 use crate::kinematics::Workspace;
+use crate::organ::Organ;
+use anyhow::{Result, bail};
 use fem::vec3::{dot, sub};
+use std::collections::{BTreeSet, HashMap};
 
 impl Workspace {
     /// Whether point `x` lies within (approximately, see the module notes) `margin` of the
@@ -62,6 +65,110 @@ pub fn reachable(
         .copied()
         .filter(|&k| !fixed(k) && workspace.reaches(positions[k], tip_radius + margin))
         .collect()
+}
+
+/// The reach stage of the pipeline: R, the free surface nodes of an organ the scene's tool can
+/// touch, with the boundary triangles among them. The bank models only these.
+pub struct Region {
+    /// R: mesh node ids, ascending.
+    pub nodes: Vec<usize>,
+    /// R's positions, m.
+    pub positions: Vec<[f64; 3]>,
+    /// Boundary triangles with all three vertices in R, as indices into `nodes`.
+    pub triangles: Vec<[u32; 3]>,
+}
+
+impl Region {
+    /// [`reachable`] on the organ's surface with the scene's device, tip radius and
+    /// `bank.reach_margin_m`; refuses an empty R and one larger than a bank holds.
+    pub fn of(organ: &Organ) -> Result<Region> {
+        let scene = &organ.scene;
+        let path = scene.path.display();
+        let nodes = reachable(
+            &Workspace::from_device(&scene.device),
+            &organ.mesh.nodes,
+            &organ.surface.nodes,
+            |k| (0..3).any(|c| organ.fixed.is_fixed(k, c)),
+            scene.tip_radius_m,
+            scene.bank.reach_margin_m,
+        );
+        if nodes.is_empty() {
+            bail!(
+                "{path}: the tool reaches no free surface node (check device.fulcrum_m, the \
+                 ranges and bank.reach_margin_m)"
+            );
+        }
+        if nodes.len() > bank_format::MAX_NODES {
+            bail!(
+                "{path}: the reachable region has {} nodes; a bank holds at most {} (u16 \
+                 indices): narrow the device's ranges",
+                nodes.len(),
+                bank_format::MAX_NODES
+            );
+        }
+        let local: HashMap<usize, u32> = nodes
+            .iter()
+            .enumerate()
+            .map(|(i, &k)| (k, i as u32))
+            .collect();
+        let triangles = organ
+            .surface
+            .triangles
+            .iter()
+            .filter_map(|t| Some([*local.get(&t[0])?, *local.get(&t[1])?, *local.get(&t[2])?]))
+            .collect();
+        let positions = nodes.iter().map(|&k| organ.mesh.nodes[k]).collect();
+        Ok(Region {
+            nodes,
+            positions,
+            triangles,
+        })
+    }
+
+    /// Nodes in R.
+    pub fn len(&self) -> usize {
+        self.nodes.len()
+    }
+
+    /// Whether R is empty (never, for a region from [`Region::of`]).
+    pub fn is_empty(&self) -> bool {
+        self.nodes.is_empty()
+    }
+
+    /// R's triangle edges `(a, b)`, `a < b`, as indices into [`Region::nodes`].
+    pub fn edges(&self) -> BTreeSet<(usize, usize)> {
+        let mut e = BTreeSet::new();
+        for t in &self.triangles {
+            for i in 0..3 {
+                let (a, b) = (t[i] as usize, t[(i + 1) % 3] as usize);
+                e.insert((a.min(b), a.max(b)));
+            }
+        }
+        e
+    }
+
+    /// Distance between R's nodes `a` and `b` at rest, m.
+    pub fn dist(&self, a: usize, b: usize) -> f64 {
+        let (p, q) = (self.positions[a], self.positions[b]);
+        (0..3).map(|i| (p[i] - q[i]).powi(2)).sum::<f64>().sqrt()
+    }
+
+    /// Mean length of R's triangle edges, m (0 without triangles).
+    pub fn mean_edge(&self) -> f64 {
+        let e = self.edges();
+        if e.is_empty() {
+            return 0.0;
+        }
+        e.iter().map(|&(a, b)| self.dist(a, b)).sum::<f64>() / e.len() as f64
+    }
+
+    /// Length of R's longest triangle edge, m (0 without triangles).
+    pub fn longest_edge(&self) -> f64 {
+        self.edges()
+            .iter()
+            .map(|&(a, b)| self.dist(a, b))
+            .fold(0.0, f64::max)
+    }
 }
 
 #[cfg(test)]

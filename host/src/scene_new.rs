@@ -2,9 +2,10 @@
 //! joint ranges aimed from a trocar at the organ, a tissue preset; the text is validated by
 //! loading it as any scene ([`Scene::parse`]) before it is written.
 
-use crate::bank::Prepared;
 use crate::kinematics::Workspace;
 use crate::meshing::Units;
+use crate::organ::Organ;
+use crate::reach::Region;
 use crate::scene::Scene;
 use anyhow::{Result, bail};
 use fem::mesh::TetMesh;
@@ -259,7 +260,7 @@ reach_margin_m = 0.002
 }
 
 /// The scene's text for `mesh` (already loaded, scaled to metres and validated) and `spec`, checked as any
-/// scene is before a bank is built ([`Prepared::from_scene`]: the trocar and the home tip
+/// scene is before a bank is built ([`Organ::from_scene`], [`Region::of`]: the trocar and the home tip
 /// outside the organ, supports that hold something but not everything and leave no rigid
 /// motion, a reachable region), as `out` would be read; also the reachable nodes' count and
 /// the scene's warnings (a mesh implausibly sized in metres, a Poisson's ratio that locks).
@@ -353,8 +354,9 @@ kind = "linear"   # fit a Chebyshev Q on bench data with `host calibrate tissue`
         i0 = r(w.insertion[0]),
         i1 = r(w.insertion[1]),
     );
-    let prepared = Prepared::from_scene(Scene::parse(out, &text)?)?;
-    Ok((text, prepared.region.len(), prepared.warnings))
+    let organ = Organ::from_scene(Scene::parse(out, &text)?)?;
+    let region = Region::of(&organ)?;
+    Ok((text, region.len(), organ.warnings))
 }
 
 #[cfg(test)]

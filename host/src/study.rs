@@ -26,10 +26,11 @@
 //! al., J. Fluids Eng. 130, 2008): `1.25 |n . W_inf n - n . W_3 n| / n . W_inf n`, the safety
 //! factor 1.25 being the one for a three-grid study whose observed order is that of the method.
 
-use crate::bank::Prepared;
 use crate::bank::sampled::SampledFem;
+use crate::organ::Organ;
 use crate::probe::closest_reachable;
-use crate::scene::{FemElement, SampledContact};
+use crate::reach::Region;
+use crate::scene::{FemElement, SampledContact, Scene};
 use anyhow::{Context, Result, bail};
 use fem::compliance::Block3;
 use fem::vec3::dot;
@@ -136,8 +137,8 @@ pub fn normal_compliance(w: &Block3, n: [f64; 3]) -> f64 {
 }
 
 /// The sites' contact points on the scene's collision surface (R's triangles).
-pub fn sites(prep: &Prepared, given: &[(String, [f64; 3])]) -> Result<Vec<Site>> {
-    let triangles: Vec<[usize; 3]> = prep
+pub fn sites(organ: &Organ, region: &Region, given: &[(String, [f64; 3])]) -> Result<Vec<Site>> {
+    let triangles: Vec<[usize; 3]> = region
         .triangles
         .iter()
         .map(|t| t.map(|k| k as usize))
@@ -145,11 +146,10 @@ pub fn sites(prep: &Prepared, given: &[(String, [f64; 3])]) -> Result<Vec<Site>>
     given
         .iter()
         .map(|(name, q)| {
-            let organ = (&prep.mesh.nodes[..], &prep.surface.triangles[..]);
-            let p =
-                closest_reachable(&prep.positions, &triangles, organ, *q).with_context(|| {
-                    format!("site {name:?} at [{:.4}, {:.4}, {:.4}] m", q[0], q[1], q[2])
-                })?;
+            let surface = (&organ.mesh.nodes[..], &organ.surface.triangles[..]);
+            let p = closest_reachable(&region.positions, &triangles, surface, *q).with_context(
+                || format!("site {name:?} at [{:.4}, {:.4}, {:.4}] m", q[0], q[1], q[2]),
+            )?;
             Ok(Site {
                 name: name.clone(),
                 query: *q,
@@ -162,7 +162,7 @@ pub fn sites(prep: &Prepared, given: &[(String, [f64; 3])]) -> Result<Vec<Site>>
 
 /// `W` at the sites on one FEM mesh of size `h_m` with `element`.
 pub fn level(
-    prep: &Prepared,
+    scene: &Scene,
     sites: &[Site],
     mesh: &Path,
     h_m: f64,
@@ -175,9 +175,9 @@ pub fn level(
         level: 1,
         richardson: None,
     };
-    let fem = SampledFem::new(&prep.scene, &spec)?;
+    let fem = SampledFem::new(scene, &spec)?;
     let points: Vec<[f64; 3]> = sites.iter().map(|s| s.point).collect();
-    let (w, _, _) = fem.patch_compliance(&points, prep.scene.tip_radius_m, None)?;
+    let (w, _, _) = fem.patch_compliance(&points, scene.tip_radius_m, None)?;
     let stats = fem.compliance.stats();
     Ok(Level {
         mesh: mesh.display().to_string(),

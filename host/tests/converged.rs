@@ -19,7 +19,8 @@
 //! limits must agree within their error estimates.
 
 use bank_format::{AlignedBytes, Bank};
-use host::bank::Prepared;
+use host::organ::Organ;
+use host::reach::Region;
 use host::report::sampled;
 use host::study::{Study, normal_compliance};
 use std::path::Path;
@@ -55,12 +56,12 @@ fn the_p1_and_p2_limits_agree_within_their_error_estimates() {
 #[test]
 fn the_study_sites_are_the_default_scenes() {
     let st = study("patch-study-p2.json");
-    let prep = Prepared::load(&manifest("scenes/liver.toml")).unwrap();
+    let liver = Organ::load(&manifest("scenes/liver.toml")).unwrap();
     let given: Vec<(String, [f64; 3])> = host::study::DEFAULT_SITES
         .iter()
         .map(|(n, p)| (n.to_string(), *p))
         .collect();
-    let sites = host::study::sites(&prep, &given).unwrap();
+    let sites = host::study::sites(&liver, &Region::of(&liver).unwrap(), &given).unwrap();
     assert_eq!(sites.len(), st.sites.len());
     for (a, b) in sites.iter().zip(&st.sites) {
         assert_eq!(a.name, b.name);
@@ -79,13 +80,13 @@ fn the_study_sites_are_the_default_scenes() {
 fn the_shipped_bank_renders_the_converged_force() {
     let st = study("patch-study-p2.json");
     let scene = manifest("scenes/liver.toml");
-    let prep = Prepared::load(&scene).unwrap();
+    let liver = Organ::load(&scene).unwrap();
     let bytes = host::bank::scene_bank(&scene).unwrap();
     assert!(bytes.len() <= 128 * 1024, "{} bytes", bytes.len());
     let aligned = AlignedBytes::new(&bytes);
     let bank = Bank::parse(&aligned).unwrap();
     assert!(bank.samples().is_some(), "the shipped bank is sampled");
-    let presses = sampled::press_errors(&prep, &bank, &st, &[0.002, 0.005, 0.008]).unwrap();
+    let presses = sampled::press_errors(&liver, &bank, &st, &[0.002, 0.005, 0.008]).unwrap();
     assert_eq!(presses.len(), 3 * st.sites.len());
     for p in &presses {
         let site = &st.sites[p.site];

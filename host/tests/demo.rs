@@ -34,11 +34,11 @@ fn assert_peak_is_the_probes(v: &serde_json::Value, depth: f64) {
         .map(|x| x.as_f64().unwrap())
         .collect();
     let scene = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/liver.toml");
-    let prep = host::bank::Prepared::load(&scene).unwrap();
+    let liver = host::organ::Organ::load(&scene).unwrap();
     let bytes = host::bank::scene_bank(&scene).unwrap();
     let aligned = bank_format::AlignedBytes::new(&bytes);
     let bank = bank_format::Bank::parse(&aligned).unwrap();
-    let organ = (&prep.mesh.nodes[..], &prep.surface.triangles[..]);
+    let organ = (&liver.mesh.nodes[..], &liver.surface.triangles[..]);
     let pressed = host::probe::probe(&bank, organ, [at[0], at[1], at[2]], Some(depth), true)
         .unwrap()
         .force_n

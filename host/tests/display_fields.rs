@@ -17,7 +17,7 @@ use std::path::Path;
 fn fields_match_direct_solves_and_put_the_tool_at_w_f() {
     let scene = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/liver.toml");
     let prep = Prepared::load(&scene).unwrap();
-    let ContactModel::Sampled(spec) = &prep.scene.contact else {
+    let ContactModel::Sampled(spec) = &prep.organ.scene.contact else {
         panic!("the default scene is sampled");
     };
     let (built, _) = scene_bank_cached(&prep, None).unwrap();
@@ -33,14 +33,18 @@ fn fields_match_direct_solves_and_put_the_tool_at_w_f() {
     for (r, &n) in fields.mesh.rest.iter().zip(&boundary.nodes) {
         assert_eq!(*r, mesh.nodes[n].map(|x| x as f32));
     }
-    let fixed = prep.scene.fixed_set(&mesh).unwrap();
-    let body =
-        fem::elasticity::Elasticity::with_element(&mesh, prep.scene.material, Default::default())
-            .unwrap();
+    let fixed = prep.organ.scene.fixed_set(&mesh).unwrap();
+    let body = fem::elasticity::Elasticity::with_element(
+        &mesh,
+        prep.organ.scene.material,
+        Default::default(),
+    )
+    .unwrap();
     let c = fem::compliance::Compliance::factorize(&body, &fixed).unwrap();
     let tool = fem::tool::ToolSurface::linear(&mesh, &boundary).unwrap();
     let radius = f64::from(samples.tip_radius_m());
-    let (lattice, points) = lattice_points(&prep.positions, &prep.triangles, spec.level);
+    let (lattice, points) =
+        lattice_points(&prep.region.positions, &prep.region.triangles, spec.level);
     let display_index = |n: usize| boundary.nodes.binary_search(&n).unwrap();
 
     let force = [0.02f32, -0.01, 0.1];

@@ -15,15 +15,18 @@
 
 use bank_format::{AlignedBytes, Bank, Precision};
 use firmware::solve::WeightedSolve;
-use host::bank::Prepared;
 use host::bank::sweep;
+use host::bank::{Prepared, ToolPairs};
 use std::path::Path;
 
 #[test]
 fn the_tool_bank_is_exact_on_every_contact_the_tool_can_make() {
     let scene = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/liver-nodal.toml");
     let prep = Prepared::load(&scene).unwrap();
-    assert_eq!(prep.scene.bank.couplings, host::scene::Couplings::Tool);
+    assert_eq!(
+        prep.organ.scene.bank.couplings,
+        host::scene::Couplings::Tool
+    );
     let built = prep.build_bank(None).unwrap();
     assert!(
         built.bytes.len() <= 128 * 1024,
@@ -32,7 +35,7 @@ fn the_tool_bank_is_exact_on_every_contact_the_tool_can_make() {
     );
     let aligned = AlignedBytes::new(&built.bytes);
     let bank = Bank::parse(&aligned).unwrap();
-    assert_eq!(bank.precision(), prep.scene.bank.precision);
+    assert_eq!(bank.precision(), prep.organ.scene.bank.precision);
 
     let rows = prep.blocks(prep.probe_radius(), None).unwrap();
     let probe_bytes = sweep::probe_bytes(&prep, &rows).unwrap();
@@ -43,7 +46,7 @@ fn the_tool_bank_is_exact_on_every_contact_the_tool_can_make() {
 
     // The patch on the demo bank is the patch on the probe bank, bit for bit: no node is
     // dropped for want of a coupling, and the nodal pressures see the same nodes.
-    let radius = prep.scene.tip_radius_m as f32;
+    let radius = prep.organ.scene.tip_radius_m as f32;
     for s in &sites {
         let tri = bank.triangles()[s.triangle];
         let on_bank =
@@ -93,11 +96,14 @@ fn bfp16_blocks_stay_within_their_rounding_bound() {
     let rows = prep.blocks(prep.probe_radius(), None).unwrap();
     let probe_bytes = sweep::probe_bytes(&prep, &rows).unwrap();
     let probe = Bank::parse_unbounded(&probe_bytes).unwrap();
-    let pairs = prep
-        .tool_pairs(&probe, host::bank::TOOL_DIVISIONS)
-        .unwrap()
-        .pairs;
-    let radius_m = prep.scene.bank.truncation_radius_m;
+    let pairs = ToolPairs::sample(
+        &probe,
+        prep.organ.scene.tip_radius_m,
+        host::bank::TOOL_DIVISIONS,
+    )
+    .unwrap()
+    .pairs;
+    let radius_m = prep.organ.scene.bank.truncation_radius_m;
     let f32_bank = prep
         .bank_in(&rows, radius_m, Some(&pairs), Precision::F32)
         .unwrap();
@@ -118,7 +124,7 @@ fn bfp16_blocks_stay_within_their_rounding_bound() {
 
     let sites = sweep::sites(&probe, 1000, 0.005, 11);
     let refs = sweep::references(&prep, &probe, &sites).unwrap();
-    let radius = prep.scene.tip_radius_m as f32;
+    let radius = prep.organ.scene.tip_radius_m as f32;
     let rel = |got: [f32; 3], want: [f64; 3]| {
         let d: [f64; 3] = std::array::from_fn(|c| f64::from(got[c]) - want[c]);
         fem::vec3::norm(d) / fem::vec3::norm(want)
@@ -140,7 +146,7 @@ fn bfp16_blocks_stay_within_their_rounding_bound() {
             let ids: Vec<usize> = patch
                 .nodes()
                 .iter()
-                .map(|&k| prep.region[usize::from(k)])
+                .map(|&k| prep.region.nodes[usize::from(k)])
                 .collect();
             let c = prep.compliance.blocks(&ids, None).unwrap();
             let w: Vec<f64> = patch.weights().iter().map(|&x| f64::from(x)).collect();

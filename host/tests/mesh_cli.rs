@@ -588,8 +588,8 @@ fn a_tetrahedral_mesh_in_millimetres_is_the_same_organ() {
     // The same compliance, to rounding (the coordinates are scaled by 1000 and back).
     let pm = host::bank::Prepared::load(&m_scene).unwrap();
     let pmm = host::bank::Prepared::load(&mm_scene).unwrap();
-    assert_eq!(pm.region, pmm.region);
-    let nodes: Vec<usize> = pm.region.iter().step_by(97).copied().collect();
+    assert_eq!(pm.region.nodes, pmm.region.nodes);
+    let nodes: Vec<usize> = pm.region.nodes.iter().step_by(97).copied().collect();
     let (a, b) = (
         pm.compliance.blocks(&nodes, None).unwrap(),
         pmm.compliance.blocks(&nodes, None).unwrap(),
@@ -758,7 +758,7 @@ fn a_fem_mesh_makes_a_sampled_scene_whose_bank_builds() {
         "{err}"
     );
     let prep = host::bank::Prepared::load(&out).unwrap();
-    let host::scene::ContactModel::Sampled(spec) = &prep.scene.contact else {
+    let host::scene::ContactModel::Sampled(spec) = &prep.organ.scene.contact else {
         panic!("--fem-mesh makes a sampled scene");
     };
     assert_eq!(

@@ -51,7 +51,7 @@ fn sampled_knobs_measure_the_shipped_bank_against_the_converged_reference() {
     let aligned = AlignedBytes::new(&bytes);
     let bank = Bank::parse(&aligned).unwrap();
     let study = sampled::reference().unwrap();
-    let error = sampled::force_error(&prep, &bank, &study, &[0.005]).unwrap();
+    let error = sampled::force_error(&prep.organ, &bank, &study, &[0.005]).unwrap();
     assert!(error.0 > 1.0, "nodal mean error {:?}", error);
 
     // With instructions (as the report measures them on the image; equal here), the front is

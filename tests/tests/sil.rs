@@ -513,7 +513,7 @@ fn near_surface_file(bank: &Bank, dir: &std::path::Path, seed: u64) -> std::path
 fn nodal_bank(grid_cell_m: f64, dir: &std::path::Path) -> Result<(PathBuf, AlignedBytes), String> {
     let scene = host::mcu::repo_root().join("host/scenes/liver-nodal.toml");
     let mut prep = host::bank::Prepared::load(&scene).map_err(|e| format!("{e:#}"))?;
-    prep.scene.bank.grid_cell_m = Some(grid_cell_m);
+    prep.organ.scene.bank.grid_cell_m = Some(grid_cell_m);
     let bytes = prep.build_bank(None).map_err(|e| format!("{e:#}"))?.bytes;
     let path = dir.join(format!("nodal-{grid_cell_m}.bank"));
     std::fs::write(&path, &bytes).unwrap();

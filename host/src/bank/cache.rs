@@ -58,7 +58,10 @@ fn code_hash() -> u64 {
 
 /// The cache key of a sampled scene's bank (module notes).
 fn bank_key(prep: &Prepared) -> Result<u64> {
-    Ok(fnv1a(prep.scene.inputs_hash()?, &code_hash().to_le_bytes()))
+    Ok(fnv1a(
+        prep.organ.scene.inputs_hash()?,
+        &code_hash().to_le_bytes(),
+    ))
 }
 
 /// The scene's bank ([`Prepared::build_bank`]); a sampled scene's comes from the cache when
@@ -68,7 +71,7 @@ pub fn scene_bank_cached(
     prep: &Prepared,
     progress: Option<&dyn Progress>,
 ) -> Result<(BuiltBank, bool)> {
-    let ContactModel::Sampled(_) = &prep.scene.contact else {
+    let ContactModel::Sampled(_) = &prep.organ.scene.contact else {
         return Ok((prep.build_bank(progress)?, false));
     };
     let key = bank_key(prep)?;
@@ -108,7 +111,7 @@ pub fn display_fields_cached(
     bank: &Bank,
     progress: Option<&dyn Progress>,
 ) -> Result<Option<(DisplayFields, bool)>> {
-    let (ContactModel::Sampled(_), Some(_)) = (&prep.scene.contact, bank.samples()) else {
+    let (ContactModel::Sampled(_), Some(_)) = (&prep.organ.scene.contact, bank.samples()) else {
         return Ok(None);
     };
     let key = FIELDS_SOURCES
@@ -154,11 +157,11 @@ mod tests {
     fn the_key_covers_a_scene_edited_in_memory() {
         let file = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/liver-qlv.toml");
         let mut prep = Prepared::load(&file).unwrap();
-        assert!(matches!(prep.scene.contact, ContactModel::Sampled(_)));
+        assert!(matches!(prep.organ.scene.contact, ContactModel::Sampled(_)));
         let with = bank_key(&prep).unwrap();
         assert_eq!(bank_key(&prep).unwrap(), with);
-        assert!(prep.scene.viscoelastic.is_some());
-        prep.scene.viscoelastic = None;
+        assert!(prep.organ.scene.viscoelastic.is_some());
+        prep.organ.scene.viscoelastic = None;
         assert_ne!(bank_key(&prep).unwrap(), with);
     }
 }

@@ -7,6 +7,8 @@
 use super::{BuiltBank, Prepared};
 use crate::bank::sampled::{SampledFem, lattice_points};
 use crate::display::fields::DisplayFields;
+use crate::organ::Organ;
+use crate::reach::Region;
 use crate::scene::{ContactModel, FemElement, SampledContact, Scene};
 use anyhow::{Context, Result, bail};
 use bank_format::{AlignedBytes, Bank};
@@ -176,16 +178,17 @@ pub struct PatchMethods {
 pub fn patch_methods(scene: Scene, overrides: &Overrides, loads: usize) -> Result<PatchMethods> {
     let mut scene = scene;
     let spec = overrides.apply(&mut scene)?;
-    let prep = Prepared::from_scene(scene)?;
-    let (_, points) = lattice_points(&prep.positions, &prep.triangles, spec.level);
+    let organ = Organ::from_scene(scene)?;
+    let region = Region::of(&organ)?;
+    let (_, points) = lattice_points(&region.positions, &region.triangles, spec.level);
     let take = if loads == 0 {
         points.len()
     } else {
         loads.min(points.len())
     };
     let chosen: Vec<[f64; 3]> = (0..take).map(|i| points[i * points.len() / take]).collect();
-    let fem = SampledFem::load(&prep.scene, &spec.fem_mesh, spec.element)?;
-    let (tool_loads, _) = fem.tool_loads(&chosen, prep.scene.tip_radius_m)?;
+    let fem = SampledFem::load(&organ.scene, &spec.fem_mesh, spec.element)?;
+    let (tool_loads, _) = fem.tool_loads(&chosen, organ.scene.tip_radius_m)?;
     let t = Instant::now();
     let forward = fem.compliance.patch_compliances(&tool_loads, None)?;
     let forward_s = t.elapsed().as_secs_f64();

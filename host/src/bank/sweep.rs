@@ -1,6 +1,6 @@
 //! Bank size against force error (`host bank sweep`, and the report's plot): for each coupling
 //! rule (a Euclidean truncation radius, or the tool's co-occurring pairs,
-//! [`Prepared::tool_pairs`]) the bank's bytes and the firmware's force error (f32, its own
+//! [`ToolPairs::sample`](super::ToolPairs::sample)) the bank's bytes and the firmware's force error (f32, its own
 //! patch and solve on the bank's bytes) against the f64 solve on untruncated compliance, over
 //! contact sites spread over the reachable surface R: a point contact (tip radius 0: the
 //! barycentric weights on the contact triangle) and the scene's tool patch at each site.
@@ -13,7 +13,7 @@
 //! compliance blocks `C_ab` of the patch's nodes. So the error is what the bank's truncation,
 //! its f32 storage and the f32 solve cost, nothing else.
 
-use super::{BlockRows, Prepared, UNCOUPLED_TOL};
+use super::{BlockRows, Prepared, ToolPairs, UNCOUPLED_TOL};
 use crate::contact::weighted_tool_force;
 use anyhow::{Context, Result, bail};
 use bank_format::region::BANK_LEN;
@@ -164,7 +164,7 @@ pub fn sites(bank: &Bank, count: usize, depth_m: f64, seed: u64) -> Vec<Site> {
 /// The f64 references at `sites`: weights from the firmware's patch on `probe` (see the module
 /// documentation), forces from the untruncated compliance.
 pub fn references(prep: &Prepared, probe: &Bank, sites: &[Site]) -> Result<Vec<Reference>> {
-    let radius = prep.scene.tip_radius_m as f32;
+    let radius = prep.organ.scene.tip_radius_m as f32;
     let mut out = Vec::with_capacity(sites.len());
     for s in sites {
         let tri = probe.triangles()[s.triangle];
@@ -196,13 +196,16 @@ pub fn references(prep: &Prepared, probe: &Bank, sites: &[Site]) -> Result<Vec<R
 
 /// Untruncated blocks among R's nodes `nodes`.
 fn blocks(prep: &Prepared, nodes: &[u16]) -> Result<Vec<Vec<fem::compliance::Block3>>> {
-    let ids: Vec<usize> = nodes.iter().map(|&k| prep.region[usize::from(k)]).collect();
+    let ids: Vec<usize> = nodes
+        .iter()
+        .map(|&k| prep.region.nodes[usize::from(k)])
+        .collect();
     Ok(prep.compliance.blocks(&ids, None)?)
 }
 
 /// The firmware's errors on `bank` against `refs`.
 pub fn errors(prep: &Prepared, bank: &Bank, refs: &[Reference]) -> Errors {
-    let radius = prep.scene.tip_radius_m as f32;
+    let radius = prep.organ.scene.tip_radius_m as f32;
     let rel = |got: [f32; 3], want: [f64; 3]| {
         let d: [f64; 3] = std::array::from_fn(|c| f64::from(got[c]) - want[c]);
         fem::vec3::norm(d) / fem::vec3::norm(want)
@@ -299,7 +302,14 @@ pub fn run(
         let built = if rule == "tool" {
             let pairs = match &tool_pairs {
                 Some(p) => p,
-                None => tool_pairs.insert(prep.tool_pairs(&probe, super::TOOL_DIVISIONS)?.pairs),
+                None => tool_pairs.insert(
+                    ToolPairs::sample(
+                        &probe,
+                        prep.organ.scene.tip_radius_m,
+                        super::TOOL_DIVISIONS,
+                    )?
+                    .pairs,
+                ),
             };
             prep.bank_in(&rows, radius, Some(pairs), precision)?
         } else {

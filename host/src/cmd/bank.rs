@@ -91,14 +91,14 @@ pub fn run(cmd: BankCmd) -> Result<()> {
 
 /// What `bank build` prints of a nodal bank: its coupling rule and the tool patches it holds.
 fn print_nodal(prep: &Prepared, bank: &Bank, pairs: usize) {
-    let radius = prep.scene.bank.truncation_radius_m;
-    let rule = match prep.scene.bank.couplings {
+    let radius = prep.organ.scene.bank.truncation_radius_m;
+    let rule = match prep.organ.scene.bank.couplings {
         Couplings::Radius => format!("truncation radius {radius} m, plus every triangle edge"),
         Couplings::Tool => format!(
             "every pair the {} m tool can put into one contact set (firmware patch rule at {} \
              anchors per triangle), every triangle edge, pairs within {radius} m; all pairs \
              within {:.4} m are kept",
-            prep.scene.tip_radius_m,
+            prep.organ.scene.tip_radius_m,
             (host::bank::TOOL_DIVISIONS + 1) * (host::bank::TOOL_DIVISIONS + 2) / 2,
             bank.truncation_radius_m()
         ),
@@ -112,7 +112,7 @@ fn print_nodal(prep: &Prepared, bank: &Bank, pairs: usize) {
         "tool      tip radius {} m: patches of up to {} nodes at the triangles' centroids; at \
          most {:.1}% of a patch's load dropped (nodes the bank does not couple, or beyond {} \
          nodes){}",
-        prep.scene.tip_radius_m,
+        prep.organ.scene.tip_radius_m,
         patches.max_nodes,
         100.0 * patches.max_dropped,
         firmware::solve::MAX_CONTACT_NODES,
@@ -142,12 +142,12 @@ fn section_table(bank: &Bank) -> Vec<(&'static str, u32, u32, u32)> {
 fn build(args: BuildArgs) -> Result<()> {
     let t = Instant::now();
     let prep = Prepared::load(&args.scene)?;
-    prep.warnings.iter().for_each(|w| eprintln!("{w}"));
-    let progress = Bar::new(match prep.scene.contact {
+    prep.organ.warnings.iter().for_each(|w| eprintln!("{w}"));
+    let progress = Bar::new(match prep.organ.scene.contact {
         ContactModel::Nodal => "supernodes",
         ContactModel::Sampled(_) => "patch compliance chunks",
     });
-    if let ContactModel::Sampled(spec) = &prep.scene.contact {
+    if let ContactModel::Sampled(spec) = &prep.organ.scene.contact {
         eprintln!(
             "sampling the tool's patch compliance on {} ({}) ...",
             spec.fem_mesh.display(),
@@ -171,10 +171,10 @@ fn build(args: BuildArgs) -> Result<()> {
         );
     }
     let mut inputs = vec![args.scene.as_path()];
-    if let MeshSource::File(mesh) = &prep.scene.mesh {
+    if let MeshSource::File(mesh) = &prep.organ.scene.mesh {
         inputs.push(mesh);
     }
-    if let ContactModel::Sampled(spec) = &prep.scene.contact {
+    if let ContactModel::Sampled(spec) = &prep.organ.scene.contact {
         inputs.push(&spec.fem_mesh);
     }
     write_atomic(&args.out, &bytes, &inputs)?;
@@ -184,14 +184,14 @@ fn build(args: BuildArgs) -> Result<()> {
     let bank = Bank::parse(&aligned).map_err(|e| {
         anyhow::anyhow!("{}: written bank fails validation: {e}", args.out.display())
     })?;
-    let (lo, hi) = prep.mesh.bounding_box();
+    let (lo, hi) = prep.organ.mesh.bounding_box();
     println!(
         "scene     {} ({}, {} nodes, {} surface nodes, box [{:.3}, {:.3}] x [{:.3}, {:.3}] x \
          [{:.3}, {:.3}] m)",
         args.scene.display(),
-        prep.mesh_name,
-        prep.mesh.nodes.len(),
-        prep.surface.nodes.len(),
+        prep.organ.mesh_name,
+        prep.organ.mesh.nodes.len(),
+        prep.organ.surface.nodes.len(),
         lo[0],
         hi[0],
         lo[1],
@@ -203,10 +203,10 @@ fn build(args: BuildArgs) -> Result<()> {
         "region R  {} reachable surface nodes, {} triangles (tip radius {} m, margin {} m)",
         bank.node_count(),
         bank.triangles().len(),
-        prep.scene.tip_radius_m,
-        prep.scene.bank.reach_margin_m
+        prep.organ.scene.tip_radius_m,
+        prep.organ.scene.bank.reach_margin_m
     );
-    match (&prep.scene.contact, sampled) {
+    match (&prep.organ.scene.contact, sampled) {
         (ContactModel::Sampled(spec), Some(st)) => {
             println!(
                 "couplings {pairs} pairs kept (the triangle edges, for the nodal contact models; \
@@ -403,7 +403,7 @@ fn sweep(args: SweepArgs) -> Result<()> {
         })
         .collect::<Result<Vec<_>>>()?;
     let prep = Prepared::load(&scene)?;
-    prep.warnings.iter().for_each(|w| eprintln!("{w}"));
+    prep.organ.warnings.iter().for_each(|w| eprintln!("{w}"));
     let config = SweepConfig {
         precisions,
         radii,
@@ -419,7 +419,7 @@ fn sweep(args: SweepArgs) -> Result<()> {
         let v = serde_json::json!({
             "scene": scene.display().to_string(),
             "region_nodes": prep.region.len(),
-            "tip_radius_m": prep.scene.tip_radius_m,
+            "tip_radius_m": prep.organ.scene.tip_radius_m,
             "depth_m": args.depth,
             "rows": rows,
         });
@@ -438,7 +438,7 @@ fn sweep(args: SweepArgs) -> Result<()> {
     );
     println!(
         "| rule | radius (mm) | precision | pairs kept | bank bytes | fits 768 KiB | point contact | tool patch r = {:.1} mm | patch load dropped (max) |",
-        prep.scene.tip_radius_m * 1e3
+        prep.organ.scene.tip_radius_m * 1e3
     );
     println!("| --- | ---: | --- | ---: | ---: | :---: | --- | --- | ---: |");
     for r in &rows {

@@ -41,7 +41,7 @@ pub struct Args {
 /// Runs the command.
 pub fn run(args: Args) -> Result<()> {
     let mesh = fem::mesh::load(&args.mesh)?;
-    if let Some(w) = host::bank::mesh_size_warning(&mesh, &args.mesh.display().to_string()) {
+    if let Some(w) = host::organ::mesh_size_warning(&mesh, &args.mesh.display().to_string()) {
         eprintln!("{w}");
     }
     let nodes = parse_list::<usize>(&args.nodes).context("--nodes")?;

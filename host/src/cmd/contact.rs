@@ -4,7 +4,9 @@
 use anyhow::{Context, Result, bail};
 use bank_format::{AlignedBytes, Bank};
 use host::bank::Prepared;
+use host::organ::Organ;
 use host::progress::Bar;
+use host::reach::Region;
 use host::scene::Scene;
 use std::path::PathBuf;
 
@@ -100,7 +102,7 @@ fn probe(args: ProbeArgs) -> Result<()> {
     let bank = Bank::parse(&aligned).map_err(|e| anyhow::anyhow!("built bank invalid: {e}"))?;
     let p = host::probe::probe(
         &bank,
-        (&prep.mesh.nodes, &prep.surface.triangles),
+        (&prep.organ.mesh.nodes, &prep.organ.surface.triangles),
         at,
         args.depth,
         args.law,
@@ -181,12 +183,13 @@ fn study(args: StudyArgs) -> Result<()> {
         })
         .collect::<Result<Vec<_>>>()?;
     let scene = Scene::load_or_default(args.scene.as_deref())?;
-    let prep = Prepared::from_scene(scene)?;
+    let organ = Organ::from_scene(scene)?;
+    let region = Region::of(&organ)?;
     let given: Vec<(String, [f64; 3])> = DEFAULT_SITES
         .iter()
         .map(|(n, p)| (n.to_string(), *p))
         .collect();
-    let sites = study::sites(&prep, &given)?;
+    let sites = study::sites(&organ, &region, &given)?;
     let mut levels = Vec::new();
     for (mesh, h) in &meshes {
         eprintln!(
@@ -195,7 +198,7 @@ fn study(args: StudyArgs) -> Result<()> {
             args.element,
             1e3 * h
         );
-        let l = study::level(&prep, &sites, mesh, *h, element)?;
+        let l = study::level(&organ.scene, &sites, mesh, *h, element)?;
         eprintln!(
             "  {} vertices, {} nodes, {} free dofs, nnz(L) {:.1} M, {:.1} s",
             l.vertices,
@@ -241,8 +244,8 @@ fn study(args: StudyArgs) -> Result<()> {
     }
     if let Some(out) = &args.out {
         let st = study::Study {
-            scene: prep.scene.path.display().to_string(),
-            tip_radius_m: prep.scene.tip_radius_m,
+            scene: organ.scene.path.display().to_string(),
+            tip_radius_m: organ.scene.tip_radius_m,
             sites,
             levels,
             reference_w,

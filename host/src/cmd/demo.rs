@@ -16,6 +16,7 @@ use host::display::server::{Server, SteerFn};
 use host::display::source::{LoopStats, SerialSource, Source, SourceSpec};
 use host::display::{DisplayMesh, DisplayStats, Pipeline, SurfaceModel, surface_neighbours};
 use host::kinematics::Workspace;
+use host::organ::Organ;
 use host::record::{Recorded, Recorder};
 use host::scene::{MeshSource, Scene};
 use host::script::{Scripted, aim_joints, press_point};
@@ -114,7 +115,7 @@ pub fn run(args: Args) -> Result<()> {
          patch compliance, about a minute, then it is cached) ..."
     );
     let prep = Prepared::from_scene(scene)?;
-    prep.warnings.iter().for_each(|w| eprintln!("{w}"));
+    prep.organ.warnings.iter().for_each(|w| eprintln!("{w}"));
     let (
         BuiltBank {
             bytes: bank_bytes,
@@ -131,9 +132,9 @@ pub fn run(args: Args) -> Result<()> {
     eprintln!(
         "scene     {}: {} nodes, {} surface nodes; bank {} reachable nodes, {pairs} coupled \
          pairs, {:.1} KiB, {} in {:.2} s",
-        prep.mesh_name,
-        prep.mesh.nodes.len(),
-        prep.surface.nodes.len(),
+        prep.organ.mesh_name,
+        prep.organ.mesh.nodes.len(),
+        prep.organ.surface.nodes.len(),
         prep.region.len(),
         bank_bytes.len() as f64 / 1024.0,
         if cached { "from the cache" } else { "built" },
@@ -154,12 +155,12 @@ pub fn run(args: Args) -> Result<()> {
     // A sampled scene shows its fine FEM surface under precomputed fields; a nodal one its
     // collision mesh with columns solved on demand.
     // The name the viewer shows for the displayed surface: a sampled scene's FEM mesh.
-    let display_name = match &prep.scene.contact {
+    let display_name = match &prep.organ.scene.contact {
         host::scene::ContactModel::Sampled(spec) => spec.fem_mesh.file_name().map_or_else(
             || spec.fem_mesh.display().to_string(),
             |n| n.to_string_lossy().into(),
         ),
-        host::scene::ContactModel::Nodal => prep.mesh_name.clone(),
+        host::scene::ContactModel::Nodal => prep.organ.mesh_name.clone(),
     };
     let fields = {
         let progress = host::progress::Bar::new("display field chunks");
@@ -170,7 +171,7 @@ pub fn run(args: Args) -> Result<()> {
             eprintln!(
                 "display   {} surface nodes of {}, {} fields ({:.1} MiB), {} in {:.2} s",
                 f.mesh.rest.len(),
-                match &prep.scene.contact {
+                match &prep.organ.scene.contact {
                     host::scene::ContactModel::Sampled(spec) => spec.fem_mesh.display().to_string(),
                     host::scene::ContactModel::Nodal => String::new(),
                 },
@@ -187,9 +188,13 @@ pub fn run(args: Args) -> Result<()> {
         fields.map(|(f, _)| Arc::new(f))
     };
     let Prepared {
-        mesh,
-        mesh_name,
-        surface,
+        organ:
+            Organ {
+                mesh,
+                mesh_name,
+                surface,
+                ..
+            },
         compliance,
         ..
     } = prep;

@@ -184,17 +184,20 @@ impl DisplayFields {
         progress: Option<&dyn Progress>,
     ) -> Result<Option<DisplayFields>> {
         let (crate::scene::ContactModel::Sampled(spec), Some(samples)) =
-            (&prep.scene.contact, bank.samples())
+            (&prep.organ.scene.contact, bank.samples())
         else {
             return Ok(None);
         };
-        let (_, points) =
-            crate::bank::sampled::lattice_points(&prep.positions, &prep.triangles, spec.level);
+        let (_, points) = crate::bank::sampled::lattice_points(
+            &prep.region.positions,
+            &prep.region.triangles,
+            spec.level,
+        );
         DisplayFields::compute(
-            &prep.scene,
+            &prep.organ.scene,
             &spec.fem_mesh,
             &samples,
-            prep.triangles.len(),
+            prep.region.triangles.len(),
             &points,
             progress,
         )

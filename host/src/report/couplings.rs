@@ -51,7 +51,7 @@ pub fn section(rows: &[SweepRow], prep: &Prepared) -> (Knob, Vec<HardCase>) {
             .collect(),
     };
     let f32 = Precision::F32.name();
-    let bank = &prep.scene.bank;
+    let bank = &prep.organ.scene.bank;
     let (rule, radius) = match bank.couplings {
         Couplings::Radius => ("radius", bank.truncation_radius_m),
         Couplings::Tool => ("tool", bank.truncation_radius_m),

@@ -212,7 +212,7 @@ fn close_nodes(p: &Prepared, bank: &Bank) -> Result<HardCase> {
         .first()
         .ok_or_else(|| anyhow!("the bank has no triangle"))?;
     let (k, l) = (ids[usize::from(tri[0])], ids[usize::from(tri[1])]);
-    let edge = fem::vec3::norm(fem::vec3::sub(p.mesh.nodes[l], p.mesh.nodes[k]));
+    let edge = fem::vec3::norm(fem::vec3::sub(p.organ.mesh.nodes[l], p.organ.mesh.nodes[k]));
     let t = 1e-6 / edge;
     let c = p.compliance.blocks(&[k, l], None)?;
     let mix = |a: Block3, b: Block3, wa: f64, wb: f64| -> Block3 {
@@ -277,38 +277,38 @@ fn close_nodes(p: &Prepared, bank: &Bank) -> Result<HardCase> {
 /// f64 patch on the whole surface.
 fn region_edge(p: &Prepared, bank: &Bank) -> Result<HardCase> {
     let mut count = std::collections::HashMap::<(usize, usize), usize>::new();
-    for t in &p.triangles {
+    for t in &p.region.triangles {
         for i in 0..3 {
             let (a, b) = (t[i] as usize, t[(i + 1) % 3] as usize);
             *count.entry((a.min(b), a.max(b))).or_default() += 1;
         }
     }
-    let n = p.positions.len().max(1) as f64;
+    let n = p.region.positions.len().max(1) as f64;
     let centre: [f64; 3] =
-        std::array::from_fn(|c| p.positions.iter().map(|q| q[c]).sum::<f64>() / n);
-    let dist = |a: usize| fem::vec3::norm(fem::vec3::sub(p.positions[a], centre));
+        std::array::from_fn(|c| p.region.positions.iter().map(|q| q[c]).sum::<f64>() / n);
+    let dist = |a: usize| fem::vec3::norm(fem::vec3::sub(p.region.positions[a], centre));
     let ws = Workspace::from_device(bank.device());
     let cal = bank.device();
     let depth = 0.003;
     // The press towards R's node `a`, `s` metres past it along the shaft.
     let along = |a: usize, s: f64| {
-        let target = p.positions[a];
+        let target = p.region.positions[a];
         let dir = fem::vec3::sub(target, ws.fulcrum);
         let unit = fem::vec3::scale(dir, 1.0 / fem::vec3::norm(dir));
         ws.joints_for_tip(fem::vec3::add(target, fem::vec3::scale(unit, s)))
     };
     // Area-weighted outward normals of R's nodes (R's triangles are counter-clockwise seen
     // from outside).
-    let mut normal = vec![[0.0f64; 3]; p.positions.len()];
-    for t in &p.triangles {
-        let v = t.map(|k| p.positions[k as usize]);
+    let mut normal = vec![[0.0f64; 3]; p.region.positions.len()];
+    for t in &p.region.triangles {
+        let v = t.map(|k| p.region.positions[k as usize]);
         let n = fem::vec3::cross(fem::vec3::sub(v[1], v[0]), fem::vec3::sub(v[2], v[0]));
         for &k in t {
             normal[k as usize] = fem::vec3::add(normal[k as usize], n);
         }
     }
     let head_on = |a: usize| {
-        let shaft = fem::vec3::sub(p.positions[a], ws.fulcrum);
+        let shaft = fem::vec3::sub(p.region.positions[a], ws.fulcrum);
         let cos = -fem::vec3::dot(shaft, normal[a])
             / (fem::vec3::norm(shaft) * fem::vec3::norm(normal[a]));
         cos >= std::f64::consts::FRAC_1_SQRT_2
@@ -340,8 +340,8 @@ fn region_edge(p: &Prepared, bank: &Bank) -> Result<HardCase> {
             along(-0.01 + (0.01 + depth) * i as f64 / steps as f64),
         );
     }
-    let surface = ContactSurface::new(&p.mesh, &p.surface);
-    let fixed = p.scene.fixed_set(&p.mesh)?;
+    let surface = ContactSurface::new(&p.organ.mesh, &p.organ.surface);
+    let fixed = &p.organ.fixed;
     let free = |k: usize| (0..3).all(|c| !fixed.is_fixed(k, c));
     let (measurement, verdict, value, reference) = match (&out.contact, out.patch) {
         (ContactState::Touching { displacement, .. }, Some(origin))

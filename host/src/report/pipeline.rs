@@ -126,7 +126,7 @@ pub fn run(cfg: &ReportConfig, step: &dyn Fn(&str)) -> Result<Report> {
     // Arithmetic precision alone: the scene's bank with f32 blocks (the storage precision is
     // the bank-couplings knob's).
     let mut p32 = Prepared::from_scene(scene.clone())?;
-    p32.scene.bank.precision = bank_format::Precision::F32;
+    p32.organ.scene.bank.precision = bank_format::Precision::F32;
     let built32 = p32.build_bank(None)?;
     let bytes32 = bank_format::AlignedBytes::new(&built32.bytes);
     let bank32 = bank_format::Bank::parse(&bytes32)
@@ -134,7 +134,7 @@ pub fn run(cfg: &ReportConfig, step: &dyn Fn(&str)) -> Result<Report> {
     let errors = precision::region_errors(&p32, &bank32, cfg.quick)?;
     knobs.push(precision::section(
         &errors,
-        prepared.scene.bank.truncation_radius_m,
+        prepared.organ.scene.bank.truncation_radius_m,
     ));
     cases.extend(precision::nu_cases(&precision::nu_rows(
         &p32,
@@ -261,7 +261,10 @@ pub fn run(cfg: &ReportConfig, step: &dyn Fn(&str)) -> Result<Report> {
         // is left out.
         let mut nodal = Vec::new();
         let own = [(
-            format!("{} bank (scene)", prepared.scene.bank.precision.name()),
+            format!(
+                "{} bank (scene)",
+                prepared.organ.scene.bank.precision.name()
+            ),
             built.bytes.clone(),
             groups.clone(),
         )];
@@ -289,7 +292,7 @@ pub fn run(cfg: &ReportConfig, step: &dyn Fn(&str)) -> Result<Report> {
             let aligned = bank_format::AlignedBytes::new(bytes);
             let parsed = bank_format::Bank::parse(&aligned)
                 .map_err(|e| anyhow::anyhow!("internal: a nodal bank does not parse: {e}"))?;
-            if let Ok(error) = sampled::force_error(&prepared, &parsed, &study, depths) {
+            if let Ok(error) = sampled::force_error(&prepared.organ, &parsed, &study, depths) {
                 nodal.push(sampled::NodalPoint {
                     name: format!("nodal tool patch on {organ_name}, {name}"),
                     bytes: bytes.len(),
@@ -353,7 +356,7 @@ pub fn run(cfg: &ReportConfig, step: &dyn Fn(&str)) -> Result<Report> {
     }
     knobs.extend(scale::section(&runs, &instructions));
     cases.extend(scale::refinement_cases(&runs));
-    let own = &prepared.scene.bank;
+    let own = &prepared.organ.scene.bank;
     let own_rule = match own.couplings {
         Couplings::Radius => "radius",
         Couplings::Tool => "tool",

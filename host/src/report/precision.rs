@@ -233,10 +233,10 @@ pub fn nu_rows(p: &Prepared, nus: &[f64], step: &dyn Fn(&str)) -> Result<Vec<NuR
     let mut rows = Vec::new();
     for &nu in nus {
         step(&format!("f32 error and condition numbers at nu = {nu}"));
-        let mut scene = p.scene.clone();
+        let mut scene = p.organ.scene.clone();
         scene.material = Material::new(scene.material.young, nu)?;
         let q = Prepared::from_scene(scene)?;
-        let radius = q.scene.bank.truncation_radius_m;
+        let radius = q.organ.scene.bank.truncation_radius_m;
         let built = q.bank(&q.blocks(radius, None)?, radius)?;
         let bytes = bank_format::AlignedBytes::new(&built.bytes);
         let bank = Bank::parse(&bytes).map_err(|e| anyhow!("bank at nu = {nu}: {e}"))?;
@@ -252,8 +252,7 @@ pub fn nu_rows(p: &Prepared, nus: &[f64], step: &dyn Fn(&str)) -> Result<Vec<NuR
             let nodes: Vec<usize> = tri.iter().map(|&k| ids[usize::from(k)]).collect();
             cond_css = cond_css.max(blocks_condition(&q.compliance.blocks(&nodes, None)?)?);
         }
-        let body = Elasticity::with_element(&q.mesh, q.scene.material, q.scene.element)?;
-        let cond_k = k_ff_condition(&body, &q.compliance, 60);
+        let cond_k = k_ff_condition(&q.organ.body, &q.compliance, 60);
         rows.push(NuRow {
             nu,
             f32_error,

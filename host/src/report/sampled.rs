@@ -23,6 +23,7 @@
 use super::{HardCase, Knob, Point, Series, Verdict};
 use crate::bank::Prepared;
 use crate::bank::sampled::{SampledFem, extrapolated, lattice_points, samples_from, spd};
+use crate::organ::Organ;
 use crate::scene::{ContactModel, FemElement, Scene};
 use crate::study::Study;
 use anyhow::{Context, Result, bail};
@@ -84,11 +85,11 @@ pub fn measure(scene: &Scene, quick: bool, step: &dyn Fn(&str)) -> Result<Vec<Va
     };
     let study = reference()?;
     let prep = Prepared::from_scene(scene.clone())?;
-    let r = prep.scene.tip_radius_m;
+    let r = prep.organ.scene.tip_radius_m;
     let levels: Vec<u32> = vec![1, 2, 3];
     let lattices: Vec<_> = levels
         .iter()
-        .map(|&l| lattice_points(&prep.positions, &prep.triangles, l))
+        .map(|&l| lattice_points(&prep.region.positions, &prep.region.triangles, l))
         .collect();
     let all: Vec<[f64; 3]> = lattices.iter().flat_map(|(_, p)| p.clone()).collect();
     let ranges: Vec<std::ops::Range<usize>> = lattices
@@ -119,7 +120,7 @@ pub fn measure(scene: &Scene, quick: bool, step: &dyn Fn(&str)) -> Result<Vec<Va
             element.name(),
             all.len()
         ));
-        let fem = SampledFem::load(&prep.scene, path, *element)?;
+        let fem = SampledFem::load(&prep.organ.scene, path, *element)?;
         let t = Instant::now();
         let (w, at, widest) = fem.patch_compliance(&all, r, None)?;
         let w_s = t.elapsed().as_secs_f64();
@@ -162,7 +163,7 @@ pub fn measure(scene: &Scene, quick: bool, step: &dyn Fn(&str)) -> Result<Vec<Va
         for (i, (samples, stats)) in per_level.iter().enumerate() {
             let chosen = b == 0 && spec.richardson.is_none() && levels[i] == spec.level;
             let seconds = factor_s + stats.w_s;
-            let id = crate::scene::fnv1a(prep.scene_id, &hash.to_le_bytes());
+            let id = crate::scene::fnv1a(prep.organ.scene_id, &hash.to_le_bytes());
             push(
                 name.clone(),
                 i,
@@ -184,7 +185,7 @@ pub fn measure(scene: &Scene, quick: bool, step: &dyn Fn(&str)) -> Result<Vec<Va
             }
             let seconds = fine.1 + stats.w_s + coarse.1 + coarse.3[i].1.w_s;
             let id = crate::scene::fnv1a(
-                crate::scene::fnv1a(prep.scene_id, &fine.2.to_le_bytes()),
+                crate::scene::fnv1a(prep.organ.scene_id, &fine.2.to_le_bytes()),
                 &coarse.2.to_le_bytes(),
             );
             push(
@@ -208,7 +209,7 @@ pub fn measure(scene: &Scene, quick: bool, step: &dyn Fn(&str)) -> Result<Vec<Va
         let aligned = AlignedBytes::new(&v.bank);
         let bank = Bank::parse(&aligned)
             .map_err(|e| anyhow::anyhow!("internal: a sampled bank does not parse: {e}"))?;
-        v.error = force_error(&prep, &bank, &study, depths)?;
+        v.error = force_error(&prep.organ, &bank, &study, depths)?;
     }
     Ok(variants)
 }
@@ -233,7 +234,7 @@ pub struct Press {
 /// `host contact probe` finds there (`d = -depth n`, the same `d` for both: a site on a
 /// triangle edge has two normals, and the bank's press takes the probe's).
 pub fn press_errors(
-    prep: &Prepared,
+    organ: &Organ,
     bank: &Bank<'_>,
     study: &Study,
     depths: &[f64],
@@ -243,7 +244,7 @@ pub fn press_errors(
         for &depth in depths {
             let p = crate::probe::probe(
                 bank,
-                (&prep.mesh.nodes, &prep.surface.triangles),
+                (&organ.mesh.nodes, &organ.surface.triangles),
                 site.query,
                 Some(depth),
                 false,
@@ -272,12 +273,12 @@ pub fn press_errors(
 /// Mean and worst relative error of the firmware's rendered force on `bank` against the
 /// reference at its sites, for normal presses of `depths` (m) ([`press_errors`]).
 pub fn force_error(
-    prep: &Prepared,
+    organ: &Organ,
     bank: &Bank<'_>,
     study: &Study,
     depths: &[f64],
 ) -> Result<(f64, f64)> {
-    let presses = press_errors(prep, bank, study, depths)?;
+    let presses = press_errors(organ, bank, study, depths)?;
     let worst = presses.iter().fold(0.0f64, |m, p| m.max(p.error));
     let mean = presses.iter().map(|p| p.error).sum::<f64>() / presses.len().max(1) as f64;
     Ok((mean, worst))

@@ -72,10 +72,10 @@ pub struct MeshRun {
 /// The press of every mesh: from the trocar towards the centre of the scene's reachable
 /// region.
 pub fn press_ray(p: &Prepared) -> ([f64; 3], [f64; 3]) {
-    let ws = Workspace::from_device(&p.scene.device);
-    let n = p.positions.len().max(1) as f64;
+    let ws = Workspace::from_device(&p.organ.scene.device);
+    let n = p.region.positions.len().max(1) as f64;
     let centre: [f64; 3] =
-        std::array::from_fn(|c| p.positions.iter().map(|q| q[c]).sum::<f64>() / n);
+        std::array::from_fn(|c| p.region.positions.iter().map(|q| q[c]).sum::<f64>() / n);
     let d = sub(centre, ws.fulcrum);
     (ws.fulcrum, scale(d, 1.0 / norm(d)))
 }
@@ -105,11 +105,11 @@ pub fn measure(
     let bank = q.build_bank(None)?;
     let bank_s = t.elapsed().as_secs_f64();
 
-    let surface = ContactSurface::new(&q.mesh, &q.surface);
+    let surface = ContactSurface::new(&q.organ.mesh, &q.organ.surface);
     let hit = surface
         .ray_entry(ray.0, ray.1)
         .with_context(|| format!("{name}: the press misses the organ"))?;
-    let fixed = q.scene.fixed_set(&q.mesh)?;
+    let fixed = &q.organ.fixed;
     let free = |k: usize| (0..3).all(|c| !fixed.is_fixed(k, c));
     let press = scale(ray.1, DEPTH);
     let along = |f: [f64; 3]| dot(f, ray.1);
@@ -144,7 +144,7 @@ pub fn measure(
             press,
         )?),
     });
-    let tip = q.scene.tip_radius_m;
+    let tip = q.organ.scene.tip_radius_m;
     for r in [tip, 2.0 * tip].into_iter().filter(|r| *r > 0.0) {
         let patch = surface.tool_patch(&hit, r, free);
         let (kept, _) = capped_patch(&patch, MAX_CONTACT_NODES);
@@ -156,14 +156,14 @@ pub fn measure(
     }
 
     // The display: every surface node, as `host demo` shows it.
-    let display = q.surface.nodes.clone();
+    let display = q.organ.surface.nodes.clone();
     let rest: Vec<[f32; 3]> = display
         .iter()
-        .map(|&k| q.mesh.nodes[k].map(|x| x as f32))
+        .map(|&k| q.organ.mesh.nodes[k].map(|x| x as f32))
         .collect();
     let near = surface.tool_patch(&hit, 3.0 * tip.max(0.002), free);
-    let (nodes, region) = (q.mesh.nodes.len(), q.region.len());
-    let positions = q.mesh.nodes.clone();
+    let (nodes, region) = (q.organ.mesh.nodes.len(), q.region.len());
+    let positions = q.organ.mesh.nodes.clone();
     let mut deformer = Deformer::new(Arc::new(q.compliance), &positions, display.clone(), 64);
     let mut u = Vec::new();
     let f = [0.0f32, 0.0, -0.5];
