@@ -34,16 +34,17 @@ impl Tissue {
 # tissue law on bench data with `host calibrate tissue`.",
             ),
             Tissue::Kidney => (
-                5000.0,
-                "# Kidney preset. young_pa = 5000 has NO published source: it is a placeholder of the\n\
-# order of the liver's. A figure was searched for and none found in what could be read:\n\
-# Farshad et al. (1998 North American Congress on Biomechanics abstract, the fresh pig\n\
-# kidney's compression, tension and shear tests; their 1999 paper was not found), Johnson,\n\
-# Campbell and Campbell-Kyureghyan, Biomechanics 1(2):264-280, 2021 (human and porcine kidney\n\
-# in unconfined compression and probing, doi:10.3390/biomechanics1020022) and Zhang et al.,\n\
-# PLoS ONE 19:e0307778, 2024 (porcine kidney cortex, doi:10.1371/journal.pone.0307778) measure\n\
-# kidney moduli, but no value of theirs was read, so none is quoted. Measure the tissue and\n\
-# fit the law with `host calibrate tissue`.",
+                5250.0,
+                "# Kidney preset. young_pa = 5250 = 2 (1 + nu) mu with nu = 0.45 and mu = 1.81 kPa, the\n\
+# shear elasticity of the renal cortex of 8 excised swine kidneys (1.81 +- 0.17 kPa, viscosity\n\
+# 1.48 +- 0.49 Pa s; shear waves of 50 to 500 Hz, small strain) in \"Shearwave dispersion\n\
+# ultrasound vibrometry (SDUV) on swine kidney\", as its abstract gives it\n\
+# (mayoclinic.pure.elsevier.com; the authors and journal, C. Amador et al., IEEE Trans.\n\
+# Ultrason. Ferroelectr. Freq. Control 58(12), 2011, are as remembered, not checked). Perfused\n\
+# kidneys are stiffer: J.-L. Gennisson, N. Grenier, C. Combe, M. Tanter, Ultrasound Med. Biol.\n\
+# 38(9):1559-1567, 2012 (doi:10.1016/j.ultrasmedbio.2012.04.013), abstract: mu = 6.9 to\n\
+# 7.7 kPa in the cortex of in vivo pig kidneys (E about 21 kPa), more with urinary pressure.\n\
+# Fit the law on bench data with `host calibrate tissue`.",
             ),
             Tissue::Brain => (
                 2526.0,
@@ -69,7 +70,10 @@ impl Tissue {
             Tissue::Liver => {
                 "young_pa = 3000 Pa is the default scene's figure, not a checked measurement"
             }
-            Tissue::Kidney => "young_pa = 5000 Pa is a placeholder with no published source",
+            Tissue::Kidney => {
+                "young_pa = 5250 Pa is ex vivo swine renal cortex by shear-wave elastography (an \
+                 abstract's mu = 1.81 kPa); in vivo cortex measured about four times stiffer"
+            }
             Tissue::Brain => {
                 "young_pa = 2526 Pa = 3 x 842 Pa, a shear figure attributed to Miller and \
                  Chinzei (2002), not verified against the paper"

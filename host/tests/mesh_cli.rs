@@ -369,12 +369,12 @@ fn the_organ_is_meshed_graded_near_the_reach_and_becomes_a_scene() {
     assert!(o.status.success(), "{err}");
     assert!(stdout.contains("the tool reaches"), "{stdout}");
     assert!(
-        err.contains("warning: --tissue kidney: young_pa = 5000 Pa is a placeholder"),
+        err.contains("warning: --tissue kidney: young_pa = 5250 Pa is ex vivo swine renal cortex"),
         "{err}"
     );
     let text_ = std::fs::read_to_string(&scene_path).unwrap();
     assert!(
-        text_.contains("mesh = \"organ.msh\"") && text_.contains("young_pa = 5000.0"),
+        text_.contains("mesh = \"organ.msh\"") && text_.contains("young_pa = 5250.0"),
         "{text_}"
     );
     let bank = dir.path().join("organ.bank");

@@ -19,7 +19,7 @@ pub enum SceneCmd {
 pub enum TissueArg {
     /// Liver parenchyma (the default scene's 3 kPa).
     Liver,
-    /// Kidney (a placeholder figure: no published source found).
+    /// Kidney cortex (5.25 kPa from an ex vivo swine shear-wave figure; in vivo is stiffer).
     Kidney,
     /// Brain (3 x 842 Pa, the shear parameter attributed to Miller and Chinzei 2002; the
     /// figure is not verified against the paper).
