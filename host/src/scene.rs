@@ -799,8 +799,24 @@ impl Scene {
         [mesh, fem, richardson].into_iter().flatten().collect()
     }
 
+    /// The paths of [`Scene::input_files`], to edit.
+    fn input_files_mut(&mut self) -> Vec<&mut PathBuf> {
+        let mesh = match &mut self.mesh {
+            MeshSource::File(p) => Some(p),
+            MeshSource::BuiltinLiver => None,
+        };
+        let (fem, richardson) = match &mut self.contact {
+            ContactModel::Sampled(s) => (
+                Some(&mut s.fem_mesh),
+                s.richardson.as_mut().map(|r| &mut r.mesh),
+            ),
+            _ => (None, None),
+        };
+        [mesh, fem, richardson].into_iter().flatten().collect()
+    }
+
     /// FNV-1a 64 over everything a bank is built from: the scene file's text, the validated
-    /// scene (its `Debug` text without its path: a scene edited in memory after loading is not
+    /// scene (its `Debug` text without its path and its files' directories: a scene edited in memory after loading is not
     /// its file's), the bytes of every file it reads ([`Scene::input_files`]) or of the
     /// embedded liver, and the bank format version. The bank caches key on it
     /// ([`crate::bank::cache`] and [`crate::sil::bank`], each adding the code that builds).
@@ -820,8 +836,13 @@ impl Scene {
             })?;
             h = fnv1a(h, &fnv1a(FNV_OFFSET, &bytes).to_le_bytes());
         }
+        // Where the files lie is no input, their bytes are (above): the same scene reached as
+        // `host/scenes/liver.toml` and as `tests/../host/scenes/liver.toml` has one key.
         let mut scene = self.clone();
         scene.path = PathBuf::new();
+        for p in scene.input_files_mut() {
+            *p = p.file_name().map(PathBuf::from).unwrap_or_default();
+        }
         h = fnv1a(h, format!("{scene:?}").as_bytes());
         h = fnv1a(h, &bank_format::VERSION_MAJOR.to_le_bytes());
         Ok(fnv1a(h, &bank_format::VERSION_MINOR.to_le_bytes()))
@@ -1988,5 +2009,22 @@ mod tests {
         assert_eq!(e.line, Some(2), "{e}");
         let e = err_of("mesh = \"x.msh\"\n");
         assert!(e.message.contains("missing field"), "{e}");
+    }
+
+    /// One scene reached by two spellings of its path has one key (the caches share its bank);
+    /// a different FEM mesh file gives another.
+    #[test]
+    fn inputs_hash_ignores_the_path_spelling_not_the_files() {
+        let dir = Path::new(env!("CARGO_MANIFEST_DIR"));
+        let a = Scene::load(&dir.join("scenes/liver.toml")).unwrap();
+        let b = Scene::load(&dir.join("../tests/../host/scenes/liver.toml")).unwrap();
+        assert_ne!(a.input_files(), b.input_files());
+        assert_eq!(a.inputs_hash().unwrap(), b.inputs_hash().unwrap());
+        let mut c = a.clone();
+        let ContactModel::Sampled(spec) = &mut c.contact else {
+            panic!("the shipped scene is sampled")
+        };
+        spec.fem_mesh = dir.join("meshes/liver-1k4.msh");
+        assert_ne!(a.inputs_hash().unwrap(), c.inputs_hash().unwrap());
     }
 }
