@@ -108,7 +108,8 @@ shellcheck scripts/*.sh .ci/run
 step "format and lints"
 cargo fmt --all --check
 cargo clippy --workspace --all-targets --profile checked -- -D warnings
-RUSTDOCFLAGS="-D warnings" cargo doc --workspace --no-deps --quiet
+# The lints' profile: the docs reuse the dependencies clippy has just checked.
+RUSTDOCFLAGS="-D warnings" cargo doc --workspace --no-deps --profile checked --quiet
 # The QEMU image is its own workspace (it only builds for the MCU).
 (cd firmware/qemu && cargo fmt --check && cargo clippy --release -- -D warnings)
 
