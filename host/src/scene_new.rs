@@ -29,9 +29,15 @@ impl Tissue {
         let (young, source) = match self {
             Tissue::Liver => (
                 3000.0,
-                "# Liver preset. young_pa = 3000: the value of the project's default scene\n\
-# (host/scenes/liver.toml, \"a few kPa\"); no measurement of it is checked here: fit the\n\
-# tissue law on bench data with `host calibrate tissue`.",
+                "# Liver preset. young_pa = 3000: the project's default scene's figure\n\
+# (host/scenes/liver.toml), within what two readable sources give. Compression-relaxation of\n\
+# 19 fresh human liver samples: \"Young's modulus values at the order of several hundreds to\n\
+# thousands Pascals\", rising with fibrosis (Yeh et al., \"Young's modulus measurements of\n\
+# human liver and correlation with pathological findings\", IEEE Ultrasonics Symposium 2001,\n\
+# abstract). Shear modulus 1.8 +- 0.4 kPa, i.e. E = 2 (1 + nu) mu = 5.2 kPa at nu = 0.45, in\n\
+# the literature table of Phys. Med. Biol. 64(22):225001, 2019 (Table 1, citing Bamber and\n\
+# Hill 1981, Palmeri et al. 2008 and others). Fit the law on bench data with\n\
+# `host calibrate tissue`.",
             ),
             Tissue::Kidney => (
                 5250.0,
@@ -68,7 +74,8 @@ impl Tissue {
     pub fn caveat(self) -> &'static str {
         match self {
             Tissue::Liver => {
-                "young_pa = 3000 Pa is the default scene's figure, not a checked measurement"
+                "young_pa = 3000 Pa is the default scene's figure: human liver measured hundreds \
+                 to thousands of Pa ex vivo, and 5.2 kPa from a shear-wave mu = 1.8 kPa"
             }
             Tissue::Kidney => {
                 "young_pa = 5250 Pa is ex vivo swine renal cortex by shear-wave elastography (an \

@@ -17,7 +17,7 @@ pub enum SceneCmd {
 /// Tissue presets.
 #[derive(clap::ValueEnum, Clone, Copy, Debug)]
 pub enum TissueArg {
-    /// Liver parenchyma (the default scene's 3 kPa).
+    /// Liver parenchyma (the default scene's 3 kPa, within published ex vivo figures).
     Liver,
     /// Kidney cortex (5.25 kPa from an ex vivo swine shear-wave figure; in vivo is stiffer).
     Kidney,
