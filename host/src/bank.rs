@@ -41,6 +41,18 @@ pub struct BuiltBank {
     pub sampled: Option<sampled::SampleStats>,
 }
 
+/// A sampled scene's contact samples, what computing them measured, and the hashes of the FEM
+/// meshes they were computed on ([`Prepared::sampled_parts`]).
+#[derive(Debug, Clone, PartialEq)]
+pub struct SampledParts {
+    /// The samples.
+    pub samples: bank_format::ContactSamples,
+    /// What computing them measured.
+    pub stats: sampled::SampleStats,
+    /// The FEM mesh's hash, then the Richardson partner's if any.
+    pub mesh_hashes: Vec<u64>,
+}
+
 /// The pipeline's three stages up to the bank, for one scene: the organ, its reachable region
 /// and its factorised compliance.
 pub struct Prepared {
@@ -71,11 +83,6 @@ impl Prepared {
         })
     }
 
-    /// The scene as read.
-    pub fn scene(&self) -> &Scene {
-        &self.organ.scene
-    }
-
     /// Blocks of R within `radius`, and at least along every triangle edge; the progress, if
     /// any, counts supernodes.
     pub fn blocks(&self, radius: f64, progress: Option<&dyn Progress>) -> Result<BlockRows> {
@@ -93,7 +100,7 @@ impl Prepared {
     /// holding a quadrature point within the tip radius, so two of them are at most
     /// `2 (r + longest edge)` apart (checked by [`ToolPairs::sample`]).
     pub fn probe_radius(&self) -> f64 {
-        2.0 * (self.scene().tip_radius_m.max(0.0) + self.region.longest_edge()) * (1.0 + 1e-3)
+        2.0 * (self.organ.scene.tip_radius_m.max(0.0) + self.region.longest_edge()) * (1.0 + 1e-3)
     }
 
     /// The bank for truncation radius `radius` from `rows` (computed for at least that
@@ -112,7 +119,7 @@ impl Prepared {
         radius: f64,
         extra: Option<&BTreeSet<(usize, usize)>>,
     ) -> Result<BuiltBank> {
-        self.bank_in(rows, radius, extra, self.scene().bank.precision)
+        self.bank_in(rows, radius, extra, self.organ.scene.bank.precision)
     }
 
     /// [`Prepared::bank_keeping`] with the coupling blocks stored in `precision` (the scene's
@@ -143,7 +150,7 @@ impl Prepared {
         extra: Option<&BTreeSet<(usize, usize)>>,
     ) -> Result<(BankBuilder, usize)> {
         let region = &self.region;
-        let scene = self.scene();
+        let scene = &self.organ.scene;
         let mut edges = region.edges();
         if let Some(extra) = extra {
             edges.extend(extra.iter().copied());
@@ -219,11 +226,11 @@ impl Prepared {
     /// The scene's bank by its coupling rule (`bank.couplings`): the pairs within
     /// `bank.truncation_radius_m`, and with "tool" also [`ToolPairs::sample`].
     pub fn build_bank(&self, progress: Option<&dyn Progress>) -> Result<BuiltBank> {
-        if let ContactModel::Sampled(spec) = &self.scene().contact {
+        if let ContactModel::Sampled(spec) = &self.organ.scene.contact {
             return self.sampled_bank(spec, progress);
         }
-        let radius = self.scene().bank.truncation_radius_m;
-        match self.scene().bank.couplings {
+        let radius = self.organ.scene.bank.truncation_radius_m;
+        match self.organ.scene.bank.couplings {
             Couplings::Radius => {
                 let rows = self.blocks(radius, progress)?;
                 self.bank(&rows, radius)
@@ -238,21 +245,42 @@ impl Prepared {
 
     /// The bank of a sampled scene: R's collision data and nodal compliance with only the
     /// triangle edges coupled (the nodal contact models' minimum, for comparison), plus the
-    /// contact samples computed on the scene's FEM mesh ([`sampled::contact_samples`]). The
+    /// contact samples computed on the scene's FEM mesh ([`Prepared::sampled_parts`]). The
     /// scene id also covers the FEM mesh's bytes.
     pub fn sampled_bank(
         &self,
         spec: &SampledContact,
         progress: Option<&dyn Progress>,
     ) -> Result<BuiltBank> {
-        let fem = sampled::SampledFem::new(self.scene(), spec)?;
-        let Some(rich) = &spec.richardson else {
-            return self.sampled_bank_on(&fem, spec.level, progress);
-        };
-        // W on the fine mesh, then (its factor dropped first) on the coarse one.
+        self.sampled_bank_from(self.sampled_parts(spec, progress)?)
+    }
+
+    /// The contact samples of a sampled scene ([`sampled::contact_samples`] on the scene's FEM
+    /// mesh, Richardson-extrapolated with the coarse one when the scene says so) and the hashes
+    /// of the FEM meshes, which the bank's scene id covers.
+    pub fn sampled_parts(
+        &self,
+        spec: &SampledContact,
+        progress: Option<&dyn Progress>,
+    ) -> Result<SampledParts> {
+        let fem = sampled::SampledFem::new(&self.organ.scene, spec)?;
         let (lattice, points) =
             sampled::lattice_points(&self.region.positions, &self.region.triangles, spec.level);
-        let r = self.scene().tip_radius_m;
+        let r = self.organ.scene.tip_radius_m;
+        let Some(rich) = &spec.richardson else {
+            let t0 = std::time::Instant::now();
+            let (w, at, widest) = fem.patch_compliance(&points, r, progress)?;
+            let total = t0.elapsed().as_secs_f64();
+            let (samples, stats) = sampled::samples_from(
+                lattice, &points, w, &at, widest, &fem, spec.level, r, total,
+            )?;
+            return Ok(SampledParts {
+                samples,
+                stats,
+                mesh_hashes: vec![fem.mesh_hash],
+            });
+        };
+        // W on the fine mesh, then (its factor dropped first) on the coarse one.
         let t0 = std::time::Instant::now();
         let (w_fine, at, widest) = fem.patch_compliance(&points, r, progress)?;
         let fine_s = t0.elapsed().as_secs_f64();
@@ -261,7 +289,7 @@ impl Prepared {
         )?;
         let fem_hash = fem.mesh_hash;
         drop(fem);
-        let coarse = sampled::SampledFem::load(self.scene(), &rich.mesh, spec.element)?;
+        let coarse = sampled::SampledFem::load(&self.organ.scene, &rich.mesh, spec.element)?;
         let t1 = std::time::Instant::now();
         let (w_coarse, ..) = coarse.patch_compliance(&points, r, progress)?;
         samples.w = sampled::extrapolated(&samples.w, &w_coarse, rich.factor());
@@ -280,13 +308,21 @@ impl Prepared {
         }
         stats.factor_s += coarse.factor_s;
         stats.w_s += t1.elapsed().as_secs_f64();
-        let coarse_hash = coarse.mesh_hash;
-        drop(coarse);
-        let id = fnv1a(
-            fnv1a(self.organ.scene_id, &fem_hash.to_le_bytes()),
-            &coarse_hash.to_le_bytes(),
-        );
-        self.sampled_bank_with(samples, stats, id)
+        Ok(SampledParts {
+            samples,
+            stats,
+            mesh_hashes: vec![fem_hash, coarse.mesh_hash],
+        })
+    }
+
+    /// The sampled bank from [`Prepared::sampled_parts`]: its scene id is the scene's, then
+    /// each FEM mesh's hash.
+    pub fn sampled_bank_from(&self, parts: SampledParts) -> Result<BuiltBank> {
+        let id = parts
+            .mesh_hashes
+            .iter()
+            .fold(self.organ.scene_id, |id, h| fnv1a(id, &h.to_le_bytes()));
+        self.sampled_bank_with(parts.samples, parts.stats, id)
     }
 
     /// [`Prepared::sampled_bank`] on an already factorised FEM body, at lattice level `level`.
@@ -301,7 +337,7 @@ impl Prepared {
             &self.region.positions,
             &self.region.triangles,
             level,
-            self.scene().tip_radius_m,
+            self.organ.scene.tip_radius_m,
             progress,
         )?;
         let id = fnv1a(self.organ.scene_id, &fem.mesh_hash.to_le_bytes());
@@ -321,7 +357,7 @@ impl Prepared {
         builder.samples = Some(samples);
         builder.scene_id = scene_id;
         let bytes = builder
-            .build_with_precision(self.scene().bank.precision)
+            .build_with_precision(self.organ.scene.bank.precision)
             .map_err(|e| anyhow::anyhow!("the bank writer refused the scene's data: {e}"))?;
         Ok(BuiltBank {
             bytes,
@@ -349,7 +385,7 @@ impl Prepared {
         let aligned = self.probe_bank(rows)?;
         let bank = Bank::parse_unbounded(&aligned)
             .map_err(|e| anyhow::anyhow!("internal: the probe bank is invalid: {e}"))?;
-        ToolPairs::sample(&bank, self.scene().tip_radius_m, TOOL_DIVISIONS)
+        ToolPairs::sample(&bank, self.organ.scene.tip_radius_m, TOOL_DIVISIONS)
     }
 }
 

@@ -13,14 +13,29 @@
 //! validated by the bank reader before use, and one that fails is rebuilt. A sampled scene's
 //! display fields ([`DisplayFields`]) go beside it as `fields-<key>.bin`, keyed by the bank's
 //! key, the bank's CRC and the text of the code that computes them.
+//!
+//! A bank that is not in the cache takes its contact samples, the costly part, from
+//! `samples-<key>.bin` when another scene of the same organ computed them: that key
+//! ([`samples_key`]) covers only what the samples depend on (the FEM meshes' bytes, the body,
+//! the tool, the lattice), so adding a `[viscoelastic]` table or editing the law rebuilds the
+//! bank in a second. [`Prepared::build_bank`] itself (`host bank build`, the precompute bench)
+//! never reads the cache.
+//!
+//! Each new key (a new scene, an edited one, a new build of the sampling code) adds files, so
+//! the cache is bounded: when a file is stored, the least recently used files of its kind go
+//! until that kind holds at most [`BANKS_KEPT`] banks or sample sets or [`FIELDS_KEPT`] field
+//! sets (a hit
+//! counts as a use). An evicted entry only costs its next user the precompute.
 
-use super::{BuiltBank, Prepared};
+use super::sampled::SampleStats;
+use super::{BuiltBank, Prepared, SampledParts};
 use crate::display::fields::DisplayFields;
-use crate::scene::{ContactModel, FNV_OFFSET, fnv1a};
-use anyhow::Result;
-use bank_format::{AlignedBytes, Bank};
+use crate::scene::{ContactModel, FNV_OFFSET, SampledContact, fnv1a};
+use anyhow::{Context, Result};
+use bank_format::{AlignedBytes, Bank, ContactSamples};
+use fem::compliance::FactorStats;
 use fem::progress::Progress;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
 
 /// The cache directory (module notes), `None` without a home directory.
@@ -71,7 +86,7 @@ pub fn scene_bank_cached(
     prep: &Prepared,
     progress: Option<&dyn Progress>,
 ) -> Result<(BuiltBank, bool)> {
-    let ContactModel::Sampled(_) = &prep.organ.scene.contact else {
+    let ContactModel::Sampled(spec) = &prep.organ.scene.contact else {
         return Ok((prep.build_bank(progress)?, false));
     };
     let key = bank_key(prep)?;
@@ -80,6 +95,7 @@ pub fn scene_bank_cached(
         && let Ok(bytes) = std::fs::read(f)
         && let Ok(bank) = Bank::parse(&AlignedBytes::new(&bytes))
     {
+        touch(f);
         let pairs = bank.pair_count();
         return Ok((
             BuiltBank {
@@ -90,11 +106,216 @@ pub fn scene_bank_cached(
             true,
         ));
     }
-    let built = prep.build_bank(progress)?;
+    let (parts, samples_cached) = sampled_parts_cached(prep, spec, progress)?;
+    let mut built = prep.sampled_bank_from(parts)?;
+    if samples_cached {
+        // What the sampling measured was another run's.
+        built.sampled = None;
+    }
     if let Some(f) = &file {
         store(f, &built.bytes);
     }
-    Ok((built, false))
+    Ok((built, samples_cached))
+}
+
+/// The cache key of a sampled scene's contact samples: the sampling code, the bytes of the FEM
+/// meshes, what the FEM body is built from (the mesh units, material, element, supports), the
+/// tool's radius, the lattice (level, R's positions and triangles) and the Richardson pair.
+/// The law, the device past R, the display law, gravity and relaxation are not in it: the
+/// same organ with another `[viscoelastic]` table shares its samples.
+fn samples_key(prep: &Prepared, spec: &SampledContact) -> Result<u64> {
+    let scene = &prep.organ.scene;
+    let mut h = fnv1a(FNV_OFFSET, &code_hash().to_le_bytes());
+    let files = [
+        Some(&spec.fem_mesh),
+        spec.richardson.as_ref().map(|r| &r.mesh),
+    ];
+    for file in files.into_iter().flatten() {
+        let bytes = std::fs::read(file).with_context(|| {
+            format!(
+                "cannot read {}, named by {}",
+                file.display(),
+                scene.path.display()
+            )
+        })?;
+        h = fnv1a(h, &fnv1a(FNV_OFFSET, &bytes).to_le_bytes());
+    }
+    let boxes: Vec<_> = scene.fix_boxes.iter().map(|b| (b.bounds, b.axes)).collect();
+    let richardson = spec.richardson.as_ref().map(|r| (r.ratio, r.order));
+    let body = format!(
+        "{:?}",
+        (
+            scene.mesh_units,
+            scene.material,
+            scene.element,
+            boxes,
+            &scene.fix_nodes,
+            scene.tip_radius_m.to_bits(),
+            spec.element,
+            spec.level,
+            richardson,
+        )
+    );
+    h = fnv1a(h, body.as_bytes());
+    for p in &prep.region.positions {
+        for c in p {
+            h = fnv1a(h, &c.to_bits().to_le_bytes());
+        }
+    }
+    for t in &prep.region.triangles {
+        for k in t {
+            h = fnv1a(h, &k.to_le_bytes());
+        }
+    }
+    Ok(h)
+}
+
+/// The scene's contact samples ([`Prepared::sampled_parts`]) from the cache (`samples-<key>`,
+/// [`samples_key`]), or computed and cached; the second value says whether they came from the
+/// cache.
+fn sampled_parts_cached(
+    prep: &Prepared,
+    spec: &SampledContact,
+    progress: Option<&dyn Progress>,
+) -> Result<(SampledParts, bool)> {
+    let key = samples_key(prep, spec)?;
+    let file = cache_dir().map(|d| d.join(format!("samples-{key:016x}.bin")));
+    if let Some(f) = &file
+        && let Ok(bytes) = std::fs::read(f)
+        && let Some(parts) = decode_parts(&bytes)
+    {
+        touch(f);
+        return Ok((parts, true));
+    }
+    let parts = prep.sampled_parts(spec, progress)?;
+    if let Some(f) = &file {
+        store(f, &encode_parts(&parts));
+    }
+    Ok((parts, false))
+}
+
+/// The first bytes of a samples file (and its layout's version).
+const PARTS_MAGIC: &[u8; 8] = b"HSAMPLE1";
+
+/// [`SampledParts`] as bytes, little-endian: the magic, the level (u32), the tip radius
+/// (f64), per triangle its sample indices (u32 count, u32s), the `W` blocks (u32 count,
+/// 9 f64 each), the statistics, the mesh hashes (u32 count, u64s).
+fn encode_parts(p: &SampledParts) -> Vec<u8> {
+    let mut out = PARTS_MAGIC.to_vec();
+    let n = |out: &mut Vec<u8>, n: usize| out.extend((n as u32).to_le_bytes());
+    out.extend(p.samples.level.to_le_bytes());
+    out.extend(p.samples.tip_radius_m.to_le_bytes());
+    n(&mut out, p.samples.triangle_samples.len());
+    for t in &p.samples.triangle_samples {
+        n(&mut out, t.len());
+        t.iter().for_each(|k| out.extend(k.to_le_bytes()));
+    }
+    n(&mut out, p.samples.w.len());
+    for v in p.samples.w.iter().flatten().flatten() {
+        out.extend(v.to_le_bytes());
+    }
+    let st = &p.stats;
+    for k in [
+        st.samples,
+        st.max_patch_nodes,
+        st.fem_vertices,
+        st.fem_nodes,
+        st.factor.free_dofs,
+        st.factor.nnz_k,
+        st.factor.nnz_l,
+    ] {
+        out.extend((k as u64).to_le_bytes());
+    }
+    for x in [st.gap_max_m, st.gap_mean_m, st.factor_s, st.w_s] {
+        out.extend(x.to_le_bytes());
+    }
+    n(&mut out, p.mesh_hashes.len());
+    p.mesh_hashes
+        .iter()
+        .for_each(|h| out.extend(h.to_le_bytes()));
+    out
+}
+
+/// [`encode_parts`] read back; `None` for anything else (another layout, a truncated file).
+fn decode_parts(bytes: &[u8]) -> Option<SampledParts> {
+    let mut r = bytes.strip_prefix(PARTS_MAGIC)?;
+    let mut take = |len: usize| -> Option<&[u8]> {
+        let (head, rest) = r.split_at_checked(len)?;
+        r = rest;
+        Some(head)
+    };
+    let u32_ = |b: &[u8]| u32::from_le_bytes(b.try_into().unwrap_or_default());
+    let level = u32_(take(4)?);
+    let tip_radius_m = f64::from_le_bytes(take(8)?.try_into().ok()?);
+    let count = |b: &[u8]| u32_(b) as usize;
+    let triangles = count(take(4)?);
+    let mut triangle_samples = Vec::with_capacity(triangles.min(1 << 20));
+    for _ in 0..triangles {
+        let len = count(take(4)?);
+        let body = take(len.checked_mul(4)?)?;
+        triangle_samples.push(body.chunks_exact(4).map(u32_).collect());
+    }
+    let blocks = count(take(4)?);
+    let body = take(blocks.checked_mul(72)?)?;
+    let f64s: Vec<f64> = body
+        .chunks_exact(8)
+        .map(|b| f64::from_le_bytes(b.try_into().unwrap_or_default()))
+        .collect();
+    let w = f64s
+        .chunks_exact(9)
+        .map(|b| std::array::from_fn(|i| std::array::from_fn(|j| b[3 * i + j])))
+        .collect();
+    let mut ints = [0usize; 7];
+    for k in &mut ints {
+        *k = usize::try_from(u64::from_le_bytes(take(8)?.try_into().ok()?)).ok()?;
+    }
+    let mut reals = [0f64; 4];
+    for x in &mut reals {
+        *x = f64::from_le_bytes(take(8)?.try_into().ok()?);
+    }
+    let hashes = count(take(4)?);
+    let body = take(hashes.checked_mul(8)?)?;
+    let mesh_hashes = body
+        .chunks_exact(8)
+        .map(|b| u64::from_le_bytes(b.try_into().unwrap_or_default()))
+        .collect();
+    if !r.is_empty() {
+        return None;
+    }
+    let [
+        samples,
+        max_patch_nodes,
+        fem_vertices,
+        fem_nodes,
+        free_dofs,
+        nnz_k,
+        nnz_l,
+    ] = ints;
+    let [gap_max_m, gap_mean_m, factor_s, w_s] = reals;
+    Some(SampledParts {
+        samples: ContactSamples {
+            level,
+            tip_radius_m,
+            triangle_samples,
+            w,
+        },
+        stats: SampleStats {
+            samples,
+            gap_max_m,
+            gap_mean_m,
+            max_patch_nodes,
+            fem_vertices,
+            fem_nodes,
+            factor: FactorStats {
+                free_dofs,
+                nnz_k,
+                nnz_l,
+            },
+            factor_s,
+            w_s,
+        },
+        mesh_hashes,
+    })
 }
 
 /// The source files whose text decides the display fields besides the bank's inputs.
@@ -124,6 +345,7 @@ pub fn display_fields_cached(
         && let Ok(bytes) = std::fs::read(f)
         && let Ok(fields) = DisplayFields::decode(&bytes)
     {
+        touch(f);
         return Ok(Some((fields, true)));
     }
     let Some(fields) = DisplayFields::for_bank(prep, bank, progress)? else {
@@ -135,8 +357,14 @@ pub fn display_fields_cached(
     Ok(Some((fields, false)))
 }
 
-/// Writes a cache file; one that cannot be written only costs the next run the precompute.
-fn store(f: &std::path::Path, bytes: &[u8]) {
+/// Sampled banks kept (about 0.1 MiB each), and as many sets of contact samples.
+pub const BANKS_KEPT: usize = 32;
+/// Display field sets kept (about 71 MiB each for the default scene).
+pub const FIELDS_KEPT: usize = 4;
+
+/// Writes a cache file, then evicts the least recently used files of its kind beyond what is
+/// kept (module notes); a file that cannot be written only costs the next run the precompute.
+fn store(f: &Path, bytes: &[u8]) {
     let written = f
         .parent()
         .map(std::fs::create_dir_all)
@@ -145,12 +373,159 @@ fn store(f: &std::path::Path, bytes: &[u8]) {
         .and_then(|_| crate::fsio::write_atomic(f, bytes, &[]).ok());
     if written.is_none() {
         eprintln!("note: could not write the cache file {}", f.display());
+        return;
+    }
+    let name = f.file_name().map(|n| n.to_string_lossy().into_owned());
+    let (prefix, kept) = match name.as_deref() {
+        Some(n) if n.starts_with("fields-") => ("fields-", FIELDS_KEPT),
+        Some(n) if n.starts_with("samples-") => ("samples-", BANKS_KEPT),
+        _ => ("bank-", BANKS_KEPT),
+    };
+    if let Some(dir) = f.parent() {
+        evict(dir, prefix, kept);
+    }
+}
+
+/// Marks a cache hit as a use (its modification time), so eviction keeps what is in use.
+fn touch(f: &Path) {
+    let _ = std::fs::File::options()
+        .append(true)
+        .open(f)
+        .and_then(|file| file.set_modified(std::time::SystemTime::now()));
+}
+
+/// Removes the oldest `<prefix>*.bin` files of `dir` (by modification time) beyond the
+/// `kept` newest; errors (a file another process removed first) are ignored.
+fn evict(dir: &Path, prefix: &str, kept: usize) {
+    let Ok(entries) = std::fs::read_dir(dir) else {
+        return;
+    };
+    let mut files: Vec<_> = entries
+        .filter_map(|e| e.ok())
+        .filter(|e| {
+            let n = e.file_name();
+            let n = n.to_string_lossy();
+            n.starts_with(prefix) && n.ends_with(".bin")
+        })
+        .filter_map(|e| Some((e.metadata().ok()?.modified().ok()?, e.path())))
+        .collect();
+    files.sort_by_key(|f| std::cmp::Reverse(f.0));
+    for (_, old) in files.iter().skip(kept) {
+        let _ = std::fs::remove_file(old);
     }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// liver.toml and liver-qlv.toml (the same organ with a `[viscoelastic]` table) share their
+    /// samples but not their banks; another Young's modulus or tool radius has its own samples.
+    #[test]
+    fn the_samples_key_covers_the_body_not_the_relaxation() {
+        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes");
+        let key = |p: &Prepared| {
+            let ContactModel::Sampled(spec) = &p.organ.scene.contact else {
+                panic!("the shipped scenes are sampled")
+            };
+            samples_key(p, spec).unwrap()
+        };
+        let elastic = Prepared::load(&dir.join("liver.toml")).unwrap();
+        let qlv = Prepared::load(&dir.join("liver-qlv.toml")).unwrap();
+        assert_eq!(key(&elastic), key(&qlv));
+        assert_ne!(bank_key(&elastic).unwrap(), bank_key(&qlv).unwrap());
+        let mut stiffer = Prepared::load(&dir.join("liver.toml")).unwrap();
+        stiffer.organ.scene.material.young *= 2.0;
+        assert_ne!(key(&stiffer), key(&elastic));
+        let mut wider = Prepared::load(&dir.join("liver.toml")).unwrap();
+        wider.organ.scene.tip_radius_m *= 1.5;
+        assert_ne!(key(&wider), key(&elastic));
+    }
+
+    /// The samples file reads back to the same parts; a truncated or extended one does not read.
+    #[test]
+    fn sample_parts_round_trip() {
+        let parts = SampledParts {
+            samples: ContactSamples {
+                level: 2,
+                tip_radius_m: 0.003,
+                triangle_samples: vec![vec![0, 1, 2, 3, 4, 5], vec![0, 2, 5, 6, 7, 8]],
+                w: (0..9)
+                    .map(|k| {
+                        std::array::from_fn(|i| {
+                            std::array::from_fn(|j| (k * 9 + i * 3 + j) as f64 * 1e-4)
+                        })
+                    })
+                    .collect(),
+            },
+            stats: SampleStats {
+                samples: 9,
+                gap_max_m: 2.3e-3,
+                gap_mean_m: 1.3e-4,
+                max_patch_nodes: 82,
+                fem_vertices: 11667,
+                fem_nodes: 83878,
+                factor: FactorStats {
+                    free_dofs: 250_000,
+                    nnz_k: 9_000_000,
+                    nnz_l: 256_300_000,
+                },
+                factor_s: 21.9,
+                w_s: 14.3,
+            },
+            mesh_hashes: vec![0x0123_4567_89ab_cdef, u64::MAX],
+        };
+        let bytes = encode_parts(&parts);
+        assert_eq!(decode_parts(&bytes), Some(parts));
+        assert_eq!(decode_parts(&bytes[..bytes.len() - 1]), None);
+        let mut longer = bytes.clone();
+        longer.push(0);
+        assert_eq!(decode_parts(&longer), None);
+        assert_eq!(decode_parts(b"HSAMPLE0"), None);
+    }
+
+    /// Eviction keeps the newest files of one kind and leaves the other kind and other files.
+    #[test]
+    fn eviction_keeps_the_most_recently_used() {
+        let dir = tempfile::tempdir().unwrap();
+        let t0 = std::time::SystemTime::now() - std::time::Duration::from_secs(100);
+        for i in 0..5u64 {
+            for kind in ["bank", "fields"] {
+                let f = dir.path().join(format!("{kind}-{i:016x}.bin"));
+                std::fs::write(&f, b"x").unwrap();
+                let file = std::fs::File::options().append(true).open(&f).unwrap();
+                file.set_modified(t0 + std::time::Duration::from_secs(i))
+                    .unwrap();
+            }
+        }
+        std::fs::write(dir.path().join("notes.txt"), b"kept").unwrap();
+        // The oldest bank used again: it stays, the next oldest goes.
+        touch(&dir.path().join(format!("bank-{:016x}.bin", 0)));
+        evict(dir.path(), "bank-", 3);
+        let mut left: Vec<String> = std::fs::read_dir(dir.path())
+            .unwrap()
+            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+            .filter(|n| n.starts_with("bank-"))
+            .collect();
+        left.sort();
+        let want: Vec<String> = [0u64, 3, 4]
+            .iter()
+            .map(|i| format!("bank-{i:016x}.bin"))
+            .collect();
+        assert_eq!(left, want);
+        let fields = std::fs::read_dir(dir.path())
+            .unwrap()
+            .filter(|e| {
+                e.as_ref()
+                    .unwrap()
+                    .file_name()
+                    .to_string_lossy()
+                    .starts_with("fields-")
+            })
+            .count();
+        assert_eq!(fields, 5);
+        assert!(dir.path().join("notes.txt").exists());
+    }
 
     /// A scene edited in memory after loading gets its own key, not its file's.
     #[test]
