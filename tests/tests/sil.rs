@@ -41,9 +41,13 @@ fn setup() -> (Setup, AlignedBytes) {
 }
 
 /// One QEMU at a time: the machine has two cores, and each run is already two busy threads.
-fn qemu(setup: &Setup, session: &Session) -> Run {
+fn qemu_turn() -> std::sync::MutexGuard<'static, ()> {
     static ONE_AT_A_TIME: Mutex<()> = Mutex::new(());
-    let _turn = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner())
+}
+
+fn qemu(setup: &Setup, session: &Session) -> Run {
+    let _turn = qemu_turn();
     let run = harness::run(setup, session).expect("QEMU run");
     assert_eq!(run.exit_code, Some(0), "image stderr:\n{}", run.stderr);
     run
@@ -226,6 +230,50 @@ fn press_and_strike_match_the_native_loop() {
     assert_eq!(assert_matches_native(&bank, &run), 0, "strike");
     let last = run.telemetry().last().copied().cloned().unwrap();
     assert_eq!(last.fault, Some(FaultReason::Overspeed));
+}
+
+/// Runs side by side (`harness::run_all`, as the report runs its tick costs and press-holds)
+/// give the figures of a run alone. Not bit for bit: the arm command travels on the
+/// asynchronous link, so the tick it lands on follows the wall clock (module notes of
+/// `host::sil::harness`), and so does everything after it by a few ticks.
+#[test]
+fn runs_side_by_side_match_a_run_alone() {
+    let (setup, bytes) = setup();
+    let bank = Bank::parse(&bytes).unwrap();
+    let session = |script| Session::new(&bank, script, 2.0).unwrap();
+    let figures = |run: &Run| {
+        assert_eq!(run.exit_code, Some(0), "image stderr:\n{}", run.stderr);
+        assert!(run.faults().is_empty(), "{:?}", run.faults());
+        let armed = run.ticks.iter().position(|t| t.state == State::Armed);
+        let contact = run.ticks.iter().position(|t| t.contact_nodes > 0);
+        let worst = run.ticks.iter().map(|t| t.body_instructions).max();
+        (
+            armed.expect("never armed"),
+            contact.expect("no contact"),
+            run.peak_force_n(),
+            worst.unwrap(),
+        )
+    };
+    // Two scripts, so that a run given back in another job's place shows.
+    let scripts = [Script::Press, Script::Slide];
+    let alone = scripts.map(|s| figures(&qemu(&setup, &session(s))));
+    let jobs = scripts.map(|s| (&setup, session(s)));
+    let runs = {
+        let _turn = qemu_turn();
+        harness::run_all(&jobs)
+    };
+    assert_eq!(runs.len(), 2);
+    for (run, alone) in runs.into_iter().zip(alone) {
+        let side = figures(&run.expect("QEMU run"));
+        eprintln!("alone {alone:?}, side by side {side:?}");
+        assert!(side.0.abs_diff(alone.0) <= 20, "{alone:?} {side:?}");
+        assert!(side.1.abs_diff(alone.1) <= 20, "{alone:?} {side:?}");
+        assert!((side.2 / alone.2 - 1.0).abs() < 0.02, "{alone:?} {side:?}");
+        assert!(
+            side.3.abs_diff(alone.3) * 50 <= alone.3,
+            "{alone:?} {side:?}"
+        );
+    }
 }
 
 /// The first tick at or after `from` in contact and armed (so a fault has current to cut).

@@ -58,18 +58,38 @@ pub struct Figures {
 }
 
 /// Runs each of [`SCRIPTS`] for `seconds` (virtual) on the image and bank of `setup` (`bank`
-/// parsed), telling `step` which script starts. A run the image stops early is an error.
+/// parsed), telling `step` which script starts; with `at_once` side by side
+/// ([`harness::run_all`]: the same ticks, but each run's wall time is shared), else one after
+/// the other. A run the image stops early is an error.
 pub fn run_scripts(
     setup: &Setup,
     bank: &Bank,
     seconds: f64,
+    at_once: bool,
     step: &dyn Fn(Script),
 ) -> Result<Vec<(Script, harness::Run)>> {
+    let jobs = SCRIPTS
+        .iter()
+        .map(|&script| Ok((setup, Session::new(bank, script, seconds)?)))
+        .collect::<Result<Vec<_>>>()?;
+    let runs = if at_once {
+        SCRIPTS.iter().for_each(|&s| step(s));
+        harness::run_all(&jobs)
+    } else {
+        SCRIPTS
+            .iter()
+            .zip(&jobs)
+            .map(|(&script, (setup, session))| {
+                step(script);
+                harness::run(setup, session)
+            })
+            .collect()
+    };
     SCRIPTS
         .iter()
-        .map(|&script| {
-            step(script);
-            let run = harness::run(setup, &Session::new(bank, script, seconds)?)?;
+        .zip(runs)
+        .map(|(&script, run)| {
+            let run = run?;
             if let Some(why) = &run.stopped {
                 bail!("{script:?}: the image stopped early: {why}\n{}", run.stderr);
             }
@@ -82,7 +102,7 @@ pub fn run_scripts(
 pub fn run(setup: &Setup, bank: &Bank, seconds: f64) -> Result<Figures> {
     let mut records = Vec::new();
     let mut runs = Vec::new();
-    for (script, run) in run_scripts(setup, bank, seconds, &|_| {})? {
+    for (script, run) in run_scripts(setup, bank, seconds, false, &|_| {})? {
         runs.push(ScriptRun {
             script,
             ticks: run.ticks.len(),

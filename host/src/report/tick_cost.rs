@@ -49,7 +49,7 @@ pub fn measure(setup: &Setup, bank: &Bank, seconds: f64, step: &dyn Fn(&str)) ->
             "firmware: {script:?} for {seconds} s on the QEMU image"
         ))
     };
-    for (script, run) in crate::bench::sil::run_scripts(setup, bank, seconds, &say)? {
+    for (script, run) in crate::bench::sil::run_scripts(setup, bank, seconds, true, &say)? {
         out.faults += run.faults().len();
         out.overruns += run.overruns();
         out.runs.push((script, run.ticks));

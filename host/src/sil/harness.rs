@@ -257,6 +257,37 @@ impl Run {
     }
 }
 
+/// [`run`] for each `(setup, session)` of `jobs`, as many at once as the machine has cores,
+/// the results in `jobs`' order. Each run is its own QEMU process, pipes and socket, and under
+/// `-icount` its ticks do not depend on what runs beside it; only its `wall_s` does, so runs
+/// whose wall time is the figure (`host bench sil`) go one at a time through [`run`].
+pub fn run_all(jobs: &[(&Setup, Session)]) -> Vec<Result<Run>> {
+    let width = std::thread::available_parallelism()
+        .map_or(1, |n| n.get())
+        .clamp(1, jobs.len().max(1));
+    let next = std::sync::atomic::AtomicUsize::new(0);
+    let done: Mutex<Vec<Option<Result<Run>>>> = Mutex::new(jobs.iter().map(|_| None).collect());
+    std::thread::scope(|s| {
+        for _ in 0..width {
+            s.spawn(|| {
+                loop {
+                    let k = next.fetch_add(1, Ordering::Relaxed);
+                    let Some((setup, session)) = jobs.get(k) else {
+                        break;
+                    };
+                    let r = run(setup, session);
+                    done.lock().unwrap_or_else(|e| e.into_inner())[k] = Some(r);
+                }
+            });
+        }
+    });
+    done.into_inner()
+        .unwrap_or_else(|e| e.into_inner())
+        .into_iter()
+        .map(|r| r.unwrap_or_else(|| Err(anyhow::anyhow!("internal: a SIL run was not made"))))
+        .collect()
+}
+
 /// Run `session` on the image under QEMU. Errors are set-up failures (QEMU missing, pipes,
 /// socket); an image that stops early is a [`Run`] with `stopped` set.
 pub fn run(setup: &Setup, session: &Session) -> Result<Run> {
