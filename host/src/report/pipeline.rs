@@ -202,7 +202,7 @@ pub fn run(cfg: &ReportConfig, step: &dyn Fn(&str)) -> Result<Report> {
         (Ok(image), Ok((qlv_scene, elastic_scene))) => {
             step("relaxation: the QLV scene's banks (elastic and relaxing)");
             let banks = relaxation::banks(&qlv_scene, &elastic_scene)?;
-            // The whole script, quick or not (5 runs of 11.5 s take about 40 s here).
+            // The whole script, quick or not (5 runs of 12 s, two at a time, take about 16 s here).
             let seconds = relaxation::PRESS_HOLD_S;
             let measured = relaxation::measure(
                 &banks,
