@@ -11,8 +11,9 @@
 //! Files live in `$HAPTIC_CACHE_DIR`, else `$XDG_CACHE_HOME/haptic-host`, else
 //! `~/.cache/haptic-host`, named `bank-<key>.bin`, written atomically; a cached file is
 //! validated by the bank reader before use, and one that fails is rebuilt. A sampled scene's
-//! display fields ([`DisplayFields`]) go beside it as `fields-<key>.bin`, keyed by the bank's
-//! key, the bank's CRC and the text of the code that computes them.
+//! display fields ([`DisplayFields`]) go beside it as `fields-<key>.bin`, keyed by what they
+//! are computed from: the samples' key (below), the samples as the bank stores them and the
+//! text of the code that computes them.
 //!
 //! A bank that is not in the cache takes its contact samples, the costly part, from
 //! `samples-<key>.bin` when another scene of the same organ computed them: that key
@@ -332,14 +333,22 @@ pub fn display_fields_cached(
     bank: &Bank,
     progress: Option<&dyn Progress>,
 ) -> Result<Option<(DisplayFields, bool)>> {
-    let (ContactModel::Sampled(_), Some(_)) = (&prep.organ.scene.contact, bank.samples()) else {
+    let (ContactModel::Sampled(spec), Some(samples)) = (&prep.organ.scene.contact, bank.samples())
+    else {
         return Ok(None);
     };
+    // What the fields are computed from: the samples' inputs and the samples as the bank
+    // stores them (so the same organ under another law or relaxation shares its fields).
+    let mut key = samples_key(prep, spec)?;
+    key = fnv1a(key, &samples.tip_radius_m().to_bits().to_le_bytes());
+    for s in 0..samples.count() {
+        for v in samples.sample(s).unwrap_or_default() {
+            key = fnv1a(key, &v.to_bits().to_le_bytes());
+        }
+    }
     let key = FIELDS_SOURCES
         .iter()
-        .fold(fnv1a(bank_key(prep)?, &bank.crc().to_le_bytes()), |h, s| {
-            fnv1a(h, s.as_bytes())
-        });
+        .fold(key, |h, s| fnv1a(h, s.as_bytes()));
     let file = cache_dir().map(|d| d.join(format!("fields-{key:016x}.bin")));
     if let Some(f) = &file
         && let Ok(bytes) = std::fs::read(f)
