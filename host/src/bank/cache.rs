@@ -17,7 +17,7 @@
 //!
 //! A bank that is not in the cache takes its contact samples, the costly part, from
 //! `samples-<key>.bin` when another scene of the same organ computed them: that key
-//! ([`samples_key`]) covers only what the samples depend on (the FEM meshes' bytes, the body,
+//! (`samples_key`) covers only what the samples depend on (the FEM meshes' bytes, the body,
 //! the tool, the lattice), so adding a `[viscoelastic]` table or editing the law rebuilds the
 //! bank in a second. [`Prepared::build_bank`] itself (`host bank build`, the precompute bench)
 //! never reads the cache.
