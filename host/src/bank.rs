@@ -264,22 +264,18 @@ impl Prepared {
         progress: Option<&dyn Progress>,
     ) -> Result<SampledParts> {
         let fem = sampled::SampledFem::new(&self.organ.scene, spec)?;
-        let (lattice, points) =
-            sampled::lattice_points(&self.region.positions, &self.region.triangles, spec.level);
+        let (positions, triangles) = (&self.region.positions, &self.region.triangles);
         let r = self.organ.scene.tip_radius_m;
         let Some(rich) = &spec.richardson else {
-            let t0 = std::time::Instant::now();
-            let (w, at, widest) = fem.patch_compliance(&points, r, progress)?;
-            let total = t0.elapsed().as_secs_f64();
-            let (samples, stats) = sampled::samples_from(
-                lattice, &points, w, &at, widest, &fem, spec.level, r, total,
-            )?;
+            let (samples, stats) =
+                sampled::contact_samples(&fem, positions, triangles, spec.level, r, progress)?;
             return Ok(SampledParts {
                 samples,
                 stats,
                 mesh_hashes: vec![fem.mesh_hash],
             });
         };
+        let (lattice, points) = sampled::lattice_points(positions, triangles, spec.level);
         // W on the fine mesh, then (its factor dropped first) on the coarse one.
         let t0 = std::time::Instant::now();
         let (w_fine, at, widest) = fem.patch_compliance(&points, r, progress)?;
@@ -340,8 +336,11 @@ impl Prepared {
             self.organ.scene.tip_radius_m,
             progress,
         )?;
-        let id = fnv1a(self.organ.scene_id, &fem.mesh_hash.to_le_bytes());
-        self.sampled_bank_with(samples, stats, id)
+        self.sampled_bank_from(SampledParts {
+            samples,
+            stats,
+            mesh_hashes: vec![fem.mesh_hash],
+        })
     }
 
     /// The sampled bank from its samples: R's collision data, the nodal compliance with the

@@ -815,26 +815,32 @@ impl Scene {
         [mesh, fem, richardson].into_iter().flatten().collect()
     }
 
+    /// FNV-1a 64 of the bytes of `file`, one the scene names (the error says so).
+    pub fn file_hash(&self, file: &Path) -> anyhow::Result<u64> {
+        use anyhow::Context;
+        let bytes = std::fs::read(file).with_context(|| {
+            format!(
+                "cannot read {}, named by {}",
+                file.display(),
+                self.path.display()
+            )
+        })?;
+        Ok(fnv1a(FNV_OFFSET, &bytes))
+    }
+
     /// FNV-1a 64 over everything a bank is built from: the scene file's text, the validated
-    /// scene (its `Debug` text without its path and its files' directories: a scene edited in memory after loading is not
+    /// scene (its `Debug` text without its path and its files' directories: a scene edited in
+    /// memory after loading is not
     /// its file's), the bytes of every file it reads ([`Scene::input_files`]) or of the
     /// embedded liver, and the bank format version. The bank caches key on it
     /// ([`crate::bank::cache`] and [`crate::sil::bank`], each adding the code that builds).
     pub fn inputs_hash(&self) -> anyhow::Result<u64> {
-        use anyhow::Context;
         let mut h = self.text_hash;
         if self.mesh == MeshSource::BuiltinLiver {
             h = fnv1a(h, BUILTIN_LIVER);
         }
         for file in self.input_files() {
-            let bytes = std::fs::read(file).with_context(|| {
-                format!(
-                    "cannot read {}, named by {}",
-                    file.display(),
-                    self.path.display()
-                )
-            })?;
-            h = fnv1a(h, &fnv1a(FNV_OFFSET, &bytes).to_le_bytes());
+            h = fnv1a(h, &self.file_hash(file)?.to_le_bytes());
         }
         // Where the files lie is no input, their bytes are (above): the same scene reached as
         // `host/scenes/liver.toml` and as `tests/../host/scenes/liver.toml` has one key.

@@ -25,14 +25,13 @@
 //! Each new key (a new scene, an edited one, a new build of the sampling code) adds files, so
 //! the cache is bounded: when a file is stored, the least recently used files of its kind go
 //! until that kind holds at most [`BANKS_KEPT`] banks or sample sets or [`FIELDS_KEPT`] field
-//! sets (a hit
-//! counts as a use). An evicted entry only costs its next user the precompute.
+//! sets (a hit counts as a use). An evicted entry only costs its next user the precompute.
 
 use super::sampled::SampleStats;
 use super::{BuiltBank, Prepared, SampledParts};
 use crate::display::fields::DisplayFields;
 use crate::scene::{ContactModel, FNV_OFFSET, SampledContact, fnv1a};
-use anyhow::{Context, Result};
+use anyhow::Result;
 use bank_format::{AlignedBytes, Bank, ContactSamples};
 use fem::compliance::FactorStats;
 use fem::progress::Progress;
@@ -132,14 +131,7 @@ fn samples_key(prep: &Prepared, spec: &SampledContact) -> Result<u64> {
         spec.richardson.as_ref().map(|r| &r.mesh),
     ];
     for file in files.into_iter().flatten() {
-        let bytes = std::fs::read(file).with_context(|| {
-            format!(
-                "cannot read {}, named by {}",
-                file.display(),
-                scene.path.display()
-            )
-        })?;
-        h = fnv1a(h, &fnv1a(FNV_OFFSET, &bytes).to_le_bytes());
+        h = fnv1a(h, &scene.file_hash(file)?.to_le_bytes());
     }
     let boxes: Vec<_> = scene.fix_boxes.iter().map(|b| (b.bounds, b.axes)).collect();
     let richardson = spec.richardson.as_ref().map(|r| (r.ratio, r.order));

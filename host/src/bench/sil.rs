@@ -59,7 +59,7 @@ pub struct Figures {
 
 /// Runs each of [`SCRIPTS`] for `seconds` (virtual) on the image and bank of `setup` (`bank`
 /// parsed), telling `step` which script starts; with `at_once` side by side
-/// ([`harness::run_all`]: the same ticks, but each run's wall time is shared), else one after
+/// ([`harness::run_all`]: the same script and costs, but each run's wall time is shared), else one after
 /// the other. A run the image stops early is an error.
 pub fn run_scripts(
     setup: &Setup,

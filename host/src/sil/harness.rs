@@ -258,9 +258,10 @@ impl Run {
 }
 
 /// [`run`] for each `(setup, session)` of `jobs`, as many at once as the machine has cores,
-/// the results in `jobs`' order. Each run is its own QEMU process, pipes and socket, and under
-/// `-icount` its ticks do not depend on what runs beside it; only its `wall_s` does, so runs
-/// whose wall time is the figure (`host bench sil`) go one at a time through [`run`].
+/// the results in `jobs`' order. Each run is its own QEMU process, pipes and socket, and its
+/// plant exchange is lockstep under `-icount`; what runs beside it moves only the
+/// asynchronous link (the tick an arm command lands on, by a tick or so) and its `wall_s`, so
+/// runs whose wall time is the figure (`host bench sil`) go one at a time through [`run`].
 pub fn run_all(jobs: &[(&Setup, Session)]) -> Vec<Result<Run>> {
     let width = std::thread::available_parallelism()
         .map_or(1, |n| n.get())
