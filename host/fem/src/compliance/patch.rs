@@ -40,9 +40,14 @@ use rayon::prelude::*;
 /// Largest block of right-hand sides held at once, bytes (256 MiB).
 pub const CHUNK_BYTES: usize = 256 << 20;
 
-/// Computes the patch compliances of a chunk of loads, appending them.
-type ChunkFn =
-    fn(&Compliance, &[Vec<(usize, f64)>], &mut Vec<Block3>) -> Result<(), ComplianceError>;
+/// Computes the patch compliances of a chunk of loads, appending them; the matrix is the
+/// chunks' shared block of right-hand sides ([`Compliance::right_hand_sides`]).
+type ChunkFn = fn(
+    &Compliance,
+    &[Vec<(usize, f64)>],
+    &mut Mat<f64>,
+    &mut Vec<Block3>,
+) -> Result<(), ComplianceError>;
 
 impl Compliance {
     /// The 3x3 patch compliance `W_s = B_s K_ff^-1 B_s^T` (m/N) of each load `loads[s]`, a list
@@ -89,11 +94,14 @@ impl Compliance {
             bar.start(chunks as u64);
         }
         let mut out = Vec::with_capacity(loads.len());
+        // One block of right-hand sides for all the chunks: a fresh one per chunk is fresh
+        // memory, a page fault per 4 KiB each time (most of a large call's time, once).
+        let mut rhs = Mat::new();
         for chunk in loads.chunks(per_chunk) {
             if nf == 0 {
                 out.extend(chunk.iter().map(|_| [[0.0; 3]; 3]));
             } else {
-                reduce(self, chunk, &mut out)?;
+                reduce(self, chunk, &mut rhs, &mut out)?;
             }
             if let Some(bar) = progress {
                 bar.advance(1);
@@ -142,7 +150,8 @@ impl Compliance {
         if nf == 0 {
             return Ok(Mat::zeros(0, 3 * loads.len()));
         }
-        let (mut y, row_of) = self.sparse_forward(loads)?;
+        let mut y = Mat::new();
+        let row_of = self.sparse_forward(loads, &mut y)?;
         let SymbolicCholeskyRaw::Supernodal(sym) = self.symbolic.raw() else {
             return Err(ComplianceError::Factorisation(
                 "internal error: expected a supernodal factor".into(),
@@ -161,13 +170,16 @@ impl Compliance {
         Ok(Mat::from_fn(nf, y.ncols(), |d, j| y[(row_of[d], j)]))
     }
 
-    /// `B^T` of a chunk, free dof `d` in row `row(d)` (three columns per load).
+    /// `B^T` of a chunk into `rhs`, free dof `d` in row `row(d)` (three columns per load);
+    /// `rhs` is reshaped and zeroed, keeping its allocation.
     fn right_hand_sides(
         &self,
         chunk: &[Vec<(usize, f64)>],
         row: impl Fn(usize) -> usize,
-    ) -> Mat<f64> {
-        let mut rhs = Mat::<f64>::zeros(self.dofs.free_count(), 3 * chunk.len());
+        rhs: &mut Mat<f64>,
+    ) {
+        rhs.truncate(0, 0);
+        rhs.resize_with(self.dofs.free_count(), 3 * chunk.len(), |_, _| 0.0);
         for (s, load) in chunk.iter().enumerate() {
             for &(node, w) in load {
                 for i in 0..3 {
@@ -177,7 +189,6 @@ impl Compliance {
                 }
             }
         }
-        rhs
     }
 
     /// `W = Y^T Y`, `Y = L^-1 P B^T` by the sparse forward substitution of the module
@@ -185,10 +196,11 @@ impl Compliance {
     fn forward_chunk(
         &self,
         chunk: &[Vec<(usize, f64)>],
+        y: &mut Mat<f64>,
         out: &mut Vec<Block3>,
     ) -> Result<(), ComplianceError> {
-        let (y, _) = self.sparse_forward(chunk)?;
-        let y = &y;
+        self.sparse_forward(chunk, y)?;
+        let y = &*y;
         out.par_extend((0..chunk.len()).into_par_iter().map(|s| {
             let cols = [0, 1, 2].map(|i| y.col_as_slice(3 * s + i));
             let mut w = [[0.0; 3]; 3];
@@ -204,12 +216,14 @@ impl Compliance {
         Ok(())
     }
 
-    /// `Y = L^-1 P B^T` for a chunk of loads by the sparse forward substitution of the module
-    /// documentation (rows in the factor's order), and each free dof's row in it.
+    /// `Y = L^-1 P B^T` for a chunk of loads into `y` by the sparse forward substitution of the
+    /// module documentation (rows in the factor's order; `y` reshaped as by
+    /// [`Compliance::right_hand_sides`]), and each free dof's row in it.
     fn sparse_forward(
         &self,
         chunk: &[Vec<(usize, f64)>],
-    ) -> Result<(Mat<f64>, Vec<usize>), ComplianceError> {
+        y: &mut Mat<f64>,
+    ) -> Result<Vec<usize>, ComplianceError> {
         let internal =
             |what: &str| ComplianceError::Factorisation(format!("internal error: {what}"));
         let SymbolicCholeskyRaw::Supernodal(sym) = self.symbolic.raw() else {
@@ -220,7 +234,7 @@ impl Compliance {
             .map(|d| inverse.map_or(d, |inv| inv[d]))
             .collect();
         let row_of = |d: usize| rows[d];
-        let mut y = self.right_hand_sides(chunk, row_of);
+        self.right_hand_sides(chunk, row_of, y);
         let ns = sym.n_supernodes();
         let (begin, end) = (sym.supernode_begin(), sym.supernode_end());
         let mut col_super = vec![0usize; sym.nrows()];
@@ -283,16 +297,17 @@ impl Compliance {
                 pending[up].extend_from_slice(&cols);
             }
         }
-        Ok((y, rows))
+        Ok(rows)
     }
 
     /// The straightforward reference: `X = K_ff^-1 B^T` by full solves, then `W = B X`.
     fn full_solve_chunk(
         &self,
         chunk: &[Vec<(usize, f64)>],
+        x: &mut Mat<f64>,
         out: &mut Vec<Block3>,
     ) -> Result<(), ComplianceError> {
-        let mut x = self.right_hand_sides(chunk, |d| d);
+        self.right_hand_sides(chunk, |d| d, x);
         self.solve_in_place(x.as_mut(), faer::Par::rayon(0));
         out.extend(chunk.iter().enumerate().map(|(s, load)| {
             let mut w = [[0.0; 3]; 3];
@@ -392,7 +407,8 @@ mod tests {
         let tool = ToolSurface::linear(&mesh, &crate::mesh::boundary(&mesh).unwrap()).unwrap();
         let l = loads(&tool, &mesh, 11, 0.004);
         let x = c.solve_loads(&l).unwrap();
-        let mut full = c.right_hand_sides(&l, |d| d);
+        let mut full = Mat::new();
+        c.right_hand_sides(&l, |d| d, &mut full);
         c.solve_in_place(full.as_mut(), faer::Par::Seq);
         assert_eq!((x.nrows(), x.ncols()), (full.nrows(), full.ncols()));
         let scale = (0..full.ncols())
