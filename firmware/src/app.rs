@@ -1230,6 +1230,40 @@ mod tests {
         assert_eq!((r.state, r.currents_a), (WireState::Armed, drive));
     }
 
+    /// Whatever the chip's reset cause, the encoders start unreferenced: `ClearFault` and `Arm`
+    /// right after boot are refused with `NotReferenced`; after homing the device arms.
+    #[test]
+    fn no_reset_cause_arms_without_homing() {
+        for cause in [
+            ResetCause::PowerOn,
+            ResetCause::BrownOut,
+            ResetCause::Pin,
+            ResetCause::Software,
+            ResetCause::IndependentWatchdog,
+            ResetCause::WindowWatchdog,
+            ResetCause::LowPower,
+            ResetCause::Unknown,
+        ] {
+            rig!(bank, app, host, plant, clock);
+            app.reset(cause);
+            app.tick(&mut plant, &clock, false).unwrap();
+            host.send(&HostToDevice::ClearFault);
+            host.send(&HostToDevice::Arm);
+            let r = app.tick(&mut plant, &clock, false).unwrap();
+            assert_eq!(r.state, WireState::Fault, "{cause:?}");
+            assert_eq!(
+                app.telemetry().fault,
+                Some(FaultReason::NotReferenced),
+                "{cause:?}"
+            );
+            host.send(&HostToDevice::ClearFault);
+            host.send(&HostToDevice::ZeroEncoders);
+            host.send(&HostToDevice::Arm);
+            let r = app.tick(&mut plant, &clock, false).unwrap();
+            assert_eq!(r.state, WireState::Armed, "{cause:?}");
+        }
+    }
+
     /// A bank whose current limit the board's amplifiers cannot deliver (2 A against an
     /// amplifier scaled to 1.5 A on motor 2): `AmplifierRange` naming the motor at boot, and
     /// every arm refused with it, cleared or not; amplifiers that can deliver it arm.

@@ -498,8 +498,12 @@ impl<'b> HapticLoop<'b> {
         let kinematics = clock.cycles();
         // An encoder jump (a glitch; the supervisor faults on it below) is never swept for
         // contacts, and a path is swept over at most its last `max_path_m`, before any
-        // geometry: the bank cannot make a tick's detection longer than that.
+        // geometry: the bank cannot make a tick's detection longer than that. Counts that
+        // jumped cannot tell the pose any more: the reference is dropped whatever the
+        // supervisor reports this tick (an interlock or a fault latched earlier hides the
+        // jump's own `EncoderJump`), so no `ClearFault` + `Arm` renders from a misplaced pose.
         let contact = if self.supervisor.encoder_jump(&counts).is_some() {
+            self.referenced = false;
             self.tracker.reset();
             ContactState::Free
         } else {
@@ -587,14 +591,6 @@ impl<'b> HapticLoop<'b> {
             solve_failed: solve_error.is_some(),
             interlocks: input.interlocks,
         });
-        // Counts that jumped cannot be trusted to tell the pose any more.
-        if out
-            .new_fault
-            .is_some_and(|f| f.reason == bank_format::FaultReason::EncoderJump)
-        {
-            self.referenced = false;
-        }
-
         self.last.tip_m = tip;
         self.last.contact_point = match contact {
             ContactState::Touching { triangle, bary, .. } if !self.last.contacts.is_empty() => {
@@ -1461,6 +1457,55 @@ mod tests {
         let out = lp.tick(input([0, 0, 100_000]));
         assert_eq!(out.state, State::Fault(FaultReason::EncoderJump));
         assert!(!lp.referenced());
+        assert!(lp.clear_fault());
+        assert_eq!(lp.arm(), Err(ArmRefused::NotReferenced));
+    }
+
+    /// A jump loses the reference whatever the supervisor reports for the tick: while another
+    /// fault is latched (`LinkSilent`, which `raise` keeps over the jump's `EncoderJump`) and
+    /// in the same tick as an interlock (reported before jumps). Both end with `Arm` refused
+    /// `NotReferenced` after `ClearFault`, and arm again once homed.
+    #[test]
+    fn a_jump_hidden_by_another_fault_still_loses_the_reference() {
+        let bytes = flat_patch();
+        let bank = Bank::parse(bytes.as_slice()).unwrap();
+        let jump = [0, 0, 100_000];
+
+        // LinkSilent latched, then the jump while it is.
+        let mut lp = homed(&bank);
+        lp.tick(input([0; 3]));
+        lp.arm().unwrap();
+        let out = lp.tick(LoopInput {
+            link_silence_ticks: 1_000,
+            ..input([0; 3])
+        });
+        assert_eq!(out.state, State::Fault(FaultReason::LinkSilent));
+        let out = lp.tick(input(jump));
+        assert_eq!(out.state, State::Fault(FaultReason::LinkSilent));
+        assert_eq!(out.new_fault, None);
+        assert!(!lp.referenced());
+        assert!(lp.clear_fault());
+        assert_eq!(lp.arm(), Err(ArmRefused::NotReferenced));
+        // Homed again where the counts now stand, it arms.
+        assert!(lp.clear_fault());
+        assert!(lp.zero_encoders());
+        assert_eq!(lp.tick(input(jump)).state, State::Disarmed);
+        assert_eq!(lp.arm(), Ok(()));
+
+        // An amplifier fault in the same tick as the jump.
+        let mut lp = homed(&bank);
+        lp.tick(input([0; 3]));
+        lp.arm().unwrap();
+        let mut amp = Interlocks::default();
+        amp.amplifier_fault[1] = true;
+        let out = lp.tick(LoopInput {
+            interlocks: amp,
+            ..input(jump)
+        });
+        assert_eq!(out.state, State::Fault(FaultReason::AmplifierFault));
+        assert_eq!(out.currents_a, [0.0; 3]);
+        assert!(!lp.referenced());
+        lp.tick(input(jump));
         assert!(lp.clear_fault());
         assert_eq!(lp.arm(), Err(ArmRefused::NotReferenced));
     }
