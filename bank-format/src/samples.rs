@@ -121,15 +121,22 @@ pub fn lattice_corners(ids: &[u16], level: u32, bary: [f32; 3]) -> Option<([u16;
     let i0 = (x as u32).min(top);
     let j0 = (y as u32).min(top - i0);
     let (fx, fy) = (x - i0 as f32, y - j0 as f32);
-    let (corners, weights) = if fx + fy <= 1.0 {
-        (
-            [(i0, j0), (i0 + 1, j0), (i0, j0 + 1)],
-            [1.0 - fx - fy, fx, fy],
-        )
-    } else {
+    // The upper small triangle, corner (i0 + 1, j0 + 1), exists only off the lattice's last
+    // row of small triangles (i0 + j0 + 2 <= level). On that row (or where a clamp moved the
+    // corner) the point is in the lower one: x + y <= level gives fx + fy <= 1 exactly, and
+    // the little f32 rounding can add (a point on the v1-v2 edge) is taken off by projecting
+    // onto the small triangle's far edge, so the weights stay non-negative and sum to 1.
+    let (corners, weights) = if fx + fy > 1.0 && i0 + j0 + 2 <= level {
         (
             [(i0 + 1, j0 + 1), (i0, j0 + 1), (i0 + 1, j0)],
             [fx + fy - 1.0, 1.0 - fx, 1.0 - fy],
+        )
+    } else {
+        let s = fx + fy;
+        let (fx, fy) = if s > 1.0 { (fx / s, fy / s) } else { (fx, fy) };
+        (
+            [(i0, j0), (i0 + 1, j0), (i0, j0 + 1)],
+            [positive(1.0 - fx - fy), fx, fy],
         )
     };
     let mut out = [0u16; 3];
@@ -218,5 +225,159 @@ mod tests {
         assert!(s.interpolate(1, [1.0, 0.0, 0.0]).is_none());
         assert!(s.interpolate(0, [f32::NAN, 0.5, 0.5]).is_some());
         assert!(s.interpolate(0, [0.0, f32::NAN, 0.5]).is_none());
+    }
+
+    /// The lattice point `(i, j)` each id names, with ids numbered as [`lattice_index`].
+    fn lattice_points(level: u32) -> Vec<(u32, u32)> {
+        let mut points = Vec::new();
+        for j in 0..=level {
+            for i in 0..=level - j {
+                points.push((i, j));
+            }
+        }
+        points
+    }
+
+    /// Checks [`lattice_corners`] at `bary`: three lattice points forming one small triangle of
+    /// the lattice, weights non-negative summing to 1, and the weighted corners reproducing the
+    /// point the module notes say is interpolated (`bary` clamped into the triangle).
+    fn check_corners(level: u32, bary: [f32; 3], ids: &[u16], points: &[(u32, u32)]) {
+        let (c, w) = lattice_corners(ids, level, bary)
+            .unwrap_or_else(|| panic!("level {level}, {bary:?}: no corners"));
+        let mut ij = c.map(|id| points[usize::from(id)]);
+        ij.sort_unstable();
+        // Sorted, a lower small triangle is (i, j), (i, j + 1), (i + 1, j) with
+        // i + j + 1 <= level; an upper one (i, j + 1), (i + 1, j), (i + 1, j + 1) with
+        // i + j + 2 <= level.
+        let (i, j) = ij[0];
+        let lower = ij == [(i, j), (i, j + 1), (i + 1, j)] && i + j < level;
+        let upper = j > 0 && ij == [(i, j), (i + 1, j - 1), (i + 1, j)] && i + j < level;
+        assert!(lower || upper, "level {level}, {bary:?}: corners {ij:?}");
+        assert!(
+            w.iter().all(|&x| x >= 0.0),
+            "level {level}, {bary:?}: {w:?}"
+        );
+        let sum: f32 = w.iter().sum();
+        assert!(
+            (sum - 1.0).abs() <= 4.0 * f32::EPSILON,
+            "level {level}: {sum}"
+        );
+        let (b1, b2) = (f64::from(bary[1].max(0.0)), f64::from(bary[2].max(0.0)));
+        let s = (b1 + b2).max(1.0);
+        let (mut x, mut y) = (0.0, 0.0);
+        for (&id, &wt) in c.iter().zip(&w) {
+            let (pi, pj) = points[usize::from(id)];
+            x += f64::from(wt) * f64::from(pi) / f64::from(level);
+            y += f64::from(wt) * f64::from(pj) / f64::from(level);
+        }
+        assert!(
+            (x - b1 / s).abs() < 1e-5 && (y - b2 / s).abs() < 1e-5,
+            "level {level}, {bary:?}: ({x}, {y}) for ({}, {})",
+            b1 / s,
+            b2 / s
+        );
+    }
+
+    /// f32 points on the v1-v2 edge, at the vertices and sliding along the triangle's edges
+    /// (the coordinates a contact on the boundary computes, one ulp either side included), and
+    /// a dense set inside, at every lattice level a bank may have: always corners of one small
+    /// triangle of the lattice (never an aliased or missing sample, which faulted the loop
+    /// `SolveFailed`), weights non-negative summing to 1, the point reproduced.
+    #[test]
+    fn corners_are_a_small_triangle_at_every_level_on_edges_and_vertices() {
+        let ulps = |v: f32| {
+            [
+                f32::from_bits(v.to_bits() - 1),
+                v,
+                f32::from_bits(v.to_bits() + 1),
+            ]
+        };
+        for level in 1..=crate::MAX_SAMPLE_LEVEL {
+            let points = lattice_points(level);
+            let ids: Vec<u16> = (0..points.len() as u16).collect();
+            let steps = 3_000;
+            for k in 1..steps {
+                let t = k as f32 / steps as f32;
+                for b2 in ulps(1.0 - t) {
+                    // The v1-v2 edge, as a contact's barycentric coordinates give it.
+                    check_corners(level, [1.0 - t - b2, t, b2], &ids, &points);
+                    // The v0-v1 and v0-v2 edges, the other coordinate zero or a rounding's
+                    // width outside.
+                    for z in [0.0, -1e-9, 1e-9] {
+                        check_corners(level, [b2, t, z], &ids, &points);
+                        check_corners(level, [b2, z, t], &ids, &points);
+                    }
+                }
+            }
+            for v in [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]] {
+                for a in ulps(1.0) {
+                    for e in [0.0, 1e-9, -1e-9] {
+                        let b = v.map(|x: f32| if x == 1.0 { a } else { e });
+                        check_corners(level, b, &ids, &points);
+                    }
+                }
+            }
+            for j in 0..=200 {
+                for i in 0..=200 - j {
+                    let (b1, b2) = (i as f32 / 200.0, j as f32 / 200.0);
+                    check_corners(level, [1.0 - b1 - b2, b1, b2], &ids, &points);
+                }
+            }
+        }
+    }
+
+    /// `W` is continuous across the small triangles' edges: along lines through the lattice in
+    /// steps of 1e-4 (barycentric), samples of an arbitrary (non-linear) field interpolate to
+    /// values that change by at most the field's lattice gradient times the step, never by a
+    /// jump of the order of the samples themselves.
+    #[test]
+    fn interpolation_is_continuous_across_small_triangle_edges() {
+        for level in 1..=crate::MAX_SAMPLE_LEVEL {
+            let points = lattice_points(level);
+            let ids: Vec<u16> = (0..points.len() as u16).collect();
+            // Deterministic values in [0, 1) (an LCG), one per sample.
+            let mut state = 12_345u32 + level;
+            let field: Vec<f32> = points
+                .iter()
+                .map(|_| {
+                    state = state.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+                    (state >> 8) as f32 / (1u32 << 24) as f32
+                })
+                .collect();
+            let value = |b: [f32; 3]| {
+                let (c, w) = lattice_corners(&ids, level, b).unwrap();
+                c.iter()
+                    .zip(&w)
+                    .map(|(&id, &wt)| wt * field[usize::from(id)])
+                    .sum::<f32>()
+            };
+            let h = 1e-4f32;
+            // Lines: along the v1-v2 edge, parallel to each side, and a skew one.
+            let lines: [([f32; 2], [f32; 2]); 4] = [
+                ([1.0, 0.0], [0.0, 1.0]),
+                ([0.0, 0.3], [0.7, 0.3]),
+                ([0.37, 0.0], [0.37, 0.63]),
+                ([0.05, 0.11], [0.61, 0.38]),
+            ];
+            // Each step crosses at most two small triangles' edges; the slope of a linear
+            // piece is at most 2 level (values within [0, 1)) per unit of barycentric length.
+            for (a, b) in lines {
+                let len = ((b[0] - a[0]).powi(2) + (b[1] - a[1]).powi(2)).sqrt();
+                let n = (len / h) as usize;
+                let at = |k: usize| {
+                    let t = k as f32 / n as f32;
+                    let (b1, b2) = (a[0] + t * (b[0] - a[0]), a[1] + t * (b[1] - a[1]));
+                    [1.0 - b1 - b2, b1, b2]
+                };
+                let bound = 4.0 * level as f32 * h + 1e-5;
+                for k in 0..n {
+                    let (p, q) = (value(at(k)), value(at(k + 1)));
+                    assert!(
+                        (p - q).abs() <= bound,
+                        "level {level}, step {k}: {p} -> {q}"
+                    );
+                }
+            }
+        }
     }
 }

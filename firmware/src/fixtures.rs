@@ -180,11 +180,16 @@ pub fn sampled_patch() -> AlignedBytes {
 
 /// [`sampled_patch`] with each sample's `W` given by `w` at its point (m -> m/N).
 pub fn sampled_patch_with(w: impl Fn([f64; 3]) -> [[f64; 3]; 3]) -> AlignedBytes {
+    sampled_patch_at_level(2, w)
+}
+
+/// [`sampled_patch_with`] at lattice `level` (1..=8).
+pub fn sampled_patch_at_level(level: u32, w: impl Fn([f64; 3]) -> [[f64; 3]; 3]) -> AlignedBytes {
     let xs: Vec<f64> = (0..PATCH_SIDE)
         .map(|i| PATCH_SPACING_M * i as f64)
         .collect();
     let mut b = grid_builder(&xs, &xs, 0.06, patch_device());
-    let lattice = bank_format::SharedLattice::new(&b.triangles, 2);
+    let lattice = bank_format::SharedLattice::new(&b.triangles, level);
     let w = lattice
         .points
         .iter()
@@ -196,7 +201,7 @@ pub fn sampled_patch_with(w: impl Fn([f64; 3]) -> [[f64; 3]; 3]) -> AlignedBytes
         })
         .collect();
     b.samples = Some(bank_format::ContactSamples {
-        level: 2,
+        level,
         tip_radius_m: 0.003,
         triangle_samples: lattice.triangle_points,
         w,

@@ -2096,6 +2096,94 @@ mod tests {
         assert_eq!(lp.telemetry().counters.rebuilds_failed, failed);
     }
 
+    /// Presses and slides along the lattice's triangle edges never fault, at every lattice
+    /// level a bank may have: the tip pressed (armed) onto points of the grid line x = 2 cm,
+    /// which is the v1-v2 edge of a column of the patch's triangles and passes through their
+    /// vertices, and slid along it at depth, renders `W(anchor)^-1 d` with the fixture's
+    /// (linear, so exactly interpolated) `W` every contact tick, never `SolveFailed`.
+    #[test]
+    fn edge_and_vertex_contacts_render_at_every_lattice_level() {
+        for level in 1..=bank_format::MAX_SAMPLE_LEVEL {
+            let bytes = crate::fixtures::sampled_patch_at_level(level, crate::fixtures::sampled_w);
+            let bank = Bank::parse(bytes.as_slice()).unwrap();
+            let mut lp = homed(&bank);
+            lp.set_mode(Mode::LinearLaw).unwrap();
+            lp.tick(input([0; 3]));
+            lp.arm().unwrap();
+            let dev = *lp.device();
+            // Tip at x = 2 cm + dx (yaw), y (pitch), insertion s; straight moves between
+            // waypoints, 20 um a tick at most.
+            let counts = |[dx, y, s]: [f32; 3]| {
+                let mut c = counts_for_insertion(&dev, s);
+                c[0] = ((y - 0.02) / 0.1 / dev.joint_per_count()[0]).round() as i32;
+                c[1] = (-dx / 0.1 / dev.joint_per_count()[1]).round() as i32;
+                c
+            };
+            let mut waypoints: Vec<[f32; 3]> = std::vec![[0.0, 0.02, 0.05]];
+            // Presses 3 mm deep at vertices (y = 1, 2, 3 cm) of the grid line x = 2 cm, the
+            // v1-v2 edge of a column of triangles, and between them on it.
+            for y in [0.01, 0.0125, 0.02, 0.0233, 0.03, 0.0351] {
+                waypoints.extend([[0.0, y, 0.097], [0.0, y, 0.103], [0.0, y, 0.097]]);
+            }
+            // A slide along that edge at 3 mm depth, through the vertices; then along the
+            // patch's sides x = 0 and x = 4 cm (the latter the v1-v2 edges of its column of
+            // triangles) with the tip 1 mm beyond, so that the anchor is held on the boundary.
+            waypoints.extend([
+                [0.0, 0.005, 0.097],
+                [0.0, 0.005, 0.103],
+                [0.0, 0.035, 0.103],
+            ]);
+            for dx in [-0.021, 0.021] {
+                waypoints.extend([
+                    [0.0, 0.035, 0.097],
+                    [dx, 0.035, 0.097],
+                    [dx, 0.035, 0.103],
+                    [dx, 0.005, 0.103],
+                    [dx, 0.005, 0.097],
+                    [0.0, 0.005, 0.097],
+                ]);
+            }
+            let mut contact_ticks = 0;
+            for pair in waypoints.windows(2) {
+                let (a, b) = (pair[0], pair[1]);
+                let len = (0..3).map(|i| (b[i] - a[i]).abs()).fold(0.0, f32::max);
+                let n = (len / 20e-6).ceil().max(1.0) as u32;
+                for k in 1..=n {
+                    let f = k as f32 / n as f32;
+                    let out = lp.tick(input(counts(core::array::from_fn(|i| {
+                        a[i] + f * (b[i] - a[i])
+                    }))));
+                    assert_eq!(
+                        (out.state, out.new_fault, out.solve_error),
+                        (State::Armed, None, None),
+                        "level {level}: {out:?}"
+                    );
+                    let ContactState::Touching {
+                        anchor,
+                        displacement,
+                        ..
+                    } = out.contact
+                    else {
+                        continue;
+                    };
+                    if out.contact_nodes == 0 {
+                        continue;
+                    }
+                    let w = crate::fixtures::sampled_w(anchor.map(f64::from));
+                    let want = crate::fixtures::gauss(
+                        w.iter().map(|r| r.to_vec()).collect(),
+                        displacement.iter().map(|&v| f64::from(v)).collect(),
+                    );
+                    let got = out.tool_force_n.map(|f| -f);
+                    let err = crate::fixtures::rel_err(&[got], &want);
+                    assert!(err < 1e-4, "level {level}: {got:?} vs {want:?}");
+                    contact_ticks += 1;
+                }
+            }
+            assert!(contact_ticks > 3_000, "level {level}: {contact_ticks}");
+        }
+    }
+
     /// The sampled contact has no background rebuild: its `W` is factored every tick, in
     /// place, and a failure leaves the last solve as it was ([`WeightedSolve::refactor`]). A
     /// sampled bank whose `W` is SPD everywhere but too ill-conditioned for the solve on one
