@@ -359,6 +359,15 @@ pub enum BankError {
         /// Which sample.
         sample: u32,
     },
+    /// A triangle's samples are positive definite but some point between them would be too
+    /// ill-conditioned for the tick's contact solve ([`crate::MIN_PIVOT_REL`],
+    /// [`crate::ill_conditioned_sample`]), so every press there would fault.
+    SampleIllConditioned {
+        /// The triangle.
+        triangle: u32,
+        /// Its sample with the smallest eigenvalue bound.
+        sample: u32,
+    },
     /// Two triangles name different samples for a lattice point of their common edge or
     /// vertex, so `W` would jump as a contact crosses it.
     SampleDiscontinuous {
@@ -452,6 +461,7 @@ impl BankError {
             BankError::RelaxationCount { .. } => 53,
             BankError::RelaxationTerm { .. } => 54,
             BankError::RelaxationSum => 55,
+            BankError::SampleIllConditioned { .. } => 56,
         }
     }
 }
@@ -587,6 +597,13 @@ impl fmt::Display for BankError {
             E::SampleNotSpd { sample } => {
                 write!(f, "patch compliance sample {sample} is not SPD")
             }
+            E::SampleIllConditioned { triangle, sample } => write!(
+                f,
+                "triangle {triangle}: patch compliance sample {sample} is too ill-conditioned \
+                 for the loop's contact solve (smallest eigenvalue under twice {:e} of the \
+                 largest diagonal entry of the triangle's samples)",
+                crate::MIN_PIVOT_REL
+            ),
             E::SampleDiscontinuous { triangle } => write!(
                 f,
                 "triangle {triangle}: a sample of its edge or vertex differs from its neighbour's"

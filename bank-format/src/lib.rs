@@ -92,7 +92,10 @@ pub use layout::{
     VERSION_MAJOR, VERSION_MINOR, bank_crc, reseal,
 };
 pub use reader::{Bank, Grid, SPD_PIVOT_REL, TRUNCATION_SLACK, UpperCouplings, validate_device};
-pub use samples::{Samples, lattice_bary, lattice_corners, lattice_index, lattice_len};
+pub use samples::{
+    MIN_PIVOT_REL, Samples, ill_conditioned_sample, lattice_bary, lattice_corners, lattice_index,
+    lattice_len, min_eigenvalue_bound,
+};
 #[cfg(feature = "alloc")]
 pub use writer::{
     AlignedBytes, BankBuilder, BuildError, ContactSamples, INPUT_SYMMETRY_REL, SharedLattice,

@@ -11,7 +11,7 @@ use crate::layout::{
     RELAXATION_TAU_MAX_S, RELAXATION_TAU_MIN_S, Relaxation, SECTION_ALIGN, SECTION_ENTRY_LEN,
     SampleHeader, SectionEntry, SectionKind, TrianglePlane, VERSION_MAJOR, bank_crc,
 };
-use crate::samples::{Samples, lattice_index, lattice_len};
+use crate::samples::{Samples, ill_conditioned_sample, lattice_index, lattice_len};
 use bytemuck::Pod;
 use core::ops::Range;
 
@@ -518,7 +518,9 @@ fn parse_relaxation<'a>(sections: &Sections<'a>) -> Result<Option<&'a Relaxation
 
 /// `SPEC.md` "Validation" rule 15, contact samples: all three sections or none; the header
 /// (level, tip radius, reserved words); `t * lattice_len(level)` indices, each below the
-/// sample count; every sample finite and SPD (the `C_kk` test); and continuity: the triangles
+/// sample count; every sample finite and SPD (the `C_kk` test); every triangle's samples
+/// well enough conditioned for the tick's solve everywhere between them
+/// ([`ill_conditioned_sample`]); and continuity: the triangles
 /// around a node name one sample for it, and the two triangles of an edge name the same samples
 /// along it.
 fn parse_samples<'a>(
@@ -567,6 +569,14 @@ fn parse_samples<'a>(
         }
     }
     let samples = Samples { header, ids, w };
+    for t in 0..triangles.len() {
+        if let Some(sample) = ill_conditioned_sample(w, samples.triangle_samples(t)) {
+            return Err(BankError::SampleIllConditioned {
+                triangle: t as u32,
+                sample: u32::from(sample),
+            });
+        }
+    }
     // Lattice point k steps from corner a towards corner b of a triangle (corners at lattice
     // (0, 0), (level, 0), (0, level)).
     let corner = |c: usize| match c {

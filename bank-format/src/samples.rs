@@ -14,6 +14,61 @@
 
 use crate::layout::SampleHeader;
 
+/// Smallest Cholesky pivot (`L_ii^2`) the loop's f32 contact solve accepts, relative to the
+/// largest diagonal entry of the matrix factored: below it an f32 solve loses more than about
+/// two significant digits, so the tick reports an ill-conditioned solve instead of forces. The
+/// one margin of the sampled contact: the tick applies it to the interpolated `W` it factors
+/// (firmware `solve::Factor::check`), and the reader refuses samples that could bring some
+/// point of a triangle under it ([`ill_conditioned_sample`]).
+pub const MIN_PIVOT_REL: f32 = 1.0e-5;
+
+/// A lower bound on the smallest eigenvalue of the symmetric 3 x 3 matrix `w` (xx, xy, xz, yy,
+/// yz, zz), in f64: `4 det / trace^2`, since `lambda_min = det / (lambda_2 lambda_3)` and
+/// `lambda_2 lambda_3 <= (trace / 2)^2`. Within a factor of about 2 to 5 of `lambda_min` for
+/// the patch compliances of tissue (eigenvalues within a factor of a few of each other); 0 or
+/// less when `w` is not positive definite.
+pub fn min_eigenvalue_bound(w: &[f32; 6]) -> f64 {
+    let [xx, xy, xz, yy, yz, zz] = w.map(f64::from);
+    let det = xx * (yy * zz - yz * yz) - xy * (xy * zz - yz * xz) + xz * (xy * yz - yy * xz);
+    let trace = xx + yy + zz;
+    if !(trace > 0.0) {
+        return 0.0;
+    }
+    4.0 * det / (trace * trace)
+}
+
+/// The sample of one triangle's lattice (`ids` into `w`, [`lattice_index`] order) that could
+/// make the interpolated `W` at some point of the triangle too ill-conditioned for the tick
+/// ([`MIN_PIVOT_REL`]), if any: the one with the smallest [`min_eigenvalue_bound`].
+///
+/// Every interpolated `W` is a convex combination of the triangle's samples, so its smallest
+/// eigenvalue is at least the smallest of theirs (concavity of `lambda_min`) and its diagonal
+/// at most their largest; a Cholesky pivot is at least `lambda_min`. The triangle passes when
+/// the smallest bound is at least twice [`MIN_PIVOT_REL`] times the largest diagonal entry:
+/// the factor 2 covers the f32 rounding of the interpolation and of the tick's factor (a few
+/// `1e-7` of the diagonal, against a margin of `1e-5`). A sample not found in `w` is returned
+/// as is (the reader's index check reports it first).
+pub fn ill_conditioned_sample(w: &[[f32; 6]], ids: &[u16]) -> Option<u16> {
+    let (mut lowest, mut worst, mut max_diag) = (f64::INFINITY, None, 0.0f64);
+    for &s in ids {
+        let Some(m) = w.get(usize::from(s)) else {
+            return Some(s);
+        };
+        let bound = min_eigenvalue_bound(m);
+        if bound < lowest {
+            (lowest, worst) = (bound, Some(s));
+        }
+        for d in [m[0], m[3], m[5]] {
+            max_diag = max_diag.max(f64::from(d));
+        }
+    }
+    if lowest >= 2.0 * f64::from(MIN_PIVOT_REL) * max_diag {
+        None
+    } else {
+        worst
+    }
+}
+
 /// Lattice points of a triangle at `level` steps per side: `(level + 1) (level + 2) / 2`.
 pub const fn lattice_len(level: u32) -> usize {
     let n = level as usize;

@@ -563,6 +563,15 @@ cases! {
         let (_, off, ..) = section(b, K::PatchCompliance);
         put_f32(b, off + 48 + 12, -1.0e-3);
     });
+    // Sample 2 (of triangle 0) SPD by the C_kk test (smallest pivot 1e-6 of the diagonal,
+    // above 1e-7) but too ill-conditioned for the tick's solve (under twice MIN_PIVOT_REL).
+    sample_ill_conditioned: E::SampleIllConditioned { triangle: 0, sample: 2 } =>
+        corrupt_sampled(|b| {
+            let (_, off, ..) = section(b, K::PatchCompliance);
+            for (k, v) in [1.0e-3, 0.0, 0.0, 1.0e-3, 0.0, 1.0e-9].into_iter().enumerate() {
+                put_f32(b, off + 48 + 4 * k, v);
+            }
+        });
     // The tick's limits (`SPEC.md`, "Limits the tick's cost rests on"): hostile but otherwise
     // valid banks, refused.
     too_many_candidates: E::TooManyCandidates { cell: 0, count: 162 } =>
@@ -625,5 +634,13 @@ fn error_codes_are_distinct_and_stable() {
     assert_eq!(E::TooManyTriangles { node: 0, count: 0 }.code(), 52);
     assert_eq!(E::RelaxationCount { count: 0 }.code(), 53);
     assert_eq!(E::RelaxationTerm { term: 0 }.code(), 54);
-    assert_eq!(E::RelaxationSum.code(), last_code());
+    assert_eq!(E::RelaxationSum.code(), 55);
+    assert_eq!(
+        E::SampleIllConditioned {
+            triangle: 0,
+            sample: 0
+        }
+        .code(),
+        last_code()
+    );
 }

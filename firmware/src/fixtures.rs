@@ -185,6 +185,12 @@ pub fn sampled_patch_with(w: impl Fn([f64; 3]) -> [[f64; 3]; 3]) -> AlignedBytes
 
 /// [`sampled_patch_with`] at lattice `level` (1..=8).
 pub fn sampled_patch_at_level(level: u32, w: impl Fn([f64; 3]) -> [[f64; 3]; 3]) -> AlignedBytes {
+    let b = sampled_patch_builder(level, w);
+    AlignedBytes::new(&b.build().expect("valid fixture bank"))
+}
+
+/// The builder of [`sampled_patch_at_level`], for a test to build (or see refused) itself.
+pub fn sampled_patch_builder(level: u32, w: impl Fn([f64; 3]) -> [[f64; 3]; 3]) -> BankBuilder {
     let xs: Vec<f64> = (0..PATCH_SIDE)
         .map(|i| PATCH_SPACING_M * i as f64)
         .collect();
@@ -206,7 +212,7 @@ pub fn sampled_patch_at_level(level: u32, w: impl Fn([f64; 3]) -> [[f64; 3]; 3])
         triangle_samples: lattice.triangle_points,
         w,
     });
-    AlignedBytes::new(&b.build().expect("valid fixture bank"))
+    b
 }
 
 fn grid_bank(xs: &[f64], ys: &[f64], truncation_m: f64, device: DeviceCalibration) -> AlignedBytes {

@@ -40,9 +40,10 @@ pub const MAX_DOFS: usize = 3 * MAX_IMPOSED_NODES;
 /// Tolerance on `|sum w_a - 1|` for contact weights (and barycentric coordinates).
 pub const WEIGHT_SUM_TOL: f32 = 1.0e-3;
 /// Smallest Cholesky pivot (`L_ii^2`) accepted, relative to the largest diagonal entry of the
-/// matrix factored. Below it an f32 solve loses more than about two significant digits, so the
-/// solve reports [`SolveError::IllConditioned`] instead of returning forces.
-pub const MIN_PIVOT_REL: f32 = 1.0e-5;
+/// matrix factored; below it the solve reports [`SolveError::IllConditioned`] instead of
+/// returning forces. The bank format's margin, which its reader applies to contact samples, so
+/// that a bank the reader accepts never fails here for its conditioning.
+pub use bank_format::MIN_PIVOT_REL;
 
 /// `C_SS` padded to the largest contact set.
 pub type CssMatrix = [[f32; MAX_DOFS]; MAX_DOFS];
