@@ -182,16 +182,36 @@ impl Device {
     }
 
     /// `force` scaled down (direction kept) to at most `max_force_n` in magnitude; a non-finite
-    /// force is returned as is (the safety supervisor faults on it).
+    /// force is returned as is (the safety supervisor faults on it). A finite force whose
+    /// squared norm overflows f32 (above about 1.8e19 N) is scaled through its largest
+    /// component, so it is capped like any other.
     pub fn limit_force(&self, force: [f32; 3]) -> [f32; 3] {
-        let n = crate::vec3::sqrt(dot(force, force));
         let max = self.cal.max_force_n;
-        if n > max && n.is_finite() {
-            let k = max / n;
-            force.map(|f| f * k)
-        } else {
-            force
+        let n2 = dot(force, force);
+        if n2.is_finite() {
+            let n = crate::vec3::sqrt(n2);
+            return if n > max {
+                let k = max / n;
+                force.map(|f| f * k)
+            } else {
+                force
+            };
         }
+        // Overflowed, or not finite: `max / |f|` as `(max / m) / |f / m|`, m the largest
+        // component's magnitude (comparisons, not `f32::max`: a libm call on the M4F).
+        let mut m = 0.0f32;
+        for f in force {
+            let a = if f < 0.0 { -f } else { f };
+            if a > m || a.is_nan() {
+                m = a;
+            }
+        }
+        if !m.is_finite() {
+            return force;
+        }
+        let s = force.map(|f| f / m);
+        let k = (max / m) / crate::vec3::sqrt(dot(s, s));
+        force.map(|f| f * k)
     }
 
     /// Unclamped motor currents for joint efforts: `i = tau / (transmission * Kt)`, A.
@@ -517,5 +537,26 @@ mod tests {
         let f = dev.limit_force([0.0, 6.0, 8.0]);
         assert!(close(f, [0.0, 3.0, 4.0], 1e-6));
         assert!(dev.limit_force([f32::NAN, 0.0, 0.0])[0].is_nan());
+        // Finite forces whose squared norm overflows f32 are capped too, direction kept.
+        let max = dev.cal.max_force_n;
+        let f = dev.limit_force([0.0, 3.0e19, -4.0e19]);
+        let want = [0.0, 0.6 * max, -0.8 * max];
+        assert!(
+            f.iter()
+                .zip(&want)
+                .all(|(a, b)| (a - b).abs() <= 1e-6 * max),
+            "{f:?}"
+        );
+        let f = dev.limit_force([f32::MAX, -f32::MAX, f32::MAX]);
+        let third = max / 3.0f32.sqrt();
+        let want = [third, -third, third];
+        assert!(
+            f.iter()
+                .zip(&want)
+                .all(|(a, b)| (a - b).abs() <= 1e-6 * max),
+            "{f:?}"
+        );
+        assert!(dev.limit_force([f32::INFINITY, 1.0, 0.0])[0].is_infinite());
+        assert!(dev.limit_force([1.0e30, f32::NAN, 0.0])[1].is_nan());
     }
 }

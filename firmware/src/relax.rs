@@ -42,7 +42,11 @@
 //! history (after a hold, negative: the surface is still below its rest shape and creeping
 //! back) and decay with `tau_k`. No force is rendered without contact. When the tool presses
 //! again before the tissue has recovered, the negative residue lowers the force: the tissue is
-//! softer for a while, as a relaxed one is. The contact is unilateral: a total force pointing
+//! softer for a while, as a relaxed one is. The memory is the pressed site's, but the state has
+//! no site: a tool that has rendered no contact force for longer than the shortest time
+//! constant may come down anywhere, so the memory is then reset (the old site taken as
+//! recovered), never carried to another site; within that time a press meets the residue, at the
+//! old site or near it. The contact is unilateral: a total force pointing
 //! against the elastic force (the tissue pulling the tool in) is never rendered, its component
 //! along `Q_e` is removed (continuous: unchanged where that component is zero), and nothing is
 //! rendered while `Q_e = 0`.
@@ -85,6 +89,11 @@ pub struct Qlv {
     q_prev: [f32; 3],
     /// This tick has pressed ([`Qlv::press`]); cleared by [`Qlv::end_tick`].
     pressed: bool,
+    /// Ticks since the last press.
+    free_ticks: u32,
+    /// The shortest time constant, in ticks (rounded up): after this many free ticks the
+    /// memory is reset (module notes, "Contact").
+    forget_after: u32,
 }
 
 impl Qlv {
@@ -94,13 +103,17 @@ impl Qlv {
         let mut decay = [0.0; MAX_PRONY_TERMS];
         let mut gain = [0.0; MAX_PRONY_TERMS];
         let mut terms = 0;
+        let mut tau_min = f64::INFINITY;
         for ((g, tau), (c, b)) in law.terms().zip(decay.iter_mut().zip(gain.iter_mut())) {
             let x = f64::from(dt_s) / f64::from(tau);
             let one_minus_a = -libm::expm1(-x);
             *c = one_minus_a as f32;
             *b = (f64::from(g) * one_minus_a / x) as f32;
+            tau_min = tau_min.min(f64::from(tau));
             terms += 1;
         }
+        // `as` saturates (an infinite or NaN ratio gives u32::MAX or 0), never panics.
+        let forget_after = libm::ceil(tau_min / f64::from(dt_s)) as u32;
         Qlv {
             g_inf: law.g_inf(),
             terms,
@@ -109,6 +122,8 @@ impl Qlv {
             h: [[0.0; 3]; MAX_PRONY_TERMS],
             q_prev: [0.0; 3],
             pressed: false,
+            free_ticks: 0,
+            forget_after,
         }
     }
 
@@ -119,6 +134,7 @@ impl Qlv {
     /// one bad tick does not poison every later one.
     pub fn press(&mut self, q_e: [f32; 3]) -> Result<[f32; 3], SolveError> {
         self.pressed = true;
+        self.free_ticks = 0;
         let h = self.update(q_e);
         let f = [
             self.g_inf * q_e[0] + h[0],
@@ -152,10 +168,16 @@ impl Qlv {
     }
 
     /// One tick without a contact force (free, or nothing rendered): (2) with `Q_e = 0`; the
-    /// memory decays. Not checked here: with a zero input the state cannot grow past what the
-    /// last pressed (finite) `Q_e` gave it, and a press checks the whole sum before rendering.
+    /// memory decays, and is reset once the tool has been free for longer than the shortest
+    /// time constant (module notes, "Contact"). Not checked here: with a zero input the state
+    /// cannot grow past what the last pressed (finite) `Q_e` gave it, and a press checks the
+    /// whole sum before rendering.
     pub fn release(&mut self) {
         self.update([0.0; 3]);
+        self.free_ticks = self.free_ticks.saturating_add(1);
+        if self.free_ticks == self.forget_after.saturating_add(1) {
+            self.reset();
+        }
     }
 
     /// The end of a tick: one that did not [`Qlv::press`] (no contact force rendered: free,
@@ -318,8 +340,8 @@ mod tests {
     }
 
     /// Release after a hold: no force without contact, the memory decays (negative after a
-    /// hold: the tissue softer for a while), and after many `tau` a press is the relaxed
-    /// tissue's again, bit for bit in the limit of a full decay.
+    /// hold: the tissue softer for a while), and long after a press is the relaxed tissue's
+    /// again.
     #[test]
     fn release_decays_the_memory_and_renders_nothing() {
         let r = law(&[0.5], &[0.1]);
@@ -334,11 +356,12 @@ mod tests {
         let h0 = qlv.h[0][2];
         // After the hold (h ~ 0.5 e^{-10} ~ 0) the drop of Q_e leaves about -0.5 N.
         assert!((f64::from(h0) + 0.5 * 0.1 / 1e-3 * (1.0 - (-0.01f64).exp())).abs() < 1e-3);
-        for _ in 0..100 {
+        for _ in 0..99 {
             qlv.release();
         }
-        // One tau later: e^{-1} of it left.
-        assert!((qlv.h[0][2] / h0 - (-1.0f32).exp()).abs() < 1e-4);
+        // One tau after the end of contact (99 ticks after h0; the reset would come a tick
+        // later): e^{-0.99} of it left.
+        assert!((qlv.h[0][2] / h0 - (-0.99f32).exp()).abs() < 1e-4);
         // A light press soon after: the residue would pull; rendered is zero along Q_e.
         let f = qlv.press([0.0, 0.0, 0.05]).unwrap();
         assert!(f.iter().all(|v| v.abs() < 1e-7), "{f:?}");
@@ -353,6 +376,31 @@ mod tests {
         let a = qlv.press([0.0, 0.0, 1.0]).unwrap();
         let b = fresh.press([0.0, 0.0, 1.0]).unwrap();
         assert!((a[2] - b[2]).abs() < 1e-6, "{a:?} vs {b:?}");
+    }
+
+    /// The memory is not carried to another site: free for the shortest time constant (5 ms,
+    /// 5 ticks, of two terms) it is still there, one tick longer it is gone, and a press then
+    /// is a fresh tissue's, bit for bit, though the long term (10 s) had barely decayed.
+    #[test]
+    fn the_memory_is_forgotten_after_the_shortest_time_constant_free() {
+        let r = law(&[0.3, 0.4], &[10.0, 0.005]);
+        let mut qlv = Qlv::new(&r, DT as f32);
+        assert_eq!(qlv.forget_after, 5);
+        for n in 1..=300 {
+            qlv.press([0.0, 0.01 * n.min(100) as f32, 0.0]).unwrap();
+            qlv.end_tick();
+        }
+        for _ in 0..5 {
+            qlv.end_tick();
+        }
+        assert!(qlv.h[0][1].abs() > 1e-4, "{:?}", qlv.h);
+        qlv.end_tick();
+        assert_eq!(qlv.h, [[0.0; 3]; MAX_PRONY_TERMS]);
+        let mut fresh = Qlv::new(&r, DT as f32);
+        for n in 1..=50 {
+            let q = [0.02 * n as f32, 0.0, 0.0];
+            assert_eq!(qlv.press(q), fresh.press(q), "{n}");
+        }
     }
 
     /// A non-finite force is an error and leaves a relaxed state behind (also a state that went
