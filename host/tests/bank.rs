@@ -403,11 +403,12 @@ fn sweep_prints_a_row_per_rule_and_radius() {
         16 * tool["pairs"].as_u64().unwrap(),
         "{v}"
     );
-    assert!(tool16["patch_max"].as_f64().unwrap() <= 1e-4, "{v}");
+    // Measured: bfp16 1.4e-5, f32 2.8e-7 (patch) and 2.0e-7 (point), against f64.
+    assert!(tool16["patch_max"].as_f64().unwrap() <= 5e-5, "{v}");
     // Edges only: the tool patch loses couplings; the tool's pairs: exact forces.
     assert!(zero["patch_max"].as_f64().unwrap() > 1e-3, "{v}");
-    assert!(tool["patch_max"].as_f64().unwrap() <= 1e-4, "{v}");
-    assert!(tool["point_max"].as_f64().unwrap() <= 1e-4, "{v}");
+    assert!(tool["patch_max"].as_f64().unwrap() <= 5e-6, "{v}");
+    assert!(tool["point_max"].as_f64().unwrap() <= 5e-6, "{v}");
     assert!(tool["fits_region"].as_bool().unwrap(), "{v}");
 }
 

@@ -93,7 +93,8 @@ fn firmware_forces_match_the_host_f64_reference_on_the_liver_bank() {
     eprintln!(
         "firmware f32 vs host f64, untruncated compliance: worst relative force error {worst:.2e}"
     );
-    assert!(worst <= 1e-4, "{worst:e}");
+    // Measured 3.4e-7; 5e-6 fails on a tenfold loss of precision.
+    assert!(worst <= 5e-6, "{worst:e}");
 }
 
 fn relative(got: &[[f32; 3]], want: &[[f64; 3]]) -> f64 {
@@ -252,12 +253,13 @@ fn full_tick_forces_match_the_host_f64_reference_on_the_liver_bank() {
             "contact set {nodes:?}: f32 vs f64 node forces {err:.2e}, tool force {tool:.2e}; \
              vs the untruncated patch (up to {dropped} node(s) not coupled in the bank): {trunc:.2e}"
         );
-        assert!(*err <= 1e-4 && *tool <= 1e-4, "{nodes:?}: {err:e} {tool:e}");
+        // Measured 4.2e-7 at most.
+        assert!(*err <= 5e-6 && *tool <= 5e-6, "{nodes:?}: {err:e} {tool:e}");
         // The bank couples every pair one tool patch can load (the "tool" rule): no patch node
         // is dropped, so the tick's force is the untruncated patch's too.
         assert_eq!(*dropped, 0, "{nodes:?}");
         assert!(
-            *trunc <= 1e-4,
+            *trunc <= 5e-6,
             "{nodes:?}: vs the untruncated patch {trunc:e}"
         );
     }

@@ -185,7 +185,8 @@ fn quick_report_renders_every_plot_and_agrees_with_the_references() {
     // tests/tests/solve_vs_host.rs hold the firmware's solves to, on the untruncated
     // compliance.
     let worst = ys("f32-vs-f64").into_iter().fold(0.0, f64::max);
-    assert!(worst <= 1e-4, "f32 vs f64: {worst:e}");
+    // Measured 8.8e-7 (docs/figures.md).
+    assert!(worst <= 5e-6, "f32 vs f64: {worst:e}");
     assert_eq!(
         find("nu = 0.45: f32 force error")["verdict"],
         "matches_reference"

@@ -135,7 +135,8 @@ fn point_contact_f32_matches_f64_reference() {
         worst = worst.max(rel_err(got.forces(), &want));
     }
     println!("point contact, 6 nodes: worst relative error f32 vs f64 {worst:.2e}");
-    assert!(worst <= 1e-4, "{worst}");
+    // Measured 4.2e-8; 5e-6 fails on a hundredfold loss of precision.
+    assert!(worst <= 5e-6, "{worst}");
 }
 
 #[test]
@@ -200,6 +201,7 @@ fn triangle_forms_f32_match_f64_reference_and_compare_conditioning() {
     println!(
         "worst relative error f32 vs f64: alpha form {worst_a:.2e}, barycentric {worst_b:.2e}"
     );
-    assert!(worst_a <= 1e-4, "{worst_a}");
-    assert!(worst_b <= 1e-4, "{worst_b}");
+    // Measured 2.6e-7 and 2.5e-7.
+    assert!(worst_a <= 5e-6, "{worst_a}");
+    assert!(worst_b <= 5e-6, "{worst_b}");
 }
