@@ -74,6 +74,9 @@ struct Fake {
     /// Homed already (`ZeroEncoders` references the encoders; `Arm` without it is refused and
     /// latched as `NotReferenced`, as the firmware does).
     referenced: bool,
+    /// Its brown-out reset is below level 3: every `Arm` is refused with `BrownOutLevel`
+    /// (detail 0, BOR off), as the firmware's configuration check does.
+    brown_out: bool,
 }
 
 /// The fake device: waits for the host's Hello, answers with `bank_crc` (and, as the firmware
@@ -119,6 +122,9 @@ fn device(
                             greeted = true;
                         }
                         HostToDevice::SetMode(m) if state == State::Disarmed => mode = m,
+                        HostToDevice::Arm if fake.brown_out => {
+                            (state, fault) = (State::Fault, Some(FaultReason::BrownOutLevel));
+                        }
                         HostToDevice::Arm if state == State::Disarmed && !referenced => {
                             (state, fault) = (State::Fault, Some(FaultReason::NotReferenced));
                         }
@@ -179,6 +185,7 @@ fn fake(bank_crc: u32, tip: [f32; 3]) -> Fake {
         fault_after: None,
         home_tip: tip,
         referenced: true,
+        brown_out: false,
     }
 }
 
@@ -630,6 +637,28 @@ fn device_arm_on_an_unhomed_device_says_to_zero_it_first() {
         "{err}"
     );
     assert!(!log.contains(&HostToDevice::ZeroEncoders), "{log:?}");
+}
+
+/// A device whose brown-out reset is below level 3 refuses every arm with `BrownOutLevel`:
+/// `host device arm` fails and names the fix, `host flash --set-bor`.
+#[test]
+fn device_arm_below_brown_out_level_3_names_the_fix() {
+    let dir = tempfile::tempdir().unwrap();
+    let (bytes, bank) = patch_bank(dir.path());
+    let crc = Bank::parse(&bytes).unwrap().crc();
+    let bor_off = Fake {
+        brown_out: true,
+        ..fake(crc, [0.0; 3])
+    };
+    let (out, _) = arm(bor_off, &bank, &["--seconds", "0.3"]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(
+        err.contains("BrownOutLevel")
+            && err.contains("below level 3")
+            && err.contains("host flash --set-bor"),
+        "{err}"
+    );
 }
 
 #[test]
