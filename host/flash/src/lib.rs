@@ -768,37 +768,58 @@ pub fn set_bor_level3(
             what: "cannot reset and halt the core",
             reason: e.to_string(),
         })?;
-    let fz = read(&mut core, DBGMCU_APB1_FZ, "cannot read DBGMCU_APB1_FZ")?;
+    match write_bor_level3(&mut core, confirm) {
+        Ok(BorOutcome::Written(change)) => {
+            core.reset().map_err(|e| Error::Session {
+                what: "the option bytes are written but the core did not reset (power-cycle \
+                       the board, then check with `host flash --set-bor`)",
+                reason: e.to_string(),
+            })?;
+            verify_optcr(&mut core, change, " after a reset of the chip")?;
+            Ok(BorOutcome::Written(change))
+        }
+        other => {
+            // Nothing written, or the write failed: the firmware runs again either way (below
+            // level 3 it refuses to arm).
+            let restarted = core.run().map_err(|e| Error::Session {
+                what: "the core did not restart after the option-byte step (power-cycle the \
+                       board)",
+                reason: e.to_string(),
+            });
+            let outcome = other?;
+            restarted?;
+            Ok(outcome)
+        }
+    }
+}
+
+/// [`set_bor_level3`] on the halted core, up to the read-back after the write.
+fn write_bor_level3(
+    core: &mut probe_rs::Core<'_>,
+    confirm: &mut dyn FnMut(&BorChange) -> bool,
+) -> Result<BorOutcome, Error> {
+    let fz = read(core, DBGMCU_APB1_FZ, "cannot read DBGMCU_APB1_FZ")?;
     write(
-        &mut core,
+        core,
         DBGMCU_APB1_FZ,
         fz | FREEZE_WATCHDOGS,
         "cannot freeze the watchdogs (DBGMCU_APB1_FZ)",
     )?;
-    let old = check_chip(&mut core)?;
+    let old = check_chip(core)?;
     let change = bor_level3(old)?;
     if !change.is_needed() {
-        core.run().map_err(|e| Error::Session {
-            what: "the option bytes are at level 3 already but the core did not restart \
-                   (power-cycle the board)",
-            reason: e.to_string(),
-        })?;
         return Ok(BorOutcome::AlreadySet(old));
     }
     if !confirm(&change) {
-        core.run().map_err(|e| Error::Session {
-            what: "nothing was written but the core did not restart (power-cycle the board)",
-            reason: e.to_string(),
-        })?;
         return Ok(BorOutcome::Declined(change));
     }
-    wait_not_busy(&mut core, old)?;
+    wait_not_busy(core, old)?;
     for key in OPTKEYS {
-        write(&mut core, FLASH_OPTKEYR, key, "cannot write FLASH_OPTKEYR")?;
+        write(core, FLASH_OPTKEYR, key, "cannot write FLASH_OPTKEYR")?;
     }
-    let unlocked = read(&mut core, FLASH_OPTCR, "cannot read FLASH_OPTCR")?;
+    let unlocked = read(core, FLASH_OPTCR, "cannot read FLASH_OPTCR")?;
     if unlocked & OPTCR_OPTLOCK != 0 {
-        let sr = read(&mut core, FLASH_SR, "cannot read FLASH_SR")?;
+        let sr = read(core, FLASH_SR, "cannot read FLASH_SR")?;
         return Err(Error::OptionWrite {
             what: "FLASH_OPTCR stayed locked after the unlock keys",
             sr,
@@ -806,14 +827,14 @@ pub fn set_bor_level3(
         });
     }
     let word = change.new & !(OPTCR_OPTLOCK | OPTCR_OPTSTRT);
-    write(&mut core, FLASH_OPTCR, word, "cannot write FLASH_OPTCR")?;
+    write(core, FLASH_OPTCR, word, "cannot write FLASH_OPTCR")?;
     write(
-        &mut core,
+        core,
         FLASH_OPTCR,
         word | OPTCR_OPTSTRT,
         "cannot start the option-byte write (OPTSTRT)",
     )?;
-    let sr = wait_not_busy(&mut core, old)?;
+    let sr = wait_not_busy(core, old)?;
     if sr & SR_ERRORS != 0 {
         return Err(Error::OptionWrite {
             what: "the flash interface flagged an error",
@@ -822,32 +843,33 @@ pub fn set_bor_level3(
         });
     }
     write(
-        &mut core,
+        core,
         FLASH_OPTCR,
         word | OPTCR_OPTLOCK,
         "cannot lock FLASH_OPTCR again",
     )?;
-    let verify = |core: &mut probe_rs::Core<'_>, when| -> Result<(), Error> {
-        let read = read(core, FLASH_OPTCR, "cannot read FLASH_OPTCR back")?;
-        if read & !OPTCR_OPTSTRT == change.new {
-            Ok(())
-        } else {
-            Err(Error::OptionVerify {
-                old,
-                new: change.new,
-                read,
-                when,
-            })
-        }
-    };
-    verify(&mut core, " after the write")?;
-    core.reset().map_err(|e| Error::Session {
-        what: "the option bytes are written but the core did not reset (power-cycle the \
-               board, then check with `host flash --set-bor`)",
-        reason: e.to_string(),
-    })?;
-    verify(&mut core, " after a reset of the chip")?;
+    verify_optcr(core, change, " after the write")?;
     Ok(BorOutcome::Written(change))
+}
+
+/// Refuses a `FLASH_OPTCR` read back (`when`: after the write, after the reset) that is not
+/// the word of `change` (`OPTSTRT` aside, which the hardware clears).
+fn verify_optcr(
+    core: &mut probe_rs::Core<'_>,
+    change: BorChange,
+    when: &'static str,
+) -> Result<(), Error> {
+    let read = read(core, FLASH_OPTCR, "cannot read FLASH_OPTCR back")?;
+    if read & !OPTCR_OPTSTRT == change.new {
+        Ok(())
+    } else {
+        Err(Error::OptionVerify {
+            old: change.old,
+            new: change.new,
+            read,
+            when,
+        })
+    }
 }
 
 /// One probe found by [`list_probes`].
