@@ -12,7 +12,7 @@ use serde::de::DeserializeOwned;
 use serde::{Deserialize, Serialize};
 
 /// Version of the message set below; the device reports it in [`DeviceToHost::Hello`].
-pub const PROTOCOL_VERSION: u16 = 6;
+pub const PROTOCOL_VERSION: u16 = 7;
 /// Most contact nodes one telemetry message carries.
 pub const MAX_CONTACTS: usize = 8;
 /// Upper bound on a postcard-encoded message, bytes (the largest, a full telemetry message, is
@@ -104,6 +104,12 @@ pub enum FaultReason {
     /// can deliver (added in protocol 6; `detail` = motor): checked at boot, every `Arm`
     /// refused with it, since the amplifier would clamp such a current silently.
     AmplifierRange,
+    /// The chip's brown-out reset is below level 3 (added in protocol 7; `detail` = the
+    /// level the option bytes set: 0 for BOR off, 1 or 2): at 168 MHz the STM32F405 needs
+    /// 2.7 V, and a lower threshold lets it run on below that. Found at boot from
+    /// `FLASH_OPTCR`, every `Arm` refused with it until `host flash --set-bor` programs
+    /// level 3.
+    BrownOutLevel,
 }
 
 /// Why the chip last started, as its reset flags tell it (added in protocol 6; on the STM32F4

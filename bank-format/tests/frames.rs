@@ -103,6 +103,11 @@ fn device_messages() -> Vec<DeviceToHost> {
             reason: FaultReason::AmplifierRange,
             detail: 1,
         },
+        DeviceToHost::Fault {
+            tick: 103,
+            reason: FaultReason::BrownOutLevel,
+            detail: 0,
+        },
         DeviceToHost::Reset {
             cause: ResetCause::BrownOut,
         },
@@ -179,12 +184,13 @@ fn fault_reasons_keep_their_wire_indices() {
         FaultReason::WatchdogReset,
         FaultReason::NotReferenced,
         FaultReason::AmplifierRange,
+        FaultReason::BrownOutLevel,
     ];
     for (index, reason) in reasons.into_iter().enumerate() {
         let bytes = postcard::to_slice(&reason, &mut [0u8; 8]).unwrap().to_vec();
         assert_eq!(bytes, [index as u8], "{reason:?}");
     }
-    assert_eq!(PROTOCOL_VERSION, 6);
+    assert_eq!(PROTOCOL_VERSION, 7);
 }
 
 #[test]

@@ -337,6 +337,7 @@ fn fault() -> impl Strategy<Value = FaultReason> {
         Just(FaultReason::WatchdogReset),
         Just(FaultReason::NotReferenced),
         Just(FaultReason::AmplifierRange),
+        Just(FaultReason::BrownOutLevel),
     ]
 }
 

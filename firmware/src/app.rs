@@ -84,8 +84,8 @@ pub struct App<'b, 'q> {
     link_grace_ticks: u32,
     last_tick_cycles: u32,
     reset_cause: Option<ResetCause>,
-    /// A fault of the hardware's configuration found at boot ([`App::check_amplifiers`]):
-    /// every arm is refused with it.
+    /// A fault of the hardware's configuration found at boot ([`App::check_amplifiers`],
+    /// [`App::check_brown_out`]): every arm is refused with it.
     configuration: Option<Fault>,
 }
 
@@ -179,6 +179,32 @@ impl<'b, 'q> App<'b, 'q> {
                 tick: self.tick_count(),
                 reason: fault.reason,
                 detail: fault.detail,
+            });
+        }
+    }
+
+    /// Check at boot that the chip's brown-out reset is at level 3 (`optcr` the value of
+    /// `FLASH_OPTCR`, [`crate::brownout`]); below it, latch and report
+    /// [`FaultReason::BrownOutLevel`] (detail the level, 0 for BOR off) and refuse every arm
+    /// with it, however often the fault is cleared: the option bytes must change (`host flash
+    /// --set-bor`). As with [`App::check_amplifiers`], without a valid bank there is nothing
+    /// to check, and the first configuration fault found is the one every arm re-sends. Call
+    /// right after [`App::new`].
+    pub fn check_brown_out(&mut self, optcr: u32) {
+        let Core::Loop(lp) = &mut self.core else {
+            return;
+        };
+        let Some((reason, detail)) =
+            crate::brownout::fault(crate::brownout::level_from_optcr(optcr))
+        else {
+            return;
+        };
+        self.configuration.get_or_insert(Fault { reason, detail });
+        if lp.raise(reason, detail) {
+            self.queue(DeviceToHost::Fault {
+                tick: self.tick_count(),
+                reason,
+                detail,
             });
         }
     }
@@ -1311,6 +1337,60 @@ mod tests {
         app.check_amplifiers(&amps(2.0));
         home(&mut app);
         let mut host = FakeHost::new(driver);
+        host.send(&HostToDevice::Arm);
+        let r = app.tick(&mut plant, &clock, false).unwrap();
+        assert_eq!(r.state, WireState::Armed);
+    }
+
+    /// A chip whose option bytes leave brown-out reset off (FLASH_OPTCR's reset value,
+    /// 0x0FFF_AAED: `BOR_LEV` = 11): `BrownOutLevel` (detail 0) at boot, and every arm refused
+    /// with it, cleared or not, homed or not; the same word with `BOR_LEV` = 00 (level 3)
+    /// arms once homed.
+    #[test]
+    fn brown_out_below_level_3_refuses_to_arm() {
+        let bytes = flat_patch();
+        let bank = Bank::parse(bytes.as_slice()).unwrap();
+        let mut link = Link::new();
+        let (tick_end, driver) = link.split();
+        let mut app = App::new(Ok(&bank), tick_end, 0);
+        app.check_brown_out(0x0FFF_AAED);
+        home(&mut app);
+        let mut host = FakeHost::new(driver);
+        let (mut plant, clock) = (plant(), clock());
+        let brown_out = |tick| DeviceToHost::Fault {
+            tick,
+            reason: FaultReason::BrownOutLevel,
+            detail: 0,
+        };
+        host.pump();
+        assert_eq!(host.sent[1], brown_out(0));
+        for _ in 0..3 {
+            host.send(&HostToDevice::ClearFault);
+            host.send(&HostToDevice::ZeroEncoders);
+            host.send(&HostToDevice::Arm);
+            let r = app.tick(&mut plant, &clock, false).unwrap();
+            assert_eq!((r.state, r.currents_a), (WireState::Fault, [0.0; 3]));
+            host.pump();
+            assert_eq!(host.sent.last(), Some(&brown_out(r.tick - 1)));
+        }
+        assert!(plant.driven.iter().all(Option::is_none));
+        assert_eq!(app.telemetry().fault, Some(FaultReason::BrownOutLevel));
+
+        // Level 3: no fault at boot; not homed, Arm is refused NotReferenced; after
+        // ZeroEncoders it arms.
+        let mut link = Link::new();
+        let (tick_end, driver) = link.split();
+        let mut app = App::new(Ok(&bank), tick_end, 0);
+        app.check_brown_out(0x0FFF_AAE1);
+        let mut host = FakeHost::new(driver);
+        host.pump();
+        assert_eq!(host.sent.len(), 1, "{:?}", host.sent);
+        host.send(&HostToDevice::Arm);
+        let r = app.tick(&mut plant, &clock, false).unwrap();
+        assert_eq!(r.state, WireState::Fault);
+        assert_eq!(app.telemetry().fault, Some(FaultReason::NotReferenced));
+        host.send(&HostToDevice::ClearFault);
+        host.send(&HostToDevice::ZeroEncoders);
         host.send(&HostToDevice::Arm);
         let r = app.tick(&mut plant, &clock, false).unwrap();
         assert_eq!(r.state, WireState::Armed);

@@ -13,8 +13,8 @@
 //! [`hal`] the trait boundary an image implements for its hardware; the QEMU
 //! software-in-the-loop image lives in `firmware/qemu/`, the STM32F405 board image in
 //! `firmware/board/`. For the images: [`deadline`] (tick overruns on a cycle counter),
-//! [`reset`] (the reset cause from the reset flags) and [`stm32_gpio`] (GPIO register words
-//! for the panic path).
+//! [`reset`] (the reset cause from the reset flags), [`brownout`] (the brown-out level from the
+//! option bytes) and [`stm32_gpio`] (GPIO register words for the panic path).
 #![no_std]
 // No panic paths in the firmware: every module the tick calls is checked (tests may unwrap).
 #![cfg_attr(
@@ -38,6 +38,7 @@ pub const TICK_PERIOD_S: f32 = 1.0 / TICK_HZ as f32;
 
 pub mod amplifier;
 pub mod app;
+pub mod brownout;
 pub mod cholesky;
 pub mod contact;
 pub mod deadline;

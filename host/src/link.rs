@@ -4,7 +4,8 @@
 //!
 //! [`open_device_port`] finds and opens the board's port, [`await_identity`] greets the device
 //! and reads its [`Identity`], [`check_identity`] refuses a device that does not run the
-//! expected bank (`host flash` uses these three); [`DeviceLink`] does all of it and then runs a
+//! expected bank (`host flash` uses these three, and [`disarm_connected`] before it halts the
+//! chip); [`DeviceLink`] does all of it and then runs a
 //! thread that sends a heartbeat every 2 ms and the commands given to it, and hands every
 //! message the device sends to a callback (the display's serial source,
 //! [`crate::display::source::SerialSource`], and so `host device`).
@@ -216,6 +217,89 @@ pub fn open_device_port(
         }
         std::thread::sleep(Duration::from_millis(200));
     }
+}
+
+/// What [`disarm_connected`] did.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum Disarmed {
+    /// No device connected: no port given and none with [`BOARD_USB_ID`], or the port given
+    /// does not exist. The text says which.
+    NoDevice(String),
+    /// `Disarm` was sent on `port`; `state` is the device's state in the first telemetry
+    /// after it that is not armed, `None` when none came within the timeout (a firmware
+    /// that speaks another protocol, or none running).
+    Sent {
+        /// The port.
+        port: String,
+        /// The state the device then reported.
+        state: Option<bank_format::State>,
+    },
+}
+
+/// Sends `Disarm` to the device on `port`, or on the one USB port with [`BOARD_USB_ID`], if
+/// one is connected, and waits up to `timeout` for telemetry that is not armed (before
+/// `host flash` halts the chip: the motors are then off by the firmware's own hand). The frame
+/// goes after a 0x00, which ends any half frame the device holds. A port that exists but
+/// cannot be opened (held by another program, no permission) is an error: the device there
+/// cannot be disarmed.
+pub fn disarm_connected(port: Option<&str>, timeout: Duration) -> Result<Disarmed> {
+    let name = match port {
+        Some(p) => p.to_string(),
+        None => match board_port()? {
+            Some(p) => p,
+            None => {
+                return Ok(Disarmed::NoDevice(format!(
+                    "no USB serial port with the board's id {:04x}:{:04x}",
+                    BOARD_USB_ID.0, BOARD_USB_ID.1
+                )));
+            }
+        },
+    };
+    let mut handle = match serialport::new(&name, 115_200)
+        .timeout(Duration::from_millis(2))
+        .open()
+    {
+        Ok(h) => h,
+        Err(e)
+            if e.kind() == serialport::ErrorKind::NoDevice
+                || e.kind() == serialport::ErrorKind::Io(ErrorKind::NotFound) =>
+        {
+            return Ok(Disarmed::NoDevice(format!("no device on {name} ({e})")));
+        }
+        Err(e) => bail!(
+            "cannot open {name} to disarm the device there ({e}): close the program holding \
+             it (host device, host demo) or give the right port with --port"
+        ),
+    };
+    handle
+        .write_all(&[0])
+        .and_then(|()| send(&mut *handle, &HostToDevice::Disarm).map_err(std::io::Error::other))
+        .with_context(|| format!("{name}: cannot send Disarm"))?;
+    let mut decoder = FrameDecoder::<DeviceToHost>::new();
+    let mut buf = [0u8; 512];
+    let end = Instant::now() + timeout;
+    while Instant::now() < end {
+        let n = match handle.read(&mut buf) {
+            Ok(0) => break,
+            Ok(n) => n,
+            Err(e) if e.kind() == ErrorKind::TimedOut => continue,
+            Err(_) => break,
+        };
+        for msg in decoder.feed_slice(buf.get(..n).unwrap_or(&[])).flatten() {
+            if let DeviceToHost::Telemetry(t) = msg
+                && t.state != bank_format::State::Armed
+            {
+                return Ok(Disarmed::Sent {
+                    port: name,
+                    state: Some(t.state),
+                });
+            }
+        }
+    }
+    Ok(Disarmed::Sent {
+        port: name,
+        state: None,
+    })
 }
 
 /// The serial port with [`BOARD_USB_ID`], if exactly one; several are an error.

@@ -74,6 +74,9 @@ struct Fake {
     /// Homed already (`ZeroEncoders` references the encoders; `Arm` without it is refused and
     /// latched as `NotReferenced`, as the firmware does).
     referenced: bool,
+    /// Its brown-out reset is below level 3: every `Arm` is refused with `BrownOutLevel`
+    /// (detail 0, BOR off), as the firmware's configuration check does.
+    brown_out: bool,
 }
 
 /// The fake device: waits for the host's Hello, answers with `bank_crc` (and, as the firmware
@@ -119,6 +122,9 @@ fn device(
                             greeted = true;
                         }
                         HostToDevice::SetMode(m) if state == State::Disarmed => mode = m,
+                        HostToDevice::Arm if fake.brown_out => {
+                            (state, fault) = (State::Fault, Some(FaultReason::BrownOutLevel));
+                        }
                         HostToDevice::Arm if state == State::Disarmed && !referenced => {
                             (state, fault) = (State::Fault, Some(FaultReason::NotReferenced));
                         }
@@ -179,6 +185,7 @@ fn fake(bank_crc: u32, tip: [f32; 3]) -> Fake {
         fault_after: None,
         home_tip: tip,
         referenced: true,
+        brown_out: false,
     }
 }
 
@@ -632,6 +639,28 @@ fn device_arm_on_an_unhomed_device_says_to_zero_it_first() {
     assert!(!log.contains(&HostToDevice::ZeroEncoders), "{log:?}");
 }
 
+/// A device whose brown-out reset is below level 3 refuses every arm with `BrownOutLevel`:
+/// `host device arm` fails and names the fix, `host flash --set-bor`.
+#[test]
+fn device_arm_below_brown_out_level_3_names_the_fix() {
+    let dir = tempfile::tempdir().unwrap();
+    let (bytes, bank) = patch_bank(dir.path());
+    let crc = Bank::parse(&bytes).unwrap().crc();
+    let bor_off = Fake {
+        brown_out: true,
+        ..fake(crc, [0.0; 3])
+    };
+    let (out, _) = arm(bor_off, &bank, &["--seconds", "0.3"]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(
+        err.contains("BrownOutLevel")
+            && err.contains("below level 3")
+            && err.contains("host flash --set-bor"),
+        "{err}"
+    );
+}
+
 #[test]
 fn device_arm_reports_a_fault_during_the_run_and_fails() {
     let dir = tempfile::tempdir().unwrap();
@@ -685,8 +714,13 @@ fn device_arm_disarms_on_ctrl_c() {
     assert_eq!(log.lock().unwrap().last(), Some(&HostToDevice::Disarm));
 }
 
+/// `host device zero` cannot see where the instrument is (the device takes any pose as home,
+/// and its tip reads the home pose after any zeroing): it asks the operator to confirm the
+/// homing fixture, sends nothing without the confirmation (refused outright without a
+/// terminal or `--yes`), and says what it checked (the device applied the command) and what
+/// it did not (the pose).
 #[test]
-fn device_zero_sends_zero_encoders_and_checks_the_tip_is_home() {
+fn device_zero_asks_for_the_fixture_and_says_what_it_checked() {
     let dir = tempfile::tempdir().unwrap();
     let (bytes, bank) = patch_bank(dir.path());
     let parsed = Bank::parse(&bytes).unwrap();
@@ -695,37 +729,86 @@ fn device_zero_sends_zero_encoders_and_checks_the_tip_is_home() {
     let home = Workspace::from_device(&cal)
         .tip(q[0], q[1], q[2])
         .map(|x| x as f32);
-    let zero = |fake: Fake| {
+    // Runs `host device zero` against `fake`, with `extra` arguments and, when `answer` is
+    // given, a terminal on stdin that has that line typed into it.
+    let zero = |fake: Fake, extra: &[&str], answer: Option<&[u8]>| {
         let (master, name, slave) = pty();
         let stop = Arc::new(AtomicBool::new(false));
         let (dev, log) = device(master, fake, Arc::clone(&stop));
-        let out = run(&["device", "zero", "--port", &name, "--bank", &bank]);
+        let mut args = vec!["device", "zero", "--port", &name, "--bank", &bank];
+        args.extend_from_slice(extra);
+        let mut cmd = Command::new(env!("CARGO_BIN_EXE_host"));
+        cmd.args(&args);
+        let tty = answer.map(|line| {
+            let (mut tty_master, _, tty_slave) = pty();
+            tty_master.write_all(line).unwrap();
+            cmd.stdin(Stdio::from(tty_slave));
+            tty_master
+        });
+        let out = cmd.output().expect("run host");
+        drop(tty);
         stop.store(true, Ordering::Relaxed);
         drop(slave);
         dev.join().unwrap();
         let log = log.lock().unwrap().clone();
         (out, log)
     };
-    // Away from home, then zeroed: the tip moves home.
     let away = Fake {
         home_tip: home,
         ..fake(parsed.crc(), [0.01, 0.02, -0.03])
     };
-    let (out, log) = zero(away);
+    // No terminal to ask at and no --yes: refused before the port is opened.
+    let (out, log) = zero(away, &[], None);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(
+        err.contains("homing fixture") && err.contains("not a terminal") && err.contains("--yes"),
+        "{err}"
+    );
+    assert!(log.is_empty(), "{log:?}");
+    // --yes: zeroed; the output says what was checked and what was not.
+    let (out, log) = zero(away, &["--yes"], None);
+    let text = String::from_utf8_lossy(&out.stdout);
     assert!(
         out.status.success(),
         "{}",
         String::from_utf8_lossy(&out.stderr)
     );
-    assert!(String::from_utf8_lossy(&out.stdout).contains("home pose"));
+    assert_eq!(log, [HostToDevice::Hello, HostToDevice::ZeroEncoders]);
+    assert!(
+        text.contains("checked: the device received and applied the command"),
+        "{text}"
+    );
+    assert!(
+        text.contains("not checked: that the instrument is in its homing fixture (--yes said so)"),
+        "{text}"
+    );
+    // At a terminal: "n" sends nothing, "y" zeroes.
+    let (out, log) = zero(away, &[], Some(b"n\n"));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(
+        err.contains("Is the instrument held in its homing fixture?"),
+        "{err}"
+    );
+    assert!(err.contains("not zeroed (nothing sent)"), "{err}");
+    assert_eq!(log, [HostToDevice::Hello]);
+    let (out, log) = zero(away, &[], Some(b"y\n"));
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(text.contains("(you confirmed it)"), "{text}");
     assert_eq!(log, [HostToDevice::Hello, HostToDevice::ZeroEncoders]);
     // A device that ignores the command (here: whose home pose is elsewhere) is an error.
     let wrong = Fake {
         home_tip: [0.5, 0.5, 0.5],
         ..away
     };
-    let (out, _) = zero(wrong);
+    let (out, _) = zero(wrong, &["--yes"], None);
     let err = String::from_utf8_lossy(&out.stderr);
     assert_eq!(out.status.code(), Some(1), "{err}");
-    assert!(err.contains("did not move to the home pose"), "{err}");
+    assert!(err.contains("did not apply ZeroEncoders"), "{err}");
 }

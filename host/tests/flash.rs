@@ -1,6 +1,8 @@
 //! `host flash` without a board: the layout check against probe-rs's STM32F405RGTx, the plan
 //! of `--dry-run` (firmware + bank, `--bank-only`), the checks that refuse a bank or an image
-//! before any probe is opened, and the "no probe" error.
+//! before any probe is opened, and the "no probe" error; `--set-bor`'s option word (old ->
+//! new, by hand from RM0090's bit map), its dry run and its refusals; the `Disarm` sent to a
+//! connected device (a fake one on a pseudo-terminal) before the probe opens.
 //!
 //! The reference for every plan is the STM32F405's sector map written out by hand from the
 //! reference manual (RM0090 §3.3, table 5), not probe-rs's description under test.
@@ -331,6 +333,10 @@ fn dry_run_bank_only_touches_nothing_below_the_bank_region() {
     assert!(out.status.success(), "{}", stderr(&out));
     let text = String::from_utf8_lossy(&out.stdout);
     assert!(text.contains("erase     3 sectors, 393216 bytes"), "{text}");
+    assert!(
+        text.contains("disarm    first: Disarm to the device on the port with the board's USB id"),
+        "{text}"
+    );
 }
 
 /// Without `--dry-run` the command would open a probe next; a bank or image refused says so
@@ -396,9 +402,15 @@ fn flash_without_a_probe_fails_with_what_to_check() {
         &bank,
         "--probe",
         "fffe:fffd:no-such-probe",
+        "--port",
+        "/dev/no-such-port",
     ]);
     let err = stderr(&out);
     assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(
+        err.contains("no device connected to disarm (no device on /dev/no-such-port"),
+        "{err}"
+    );
     assert!(
         err.contains("no debug probe fffe:fffd:no-such-probe found"),
         "{err}"
@@ -446,4 +458,218 @@ fn dry_run_with_a_scene_programs_the_bank_host_bank_build_writes() {
     let crc = u32::from_le_bytes(bytes[20..24].try_into().unwrap());
     let text = String::from_utf8_lossy(&out.stdout);
     assert!(text.contains(&format!("bank crc  {crc:#010x}")), "{text}");
+}
+
+/// `--set-bor`'s word: `BOR_LEV` (bits 3:2) cleared, every other bit as read, `OPTLOCK` (bit 0)
+/// set and `OPTSTRT` (bit 1) clear; the expected words are written out by hand from RM0090's
+/// FLASH_OPTCR map (nWRP 27:16, RDP 15:8, nRST_STDBY 7, nRST_STOP 6, WDG_SW 5, BOR_LEV 3:2).
+#[test]
+fn set_bor_clears_bor_lev_and_keeps_every_other_bit() {
+    let cases = [
+        // Factory option bytes: BOR off (11).
+        (0x0FFF_AAED, 0x0FFF_AAE1),
+        // Level 1 (10) and level 2 (01).
+        (0x0FFF_AAE9, 0x0FFF_AAE1),
+        (0x0FFF_AAE5, 0x0FFF_AAE1),
+        // Sectors 0 and 1 write-protected, the hardware watchdog (WDG_SW = 0), BOR off.
+        (0x0FFC_AACD, 0x0FFC_AAC1),
+    ];
+    for (old, new) in cases {
+        let change = flash::bor_level3(old).unwrap();
+        assert_eq!((change.old, change.new), (old, new), "{old:#010x}");
+        assert!(change.is_needed());
+    }
+    // At level 3 already: nothing to write.
+    let change = flash::bor_level3(0x0FFF_AAE1).unwrap();
+    assert_eq!(change.new, 0x0FFF_AAE1);
+    assert!(!change.is_needed());
+    assert_eq!(flash::OPTCR_FACTORY, 0x0FFF_AAED);
+    assert!(flash::bor_level_name(0x0FFF_AAED).starts_with("off"));
+    assert!(flash::bor_level_name(0x0FFF_AAE1).starts_with("level 3"));
+    // Read protection other than level 0: refused, naming the level; RDP is never written.
+    for (old, level) in [(0x0FFF_00ED, 1), (0x0FFF_55ED, 1), (0x0FFF_CCED, 2)] {
+        let err = flash::bor_level3(old).unwrap_err().to_string();
+        assert!(
+            err.contains("read-protected") && err.contains(&format!("level {level}")),
+            "{old:#010x}: {err}"
+        );
+    }
+}
+
+/// The dry run of `--set-bor` needs no probe and shows the rule, the factory word's change and
+/// the `Disarm` it would send first.
+#[test]
+fn dry_run_set_bor_shows_the_option_word_and_the_disarm() {
+    let out = host(&["flash", "--set-bor", "--dry-run"]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let text = String::from_utf8_lossy(&out.stdout);
+    for want in [
+        "FLASH_OPTCR 0x40023c14: BOR_LEV (bits 3:2) := 00",
+        "RDP (bits 15:8) never written",
+        "0x0fffaaed -> 0x0fffaae1",
+        "asks before writing",
+        "disarm    first: Disarm to the device on the port with the board's USB id",
+    ] {
+        assert!(text.contains(want), "{want:?} not in {text}");
+    }
+}
+
+/// `--set-bor` without a terminal to ask at and without `--yes` is refused before any port or
+/// probe is opened; with `--yes` it goes on to the disarm and the probe (none here). It takes
+/// no firmware or bank.
+#[test]
+fn set_bor_is_confirmed_or_refused_before_the_probe() {
+    let out = host(&[
+        "flash",
+        "--set-bor",
+        "--probe",
+        "fffe:fffd:no-such-probe",
+        "--port",
+        "/dev/no-such-port",
+    ]);
+    let err = stderr(&out);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(
+        err.contains("stdin is not a terminal") && err.contains("--yes"),
+        "{err}"
+    );
+    assert!(!err.contains("probe") && !err.contains("disarm"), "{err}");
+    let out = host(&[
+        "flash",
+        "--set-bor",
+        "--yes",
+        "--probe",
+        "fffe:fffd:no-such-probe",
+        "--port",
+        "/dev/no-such-port",
+    ]);
+    let err = stderr(&out);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(err.contains("no device connected to disarm"), "{err}");
+    assert!(
+        err.contains("no debug probe fffe:fffd:no-such-probe found"),
+        "{err}"
+    );
+    let dir = tempfile::tempdir().unwrap();
+    let bank = write(dir.path(), "b.bank", &bank(65_536));
+    let out = host(&["flash", "--set-bor", "--bank", &bank, "--dry-run"]);
+    assert!(!out.status.success());
+    assert!(
+        stderr(&out).contains("cannot be used with"),
+        "{}",
+        stderr(&out)
+    );
+}
+
+/// A device connected on the port given (a fake one on a pseudo-terminal that answers
+/// `Disarm` with disarmed telemetry) is sent `Disarm` before the probe is opened, and the
+/// output says so.
+#[cfg(target_os = "linux")]
+#[test]
+fn flash_disarms_a_connected_device_first() {
+    use bank_format::{
+        Counters, DeviceToHost, FrameDecoder, HostToDevice, MAX_FRAME, Mode, State, Telemetry,
+        encode_frame,
+    };
+    use std::io::{Read, Write};
+    use std::sync::atomic::{AtomicBool, Ordering};
+    use std::sync::{Arc, Mutex};
+    let (mut master, name, _slave) = pty();
+    let stop = Arc::new(AtomicBool::new(false));
+    let seen = Arc::new(Mutex::new(Vec::new()));
+    let device = {
+        let (stop, seen) = (Arc::clone(&stop), Arc::clone(&seen));
+        std::thread::spawn(move || {
+            let mut rx: FrameDecoder<HostToDevice> = FrameDecoder::new();
+            let (mut bytes, mut buf) = ([0u8; 256], [0u8; MAX_FRAME]);
+            while !stop.load(Ordering::Relaxed) {
+                if let Ok(n) = master.read(&mut bytes) {
+                    for msg in rx.feed_slice(&bytes[..n]).flatten() {
+                        if msg == HostToDevice::Disarm {
+                            let t = Telemetry {
+                                tick: 1,
+                                state: State::Disarmed,
+                                mode: Mode::Render,
+                                fault: None,
+                                tip_m: [0.0; 3],
+                                contacts: Default::default(),
+                                contact_point: None,
+                                currents_a: [0.0; 3],
+                                tool_force_n: [0.0; 3],
+                                dropped_load: 0.0,
+                                counters: Counters::default(),
+                            };
+                            let frame = encode_frame(&DeviceToHost::Telemetry(t), &mut buf);
+                            let _ = master.write_all(frame.unwrap());
+                        }
+                        seen.lock().unwrap().push(msg);
+                    }
+                }
+                std::thread::sleep(std::time::Duration::from_millis(1));
+            }
+        })
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let elf = write(dir.path(), "fw.elf", &image());
+    let bank = write(dir.path(), "b.bank", &bank(65_536));
+    let out = host(&[
+        "flash",
+        "--elf",
+        &elf,
+        "--bank",
+        &bank,
+        "--probe",
+        "fffe:fffd:no-such-probe",
+        "--port",
+        &name,
+    ]);
+    stop.store(true, Ordering::Relaxed);
+    device.join().unwrap();
+    let err = stderr(&out);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(
+        err.contains(&format!(
+            "sent Disarm to the device on {name}: it reports Disarmed"
+        )),
+        "{err}"
+    );
+    assert!(
+        err.contains("no debug probe fffe:fffd:no-such-probe found"),
+        "{err}"
+    );
+    assert_eq!(*seen.lock().unwrap(), [HostToDevice::Disarm]);
+}
+
+/// A pseudo-terminal, both ends close-on-exec: (non-blocking master, slave path, slave).
+#[cfg(target_os = "linux")]
+fn pty() -> (std::fs::File, String, std::fs::File) {
+    use std::os::fd::FromRawFd;
+    // SAFETY: posix_openpt(3), grantpt(3), unlockpt(3), ptsname_r(3) and open(2) on a fresh
+    // descriptor, each checked; ptsname_r writes a NUL-terminated name into the buffer given.
+    unsafe {
+        let m = libc::posix_openpt(libc::O_RDWR | libc::O_NOCTTY | libc::O_CLOEXEC);
+        assert!(m >= 0, "posix_openpt failed");
+        assert_eq!(libc::grantpt(m), 0, "grantpt failed");
+        assert_eq!(libc::unlockpt(m), 0, "unlockpt failed");
+        let mut buf = [0 as libc::c_char; 64];
+        assert_eq!(libc::ptsname_r(m, buf.as_mut_ptr(), buf.len()), 0);
+        let name = std::ffi::CStr::from_ptr(buf.as_ptr())
+            .to_string_lossy()
+            .into_owned();
+        let s = libc::open(
+            buf.as_ptr(),
+            libc::O_RDWR | libc::O_NOCTTY | libc::O_CLOEXEC,
+        );
+        assert!(s >= 0, "opening {name} failed");
+        libc::fcntl(
+            m,
+            libc::F_SETFL,
+            libc::fcntl(m, libc::F_GETFL) | libc::O_NONBLOCK,
+        );
+        (
+            std::fs::File::from_raw_fd(m),
+            name,
+            std::fs::File::from_raw_fd(s),
+        )
+    }
 }

@@ -165,6 +165,12 @@ fn take_reset_cause() -> ResetCause {
     firmware::reset::cause_from_rcc_csr(csr)
 }
 
+/// `FLASH_OPTCR`, the option bytes loaded at reset: its `BOR_LEV` bits tell the brown-out
+/// reset level ([`firmware::brownout`], checked by [`App::check_brown_out`]).
+fn read_optcr() -> u32 {
+    embassy_stm32::pac::FLASH.optcr().read().0
+}
+
 /// Status LED: slow blink disarmed, on armed, fast blink on a fault.
 #[embassy_executor::task]
 async fn led(mut led: Output<'static>) {
@@ -208,6 +214,7 @@ fn main() -> ! {
     let mut app = App::new(bank.as_ref().map_err(|e| *e), tick_end, LINK_GRACE_TICKS);
     app.reset(take_reset_cause());
     app.check_amplifiers(&BOARD.amplifiers);
+    app.check_brown_out(read_optcr());
     let plant = BoardPlant::new(parts.hardware);
 
     let tick_spawner = board::start_tick_executor();

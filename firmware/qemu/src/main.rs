@@ -19,6 +19,10 @@
 //!   UART; absent: unlimited, as QEMU's USART is instantaneous).
 //! - The plant (encoders in, currents out) is a lockstep semihosting channel ([`plant`]) that
 //!   holds virtual time while the host answers.
+//! - The board's boot checks of its hardware are not run: no reset cause (QEMU has no reset
+//!   flags), no amplifier ranges, and no brown-out level ([`App::check_brown_out`]): the
+//!   emulated chip has no supply to sag and no option bytes of a board, so the image does not
+//!   read `FLASH_OPTCR`; the board image does, and `host flash --set-bor` programs it.
 //!
 //! The image exits (semihosting) when the plant channel closes: code 0 for a clean close, 1
 //! for a plant error, 101 for a panic.

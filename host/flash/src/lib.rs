@@ -10,9 +10,12 @@
 //! the sector geometry of the target's flash algorithm; [`flash`] runs that plan in one probe
 //! session (erase of the planned sectors only, program, verify, reset).
 //!
-//! What needs no probe ([`Layout`], [`Layout::plan`], [`firmware_segments`], [`check_bank`])
-//! is what the tests cover; [`flash`] and [`list_probes`] need a probe for anything but the
-//! "no probe" error.
+//! [`set_bor_level3`] programs the option bytes' brown-out reset level 3 (the firmware refuses
+//! to arm below it, `firmware::brownout`), the word computed by [`bor_level3`].
+//!
+//! What needs no probe ([`Layout`], [`Layout::plan`], [`firmware_segments`], [`check_bank`],
+//! [`bor_level3`]) is what the tests cover; [`flash`], [`set_bor_level3`] and [`list_probes`]
+//! need a probe for anything but the "no probe" error.
 
 use bank_format::region::{BANK_LEN, BANK_ORIGIN, FIRMWARE_LEN, FIRMWARE_ORIGIN};
 use bank_format::{AlignedBytes, Bank};
@@ -36,6 +39,28 @@ const DEV_ID_F405: u32 = 0x413;
 const FLASH_OPTCR: u64 = 0x4002_3C14;
 /// `RDP` byte of level 0 (no read protection); 0xCC is level 2, anything else level 1.
 const RDP_LEVEL_0: u32 = 0xAA;
+/// `FLASH_OPTKEYR` (RM0090 §3.9.3): the two keys written in turn clear `OPTLOCK`.
+const FLASH_OPTKEYR: u64 = 0x4002_3C08;
+/// The option-byte unlock keys (RM0090 §3.6.2).
+const OPTKEYS: [u32; 2] = [0x0819_2A3B, 0x4C5D_6E7F];
+/// `FLASH_SR` (RM0090 §3.9.5): `BSY` (bit 16) and the error flags OPERR (1), WRPERR (4),
+/// PGAERR (5), PGPERR (6), PGSERR (7).
+const FLASH_SR: u64 = 0x4002_3C0C;
+const SR_BSY: u32 = 1 << 16;
+const SR_ERRORS: u32 = (1 << 1) | (0b1111 << 4);
+/// `FLASH_OPTCR.OPTLOCK` (bit 0) and `OPTSTRT` (bit 1).
+const OPTCR_OPTLOCK: u32 = 1;
+const OPTCR_OPTSTRT: u32 = 1 << 1;
+/// `FLASH_OPTCR.BOR_LEV` (bits 3:2): 00 level 3, 01 level 2, 10 level 1, 11 off.
+pub const OPTCR_BOR_LEV: u32 = 0b11 << 2;
+/// `FLASH_OPTCR`'s reset value on a chip with factory option bytes (RM0090 §3.9.10): no write
+/// protection, `RDP` level 0, the user bits set, BOR off, `OPTLOCK` set.
+pub const OPTCR_FACTORY: u32 = 0x0FFF_AAED;
+/// `DBGMCU_APB1_FZ` (RM0090 §38.16.4): `DBG_WWDG_STOP` (bit 11) and `DBG_IWDG_STOP` (bit 12)
+/// stop the watchdogs while the core is halted, so that none resets the chip in the middle
+/// of an option-byte write.
+const DBGMCU_APB1_FZ: u64 = 0xE004_2008;
+const FREEZE_WATCHDOGS: u32 = (1 << 11) | (1 << 12);
 
 /// What a part of the plan holds.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -193,6 +218,36 @@ pub enum Error {
          reflash verifies"
     )]
     Verify,
+    /// The option bytes did not take the brown-out level written.
+    #[error(
+        "the option bytes did not take BOR level 3: FLASH_OPTCR was {old:#010x}, {new:#010x} \
+         was written, {read:#010x} reads back{when}; the device stays refused to arm \
+         (BrownOutLevel): power-cycle the board and run `host flash --set-bor` again"
+    )]
+    OptionVerify {
+        /// The word before.
+        old: u32,
+        /// The word written.
+        new: u32,
+        /// The word read back.
+        read: u32,
+        /// When it was read (after the write, or after the reset).
+        when: &'static str,
+    },
+    /// The flash interface reported an error or stayed busy during the option-byte write.
+    #[error(
+        "the option-byte write failed: {what} (FLASH_SR {sr:#010x}); FLASH_OPTCR was \
+         {old:#010x}: power-cycle the board and run `host flash --set-bor` again (it reads the \
+         word and asks before writing) before using the device"
+    )]
+    OptionWrite {
+        /// What went wrong.
+        what: &'static str,
+        /// `FLASH_SR` at that moment.
+        sr: u32,
+        /// The word before.
+        old: u32,
+    },
     /// Another probe-rs failure during the session.
     #[error("{what}: {reason}")]
     Session {
@@ -510,6 +565,313 @@ pub fn check_bank(bytes: &[u8], region_len: u64) -> Result<u32, Error> {
     Ok(bank.crc())
 }
 
+/// Opens the probe (`selector`, or the only one attached) and attaches to `chip`.
+fn open_session(
+    chip: &str,
+    selector: Option<&DebugProbeSelector>,
+) -> Result<probe_rs::Session, Error> {
+    let lister = Lister::new();
+    let found = lister.list_with_access(selector);
+    let usable: Vec<_> = found
+        .iter()
+        .filter(|p| matches!(p.accessibility, Accessibility::Accessible))
+        .collect();
+    let probe_info = match usable.as_slice() {
+        [] if found.is_empty() => {
+            let which = selector.map_or_else(
+                || "no debug probe found".into(),
+                |s| format!("no debug probe {s} found"),
+            );
+            return Err(Error::NoProbe(format!("{which}: {NO_PROBE_HELP}")));
+        }
+        [] => {
+            let names: Vec<_> = found
+                .iter()
+                .map(|p| DebugProbeSelector::from(&p.info).to_string())
+                .collect();
+            return Err(Error::NoProbe(format!(
+                "the debug probe(s) {} are attached but this user may not open them (USB \
+                 permissions): {NO_PROBE_HELP}",
+                names.join(", ")
+            )));
+        }
+        [one] => *one,
+        many => {
+            return Err(Error::SeveralProbes {
+                count: many.len(),
+                list: many
+                    .iter()
+                    .map(|p| DebugProbeSelector::from(&p.info).to_string())
+                    .collect::<Vec<_>>()
+                    .join(", "),
+            });
+        }
+    };
+    let name = DebugProbeSelector::from(&probe_info.info).to_string();
+    let probe = probe_info.info.open().map_err(|e| Error::ProbeBusy {
+        probe: name.clone(),
+        reason: e.to_string(),
+    })?;
+    probe
+        .attach(chip, Permissions::default())
+        .map_err(|e| Error::Attach {
+            probe: name,
+            chip: chip.into(),
+            reason: e.to_string(),
+        })
+}
+
+/// Reads the word at `address`, naming `what` on failure.
+fn read(core: &mut probe_rs::Core<'_>, address: u64, what: &'static str) -> Result<u32, Error> {
+    core.read_word_32(address).map_err(|e| Error::Session {
+        what,
+        reason: e.to_string(),
+    })
+}
+
+/// Writes `value` at `address`, naming `what` on failure.
+fn write(
+    core: &mut probe_rs::Core<'_>,
+    address: u64,
+    value: u32,
+    what: &'static str,
+) -> Result<(), Error> {
+    core.write_word_32(address, value)
+        .map_err(|e| Error::Session {
+            what,
+            reason: e.to_string(),
+        })
+}
+
+/// Checks the die (`DBGMCU_IDCODE`) and that the flash is not read-protected
+/// (`FLASH_OPTCR.RDP`); returns `FLASH_OPTCR`.
+fn check_chip(core: &mut probe_rs::Core<'_>) -> Result<u32, Error> {
+    let idcode = read(core, DBGMCU_IDCODE, "cannot read DBGMCU_IDCODE")?;
+    if idcode & 0xFFF != DEV_ID_F405 {
+        return Err(Error::WrongChip {
+            idcode,
+            dev_id: idcode & 0xFFF,
+            want: DEV_ID_F405,
+        });
+    }
+    let optcr = read(core, FLASH_OPTCR, "cannot read FLASH_OPTCR")?;
+    check_rdp(optcr)?;
+    Ok(optcr)
+}
+
+/// Refuses a `FLASH_OPTCR` word whose `RDP` byte (bits 15:8) is not level 0.
+fn check_rdp(optcr: u32) -> Result<(), Error> {
+    let rdp = (optcr >> 8) & 0xFF;
+    if rdp != RDP_LEVEL_0 {
+        return Err(Error::ReadProtected {
+            rdp,
+            level: if rdp == 0xCC { 2 } else { 1 },
+        });
+    }
+    Ok(())
+}
+
+/// A change of `FLASH_OPTCR` that sets brown-out reset level 3 ([`bor_level3`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct BorChange {
+    /// The word read from the chip.
+    pub old: u32,
+    /// The word once written and locked again.
+    pub new: u32,
+}
+
+impl BorChange {
+    /// Whether the chip is below level 3 (there is something to write).
+    pub fn is_needed(&self) -> bool {
+        self.old != self.new
+    }
+}
+
+/// The brown-out level `BOR_LEV` of a `FLASH_OPTCR` word selects, as a person reads it.
+pub fn bor_level_name(optcr: u32) -> &'static str {
+    match (optcr & OPTCR_BOR_LEV) >> 2 {
+        0b00 => "level 3 (reset below about 2.7 V)",
+        0b01 => "level 2 (reset below about 2.4 V)",
+        0b10 => "level 1 (reset below about 2.1 V)",
+        _ => "off (reset only at power-down, about 1.7 V)",
+    }
+}
+
+/// The `FLASH_OPTCR` word that sets brown-out reset level 3 from the word `old` read from the
+/// chip: `BOR_LEV` (bits 3:2) cleared to 00, every other option bit kept as it is (write
+/// protection, the read protection `RDP`, the user bits), `OPTSTRT` clear and `OPTLOCK` set,
+/// as the register reads once the write is over. Refused unless `RDP` is level 0 (0xAA): the
+/// read protection is never written, and a chip at level 1 or 2 is not this tool's to change.
+pub fn bor_level3(old: u32) -> Result<BorChange, Error> {
+    check_rdp(old)?;
+    Ok(BorChange {
+        old,
+        new: (old & !(OPTCR_BOR_LEV | OPTCR_OPTSTRT)) | OPTCR_OPTLOCK,
+    })
+}
+
+/// What [`set_bor_level3`] did.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum BorOutcome {
+    /// The chip was at level 3 already (the word read): nothing written.
+    AlreadySet(u32),
+    /// The change was not confirmed: nothing written.
+    Declined(BorChange),
+    /// Written, read back after the write and again after a reset of the chip.
+    Written(BorChange),
+}
+
+/// How long a flash operation may keep `FLASH_SR.BSY` set (an option-byte write takes tens of
+/// milliseconds; a sector erase, which a running firmware could have started, up to 2 s).
+const BUSY_TIMEOUT: std::time::Duration = std::time::Duration::from_secs(5);
+
+/// Waits until `FLASH_SR.BSY` clears; the status word then.
+fn wait_not_busy(core: &mut probe_rs::Core<'_>, old: u32) -> Result<u32, Error> {
+    let end = std::time::Instant::now() + BUSY_TIMEOUT;
+    loop {
+        let sr = read(core, FLASH_SR, "cannot read FLASH_SR")?;
+        if sr & SR_BSY == 0 {
+            return Ok(sr);
+        }
+        if std::time::Instant::now() >= end {
+            return Err(Error::OptionWrite {
+                what: "the flash stayed busy for 5 s",
+                sr,
+                old,
+            });
+        }
+        std::thread::sleep(std::time::Duration::from_millis(1));
+    }
+}
+
+/// Programs brown-out reset level 3 into the option bytes in one probe session: opens the
+/// probe (`selector`, or the only one attached), attaches to [`CHIP`], resets and halts the
+/// core with the watchdogs frozen (so that neither the firmware nor a watchdog reset
+/// interrupts the write), checks the die and reads `FLASH_OPTCR`. At level 3 already, nothing
+/// is written; else [`bor_level3`] gives the new word (refused unless `RDP` is level 0) and
+/// `confirm` sees the change: `false` writes nothing. Confirmed, it unlocks the option bytes
+/// (`FLASH_OPTKEYR`), writes the word with `BOR_LEV` = 00, starts the write (`OPTSTRT`),
+/// waits for `BSY` to clear, checks the error flags, locks again (`OPTLOCK`), reads the word
+/// back, resets the chip (which reloads the option bytes) and reads it again: a mismatch
+/// either time is [`Error::OptionVerify`].
+pub fn set_bor_level3(
+    selector: Option<&DebugProbeSelector>,
+    confirm: &mut dyn FnMut(&BorChange) -> bool,
+) -> Result<BorOutcome, Error> {
+    let mut session = open_session(CHIP, selector)?;
+    let mut core = session.core(0).map_err(|e| Error::Session {
+        what: "cannot reach the core",
+        reason: e.to_string(),
+    })?;
+    core.reset_and_halt(std::time::Duration::from_millis(500))
+        .map_err(|e| Error::Session {
+            what: "cannot reset and halt the core",
+            reason: e.to_string(),
+        })?;
+    match write_bor_level3(&mut core, confirm) {
+        Ok(BorOutcome::Written(change)) => {
+            core.reset().map_err(|e| Error::Session {
+                what: "the option bytes are written but the core did not reset (power-cycle \
+                       the board, then check with `host flash --set-bor`)",
+                reason: e.to_string(),
+            })?;
+            verify_optcr(&mut core, change, " after a reset of the chip")?;
+            Ok(BorOutcome::Written(change))
+        }
+        other => {
+            // Nothing written, or the write failed: the firmware runs again either way (below
+            // level 3 it refuses to arm).
+            let restarted = core.run().map_err(|e| Error::Session {
+                what: "the core did not restart after the option-byte step (power-cycle the \
+                       board)",
+                reason: e.to_string(),
+            });
+            let outcome = other?;
+            restarted?;
+            Ok(outcome)
+        }
+    }
+}
+
+/// [`set_bor_level3`] on the halted core, up to the read-back after the write.
+fn write_bor_level3(
+    core: &mut probe_rs::Core<'_>,
+    confirm: &mut dyn FnMut(&BorChange) -> bool,
+) -> Result<BorOutcome, Error> {
+    let fz = read(core, DBGMCU_APB1_FZ, "cannot read DBGMCU_APB1_FZ")?;
+    write(
+        core,
+        DBGMCU_APB1_FZ,
+        fz | FREEZE_WATCHDOGS,
+        "cannot freeze the watchdogs (DBGMCU_APB1_FZ)",
+    )?;
+    let old = check_chip(core)?;
+    let change = bor_level3(old)?;
+    if !change.is_needed() {
+        return Ok(BorOutcome::AlreadySet(old));
+    }
+    if !confirm(&change) {
+        return Ok(BorOutcome::Declined(change));
+    }
+    wait_not_busy(core, old)?;
+    for key in OPTKEYS {
+        write(core, FLASH_OPTKEYR, key, "cannot write FLASH_OPTKEYR")?;
+    }
+    let unlocked = read(core, FLASH_OPTCR, "cannot read FLASH_OPTCR")?;
+    if unlocked & OPTCR_OPTLOCK != 0 {
+        let sr = read(core, FLASH_SR, "cannot read FLASH_SR")?;
+        return Err(Error::OptionWrite {
+            what: "FLASH_OPTCR stayed locked after the unlock keys",
+            sr,
+            old,
+        });
+    }
+    let word = change.new & !(OPTCR_OPTLOCK | OPTCR_OPTSTRT);
+    write(core, FLASH_OPTCR, word, "cannot write FLASH_OPTCR")?;
+    write(
+        core,
+        FLASH_OPTCR,
+        word | OPTCR_OPTSTRT,
+        "cannot start the option-byte write (OPTSTRT)",
+    )?;
+    let sr = wait_not_busy(core, old)?;
+    if sr & SR_ERRORS != 0 {
+        return Err(Error::OptionWrite {
+            what: "the flash interface flagged an error",
+            sr,
+            old,
+        });
+    }
+    write(
+        core,
+        FLASH_OPTCR,
+        word | OPTCR_OPTLOCK,
+        "cannot lock FLASH_OPTCR again",
+    )?;
+    verify_optcr(core, change, " after the write")?;
+    Ok(BorOutcome::Written(change))
+}
+
+/// Refuses a `FLASH_OPTCR` read back (`when`: after the write, after the reset) that is not
+/// the word of `change` (`OPTSTRT` aside, which the hardware clears).
+fn verify_optcr(
+    core: &mut probe_rs::Core<'_>,
+    change: BorChange,
+    when: &'static str,
+) -> Result<(), Error> {
+    let read = read(core, FLASH_OPTCR, "cannot read FLASH_OPTCR back")?;
+    if read & !OPTCR_OPTSTRT == change.new {
+        Ok(())
+    } else {
+        Err(Error::OptionVerify {
+            old: change.old,
+            new: change.new,
+            read,
+            when,
+        })
+    }
+}
+
 /// One probe found by [`list_probes`].
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct ProbeEntry {
@@ -574,81 +936,13 @@ pub fn flash(
 ) -> Result<Plan, Error> {
     let plan = layout.plan(parts)?;
     let loader = layout.loader(parts)?;
-    let lister = Lister::new();
-    let found = lister.list_with_access(selector);
-    let usable: Vec<_> = found
-        .iter()
-        .filter(|p| matches!(p.accessibility, Accessibility::Accessible))
-        .collect();
-    let probe_info = match usable.as_slice() {
-        [] if found.is_empty() => {
-            let which = selector.map_or_else(
-                || "no debug probe found".into(),
-                |s| format!("no debug probe {s} found"),
-            );
-            return Err(Error::NoProbe(format!("{which}: {NO_PROBE_HELP}")));
-        }
-        [] => {
-            let names: Vec<_> = found
-                .iter()
-                .map(|p| DebugProbeSelector::from(&p.info).to_string())
-                .collect();
-            return Err(Error::NoProbe(format!(
-                "the debug probe(s) {} are attached but this user may not open them (USB \
-                 permissions): {NO_PROBE_HELP}",
-                names.join(", ")
-            )));
-        }
-        [one] => *one,
-        many => {
-            return Err(Error::SeveralProbes {
-                count: many.len(),
-                list: many
-                    .iter()
-                    .map(|p| DebugProbeSelector::from(&p.info).to_string())
-                    .collect::<Vec<_>>()
-                    .join(", "),
-            });
-        }
-    };
-    let name = DebugProbeSelector::from(&probe_info.info).to_string();
-    let probe = probe_info.info.open().map_err(|e| Error::ProbeBusy {
-        probe: name.clone(),
-        reason: e.to_string(),
-    })?;
-    let mut session = probe
-        .attach(layout.chip(), Permissions::default())
-        .map_err(|e| Error::Attach {
-            probe: name.clone(),
-            chip: layout.chip().into(),
-            reason: e.to_string(),
-        })?;
+    let mut session = open_session(layout.chip(), selector)?;
     {
         let mut core = session.core(0).map_err(|e| Error::Session {
             what: "cannot reach the core",
             reason: e.to_string(),
         })?;
-        let read = |core: &mut probe_rs::Core<'_>, address: u64, what: &'static str| {
-            core.read_word_32(address).map_err(|e| Error::Session {
-                what,
-                reason: e.to_string(),
-            })
-        };
-        let idcode = read(&mut core, DBGMCU_IDCODE, "cannot read DBGMCU_IDCODE")?;
-        if idcode & 0xFFF != DEV_ID_F405 {
-            return Err(Error::WrongChip {
-                idcode,
-                dev_id: idcode & 0xFFF,
-                want: DEV_ID_F405,
-            });
-        }
-        let rdp = (read(&mut core, FLASH_OPTCR, "cannot read FLASH_OPTCR")? >> 8) & 0xFF;
-        if rdp != RDP_LEVEL_0 {
-            return Err(Error::ReadProtected {
-                rdp,
-                level: if rdp == 0xCC { 2 } else { 1 },
-            });
-        }
+        check_chip(&mut core)?;
     }
     // The sectors probe-rs's flasher lays out (reported once, before it erases).
     let mut laid_out: Vec<Span> = Vec::new();

@@ -27,11 +27,23 @@ pub enum DeviceCmd {
     /// already or in a fault (unless --clear-fault), and currents over the bank's limits. The
     /// device itself refuses to arm until it has been homed (`zero`) since it started.
     Arm(ArmArgs),
-    /// Declare the device's current pose its calibration's home pose (the instrument held in
-    /// the home fixture, device disarmed); confirmed when the telemetry's tip is the home
-    /// pose's. This homing references the encoders, which the device needs before it arms,
-    /// after every reset.
-    Zero(DeviceArgs),
+    /// Declare the device's current pose its calibration's home pose: asks you to confirm
+    /// that the instrument is in its homing fixture (--yes: you checked it already; without a
+    /// terminal, --yes is required), then sends ZeroEncoders and waits for the device to apply
+    /// it. This homing references the encoders, which the device needs before it arms, after
+    /// every reset. Only you can check the pose: the device takes whatever pose it stands in
+    /// as home.
+    Zero(ZeroArgs),
+}
+
+/// Arguments of `host device zero`.
+#[derive(clap::Args, Debug)]
+pub struct ZeroArgs {
+    #[command(flatten)]
+    device: DeviceArgs,
+    /// The instrument is in its homing fixture: zero without asking (for scripts).
+    #[arg(long)]
+    yes: bool,
 }
 
 /// Which device and bank (`host device check` and `arm`).
@@ -291,8 +303,10 @@ fn arm(args: ArmArgs) -> Result<()> {
              holding it): disarm it first"
         ),
         State::Fault if !args.clear_fault => bail!(
-            "{port}: the device is in a fault ({:?}): fix its cause and rerun with --clear-fault",
-            first.fault
+            "{port}: the device is in a fault ({:?}): fix its cause and rerun with \
+             --clear-fault{}",
+            first.fault,
+            fault_hint(first.fault)
         ),
         State::Fault => {
             source.command(HostToDevice::ClearFault)?;
@@ -319,13 +333,7 @@ fn arm(args: ArmArgs) -> Result<()> {
     };
     if let Some(seen) = seen {
         let _ = source.command(HostToDevice::Disarm);
-        let hint = match seen.as_ref().and_then(|s| s.fault) {
-            Some(FaultReason::NotReferenced) => {
-                "; it has not been homed since it started: put the instrument in its home \
-                 fixture, run `host device zero`, then arm again with --clear-fault"
-            }
-            _ => "",
-        };
+        let hint = fault_hint(seen.as_ref().and_then(|s| s.fault));
         bail!(
             "{port}: the device did not arm in mode {mode:?}: {}{hint}",
             describe(&seen)
@@ -376,6 +384,22 @@ fn arm(args: ArmArgs) -> Result<()> {
     }
 }
 
+/// What to do about the faults an operator fixes outside the device (appended to a message).
+fn fault_hint(fault: Option<FaultReason>) -> &'static str {
+    match fault {
+        Some(FaultReason::NotReferenced) => {
+            "; it has not been homed since it started: put the instrument in its home \
+             fixture, run `host device zero`, then arm again with --clear-fault"
+        }
+        Some(FaultReason::BrownOutLevel) => {
+            "; its brown-out reset is below level 3 (FLASH_OPTCR's BOR_LEV is not 00), so it \
+             could run on below the 2.7 V its 168 MHz clock needs: run `host flash --set-bor` \
+             (it programs BOR level 3 in the option bytes), then arm again"
+        }
+        _ => "",
+    }
+}
+
 /// One line of `host device arm`'s output.
 fn print_armed(s: &Sample, json: bool) {
     let f = s.tool_force_n;
@@ -406,10 +430,12 @@ fn print_armed(s: &Sample, json: bool) {
     }
 }
 
-fn zero(args: DeviceArgs) -> Result<()> {
-    let (cal, crc, name) = bank(&args)?;
-    let mut source = open(&args, crc, &name)?;
-    let port = &args.port;
+fn zero(args: ZeroArgs) -> Result<()> {
+    let (cal, crc, name) = bank(&args.device)?;
+    let fixture = "that the instrument is in its homing fixture";
+    super::confirm::require_terminal_or_yes(args.yes, fixture)?;
+    let mut source = open(&args.device, crc, &name)?;
+    let port = &args.device.port;
     let first = await_sample(&mut source, |_| true)?
         .map_err(|_| anyhow::anyhow!("{port}: no telemetry from the device within 1 s"))?;
     if first.state == State::Armed {
@@ -420,6 +446,16 @@ fn zero(args: DeviceArgs) -> Result<()> {
         f64::from(cal.home_joint[1]),
         f64::from(cal.home_joint[2]),
     );
+    if !super::confirm::ask(
+        args.yes,
+        "The device takes the pose it stands in as its home pose. Is the instrument held in \
+         its homing fixture?",
+    )? {
+        bail!(
+            "{port}: not zeroed (nothing sent): put the instrument in its homing fixture and \
+             run `host device zero` again"
+        );
+    }
     // The tip goes through f32 (a ~0.1 m vector): 10 um is far below any pose change.
     let at_home = |s: &Sample| {
         s.tip_m
@@ -430,8 +466,20 @@ fn zero(args: DeviceArgs) -> Result<()> {
     source.command(HostToDevice::ZeroEncoders)?;
     match await_sample(&mut source, at_home)? {
         Ok(_) => {
+            let how = if args.yes {
+                "--yes said so"
+            } else {
+                "you confirmed it"
+            };
             println!(
-                "zeroed: the tip is at the home pose [{:+.2}, {:+.2}, {:+.2}] mm",
+                "zeroed: the device applied ZeroEncoders; its tip now reads the home pose \
+                 [{:+.2}, {:+.2}, {:+.2}] mm\n\
+                 checked: the device received and applied the command (it reads the home pose \
+                 after any zeroing, wherever the instrument stands, so this says nothing of the \
+                 pose)\n\
+                 not checked: that the instrument is in its homing fixture ({how}); if it was \
+                 not, the organ, the joint limits and the gravity feed-forward are misplaced \
+                 until the next zero",
                 home[0] * 1e3,
                 home[1] * 1e3,
                 home[2] * 1e3
@@ -439,7 +487,8 @@ fn zero(args: DeviceArgs) -> Result<()> {
             Ok(())
         }
         Err(seen) => bail!(
-            "{port}: the tip did not move to the home pose within 1 s ({}; tip {:?} m)",
+            "{port}: the device did not apply ZeroEncoders within 1 s: its tip did not move to \
+             the home pose ({}; tip {:?} m)",
             describe(&seen),
             seen.map(|s| s.tip_m)
         ),

@@ -5,6 +5,7 @@ pub mod bench;
 pub mod bench_law;
 pub mod calibrate;
 pub mod compliance;
+pub mod confirm;
 pub mod contact;
 pub mod demo;
 pub mod device;
