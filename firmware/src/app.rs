@@ -970,9 +970,9 @@ mod tests {
 
     /// With the board's grace (none: only valid frames count as link activity), a link that
     /// delivers only garbage, a byte every tick, keeps the device armed for at most the
-    /// supervisor's 10-tick timeout after the last valid frame, as a silent one does.
+    /// bank's link timeout after the last valid frame, as a silent one does.
     #[test]
-    fn garbage_only_link_faults_within_ten_ticks_with_the_board_grace() {
+    fn garbage_only_link_faults_within_the_timeout_with_the_board_grace() {
         let bytes = flat_patch();
         let bank = Bank::parse(bytes.as_slice()).unwrap();
         for garbage in [true, false] {
@@ -1004,8 +1004,9 @@ mod tests {
         }
     }
 
+    /// The flat patch's link timeout in ticks (1 kHz).
     fn firmware_link_timeout() -> u32 {
-        crate::safety::DEFAULT_LINK_TIMEOUT_TICKS
+        crate::fixtures::FIXTURE_LINK_TIMEOUT_MS
     }
 
     /// A link that carries only one byte per tick (a tenth of a telemetry frame): the ticks
