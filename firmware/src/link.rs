@@ -42,7 +42,8 @@
 //! live at different interrupt priorities on one core. Encoding and decoding in the driver
 //! keep postcard, the CRC, COBS and the frame buffers out of the tick: the tick only moves a
 //! message (a few hundred bytes) into its queue slot and takes at most
-//! [`crate::app::MAX_COMMANDS_PER_TICK`] commands (about 20 bytes each) out of the other, so
+//! [`crate::app::MAX_COMMANDS_PER_TICK`] commands (about 20 bytes each) out of the other
+//! (besides discarding, never applying, at most the queue's length of superseded `Arm`s), so
 //! however the host's bytes bunch up (a burst after a stall, a flood of garbage), what the
 //! link costs the tick is bounded by a few commands, not by the bytes that arrived.
 
