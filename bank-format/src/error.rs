@@ -57,6 +57,8 @@ pub enum DeviceField {
         /// Joint index.
         axis: u8,
     },
+    /// `link_timeout_ms` not in [`crate::LINK_TIMEOUT_MS_MIN`]`..=`[`crate::LINK_TIMEOUT_MS_MAX`].
+    LinkTimeout,
 }
 
 impl fmt::Display for DeviceField {
@@ -90,6 +92,12 @@ impl fmt::Display for DeviceField {
             DeviceField::MaxJointSpeed { axis } => {
                 write!(f, "maximum speed of joint {axis} is not positive")
             }
+            DeviceField::LinkTimeout => write!(
+                f,
+                "link timeout is not in [{}, {}] ms",
+                crate::LINK_TIMEOUT_MS_MIN,
+                crate::LINK_TIMEOUT_MS_MAX
+            ),
         }
     }
 }

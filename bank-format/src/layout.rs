@@ -17,10 +17,11 @@ pub const MAGIC: [u8; 8] = *b"HAPTBANK";
 /// presence changes how the firmware renders a contact (`SPEC.md`, "Versioning"); 7: the
 /// optional viscoelastic relaxation ([`Relaxation`]), whose presence changes the force the
 /// firmware renders for the same penetration (a 6.x reader would skip it and render the
-/// instantaneous elastic response for ever, up to `1 / g_inf` times too stiff in a hold).
-pub const VERSION_MAJOR: u16 = 7;
+/// instantaneous elastic response for ever, up to `1 / g_inf` times too stiff in a hold); 8: the
+/// device record gained the host link timeout ([`DeviceCalibration::link_timeout_ms`]).
+pub const VERSION_MAJOR: u16 = 8;
 /// Minor version this crate writes. Readers accept any minor version of their major version
-/// (minor versions only add optional sections, which older readers skip). 7.0 has the optional
+/// (minor versions only add optional sections, which older readers skip). 8.0 has the optional
 /// gravity section ([`SectionKind::Gravity`], added in 3.1).
 pub const VERSION_MINOR: u16 = 0;
 /// Size of [`BankHeader`] in bytes; the section table follows it.
@@ -579,7 +580,20 @@ pub struct DeviceCalibration {
     /// Joint speeds above which the armed device disables its forces (`Overspeed`): pitch rad/s,
     /// yaw rad/s, insertion m/s, each `> 0`.
     pub max_joint_speed: [f32; 3],
+    /// Host link timeout, ms, in [`LINK_TIMEOUT_MS_MIN`]`..=`[`LINK_TIMEOUT_MS_MAX`]: the armed
+    /// device faults (`LinkSilent`) when no valid host frame arrived for longer (8.0).
+    pub link_timeout_ms: u32,
 }
+
+/// Shortest [`DeviceCalibration::link_timeout_ms`]: two and a half of the host's 2 ms
+/// heartbeat periods.
+pub const LINK_TIMEOUT_MS_MIN: u32 = 5;
+/// Longest [`DeviceCalibration::link_timeout_ms`]: beyond it a hand pushed by a force the host
+/// can no longer stop moves centimetres (at the 1 m/s overspeed threshold, 10 cm in 100 ms).
+pub const LINK_TIMEOUT_MS_MAX: u32 = 100;
+/// The scene's default [`DeviceCalibration::link_timeout_ms`], from the host's measured
+/// heartbeat jitter (`host bench heartbeat`; `docs/scenes-and-banks.md`, "link timeout").
+pub const DEFAULT_LINK_TIMEOUT_MS: u32 = 50;
 
 /// Number of coefficients of [`GravityCompensation`].
 pub const GRAVITY_COEFFS: usize = 8;
@@ -718,7 +732,7 @@ const _: () = {
     assert!(core::mem::size_of::<BankMeta>() == 16);
     assert!(core::mem::size_of::<GridHeader>() == 24);
     assert!(core::mem::size_of::<LawRecord>() == 80);
-    assert!(core::mem::size_of::<DeviceCalibration>() == 156);
+    assert!(core::mem::size_of::<DeviceCalibration>() == 160);
     assert!(core::mem::align_of::<DeviceCalibration>() == BANK_ALIGN);
     assert!(core::mem::size_of::<GravityCompensation>() == 32);
     assert!(core::mem::size_of::<Ckl16>() == 20);

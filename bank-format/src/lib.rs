@@ -91,6 +91,7 @@ pub use layout::{
     SECTION_ALIGN, SECTION_ENTRY_LEN, SampleHeader, SectionEntry, SectionKind, TrianglePlane,
     VERSION_MAJOR, VERSION_MINOR, bank_crc, reseal,
 };
+pub use layout::{DEFAULT_LINK_TIMEOUT_MS, LINK_TIMEOUT_MS_MAX, LINK_TIMEOUT_MS_MIN};
 pub use reader::{Bank, Grid, SPD_PIVOT_REL, TRUNCATION_SLACK, UpperCouplings, validate_device};
 pub use samples::{
     MIN_PIVOT_REL, Samples, ill_conditioned_sample, lattice_bary, lattice_corners, lattice_index,

@@ -1784,6 +1784,9 @@ fn check_device(d: &DeviceCalibration) -> Result<(), BankError> {
             return fail(DeviceField::MaxJointSpeed { axis });
         }
     }
+    if !(crate::LINK_TIMEOUT_MS_MIN..=crate::LINK_TIMEOUT_MS_MAX).contains(&d.link_timeout_ms) {
+        return fail(DeviceField::LinkTimeout);
+    }
     Ok(())
 }
 

@@ -54,6 +54,7 @@ const DEV_FORCE: usize = 132;
 const DEV_TIP: usize = 136;
 const DEV_TIP_SPEED: usize = 140;
 const DEV_JOINT_SPEED: usize = 144;
+const DEV_LINK_TIMEOUT: usize = 156;
 
 fn set_entry(kind: K, field: usize, value: u32) -> Result<(), E> {
     corrupt(|b| {
@@ -263,9 +264,9 @@ cases! {
         Bank::parse(&aligned[1..]).map(|_| ())
     };
     bad_magic: E::BadMagic => corrupt(|b| b[0] = b'X');
-    // A bank of the previous major version (its reader would skip a relaxation section).
-    unsupported_version: E::UnsupportedVersion { major: 6, .. } => corrupt(|b| put_u16(b, 8, 6));
-    unsupported_later_version: E::UnsupportedVersion { major: 8, .. } => corrupt(|b| put_u16(b, 8, 8));
+    // A bank of the previous major version (its device record is 4 bytes shorter).
+    unsupported_version: E::UnsupportedVersion { major: 7, .. } => corrupt(|b| put_u16(b, 8, 7));
+    unsupported_later_version: E::UnsupportedVersion { major: 9, .. } => corrupt(|b| put_u16(b, 8, 9));
     bad_header_length: E::BadHeaderLength { header_len: 24 } => corrupt(|b| put_u16(b, 12, 24));
     too_many_sections: E::TooManySections { count: 33 } => corrupt(|b| put_u16(b, 14, 33));
     bad_total_length_unaligned: E::BadTotalLength { .. } => {
@@ -496,6 +497,10 @@ cases! {
         device_f32(DEV_JOINT_SPEED + 4, -3.0);
     device_max_joint_speed_insertion: E::Device { field: F::MaxJointSpeed { axis: 2 } } =>
         device_f32(DEV_JOINT_SPEED + 8, -0.0);
+    device_link_timeout_short: E::Device { field: F::LinkTimeout } =>
+        corrupt_section(K::Device, |s| put_u32(s, DEV_LINK_TIMEOUT, 4));
+    device_link_timeout_long: E::Device { field: F::LinkTimeout } =>
+        corrupt_section(K::Device, |s| put_u32(s, DEV_LINK_TIMEOUT, 101));
     ckl_exponent: E::CklExponent { entry: 1 } => {
         let mut bytes = builder().build_with_precision(bank_format::Precision::Bfp16).unwrap();
         let (_, off, ..) = section(&bytes, K::NeighbourCkl16);

@@ -411,7 +411,7 @@ fn the_device_section_is_laid_out_as_spec_md_says() {
     let d = device();
     let bytes = valid_bytes();
     let (_, off, len, count) = section(&bytes, SectionKind::Device);
-    assert_eq!((len, count), (156, 1));
+    assert_eq!((len, count), (160, 1));
     assert_eq!(len, std::mem::size_of::<bank_format::DeviceCalibration>());
     let s = &bytes[off..off + len];
     let words = |at: usize, n: usize| -> Vec<[u8; 4]> {
@@ -440,6 +440,7 @@ fn the_device_section_is_laid_out_as_spec_md_says() {
             "tip_radius_m" => f32s(&[d.tip_radius_m]),
             "max_tip_speed_m_s" => f32s(&[d.max_tip_speed_m_s]),
             "max_joint_speed" => f32s(&d.max_joint_speed),
+            "link_timeout_ms" => u32s(&[d.link_timeout_ms]),
             other => panic!("SPEC.md names an unknown device field {other:?}"),
         };
         let n = match ty {
@@ -451,7 +452,7 @@ fn the_device_section_is_laid_out_as_spec_md_says() {
         assert_eq!(words(at, n), want, "{field} at offset {at}");
         end = at + 4 * n;
     }
-    assert_eq!(rows.len(), 15);
+    assert_eq!(rows.len(), 16);
     assert_eq!(end, len, "SPEC.md's device table covers the whole record");
 }
 
@@ -507,6 +508,33 @@ fn the_speed_thresholds_round_trip_and_bad_ones_are_refused() {
         );
         assert_eq!(bank_format::validate_device(&x.device), Err(want));
     }
+}
+
+/// The link timeout (8.0) round-trips at both ends of its range; outside it, the writer and the
+/// reader refuse it (`Device { field: LinkTimeout }`), and so does `validate_device`.
+#[test]
+fn the_link_timeout_round_trips_and_out_of_range_is_refused() {
+    for ms in [5, 37, 100] {
+        let mut x = builder();
+        x.device.link_timeout_ms = ms;
+        let aligned = AlignedBytes::new(&x.build().unwrap());
+        let bank = Bank::parse(&aligned).unwrap();
+        assert_eq!(bank.device().link_timeout_ms, ms);
+        assert_eq!(bank.device(), &x.device);
+    }
+    let want = BankError::Device {
+        field: bank_format::DeviceField::LinkTimeout,
+    };
+    for ms in [0, 4, 101, u32::MAX] {
+        let mut x = builder();
+        x.device.link_timeout_ms = ms;
+        assert_eq!(x.build(), Err(BuildError::Rejected(want)), "{ms} ms");
+        assert_eq!(bank_format::validate_device(&x.device), Err(want));
+    }
+    assert_eq!(
+        want.to_string(),
+        "device calibration: link timeout is not in [5, 100] ms"
+    );
 }
 
 /// The 16-bit storage (`SPEC.md`, "16-bit blocks"): the same bank with each block as 16-bit

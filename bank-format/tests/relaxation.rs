@@ -28,7 +28,7 @@ fn with(r: Relaxation) -> Vec<u8> {
 
 #[test]
 fn the_relaxation_section_round_trips_and_is_optional() {
-    assert_eq!(VERSION_MAJOR, 7);
+    assert_eq!(VERSION_MAJOR, 8);
     let bytes = with(law());
     let aligned = AlignedBytes::new(&bytes);
     let bank = Bank::parse(&aligned).unwrap();

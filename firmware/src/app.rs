@@ -32,9 +32,9 @@ pub const TELEMETRY_EVERY_TICKS: u32 = 10;
 /// stalled, then sent its backlog) cannot stretch a tick: the link's driver decodes them
 /// outside the tick ([`crate::link`]), and taking one out of the queue costs the tick a
 /// copy of about 20 bytes and the command itself. 4 is more than a host sends in a tick (a
-/// heartbeat every few ticks, a command now and then); a backlog waits in the link's queue
-/// ([`crate::link::RX_COMMANDS`]). (The tick used to decode up to 32 received bytes itself,
-/// about 1,600 instructions when a burst landed.)
+/// command now and then; heartbeats and `Disarm` take no queue slot); a backlog waits in the
+/// link's queue ([`crate::link::RX_COMMANDS`]). (The tick used to decode up to 32 received
+/// bytes itself, about 1,600 instructions when a burst landed.)
 pub const MAX_COMMANDS_PER_TICK: usize = 4;
 
 /// What one tick did, for the caller (the software-in-the-loop image reports it to its
@@ -335,19 +335,27 @@ impl<'b, 'q> App<'b, 'q> {
         Ok(out)
     }
 
-    /// Apply what the link has received, at most [`MAX_COMMANDS_PER_TICK`] commands; note
-    /// whether any byte arrived since the last tick (activity, for [`App::link_silence`]).
+    /// Apply what the link has received: first a `Disarm` that arrived since the last tick
+    /// (never queued, so never shed: [`crate::link`]), then at most
+    /// [`MAX_COMMANDS_PER_TICK`] queued commands; note whether any byte and any valid frame
+    /// arrived since the last tick (activity, for [`App::link_silence`]).
     fn poll_link(&mut self) {
         let bytes = self.link.rx_counts().bytes();
         if bytes != self.rx_bytes_seen {
             self.rx_bytes_seen = bytes;
             self.ticks_since_host_byte = 0;
         }
+        let arrived = self.link.poll();
+        if arrived.frame {
+            self.ticks_since_host_frame = 0;
+        }
+        if arrived.disarm {
+            self.command(HostToDevice::Disarm);
+        }
         for _ in 0..MAX_COMMANDS_PER_TICK {
             let Some(cmd) = self.link.receive() else {
                 break;
             };
-            self.ticks_since_host_frame = 0;
             self.command(cmd);
         }
     }
@@ -988,9 +996,9 @@ mod tests {
 
     /// With the board's grace (none: only valid frames count as link activity), a link that
     /// delivers only garbage, a byte every tick, keeps the device armed for at most the
-    /// supervisor's 10-tick timeout after the last valid frame, as a silent one does.
+    /// bank's link timeout after the last valid frame, as a silent one does.
     #[test]
-    fn garbage_only_link_faults_within_ten_ticks_with_the_board_grace() {
+    fn garbage_only_link_faults_within_the_timeout_with_the_board_grace() {
         let bytes = flat_patch();
         let bank = Bank::parse(bytes.as_slice()).unwrap();
         for garbage in [true, false] {
@@ -1022,8 +1030,9 @@ mod tests {
         }
     }
 
+    /// The flat patch's link timeout in ticks (1 kHz).
     fn firmware_link_timeout() -> u32 {
-        crate::safety::DEFAULT_LINK_TIMEOUT_TICKS
+        crate::fixtures::FIXTURE_LINK_TIMEOUT_MS
     }
 
     /// A link that carries only one byte per tick (a tenth of a telemetry frame): the ticks
@@ -1083,25 +1092,60 @@ mod tests {
     fn a_burst_of_commands_is_applied_a_few_a_tick_in_order() {
         rig!(bank, app, host, plant, clock);
         home(&mut app);
-        host.send(&HostToDevice::Arm);
-        app.tick(&mut plant, &clock, false).unwrap();
         for _ in 0..9 {
-            host.send(&HostToDevice::Heartbeat);
+            host.send(&HostToDevice::ClearFault);
         }
-        host.send(&HostToDevice::Disarm);
+        host.send(&HostToDevice::Arm);
         let states: Vec<WireState> = (0..4)
             .map(|_| app.tick(&mut plant, &clock, false).unwrap().state)
             .collect();
         assert_eq!(
             states,
             [
-                WireState::Armed,
-                WireState::Armed,
                 WireState::Disarmed,
-                WireState::Disarmed
+                WireState::Disarmed,
+                WireState::Armed,
+                WireState::Armed
             ]
         );
-        assert_eq!(app.telemetry().counters.rx_frames, 11);
+        assert_eq!(app.telemetry().counters.rx_frames, 10);
+    }
+
+    /// A flooding host (200 heartbeats and 40 commands, an `Arm` among them, in one burst
+    /// between two ticks) then `Disarm`: the next tick runs disarmed, and so does every tick
+    /// while the backlog drains (the `Arm` sent before the `Disarm` is superseded). Heartbeats
+    /// took no queue slot, so what was shed is exactly the commands beyond the queue's 15.
+    #[test]
+    fn a_flooding_hosts_disarm_takes_effect_at_the_next_tick() {
+        rig!(bank, app, host, plant, clock);
+        home(&mut app);
+        host.send(&HostToDevice::Arm);
+        assert_eq!(
+            app.tick(&mut plant, &clock, false).unwrap().state,
+            WireState::Armed
+        );
+        for i in 0..240 {
+            host.send(&match i % 6 {
+                0 if i == 6 => HostToDevice::Arm,
+                0 => HostToDevice::ClearFault,
+                _ => HostToDevice::Heartbeat,
+            });
+        }
+        host.send(&HostToDevice::Disarm);
+        for t in 0..10 {
+            let report = app.tick(&mut plant, &clock, false).unwrap();
+            assert_eq!(
+                report.state,
+                WireState::Disarmed,
+                "tick {t} after the Disarm"
+            );
+            assert!(report.currents_a.iter().all(|&i| i == 0.0));
+        }
+        let c = app.telemetry().counters;
+        // Arm, 240 flood frames, Disarm; 40 commands of which 15 fit the queue.
+        assert_eq!(c.rx_frames, 1 + 240 + 1);
+        assert_eq!(c.rx_dropped, 40 - 15);
+        assert_eq!(c.rx_errors, 0);
     }
 
     /// A host that stopped reading lets telemetry fill the outgoing queue; a fault raised

@@ -10,6 +10,10 @@ extern crate alloc;
 use alloc::vec::Vec;
 use bank_format::{AlignedBytes, BankBuilder, DeviceCalibration, TissueLaw};
 
+/// The fixture devices' link timeout, ms: 10 ticks at 1 kHz, which the tests' silence counts
+/// are written against (a scene's default is `bank_format::DEFAULT_LINK_TIMEOUT_MS`).
+pub const FIXTURE_LINK_TIMEOUT_MS: u32 = 10;
+
 /// The liver scene's device (`host/scenes/liver.toml`).
 pub fn liver_device() -> DeviceCalibration {
     DeviceCalibration {
@@ -30,6 +34,7 @@ pub fn liver_device() -> DeviceCalibration {
         // insertion) and 1 m/s along the shaft.
         max_tip_speed_m_s: 1.0,
         max_joint_speed: [10.0, 10.0, 1.0],
+        link_timeout_ms: FIXTURE_LINK_TIMEOUT_MS,
     }
 }
 
@@ -52,6 +57,7 @@ pub fn bench_device(fulcrum_m: [f32; 3]) -> DeviceCalibration {
         tip_radius_m: 0.002,
         max_tip_speed_m_s: 1.0,
         max_joint_speed: [10.0, 10.0, 1.0],
+        link_timeout_ms: FIXTURE_LINK_TIMEOUT_MS,
     }
 }
 
@@ -88,6 +94,7 @@ pub fn tilted_device() -> DeviceCalibration {
         tip_radius_m: 0.002,
         max_tip_speed_m_s: 1.0,
         max_joint_speed: [10.0, 10.0, 1.0],
+        link_timeout_ms: FIXTURE_LINK_TIMEOUT_MS,
     }
 }
 

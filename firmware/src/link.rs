@@ -21,13 +21,29 @@
 //! - a received frame that does not decode (CRC, COBS, too short or long, not a command) is
 //!   dropped and counted ([`RxCounts::errors`], telemetry's `rx_errors`); a decoded command
 //!   that finds the incoming queue full is dropped and counted ([`RxCounts::dropped`],
-//!   telemetry's `rx_dropped`).
+//!   telemetry's `rx_dropped`);
+//! - two commands never take a queue slot, so a flood cannot shed them: a `Heartbeat` only
+//!   says the host is there, which the count of valid frames ([`RxCounts::frames`]) carries;
+//!   a `Disarm` is counted ([`RxCounts::disarms`]) and the tick looks at that count before
+//!   its queue every tick ([`TickEnd::poll`]), so a `Disarm` takes effect at the first tick
+//!   after it arrived whatever the queue holds. Each queued command carries the count of
+//!   `Disarm`s received before it, which keeps the host's order: an `Arm` sent before a
+//!   `Disarm` that is already applied is skipped, and a command sent after a `Disarm` the tick
+//!   has not applied yet comes out after that `Disarm` ([`TickEnd::receive`]);
+//! - a new connection ([`DriverEnd::connected`], the board's USB task calls it when the
+//!   host's serial port opens) starts clean: the decoder drops a frame torn by the
+//!   disconnect, and the messages queued for the previous connection (stale telemetry,
+//!   replies, faults) are dropped and counted (`tx_dropped`). What they said is not lost: the
+//!   latched fault is in every telemetry frame (`state`, `fault`), and the host's `Hello`
+//!   gets the identity and the reset cause again. The host leads every connection with a
+//!   0x00, which ends whatever the device's decoder holds, so its `Hello` decodes either way.
 //!
 //! The queues are lock-free (heapless `spsc`) and the counters atomic, so the two ends may
 //! live at different interrupt priorities on one core. Encoding and decoding in the driver
 //! keep postcard, the CRC, COBS and the frame buffers out of the tick: the tick only moves a
 //! message (a few hundred bytes) into its queue slot and takes at most
-//! [`crate::app::MAX_COMMANDS_PER_TICK`] commands (about 20 bytes each) out of the other, so
+//! [`crate::app::MAX_COMMANDS_PER_TICK`] commands (about 20 bytes each) out of the other
+//! (besides discarding, never applying, at most the queue's length of superseded `Arm`s), so
 //! however the host's bytes bunch up (a burst after a stall, a flood of garbage), what the
 //! link costs the tick is bounded by a few commands, not by the bytes that arrived.
 
@@ -40,9 +56,8 @@ use heapless::spsc::{Consumer, Producer, Queue};
 /// Outgoing messages the queue holds (minus one: heapless keeps a slot free). At 100 Hz
 /// telemetry this is 70 ms of messages for a host that stopped reading.
 pub const TX_FRAMES: usize = 8;
-/// Incoming commands the queue holds (minus one): a host sends a heartbeat every few ticks
-/// and a command now and then; 15 hold a USB packet's worth of heartbeats (64 bytes, 7 bytes
-/// a heartbeat frame) with room to spare while the tick takes
+/// Incoming commands the queue holds (minus one): heartbeats and `Disarm` never take a slot,
+/// and a host sends a command now and then; 15 hold a burst of them while the tick takes
 /// [`crate::app::MAX_COMMANDS_PER_TICK`] a tick.
 pub const RX_COMMANDS: usize = 16;
 /// Outgoing slots periodic telemetry never takes ([`TickEnd::send_periodic`]): room for a
@@ -64,6 +79,7 @@ pub struct RxCounts {
     frames: AtomicU32,
     errors: AtomicU32,
     dropped: AtomicU32,
+    disarms: AtomicU32,
 }
 
 impl RxCounts {
@@ -73,6 +89,7 @@ impl RxCounts {
             frames: AtomicU32::new(0),
             errors: AtomicU32::new(0),
             dropped: AtomicU32::new(0),
+            disarms: AtomicU32::new(0),
         }
     }
 
@@ -81,9 +98,15 @@ impl RxCounts {
         self.bytes.load(Ordering::Relaxed)
     }
 
-    /// Frames that decoded to a command (telemetry's `rx_frames`).
+    /// Frames that decoded to a command (telemetry's `rx_frames`): the tick's evidence that
+    /// the host is there.
     pub fn frames(&self) -> u32 {
         self.frames.load(Ordering::Relaxed)
+    }
+
+    /// `Disarm` commands received (counted here, never queued).
+    pub fn disarms(&self) -> u32 {
+        self.disarms.load(Ordering::Relaxed)
     }
 
     /// Frames dropped: CRC, COBS, too short, oversize or not a command (telemetry's
@@ -93,16 +116,22 @@ impl RxCounts {
     }
 
     /// Decoded commands dropped because the incoming queue was full (telemetry's
-    /// `rx_dropped`).
+    /// `rx_dropped`); never a heartbeat or a `Disarm`, which take no slot.
     pub fn dropped(&self) -> u32 {
         self.dropped.load(Ordering::Relaxed)
     }
 }
 
+/// A queued command and the number of `Disarm`s received before it (wrapping).
+struct Queued {
+    disarms_before: u32,
+    cmd: HostToDevice,
+}
+
 /// The link's queues; [`Link::split`] hands out the two ends.
 pub struct Link {
     tx: Queue<DeviceToHost, TX_FRAMES>,
-    rx: Queue<HostToDevice, RX_COMMANDS>,
+    rx: Queue<Queued, RX_COMMANDS>,
     rx_counts: RxCounts,
     tx_dropped: AtomicU32,
 }
@@ -135,6 +164,8 @@ impl Link {
                 rx: rx_out,
                 rx_counts,
                 tx_dropped,
+                frames_seen: 0,
+                disarms_seen: 0,
             },
             DriverEnd {
                 tx: tx_out,
@@ -150,12 +181,24 @@ impl Link {
     }
 }
 
+/// What arrived since the tick last looked ([`TickEnd::poll`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Arrivals {
+    /// At least one valid frame: the host is there.
+    pub frame: bool,
+    /// At least one `Disarm`: apply it before anything else.
+    pub disarm: bool,
+}
+
 /// The tick's end: queue messages, take received commands. Every method returns at once.
 pub struct TickEnd<'q> {
     tx: Producer<'q, DeviceToHost>,
-    rx: Consumer<'q, HostToDevice>,
+    rx: Consumer<'q, Queued>,
     rx_counts: &'q RxCounts,
     tx_dropped: &'q AtomicU32,
+    /// [`RxCounts::frames`] and [`RxCounts::disarms`] when the tick last looked.
+    frames_seen: u32,
+    disarms_seen: u32,
 }
 
 impl TickEnd<'_> {
@@ -180,9 +223,43 @@ impl TickEnd<'_> {
         self.send(msg)
     }
 
-    /// The next command the host sent, if any.
+    /// Whether a valid frame, and whether a `Disarm`, arrived since the last call: one atomic
+    /// load when nothing did (a `Disarm` is counted before the frame that carried it, so the
+    /// frame count always moves with it). Call before [`TickEnd::receive`], every tick.
+    pub fn poll(&mut self) -> Arrivals {
+        let frames = self.rx_counts.frames.load(Ordering::Acquire);
+        if frames == self.frames_seen {
+            return Arrivals::default();
+        }
+        self.frames_seen = frames;
+        let disarms = self.rx_counts.disarms.load(Ordering::Relaxed);
+        let disarm = disarms != self.disarms_seen;
+        self.disarms_seen = disarms;
+        Arrivals {
+            frame: true,
+            disarm,
+        }
+    }
+
+    /// The next command the host sent, if any, in the host's order with its `Disarm`s: an
+    /// `Arm` the host sent before a `Disarm` already applied is skipped (the `Disarm`
+    /// supersedes it), and a command the host sent after a `Disarm` not yet applied comes
+    /// after a `Disarm` returned here first. Skips at most the queue's length.
     pub fn receive(&mut self) -> Option<HostToDevice> {
-        self.rx.dequeue()
+        loop {
+            let stamp = self.rx.peek()?.disarms_before;
+            // Wrapping order: the queue holds far fewer than 2^31 commands.
+            let ahead = stamp.wrapping_sub(self.disarms_seen) as i32;
+            if ahead > 0 {
+                self.disarms_seen = stamp;
+                return Some(HostToDevice::Disarm);
+            }
+            let queued = self.rx.dequeue()?;
+            if ahead < 0 && matches!(queued.cmd, HostToDevice::Arm) {
+                continue;
+            }
+            return Some(queued.cmd);
+        }
     }
 
     /// What the driver has received so far.
@@ -201,7 +278,7 @@ impl TickEnd<'_> {
 /// commands.
 pub struct DriverEnd<'q> {
     tx: Consumer<'q, DeviceToHost>,
-    rx: Producer<'q, HostToDevice>,
+    rx: Producer<'q, Queued>,
     rx_counts: &'q RxCounts,
     tx_dropped: &'q AtomicU32,
     /// The command decoder: holds at most the largest command frame.
@@ -258,8 +335,9 @@ impl DriverEnd<'_> {
     }
 
     /// Take received `bytes`: decode them ([`FrameDecoder`], resynchronising on each 0x00) and
-    /// queue every command they complete; a frame that does not decode, or a command that
-    /// finds the queue full, is dropped and counted ([`RxCounts`]).
+    /// queue every command they complete, except a `Heartbeat` (counted as a frame only) and a
+    /// `Disarm` (counted in [`RxCounts::disarms`]); a frame that does not decode, or a command
+    /// that finds the queue full, is dropped and counted ([`RxCounts`]).
     pub fn put_rx(&mut self, bytes: &[u8]) {
         let counts = self.rx_counts;
         counts.bytes.fetch_add(
@@ -267,18 +345,48 @@ impl DriverEnd<'_> {
             Ordering::Relaxed,
         );
         for result in self.decoder.feed_slice(bytes) {
-            let counter = match result {
-                Ok(cmd) => {
-                    counts.frames.fetch_add(1, Ordering::Relaxed);
-                    if self.rx.enqueue(cmd).is_ok() {
-                        continue;
-                    }
-                    &counts.dropped
+            let cmd = match result {
+                Ok(cmd) => cmd,
+                Err(_) => {
+                    counts.errors.fetch_add(1, Ordering::Relaxed);
+                    continue;
                 }
-                Err(_) => &counts.errors,
             };
-            counter.fetch_add(1, Ordering::Relaxed);
+            match cmd {
+                HostToDevice::Heartbeat => {}
+                HostToDevice::Disarm => {
+                    counts.disarms.fetch_add(1, Ordering::Relaxed);
+                }
+                cmd => {
+                    let queued = Queued {
+                        disarms_before: counts.disarms.load(Ordering::Relaxed),
+                        cmd,
+                    };
+                    if self.rx.enqueue(queued).is_err() {
+                        counts.dropped.fetch_add(1, Ordering::Relaxed);
+                    }
+                }
+            }
+            // After the disarm count and the queue: a tick that sees this frame counted sees
+            // them too ([`TickEnd::poll`]).
+            counts.frames.fetch_add(1, Ordering::Release);
         }
+    }
+
+    /// A new connection (the host opened its serial port): drop the frame the decoder holds
+    /// (torn by the disconnect) and every message queued for the previous connection,
+    /// counting them in `tx_dropped`, so the new connection's first frames are the host's own
+    /// and the device's first are current. Commands already queued stay: the tick applies
+    /// them within [`RX_COMMANDS`] / [`crate::app::MAX_COMMANDS_PER_TICK`] ticks, long
+    /// before a reconnection completes.
+    pub fn connected(&mut self) {
+        self.decoder.reset();
+        let mut stale = u32::from(self.sent < self.len);
+        while self.tx.dequeue().is_some() {
+            stale = stale.wrapping_add(1);
+        }
+        (self.len, self.sent) = (0, 0);
+        self.tx_dropped.fetch_add(stale, Ordering::Relaxed);
     }
 
     /// What has been received so far.
@@ -432,7 +540,8 @@ mod tests {
             driver.put_rx(chunk);
         }
         let got: Vec<HostToDevice> = core::iter::from_fn(|| tick.receive()).collect();
-        assert_eq!(got, [Arm, Heartbeat, ClearFault]);
+        // The heartbeat counts as a frame; it takes no queue slot.
+        assert_eq!(got, [Arm, ClearFault]);
         let counts = tick.rx_counts();
         assert_eq!(counts.bytes(), bytes.len() as u32);
         assert_eq!(
@@ -448,9 +557,9 @@ mod tests {
     fn commands_beyond_the_queue_are_dropped_and_counted() {
         let mut link = Link::new();
         let (mut tick, mut driver) = link.split();
-        let beat = frame(&HostToDevice::Heartbeat);
+        let clear = frame(&HostToDevice::ClearFault);
         for _ in 0..RX_COMMANDS + 4 {
-            driver.put_rx(&beat);
+            driver.put_rx(&clear);
         }
         assert_eq!(
             core::iter::from_fn(|| tick.receive()).count(),
@@ -460,5 +569,120 @@ mod tests {
         assert_eq!(counts.frames(), RX_COMMANDS as u32 + 4);
         assert_eq!(counts.dropped(), 5);
         assert_eq!(counts.errors(), 0);
+    }
+
+    /// A flood (200 heartbeats, 30 commands) then `Disarm`: the `Disarm` is seen at the next
+    /// poll whatever the queue holds; heartbeats take no slot, so only the 30 - 15 commands
+    /// beyond the queue are shed.
+    #[test]
+    fn a_flood_sheds_commands_but_never_a_disarm() {
+        let mut link = Link::new();
+        let (mut tick, mut driver) = link.split();
+        for i in 0..230 {
+            driver.put_rx(&frame(if i % 23 == 0 || i % 23 == 11 || i % 23 == 17 {
+                &HostToDevice::ClearFault
+            } else {
+                &HostToDevice::Heartbeat
+            }));
+        }
+        driver.put_rx(&frame(&HostToDevice::Disarm));
+        assert_eq!(
+            tick.poll(),
+            Arrivals {
+                frame: true,
+                disarm: true
+            }
+        );
+        let counts = driver.rx_counts();
+        assert_eq!(
+            (counts.frames(), counts.dropped(), counts.disarms()),
+            (231, 15, 1)
+        );
+        let queued: Vec<_> = core::iter::from_fn(|| tick.receive()).collect();
+        assert_eq!(
+            queued,
+            [const { HostToDevice::ClearFault }; RX_COMMANDS - 1]
+        );
+        assert_eq!(tick.poll(), Arrivals::default());
+    }
+
+    /// The tick's view keeps the host's order around a `Disarm`: an `Arm` sent before an
+    /// applied `Disarm` is skipped, other commands before it still come out, and a command
+    /// sent after a `Disarm` the tick has not polled yet comes out after that `Disarm`, which
+    /// the next poll does not repeat.
+    #[test]
+    fn disarm_keeps_the_hosts_order() {
+        use bank_format::HostToDevice::{Arm, ClearFault, Disarm, Hello, ZeroEncoders};
+        let mut link = Link::new();
+        let (mut tick, mut driver) = link.split();
+        for cmd in [ClearFault, Arm, Disarm, ZeroEncoders, Arm] {
+            driver.put_rx(&frame(&cmd));
+        }
+        assert!(tick.poll().disarm);
+        let got: Vec<_> = core::iter::from_fn(|| tick.receive()).collect();
+        assert_eq!(got, [ClearFault, ZeroEncoders, Arm]);
+
+        driver.put_rx(&frame(&Hello));
+        assert_eq!(
+            tick.poll(),
+            Arrivals {
+                frame: true,
+                disarm: false
+            }
+        );
+        for cmd in [Disarm, Arm] {
+            driver.put_rx(&frame(&cmd));
+        }
+        let got: Vec<_> = core::iter::from_fn(|| tick.receive()).collect();
+        assert_eq!(got, [Hello, Disarm, Arm]);
+        assert_eq!(
+            tick.poll(),
+            Arrivals {
+                frame: true,
+                disarm: false
+            }
+        );
+    }
+
+    /// A reconnection: the device's decoder holds half a frame from before the disconnect and
+    /// the outgoing queue holds messages for the old connection, one of them half sent. After
+    /// [`DriverEnd::connected`] the host's `Hello` (sent without a leading delimiter) decodes,
+    /// nothing stale goes out (the four stale messages are counted as dropped), and the first
+    /// bytes out are the frame of the first message queued after it.
+    #[test]
+    fn a_new_connection_drops_the_torn_frame_and_the_stale_messages() {
+        let mut link = Link::new();
+        let (mut tick, mut driver) = link.split();
+        let stale = |i: u32| DeviceToHost::Fault {
+            tick: i,
+            reason: bank_format::FaultReason::LinkSilent,
+            detail: 11,
+        };
+        for i in 0..4 {
+            assert!(tick.send(stale(i)));
+        }
+        let mut part = [0u8; 5];
+        assert_eq!(driver.take_tx(&mut part), 5);
+        let torn = frame(&HostToDevice::ClearFault);
+        driver.put_rx(&torn[..torn.len() / 2]);
+
+        driver.connected();
+        assert!(!driver.has_tx());
+        assert_eq!(tick.tx_dropped(), 4);
+        driver.put_rx(&frame(&HostToDevice::Hello));
+        assert_eq!(tick.receive(), Some(HostToDevice::Hello));
+        assert_eq!(driver.rx_counts().errors(), 0);
+
+        let fresh = DeviceToHost::Hello {
+            protocol: bank_format::PROTOCOL_VERSION,
+            bank_crc: Some(0x1234_5678),
+            scene_id: 9,
+            node_count: 3,
+        };
+        assert!(tick.send(fresh.clone()));
+        let mut buf = [0u8; MAX_FRAME];
+        let n = driver.take_tx(&mut buf);
+        let mut want = [0u8; MAX_FRAME];
+        assert_eq!(&buf[..n], encode_frame(&fresh, &mut want).unwrap());
     }
 }

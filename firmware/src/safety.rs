@@ -104,8 +104,6 @@ pub struct Fault {
 /// above what a hand does; an encoder glitch or a miscount is much faster). They must stay
 /// above the bank's overspeed thresholds (see the module notes).
 pub const DEFAULT_JUMP_SPEED: [f32; 3] = [20.0, 20.0, 2.0];
-/// Default host link timeout in ticks (10 ms at 1 kHz).
-pub const DEFAULT_LINK_TIMEOUT_TICKS: u32 = 10;
 /// Default ratio of requested current to limit beyond which clamping becomes a fault.
 pub const DEFAULT_CURRENT_FAULT_RATIO: f32 = 1.25;
 /// Default tolerance outside the calibrated joint ranges: rad, rad, m.
@@ -140,8 +138,9 @@ pub struct SafetyConfig {
 
 impl SafetyConfig {
     /// Thresholds from a calibration: `max_counts_per_tick = jump_speed * tick * counts_per_rev *
-    /// |transmission| / (2 pi)` (at least 1), the overspeed thresholds, joint and current limits
-    /// from the calibration, with the defaults above for the rest.
+    /// |transmission| / (2 pi)` (at least 1), `link_timeout_ticks` the calibration's
+    /// `link_timeout_ms` in ticks of `tick_s` (rounded; at least 1), the overspeed thresholds,
+    /// joint and current limits from the calibration, with the defaults above for the rest.
     pub fn from_calibration(
         cal: &DeviceCalibration,
         jump_speed: [f32; 3],
@@ -155,9 +154,11 @@ impl SafetyConfig {
             let n = (v * tick_s * cpr * if t < 0.0 { -t } else { t } / (2.0 * PI)) as u32;
             n.max(1)
         });
+        // `as` saturates (NaN -> 0), never panics.
+        let link_timeout_ticks = (cal.link_timeout_ms as f32 * 1e-3 / tick_s + 0.5) as u32;
         SafetyConfig {
             max_counts_per_tick,
-            link_timeout_ticks: DEFAULT_LINK_TIMEOUT_TICKS,
+            link_timeout_ticks: link_timeout_ticks.max(1),
             current_fault_ratio: DEFAULT_CURRENT_FAULT_RATIO,
             current_limit_a: cal.current_limit_a,
             joint_min: cal.joint_min,
@@ -1178,19 +1179,47 @@ mod tests {
         assert_eq!(out.state, State::Armed);
     }
 
+    /// The bank's link timeout, 37 ms at 1 kHz: armed through 37 silent ticks, `LinkSilent`
+    /// (detail 38) at the 38th; at 2 kHz the same 37 ms are 74 ticks; the range's ends map to
+    /// 5 and 100 ticks.
     #[test]
     fn link_timeout_boundary() {
-        let mut s = armed();
+        let cal = DeviceCalibration {
+            link_timeout_ms: 37,
+            ..liver_device()
+        };
+        let mut s = Supervisor::new(SafetyConfig::new(&cal));
+        s.tick(&ok_tick());
+        assert_eq!(s.arm(true, true), Ok(()));
+        for silence in 1..=37 {
+            let out = s.tick(&TickInput {
+                link_silence_ticks: silence,
+                ..ok_tick()
+            });
+            assert_eq!(out.state, State::Armed, "{silence} ticks");
+        }
         let out = s.tick(&TickInput {
-            link_silence_ticks: 10,
-            ..ok_tick()
-        });
-        assert_eq!(out.state, State::Armed);
-        let out = s.tick(&TickInput {
-            link_silence_ticks: 11,
+            link_silence_ticks: 38,
             ..ok_tick()
         });
         assert_eq!(out.state, State::Fault(FaultReason::LinkSilent));
+        assert_eq!(
+            out.new_fault,
+            Some(Fault {
+                reason: FaultReason::LinkSilent,
+                detail: 38
+            })
+        );
+        let at = |ms, tick_s| {
+            let cal = DeviceCalibration {
+                link_timeout_ms: ms,
+                ..liver_device()
+            };
+            SafetyConfig::from_calibration(&cal, DEFAULT_JUMP_SPEED, tick_s).link_timeout_ticks
+        };
+        assert_eq!(at(37, 0.5e-3), 74);
+        assert_eq!(at(bank_format::LINK_TIMEOUT_MS_MIN, 1e-3), 5);
+        assert_eq!(at(bank_format::LINK_TIMEOUT_MS_MAX, 1e-3), 100);
     }
 
     #[test]

@@ -258,6 +258,8 @@ struct RawDevice {
     #[serde(default)]
     max_joint_speed: Option<Spanned<[f64; 3]>>,
     #[serde(default)]
+    link_timeout_ms: Option<Spanned<f64>>,
+    #[serde(default)]
     friction_offset: Option<Spanned<[f64; 3]>>,
 }
 
@@ -1325,6 +1327,7 @@ fn parse_device(ctx: &Ctx, d: &RawDevice, tip: f64) -> Result<DeviceCalibration,
         ));
     }
     let (tip_speed, joint_speed) = parse_speed_limits(ctx, d)?;
+    let link_timeout_ms = parse_link_timeout(ctx, d)?;
     let f32s = |a: [f64; 3]| a.map(|x| x as f32);
     let device = DeviceCalibration {
         fulcrum_m: f32s(*d.fulcrum_m.get_ref()),
@@ -1342,10 +1345,37 @@ fn parse_device(ctx: &Ctx, d: &RawDevice, tip: f64) -> Result<DeviceCalibration,
         tip_radius_m: tip as f32,
         max_tip_speed_m_s: tip_speed as f32,
         max_joint_speed: f32s(joint_speed),
+        link_timeout_ms,
     };
     bank_format::validate_device(&device)
         .map_err(|e| ctx.err(d.fulcrum_m.span(), "device", e.to_string()))?;
     Ok(device)
+}
+
+/// `device.link_timeout_ms` (optional, default [`bank_format::DEFAULT_LINK_TIMEOUT_MS`]): a whole
+/// number of ms in [`bank_format::LINK_TIMEOUT_MS_MIN`]`..=`[`bank_format::LINK_TIMEOUT_MS_MAX`]
+/// (`bank-format` `SPEC.md`, "Link timeout").
+fn parse_link_timeout(ctx: &Ctx, d: &RawDevice) -> Result<u32, SceneError> {
+    let Some(v) = &d.link_timeout_ms else {
+        return Ok(bank_format::DEFAULT_LINK_TIMEOUT_MS);
+    };
+    let (lo, hi) = (
+        bank_format::LINK_TIMEOUT_MS_MIN,
+        bank_format::LINK_TIMEOUT_MS_MAX,
+    );
+    let ms = *v.get_ref();
+    if ms.fract() == 0.0 && ms >= f64::from(lo) && ms <= f64::from(hi) {
+        // Whole and within [5, 100]: exact as u32.
+        return Ok(ms as u32);
+    }
+    Err(ctx.err(
+        v.span(),
+        "device.link_timeout_ms",
+        format!(
+            "must be a whole number of ms in [{lo}, {hi}], got {ms} (the host's heartbeat comes \
+             every 2 ms; `host bench heartbeat` measures how late it can be)"
+        ),
+    ))
 }
 
 /// `device.max_tip_speed_m_s` (optional, default [`DEFAULT_MAX_TIP_SPEED_M_S`]) finite and > 0;
@@ -1912,6 +1942,21 @@ mod tests {
                 "bank.truncation_radius_m",
             ),
             ("couplings", "couplings = \"knn\"", "bank.couplings"),
+            (
+                "link_timeout_ms",
+                "link_timeout_ms = 4",
+                "device.link_timeout_ms",
+            ),
+            (
+                "link_timeout_ms",
+                "link_timeout_ms = 101",
+                "device.link_timeout_ms",
+            ),
+            (
+                "link_timeout_ms",
+                "link_timeout_ms = -20",
+                "device.link_timeout_ms",
+            ),
         ] {
             let (text, line) = with_line(&t, key, bad);
             let e = err_of(&text);
@@ -1970,6 +2015,33 @@ mod tests {
         // Given explicitly below the jump speeds, a fast tip threshold is fine.
         let (fast, _) = with_line(&t, "max_tip_speed_m_s", "max_tip_speed_m_s = 3.0");
         assert_eq!(parse(&fast).max_tip_speed_m_s, 3.0);
+    }
+
+    /// The link timeout: the shipped scene's, the default when the key is absent, both ends of
+    /// the range accepted and carried into the calibration; a fraction is refused naming the
+    /// key and line.
+    #[test]
+    fn link_timeout_has_a_default_and_reaches_the_calibration() {
+        let (_, t) = shipped();
+        let parse = |text: &str| Scene::parse(Path::new("scene.toml"), text).unwrap().device;
+        assert_eq!(parse(&t).link_timeout_ms, 50);
+        let (absent, _) = with_line(&t, "link_timeout_ms", "");
+        assert_eq!(
+            parse(&absent).link_timeout_ms,
+            bank_format::DEFAULT_LINK_TIMEOUT_MS
+        );
+        for ms in [5, 100] {
+            let (given, _) = with_line(&t, "link_timeout_ms", &format!("link_timeout_ms = {ms}"));
+            assert_eq!(parse(&given).link_timeout_ms, ms);
+        }
+        let (fraction, line) = with_line(&t, "link_timeout_ms", "link_timeout_ms = 50.5");
+        let e = err_of(&fraction);
+        assert_eq!(
+            (e.line, e.key.as_str()),
+            (Some(line), "device.link_timeout_ms"),
+            "{e}"
+        );
+        assert!(e.message.contains("whole number of ms in [5, 100]"), "{e}");
     }
 
     #[test]

@@ -344,12 +344,14 @@ torque_constant_nm_per_a = [0.025, 0.025, 0.025]
 current_limit_a = [2.0, 2.0, 2.0]
 max_force_n = 5.0
 max_tip_speed_m_s = 1.0
+link_timeout_ms = {link_timeout_ms}   # host silence before the armed device faults, in [5, 100]
 
 [law]
 kind = "linear"   # fit a Chebyshev Q on bench data with `host calibrate tissue`
 
 {contact}"#,
         contact = contact_text(spec.fem_mesh.as_deref()),
+        link_timeout_ms = bank_format::DEFAULT_LINK_TIMEOUT_MS,
         tissue = spec.tissue.name(),
         units = spec.mesh_units.name(),
         lo = v3(lo),

@@ -107,7 +107,7 @@ impl Source for VirtualDevice {
 /// Asks for the real-time FIFO scheduling class for the calling thread (Linux; needs
 /// CAP_SYS_NICE or an rtprio limit); returns whether it was granted. The thread sleeps between
 /// ticks, so it cannot starve the machine.
-fn request_realtime() -> bool {
+pub(crate) fn request_realtime() -> bool {
     #[cfg(target_os = "linux")]
     {
         let param = libc::sched_param { sched_priority: 20 };

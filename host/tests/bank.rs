@@ -64,12 +64,14 @@ fn shipped_scene_builds_a_valid_bank_and_inspect_refuses_damaged_copies() {
     );
 
     // The scene's speed thresholds, the cell certificates, pairs stored once and the triangle
-    // planes (format 5); format 7, and the default scene elastic (no relaxation section).
-    assert_eq!(bank.version().0, 7);
+    // planes (format 5); format 8 (the link timeout in the device record), and the default
+    // scene elastic (no relaxation section).
+    assert_eq!(bank.version().0, 8);
     assert_eq!(bank.relaxation(), None);
     assert_eq!(bank.triangle_planes().len(), bank.triangles().len());
     assert_eq!(bank.device().max_tip_speed_m_s, 1.0);
     assert_eq!(bank.device().max_joint_speed, [10.0, 10.0, 1.0]);
+    assert_eq!(bank.device().link_timeout_ms, 50);
     let o = host(&["bank", "inspect", s(&out)]);
     assert!(o.status.success(), "{}", stderr(&o));
     let text = String::from_utf8_lossy(&o.stdout);
@@ -77,6 +79,7 @@ fn shipped_scene_builds_a_valid_bank_and_inspect_refuses_damaged_copies() {
         text.contains("overspeed tip 1 m/s; joints 10 rad/s, 10 rad/s, 1 m/s"),
         "{text}"
     );
+    assert!(text.contains("\nlink      timeout 50 ms\n"), "{text}");
     // The tool patches at the triangles' centroids, as the build printed them: the 3 mm tip
     // covers a few nodes, never more than the firmware's solve takes.
     let patches = host::bank::stats::tool_patches(&bank);
@@ -107,6 +110,7 @@ fn shipped_scene_builds_a_valid_bank_and_inspect_refuses_damaged_copies() {
     );
     assert_eq!(v["crc32"], format!("{:08x}", bank.crc()));
     assert_eq!(v["device"]["max_tip_speed_m_s"], 1.0);
+    assert_eq!(v["device"]["link_timeout_ms"], 50);
     assert_eq!(
         v["device"]["max_joint_speed"],
         serde_json::json!([10.0, 10.0, 1.0])

@@ -301,9 +301,11 @@ fn assert_zero_from(run: &Run, tick: u32) {
 }
 
 #[test]
-fn silent_host_link_faults_within_ten_ticks() {
+fn silent_host_link_faults_after_the_banks_timeout() {
     let (setup, bytes) = setup();
     let bank = Bank::parse(&bytes).unwrap();
+    // Ticks at 1 kHz.
+    let timeout = bank.device().link_timeout_ms;
     let probe = qemu(&setup, &Session::new(&bank, Script::Press, 1.5).unwrap());
     let quiet_from = pressing_tick(&probe, 1000);
     let mut session = Session::new(&bank, Script::Press, 1.5).unwrap();
@@ -313,11 +315,11 @@ fn silent_host_link_faults_within_ten_ticks() {
     assert_eq!(faults.len(), 1, "{faults:?}");
     let (tick, reason, detail) = faults[0];
     assert_eq!(reason, FaultReason::LinkSilent);
-    // Faulted on the 11th tick without a frame (timeout 10 ticks), and not before the host
+    // Faulted on the first tick past the timeout without a frame, and not before the host
     // went quiet (its last heartbeat may still have been in flight on the UART).
-    assert_eq!(detail, 11);
+    assert_eq!(detail, timeout + 1);
     assert!(
-        tick > quiet_from && tick <= quiet_from + 11 + 10,
+        tick > quiet_from && tick <= quiet_from + timeout + 1 + 10,
         "{tick} vs {quiet_from}"
     );
     assert!(run.ticks[tick as usize - 2].currents_a != [0.0; 3]);
@@ -327,12 +329,13 @@ fn silent_host_link_faults_within_ten_ticks() {
 }
 
 /// A host that stops its heartbeats but keeps sending garbage (one byte a tick, never a valid
-/// frame): the QEMU image's link grace (20 ticks, for its slow USART) plus the 10-tick timeout,
+/// frame): the QEMU image's link grace (20 ticks, for its slow USART) plus the bank's timeout,
 /// then `LinkSilent` and zero current; not the 100 ticks the old fixed grace allowed.
 #[test]
 fn garbage_only_link_faults_after_the_images_grace() {
     let (setup, bytes) = setup();
     let bank = Bank::parse(&bytes).unwrap();
+    let timeout = bank.device().link_timeout_ms;
     let quiet_from = 300;
     let mut session = Session::new(&bank, Script::Press, 0.5).unwrap();
     session.heartbeat_until = Some(quiet_from);
@@ -346,7 +349,7 @@ fn garbage_only_link_faults_after_the_images_grace() {
     assert_eq!(reason, FaultReason::LinkSilent);
     // The last heartbeat may still have been in flight on the UART (a few ticks).
     assert!(
-        tick > quiet_from + 10 && tick <= quiet_from + 10 + 20 + 10,
+        tick > quiet_from + timeout && tick <= quiet_from + timeout + 20 + 10,
         "{tick} vs {quiet_from}"
     );
     assert_eq!(run.ticks[quiet_from as usize].state, State::Armed);

@@ -91,6 +91,7 @@ pub fn device() -> DeviceCalibration {
         tip_radius_m: 0.002,
         max_tip_speed_m_s: 1.0,
         max_joint_speed: [10.0, 12.0, 1.5],
+        link_timeout_ms: 20,
     }
 }
 

@@ -70,8 +70,8 @@ fn bank_region() -> &'static [u8] {
 
 /// The link grace of the application ([`App::new`]): none. The USB CDC link delivers a whole
 /// frame within a tick, so only valid frames count as link activity, and a host that sends
-/// nothing or only garbage faults `LinkSilent` after the supervisor's 10-tick timeout (the
-/// device is armed for at most 10 ms of it).
+/// nothing or only garbage faults `LinkSilent` after the bank's link timeout
+/// (`link_timeout_ms`, one tick a ms; the device is armed for at most that long of it).
 const LINK_GRACE_TICKS: u32 = 0;
 
 /// The safety state after the last tick, for the LED (0 disarmed, 1 armed, 2 fault).

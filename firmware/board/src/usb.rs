@@ -5,12 +5,16 @@
 //! them, received packets decoded into commands for the incoming queue
 //! ([`DriverEnd::put_rx`], also here in thread mode). The tick never waits on it: when the host is
 //! slow or absent, whole messages are dropped on the tick's side and counted (`tx_dropped`).
+//! Each time the host opens its port (DTR rises: after enumeration, a cable pulled and plugged
+//! back, a host program that closed and reopened the port) the link starts clean
+//! ([`DriverEnd::connected`]): a frame torn by the disconnect is dropped, and so is what was
+//! queued for the previous connection.
 
 use core::cell::RefCell;
 
-use embassy_futures::join::join3;
+use embassy_futures::join::join4;
 use embassy_time::Timer;
-use embassy_usb::class::cdc_acm::{CdcAcmClass, Receiver, Sender, State};
+use embassy_usb::class::cdc_acm::{CdcAcmClass, ControlChanged, Receiver, Sender, State};
 use embassy_usb::driver::EndpointError;
 use embassy_usb::{Builder, Config};
 use firmware::link::DriverEnd;
@@ -48,11 +52,34 @@ pub async fn run(driver: UsbDriver, link: DriverEnd<'static>) {
     );
     let class = CdcAcmClass::new(&mut builder, CDC_STATE.init(State::new()), PACKET as u16);
     let mut device = builder.build();
-    let (tx, rx) = class.split();
-    // Both directions use the driver end from this one task; neither holds the borrow across
-    // an `await`, so a borrow never finds it taken.
+    let (tx, rx, control) = class.split_with_control();
+    // Both directions and the connection watch use the driver end from this one task; none
+    // holds the borrow across an `await`, so a borrow never finds it taken.
     let link = RefCell::new(link);
-    join3(device.run(), send(tx, &link), receive(rx, &link)).await;
+    join4(
+        device.run(),
+        send(tx, &link),
+        receive(rx, &link),
+        connections(control, &link),
+    )
+    .await;
+}
+
+/// Every time the host opens the port (DTR rises; a USB reset or unplug lowers it), the link
+/// starts clean ([`DriverEnd::connected`]).
+async fn connections(control: ControlChanged<'static>, link: &RefCell<DriverEnd<'static>>) {
+    let mut open = false;
+    loop {
+        control.control_changed().await;
+        let dtr = control.dtr();
+        if dtr
+            && !open
+            && let Ok(mut l) = link.try_borrow_mut()
+        {
+            l.connected();
+        }
+        open = dtr;
+    }
 }
 
 /// Outgoing: take what the tick queued, one packet at a time, as fast as the host reads.

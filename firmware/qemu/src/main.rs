@@ -167,10 +167,10 @@ const TX_CHUNK: usize = 16;
 
 /// The link grace of the application ([`App::new`]): QEMU's USART holds one byte at a time and
 /// carries a few a tick, so a 20-byte command spans several ticks, during which the bytes alone
-/// keep the link alive. 20 ticks (twice the supervisor's timeout) is a choice, not a
-/// measurement of the longest frame gap; the SIL tests run with it without a `LinkSilent`. A
-/// host that goes silent still faults after 10 ticks without a byte; one that sends only
-/// garbage after 10 + 20 ticks without a valid frame.
+/// keep the link alive. 20 ticks is a choice, not a measurement of the longest frame gap; the
+/// SIL tests run with it without a `LinkSilent`. A host that goes silent still faults after
+/// the bank's link timeout (`link_timeout_ms` ticks) without a byte; one that sends only
+/// garbage after that timeout + 20 ticks without a valid frame.
 const LINK_GRACE_TICKS: u32 = 20;
 
 /// The link: received bytes decoded into the tick's command queue ([`DriverEnd::put_rx`]),

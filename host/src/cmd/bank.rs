@@ -308,7 +308,7 @@ fn inspect(args: InspectArgs) -> Result<()> {
                 "torque_constant_nm_per_a": d.torque_constant_nm_per_a,
                 "current_limit_a": d.current_limit_a, "max_force_n": d.max_force_n,
                 "tip_radius_m": d.tip_radius_m, "max_tip_speed_m_s": d.max_tip_speed_m_s,
-                "max_joint_speed": d.max_joint_speed,
+                "max_joint_speed": d.max_joint_speed, "link_timeout_ms": d.link_timeout_ms,
             },
             "sections": sections.iter().map(|(n, o, l, c)| serde_json::json!(
                 { "kind": n, "offset": o, "len": l, "count": c })).collect::<Vec<_>>(),
@@ -371,6 +371,7 @@ fn inspect(args: InspectArgs) -> Result<()> {
         "overspeed tip {} m/s; joints {} rad/s, {} rad/s, {} m/s",
         d.max_tip_speed_m_s, d.max_joint_speed[0], d.max_joint_speed[1], d.max_joint_speed[2]
     );
+    println!("link      timeout {} ms", d.link_timeout_ms);
     println!("sections  kind                  offset     bytes   count");
     for (name, off, len, count) in sections {
         println!("          {name:<20} {off:>7} {len:>9} {count:>7}");

@@ -27,6 +27,9 @@ pub enum Bench {
     /// Instructions one evaluation of the tissue law costs on the MCU (thumbv7em), per degree,
     /// counted on the disassembly of `TissueLaw::eval`.
     Law(super::bench_law::LawArgs),
+    /// The host link's heartbeat intervals as a device sees them (median, p99, p99.9, max),
+    /// optionally under a CPU load: what the device's link timeout must tolerate.
+    Heartbeat(super::bench_heartbeat::HeartbeatArgs),
     /// Flash and static RAM of an MCU image (ELF) against the firmware and RAM regions of
     /// memory.x (e.g. the board image,
     /// firmware/board/target/thumbv7em-none-eabihf/release/firmware-board).
@@ -174,6 +177,7 @@ pub fn run(bench: Bench) -> Result<()> {
         Bench::Refinement(args) => super::refinement::run(args),
         Bench::Sil(args) => sil(args),
         Bench::Law(args) => super::bench_law::run(args),
+        Bench::Heartbeat(args) => super::bench_heartbeat::run(args),
         Bench::Image(args) => image(args),
         Bench::Precompute(args) => precompute(args),
         Bench::Patch(args) => patch(args),

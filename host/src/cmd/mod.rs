@@ -2,6 +2,7 @@
 
 pub mod bank;
 pub mod bench;
+pub mod bench_heartbeat;
 pub mod bench_law;
 pub mod calibrate;
 pub mod compliance;

@@ -162,7 +162,7 @@ impl std::str::FromStr for SourceSpec {
 
 /// A device on a serial port: the link thread ([`DeviceLink`]) decodes `DeviceToHost::Telemetry`
 /// frames, sends a heartbeat every 2 ms (the firmware's link-silence watchdog expects one within
-/// 10 ticks) and the commands given to [`SerialSource::command`].
+/// the bank's `link_timeout_ms`) and the commands given to [`SerialSource::command`].
 pub struct SerialSource {
     link: DeviceLink,
     mailbox: Arc<Mailbox>,
