@@ -410,7 +410,7 @@ fn track(
     Some(near)
 }
 
-/// A point of R's rest surface found by [`closest_surface_point`].
+/// A point of R's rest surface where a [`SurfaceWalk`] landed.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct SurfacePoint {
     /// Index into `bank.triangles()`.
@@ -421,23 +421,6 @@ pub struct SurfacePoint {
     pub bary: [f32; 3],
     /// The point, m.
     pub point: [f32; 3],
-}
-
-/// The rest-surface point under `p` (a point near the surface), by a walk from triangle
-/// `start` (nodes `start_nodes`) run to its end: [`SurfaceWalk`] with all its steps at once
-/// ([`MAX_SLIDE_STEPS`] and the closing closest point). `None` only for a bank whose indices
-/// do not hold.
-pub fn closest_surface_point(
-    bank: &Bank,
-    start: u32,
-    start_nodes: [u16; 3],
-    p: [f32; 3],
-) -> Option<SurfacePoint> {
-    let mut budget = MAX_SLIDE_STEPS + 1;
-    match SurfaceWalk::new(start, start_nodes).advance(bank, p, &mut budget) {
-        Walk::Landed(sp) => Some(sp),
-        Walk::Walking | Walk::Lost => None,
-    }
 }
 
 /// A walk across R's edges to the rest-surface point under a point `p` near the surface, which
@@ -1116,6 +1099,23 @@ mod tests {
             tr.update(&bank, [0.036, 0.018, depth], [0.036, 0.018, 0.0001]),
             ContactState::Free
         );
+    }
+
+    /// The rest-surface point under `p` (a point near the surface), by a walk from triangle
+    /// `start` (nodes `start_nodes`) run to its end: [`SurfaceWalk`] with all its steps at once
+    /// ([`MAX_SLIDE_STEPS`] and the closing closest point). `None` only for a bank whose indices
+    /// do not hold.
+    fn closest_surface_point(
+        bank: &Bank,
+        start: u32,
+        start_nodes: [u16; 3],
+        p: [f32; 3],
+    ) -> Option<SurfacePoint> {
+        let mut budget = MAX_SLIDE_STEPS + 1;
+        match SurfaceWalk::new(start, start_nodes).advance(bank, p, &mut budget) {
+            Walk::Landed(sp) => Some(sp),
+            Walk::Walking | Walk::Lost => None,
+        }
     }
 
     /// The tracking of a slide with its whole walk in one tick (no per-tick budget): the
