@@ -1225,7 +1225,7 @@ mod tests {
                 // The displacement leaves the cone by at most the tick's motion.
                 let over = crate::vec3::dist2(tip, got.point).sqrt()
                     - crate::vec3::dist2(tip, next.point).sqrt();
-                assert!(over >= 0.0 && over <= 0.00046, "{over}");
+                assert!((0.0..=0.00046).contains(&over), "{over}");
                 continue;
             }
             for i in 0..3 {

@@ -373,9 +373,9 @@ fn sil(args: SilArgs) -> Result<()> {
         wander,
     } = host::bench::sil::run(&setup, &bank, args.seconds, 0..args.seeds)?;
     let seeds = match args.seeds {
-        0 => "no wander seeds".to_string(),
-        1 => "wander seed 0".to_string(),
-        n => format!("wander seeds 0-{}", n - 1),
+        0 => "no seeds".to_string(),
+        1 => "seed 0".to_string(),
+        n => format!("seeds 0-{}", n - 1),
     };
     let worst_wander = wander.iter().max_by_key(|w| w.max_body_instructions);
     if args.json {
@@ -455,7 +455,7 @@ fn sil(args: SilArgs) -> Result<()> {
         );
     }
     println!(
-        "worst body over press, slide, strike and {seeds}: {goal_body} instructions (goal \
+        "worst body over press, slide, strike and wander {seeds}: {goal_body} instructions (goal \
          {BODY_GOAL})"
     );
     println!(
