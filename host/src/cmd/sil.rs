@@ -226,12 +226,12 @@ impl Summary {
 
 /// Runs `host sil`.
 pub fn run(args: Args) -> Result<()> {
-    let (setup, bytes) = args.setup.resolve()?;
-    let bank = Bank::parse(&bytes)
-        .map_err(|e| anyhow::anyhow!("{}: invalid bank: {e}", setup.bank.display()))?;
     if args.seed.is_some() && args.script != SilScript::Wander {
         bail!("--seed chooses a wander path: use it with --script wander");
     }
+    let (setup, bytes) = args.setup.resolve()?;
+    let bank = Bank::parse(&bytes)
+        .map_err(|e| anyhow::anyhow!("{}: invalid bank: {e}", setup.bank.display()))?;
     let seconds = args.seconds.unwrap_or(5.0);
     let seed = (args.script == SilScript::Wander && args.trajectory.is_none())
         .then(|| args.seed.unwrap_or(0));

@@ -77,8 +77,14 @@ pub fn path(bank: &Bank, seed: u64, seconds: f64) -> Result<Vec<(f64, [f64; 3])>
         angles: [0.0, 0.0],
         depth_m: -START_ABOVE_M,
     };
-    let first = joints(bank, &limits, at)
-        .ok_or_else(|| anyhow::anyhow!("the wander path cannot start above the surface"))?;
+    let first = joints(bank, &limits, at).ok_or_else(|| {
+        anyhow::anyhow!(
+            "a wander path starts {} mm above the surface straight below the trocar: the \
+             shaft there misses the bank's reachable surface, or that point is outside the \
+             device's insertion range",
+            START_ABOVE_M * 1e3
+        )
+    })?;
     let mut samples = vec![(0.0, first)];
     let mut t = 0.0;
     while t < seconds {
