@@ -71,10 +71,10 @@ pub const MAX_SLIDE_STEPS: u32 = 32;
 /// Steps of a [`SurfaceWalk`] a sliding contact takes per tick (each a plane test and at most
 /// one edge crossing, or the closest point of the triangle where the walk stops): one for a
 /// slide within the anchor's triangle, two across an edge. Under QEMU on the shipped liver a
-/// held contact's tracking costs about 200 instructions while it sticks, 510 with one step, 760
-/// with two and 930 to 1,400 with three or four, which a tick at 0.45 m/s near a vertex took
-/// before the walk was budgeted; with the rest of a contact tick (about 2,170) two steps keep
-/// the loop body under 3,000.
+/// held contact's tracking costs about 200 instructions while it sticks, 520 with one step and
+/// up to 810 with two (three or four steps, which a slide at 0.45 m/s past a vertex needs, cost
+/// 930 to 1,400); with the rest of a contact tick (about 2,160) two steps keep the loop body
+/// under 3,000.
 pub const SLIDE_STEPS_PER_TICK: u32 = 2;
 /// Most path pieces [`detect`] cuts a tick's path into: the loop shortens a longer path to its
 /// last [`max_path_m`] before detecting ([`path_tail`]). With at most
