@@ -37,11 +37,21 @@
 //! cone, the contact slides: the anchor moves along the surface just far enough to put the
 //! displacement back on the cone (the normal is the stored plane's `m / |m|`, so a press in
 //! place loads no vertex and takes no square root; the target point is found on the rest
-//! surface by
-//! [`closest_surface_point`], a walk across edges from the current triangle), so the
-//! tangential force is bounded by the slope and changes continuously, with no saw-tooth at
-//! triangle edges. Contact ends when `(tip - anchor) . n > 0` for the contact triangle's outward
-//! rest normal `n` (the contact would pull), checked before and after any slide.
+//! surface by a [`SurfaceWalk`] across edges from the current triangle), so the tangential
+//! force is bounded by the slope and changes continuously, with no saw-tooth at triangle
+//! edges. Contact ends when `(tip - anchor) . n > 0` for the contact triangle's outward rest
+//! normal `n` (the contact would pull), checked before and after any slide.
+//!
+//! A tick's slide takes at most [`SLIDE_STEPS_PER_TICK`] steps of its walk: a slide within the
+//! anchor's triangle takes one, across an edge two. A walk that needs more (past a vertex,
+//! where the walk goes round the vertex's triangles, or over slivers) goes on at the next tick
+//! from the triangle it reached, towards that tick's target (or is dropped when the tip has
+//! come back inside the cone). Until it lands the anchor is the target itself, in the plane of
+//! the triangle the slide started on, with that triangle and its barycentric coordinates: the
+//! displacement stays on the cone (the force of the whole walk, to the surface's curvature
+//! over a tick's motion), and the contact's `W` or patch is the start point's, less than a
+//! tick's motion away (0.45 mm at the shipped scene's 0.45 m/s). A slide that crosses at most
+//! one edge a tick is tracked exactly as by the whole walk.
 
 // `!(x > 0.0)` is deliberate throughout: it also rejects NaN.
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
@@ -55,8 +65,17 @@ pub const PARALLEL_TOL: f32 = 1.0e-4;
 /// Barycentric tolerance: a crossing point whose smallest barycentric coordinate is at least
 /// `-BARY_TOL` is inside the triangle (edges and vertices are shared by their triangles).
 pub const BARY_TOL: f32 = 1.0e-5;
-/// Cap on the triangle-to-triangle steps of one slide.
+/// Cap on the triangle-to-triangle steps of one walk ([`SurfaceWalk`]; a slide's walk may span
+/// ticks, [`SLIDE_STEPS_PER_TICK`]).
 pub const MAX_SLIDE_STEPS: u32 = 32;
+/// Steps of a [`SurfaceWalk`] a sliding contact takes per tick (each a plane test and at most
+/// one edge crossing, or the closest point of the triangle where the walk stops): one for a
+/// slide within the anchor's triangle, two across an edge. Under QEMU on the shipped liver a
+/// held contact's tracking costs about 200 instructions while it sticks, 520 with one step and
+/// up to 810 with two (three or four steps, which a slide at 0.45 m/s past a vertex needs, cost
+/// 930 to 1,400); with the rest of a contact tick (about 2,160) two steps keep the loop body
+/// under 3,000.
+pub const SLIDE_STEPS_PER_TICK: u32 = 2;
 /// Most path pieces [`detect`] cuts a tick's path into: the loop shortens a longer path to its
 /// last [`max_path_m`] before detecting ([`path_tail`]). With at most
 /// [`bank_format::MAX_CELL_CANDIDATES`] candidates a cell (`Bank::parse` refuses more), a
@@ -110,9 +129,12 @@ pub enum ContactState {
         triangle: u32,
         /// The triangle's nodes (same order as `bary`).
         nodes: [u16; 3],
-        /// Barycentric coordinates of `anchor` in the triangle: each in `[0, 1]`, sum 1.
+        /// Barycentric coordinates of `anchor` in the triangle: each in `[0, 1]`, sum 1 (while
+        /// a slide's walk is under way, those of the point the slide started from).
         bary: [f32; 3],
-        /// The rest-surface point the tip holds, m.
+        /// The rest-surface point the tip holds, m (while a slide's walk is under way, the
+        /// slide's target in the plane of `triangle`, less than the walk's ticks of motion
+        /// outside it).
         anchor: [f32; 3],
         /// `tip - anchor`, m: the displacement imposed on the contact point.
         displacement: [f32; 3],
@@ -139,28 +161,41 @@ pub struct Hit {
 pub struct ContactTracker {
     /// The anchor: the rest-surface point the tool holds.
     active: Option<SurfacePoint>,
+    /// A slide's walk that ran out of its tick's [`SLIDE_STEPS_PER_TICK`], resumed the next
+    /// tick.
+    slide: Option<SurfaceWalk>,
 }
 
 impl ContactTracker {
     /// A free tracker (the bank's grid holds everything detection needs).
     pub const fn new() -> ContactTracker {
-        ContactTracker { active: None }
+        ContactTracker {
+            active: None,
+            slide: None,
+        }
+    }
+
+    /// Whether a contact is held (the next [`ContactTracker::update`] tracks it and does not
+    /// read its path).
+    pub fn touching(&self) -> bool {
+        self.active.is_some()
     }
 
     /// Drop any contact (e.g. after a fault or a bank change).
     pub fn reset(&mut self) {
         self.active = None;
+        self.slide = None;
     }
 
     /// One tick: the tip moved from `prev_tip` to `tip` (m, bank frame). A non-finite tip drops
     /// the contact and reports [`ContactState::Free`].
     pub fn update(&mut self, bank: &Bank, prev_tip: [f32; 3], tip: [f32; 3]) -> ContactState {
         if !finite(tip) {
-            self.active = None;
+            self.reset();
             return ContactState::Free;
         }
         if let Some(active) = self.active {
-            self.active = track(bank, active, tip);
+            self.active = track(bank, active, &mut self.slide, tip);
         } else if let Some(hit) = detect(bank, prev_tip, tip) {
             self.active = Some(SurfacePoint {
                 triangle: hit.triangle,
@@ -333,27 +368,55 @@ fn intersect(
 /// "triangle planes"): the contact pulls when `d . m > 0` (`d = tip - anchor`); the inward
 /// depth is `-(d . m) / |m|` and the tangential part `dt = d - m (d . m) / (m . m)`. The stick
 /// test `|dt| <= STICK_SLOPE depth` is compared squared, so a press in place takes no square
-/// root and loads no vertex; only a slide does.
-fn track(bank: &Bank, active: SurfacePoint, tip: [f32; 3]) -> Option<SurfacePoint> {
+/// root and loads no vertex; only a slide does. A slide walks towards its target for at most
+/// [`SLIDE_STEPS_PER_TICK`] steps, resuming `slide` (the last tick's unfinished walk) when there
+/// is one; a walk still under way is left in `slide` and the anchor is the target, on the held
+/// triangle (see the module notes).
+fn track(
+    bank: &Bank,
+    active: SurfacePoint,
+    slide: &mut Option<SurfaceWalk>,
+    tip: [f32; 3],
+) -> Option<SurfacePoint> {
     let planes = bank.triangle_planes();
     let m = planes.get(active.triangle as usize)?.m;
     let mm = dot(m, m);
     let d = sub(tip, active.point);
     let dm = dot(d, m);
     if !(mm > 0.0) || dm > 0.0 {
+        *slide = None;
         return None;
     }
     // Normal (inward, >= 0: depth^2 = dm^2 / mm) and tangential parts of the displacement.
     let dt = sub(d, scale(m, dm / mm));
     let t2 = dot(dt, dt);
     if !(t2 > STICK_SLOPE * STICK_SLOPE * (dm * dm / mm)) {
+        *slide = None;
         return Some(active);
     }
     // Slide: move the anchor along the tangential displacement onto the cone's edge.
     let t = sqrt(t2);
     let allowed = STICK_SLOPE * (-dm / sqrt(mm));
     let target = add(active.point, scale(dt, 1.0 - allowed / t));
-    let near = closest_surface_point(bank, active.triangle, active.nodes, target)?;
+    let walk = slide.get_or_insert_with(|| SurfaceWalk::new(active.triangle, active.nodes));
+    let mut steps = SLIDE_STEPS_PER_TICK;
+    let near = match walk.advance(bank, target, &mut steps) {
+        // Under way: for this tick the anchor is the target itself, in the held triangle's
+        // plane, so the displacement stays on the cone; the triangle and its coordinates are
+        // the held ones until the walk lands.
+        Walk::Walking => {
+            return Some(SurfacePoint {
+                point: target,
+                ..active
+            });
+        }
+        Walk::Landed(near) => near,
+        Walk::Lost => {
+            *slide = None;
+            return None;
+        }
+    };
+    *slide = None;
     let m = planes.get(near.triangle as usize)?.m;
     if dot(sub(tip, near.point), m) > 0.0 {
         return None;
@@ -361,7 +424,7 @@ fn track(bank: &Bank, active: SurfacePoint, tip: [f32; 3]) -> Option<SurfacePoin
     Some(near)
 }
 
-/// A point of R's rest surface found by [`closest_surface_point`].
+/// A point of R's rest surface where a [`SurfaceWalk`] landed.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct SurfacePoint {
     /// Index into `bank.triangles()`.
@@ -374,38 +437,26 @@ pub struct SurfacePoint {
     pub point: [f32; 3],
 }
 
-/// The rest-surface point under `p` (a point near the surface), by a walk from triangle
-/// `start` (nodes `start_nodes`) run to its end: [`SurfaceWalk`] with the whole
-/// [`MAX_SLIDE_STEPS`] at once. `None` only for a bank whose indices do not hold.
-pub fn closest_surface_point(
-    bank: &Bank,
-    start: u32,
-    start_nodes: [u16; 3],
-    p: [f32; 3],
-) -> Option<SurfacePoint> {
-    let mut budget = MAX_SLIDE_STEPS;
-    match SurfaceWalk::new(start, start_nodes).advance(bank, p, &mut budget) {
-        Walk::Landed(sp) => Some(sp),
-        Walk::Walking | Walk::Lost => None,
-    }
-}
-
 /// A walk across R's edges to the rest-surface point under a point `p` near the surface, which
 /// can stop and resume: each step projects `p` onto the current triangle's plane (its
 /// barycentric coordinates from the stored plane, `plane_bary`); if the projection lies inside,
 /// that is the point; otherwise the walk crosses the edge opposite the most negative
 /// barycentric coordinate into the neighbouring triangle. After [`MAX_SLIDE_STEPS`] steps in
 /// all, at a boundary edge of R, or when the walk would step straight back (over a ridge, where
-/// `p` projects outside both triangles), the answer is the closest point of the current
-/// triangle. A local search, about a hundred operations per step: it follows the surface
-/// around `start`, never jumping to a fold elsewhere. A caller with a per-tick budget
-/// ([`crate::patch::PatchBuild::locate`]) takes a few steps a tick; the point it lands on does
-/// not depend on how the steps were split.
-#[derive(Clone, Copy, Debug)]
+/// `p` projects outside both triangles), the walk stops, and its answer is the closest point of
+/// the current triangle, one step more. A local search, about a hundred operations per step:
+/// it follows the surface around `start`, never jumping to a fold elsewhere. A caller with a
+/// per-tick budget (a slide, [`SLIDE_STEPS_PER_TICK`]; a patch rebuild,
+/// [`crate::patch::PatchBuild::locate`]) takes a few steps a tick; for a fixed `p` the point it
+/// lands on does not depend on how the steps were split. A slide resumes its walk towards the
+/// next tick's target, from where it stopped.
+#[derive(Clone, Copy, Debug, PartialEq)]
 pub struct SurfaceWalk {
     triangle: u32,
     nodes: [u16; 3],
     came_from: Option<u32>,
+    /// Steps taken; [`MAX_SLIDE_STEPS`] once the walk has stopped on `triangle` (what is left
+    /// is its closest point).
     taken: u32,
 }
 
@@ -431,15 +482,19 @@ impl SurfaceWalk {
         }
     }
 
-    /// Takes steps towards the point under `p` while `budget` lasts, one off it per step.
+    /// Takes steps towards the point under `p` while `budget` lasts, one off it per step (the
+    /// closing closest point of a stopped walk included).
     pub fn advance(&mut self, bank: &Bank, p: [f32; 3], budget: &mut u32) -> Walk {
         let positions = bank.positions();
         let planes = bank.triangle_planes();
-        while self.taken < MAX_SLIDE_STEPS {
+        loop {
             if *budget == 0 {
                 return Walk::Walking;
             }
             *budget -= 1;
+            if self.taken >= MAX_SLIDE_STEPS {
+                break;
+            }
             self.taken += 1;
             let (Some([a, b, c]), Some(plane)) = (
                 vertices(positions, self.nodes),
@@ -477,7 +532,7 @@ impl SurfaceWalk {
                     self.triangle = t;
                     self.nodes = tri;
                 }
-                _ => break,
+                _ => self.taken = MAX_SLIDE_STEPS,
             }
         }
         let Some([a, b, c]) = vertices(positions, self.nodes) else {
@@ -495,17 +550,26 @@ impl SurfaceWalk {
     }
 }
 
-/// The triangle other than `t` with edge `(u, v)`, if R has one.
+/// The triangle other than `t` with edge `(u, v)`, if R has one: the first triangle of both
+/// `u`'s and `v`'s lists other than `t`, by merging the two lists (each strictly ascending and
+/// exactly the node's triangles, `SPEC.md` "Node-triangle adjacency"), so only the triangle
+/// found is loaded: at most 32 comparisons with [`bank_format::MAX_NODE_TRIANGLES`] a node.
 fn neighbour_across(bank: &Bank, t: u32, u: u16, v: u16) -> Option<(u32, [u16; 3])> {
-    let triangles = bank.triangles();
-    bank.node_triangles(usize::from(u))
-        .iter()
-        .map(|&o| u32::from(o))
-        .filter(|&o| o != t)
-        .find_map(|o| {
-            let tri = *triangles.get(o as usize)?;
-            tri.contains(&v).then_some((o, tri))
-        })
+    let mut a = bank.node_triangles(usize::from(u)).iter();
+    let mut b = bank.node_triangles(usize::from(v)).iter();
+    let (mut x, mut y) = (*a.next()?, *b.next()?);
+    loop {
+        if x < y {
+            x = *a.next()?;
+        } else if y < x {
+            y = *b.next()?;
+        } else if u32::from(x) != t {
+            let tri = *bank.triangles().get(usize::from(x))?;
+            return Some((u32::from(x), tri));
+        } else {
+            (x, y) = (*a.next()?, *b.next()?);
+        }
+    }
 }
 
 /// Closest point of triangle `abc` to `p` (Ericson, Real-Time Collision Detection 5.1.5): the
@@ -1051,6 +1115,139 @@ mod tests {
         );
     }
 
+    /// The rest-surface point under `p` (a point near the surface), by a walk from triangle
+    /// `start` (nodes `start_nodes`) run to its end: [`SurfaceWalk`] with all its steps at once
+    /// ([`MAX_SLIDE_STEPS`] and the closing closest point). `None` only for a bank whose indices
+    /// do not hold.
+    fn closest_surface_point(
+        bank: &Bank,
+        start: u32,
+        start_nodes: [u16; 3],
+        p: [f32; 3],
+    ) -> Option<SurfacePoint> {
+        let mut budget = MAX_SLIDE_STEPS + 1;
+        match SurfaceWalk::new(start, start_nodes).advance(bank, p, &mut budget) {
+            Walk::Landed(sp) => Some(sp),
+            Walk::Walking | Walk::Lost => None,
+        }
+    }
+
+    /// The tracking of a slide with its whole walk in one tick (no per-tick budget): the
+    /// reference for [`track`]. Returns the next anchor and the walk's steps.
+    fn whole_walk_track(bank: &Bank, active: SurfacePoint, tip: [f32; 3]) -> (SurfacePoint, u32) {
+        let m = bank.triangle_planes()[active.triangle as usize].m;
+        let (mm, d) = (dot(m, m), sub(tip, active.point));
+        let dm = dot(d, m);
+        assert!(dm <= 0.0, "released at {tip:?}");
+        let dt = sub(d, scale(m, dm / mm));
+        let t2 = dot(dt, dt);
+        if !(t2 > STICK_SLOPE * STICK_SLOPE * (dm * dm / mm)) {
+            return (active, 0);
+        }
+        let t = sqrt(t2);
+        let allowed = STICK_SLOPE * (-dm / sqrt(mm));
+        let target = add(active.point, scale(dt, 1.0 - allowed / t));
+        let mut all = u32::MAX;
+        let walk = SurfaceWalk::new(active.triangle, active.nodes).advance(bank, target, &mut all);
+        let Walk::Landed(near) = walk else {
+            panic!("no landing at {target:?}");
+        };
+        (near, u32::MAX - all)
+    }
+
+    /// The anchor of a touching state.
+    fn anchor_of(s: &ContactState) -> SurfacePoint {
+        let ContactState::Touching {
+            triangle,
+            nodes,
+            bary,
+            anchor,
+            ..
+        } = *s
+        else {
+            panic!("not touching: {s:?}");
+        };
+        SurfacePoint {
+            triangle,
+            nodes,
+            bary,
+            point: anchor,
+        }
+    }
+
+    /// A slide whose anchor crosses at most one edge a tick (here 20 um a tick, 2 mm deep,
+    /// across the patch's triangles) is tracked with [`SLIDE_STEPS_PER_TICK`] steps a tick
+    /// exactly as with the whole walk in every tick: the same anchor, bit for bit, so the same
+    /// displacement and force.
+    #[test]
+    fn a_slow_slide_is_tracked_as_by_the_whole_walk() {
+        let bytes = patch();
+        let bank = Bank::parse(&bytes).unwrap();
+        let mut tr = ContactTracker::new();
+        let depth = -0.002f32;
+        let mut tips = std::vec![[0.004f32, 0.006, 0.001], [0.004, 0.006, depth]];
+        for i in 1..=1600 {
+            let u = i as f32 / 1600.0;
+            tips.push([0.004 + 0.032 * u, 0.006 + 0.012 * u, depth]);
+        }
+        let states = run(&bank, &mut tr, [0.004, 0.006, 0.004], &tips);
+        let mut reference = anchor_of(&states[1]);
+        let (mut edges, mut most) = (0, 0);
+        for (s, &tip) in states.iter().zip(&tips).skip(2) {
+            let (next, steps) = whole_walk_track(&bank, reference, tip);
+            edges += usize::from(next.triangle != reference.triangle);
+            most = most.max(steps);
+            reference = next;
+            assert_eq!(anchor_of(s), reference, "at {tip:?}");
+        }
+        assert!(
+            edges >= 6 && most == 2,
+            "{edges} edges, {most} steps at most"
+        );
+    }
+
+    /// A fast slide (0.45 mm a tick) whose anchor passes a vertex 20 um away: there the whole
+    /// walk takes more than [`SLIDE_STEPS_PER_TICK`] steps in a tick. The budgeted walk goes
+    /// on at the next tick; meanwhile the anchor is the target on the held triangle's plane,
+    /// which on this flat patch is where the whole walk lands: every tick's anchor point (so
+    /// displacement and force) is the whole walk's to f32 rounding, only the contact triangle
+    /// lags for a tick or two.
+    #[test]
+    fn a_slide_past_a_vertex_keeps_the_whole_walks_anchor() {
+        let bytes = patch();
+        let bank = Bank::parse(&bytes).unwrap();
+        let mut tr = ContactTracker::new();
+        let depth = -0.002f32;
+        // Along (1, -1) through (0.02, 0.02) shifted by 20 um: across the diagonal split.
+        let at = |s: f32| [0.02 + s + 2.0e-5, 0.02 - s, depth];
+        let mut tips = std::vec![[0.012f32, 0.028, 0.001], at(-0.008)];
+        let step = 0.00045 / core::f32::consts::SQRT_2;
+        for i in 1..=36 {
+            tips.push(at(-0.008 + step * i as f32));
+        }
+        let states = run(&bank, &mut tr, [0.012, 0.028, 0.004], &tips);
+        let mut reference = anchor_of(&states[1]);
+        let (mut lagged, mut most) = (0, 0);
+        for (s, &tip) in states.iter().zip(&tips).skip(2) {
+            let (next, steps) = whole_walk_track(&bank, reference, tip);
+            most = most.max(steps);
+            reference = next;
+            let got = anchor_of(s);
+            for i in 0..3 {
+                assert!(
+                    (got.point[i] - next.point[i]).abs() < 1.0e-7,
+                    "{got:?} vs {next:?}"
+                );
+            }
+            lagged += usize::from(got.triangle != next.triangle);
+            if got.triangle == next.triangle {
+                reference = got;
+            }
+        }
+        assert!(most > SLIDE_STEPS_PER_TICK, "{most}");
+        assert!((1..=2).contains(&lagged), "{lagged}");
+    }
+
     /// A walk advanced one step a call lands where the whole walk does, after as many calls
     /// as the whole walk takes steps; a walk stops at the overall cap either way.
     #[test]
@@ -1083,7 +1280,7 @@ mod tests {
             };
             assert_eq!(landed, whole, "{p:?}");
             assert_eq!(calls, taken, "{p:?}");
-            assert!(taken <= MAX_SLIDE_STEPS);
+            assert!(taken <= MAX_SLIDE_STEPS + 1);
         }
         // Across the 5 x 5 patch from its first triangle: several steps.
         let mut all = u32::MAX;

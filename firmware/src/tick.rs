@@ -507,9 +507,11 @@ impl<'b> HapticLoop<'b> {
             self.tracker.reset();
             ContactState::Free
         } else {
-            let prev = self
-                .prev_tip
-                .map_or(tip, |p| path_tail(p, tip, self.max_path_m));
+            // A held contact tracks the tip alone: only detection reads the path.
+            let prev = match self.prev_tip {
+                Some(p) if !self.tracker.touching() => path_tail(p, tip, self.max_path_m),
+                _ => tip,
+            };
             self.tracker.update(self.bank, prev, tip)
         };
         self.prev_tip = Some(tip);

@@ -1,6 +1,7 @@
 //! Contact detection and tracking on a curved patch: a spherical cap (radius 5 cm, 6 x 6 cm
 //! footprint, 5 mm spacing) built here. Every tick checks no NaN, barycentric coordinates in
-//! `[0, 1]` summing to 1, `displacement = tip - anchor`, and the release rule.
+//! `[0, 1]` summing to 1, `displacement = tip - anchor`, the anchor on its triangle (or, while
+//! a slide's walk is under way, in its plane between it and the tip), and the release rule.
 
 #![allow(clippy::needless_range_loop)]
 
@@ -92,13 +93,27 @@ fn check(bank: &Bank, s: &ContactState, tip: [f32; 3]) -> Option<u32> {
     }
     assert!((bary.iter().sum::<f32>() - 1.0).abs() < 1.0e-5, "{bary:?}");
     let p = |k: u16| bank.positions()[usize::from(k)];
+    let n = normal(bank, nodes);
+    let on: [f32; 3] = std::array::from_fn(|i| (0..3).map(|v| bary[v] * p(nodes[v])[i]).sum());
+    let dist = |a: [f32; 3], b: [f32; 3]| (0..3).map(|i| (a[i] - b[i]).powi(2)).sum::<f32>().sqrt();
     for i in 0..3 {
         assert!(anchor[i].is_finite() && displacement[i].is_finite());
         assert!((displacement[i] - (tip[i] - anchor[i])).abs() < 1.0e-7);
-        let on: f32 = (0..3).map(|v| bary[v] * p(nodes[v])[i]).sum();
-        assert!((on - anchor[i]).abs() < 1.0e-6, "anchor off its triangle");
     }
-    let n = normal(bank, nodes);
+    // On its triangle; or, while a slide's walk is under way (`firmware::contact`, at most
+    // `SLIDE_STEPS_PER_TICK` steps a tick), the slide's target: in the plane of the triangle
+    // the slide started on (whose point `on` is), no farther from `on` than the tip's
+    // tangential distance plus the stick cone's allowance (20% of the depth).
+    let off = dist(on, anchor);
+    if off >= 1.0e-6 {
+        let nn = dist(n, [0.0; 3]);
+        let height: f32 = (0..3).map(|i| (anchor[i] - on[i]) * n[i]).sum::<f32>() / nn;
+        assert!(
+            height.abs() < 1.0e-6 && off <= 1.2 * dist(tip, on) + 1.0e-6,
+            "anchor off its triangle by {off}, the tip {} from its point",
+            dist(tip, on)
+        );
+    }
     let dn: f32 = (0..3).map(|i| displacement[i] * n[i]).sum();
     assert!(dn <= 0.0, "a pulling contact was kept");
     Some(triangle)

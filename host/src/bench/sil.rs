@@ -1,6 +1,7 @@
 //! `host bench sil`: instructions per tick of the firmware image under QEMU (idle and per
 //! contact-set size, loop body and whole tick, and per code phase) along the press, slide and
-//! strike scripts, against the goal, and the image's flash and static RAM.
+//! strike scripts, the worst loop body over them and over seeded `wander` paths
+//! ([`crate::sil::wander`]), against the goal, and the image's flash and static RAM.
 
 use crate::mcu::ImageSize;
 use crate::sil::cost::{
@@ -8,6 +9,7 @@ use crate::sil::cost::{
     code_phase_samples_of_runs,
 };
 use crate::sil::harness::{self, Session, Setup};
+use crate::sil::script::Trajectory;
 use crate::trajectory::Script;
 use anyhow::{Result, bail};
 use bank_format::Bank;
@@ -32,6 +34,23 @@ pub struct ScriptRun {
     pub wall_s: f64,
 }
 
+/// One `wander` seed's run.
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
+pub struct WanderRun {
+    /// The seed.
+    pub seed: u64,
+    /// Ticks run.
+    pub ticks: usize,
+    /// The largest loop body, every tick (armed or not), instructions.
+    pub max_body_instructions: u32,
+    /// The largest whole tick, instructions.
+    pub max_tick_instructions: u32,
+    /// Ticks that overran their period.
+    pub overruns: u32,
+    /// Faults the image reported.
+    pub faults: usize,
+}
+
 /// The figures of [`run`].
 #[derive(Clone, Debug, PartialEq)]
 pub struct Figures {
@@ -43,8 +62,8 @@ pub struct Figures {
     pub worst_body: u32,
     /// The largest whole tick of any group, instructions.
     pub worst_tick: u32,
-    /// The largest loop body over every tick (armed or not), instructions
-    /// ([`against_goal`]).
+    /// The largest loop body over every tick (armed or not) of every run, the scripts' and
+    /// the `wander` seeds', instructions ([`against_goal`]).
     pub goal_body: u32,
     /// The largest whole tick over every tick (armed or not), instructions.
     pub goal_tick: u32,
@@ -55,6 +74,8 @@ pub struct Figures {
     pub size: ImageSize,
     /// The runs, one per script of [`SCRIPTS`].
     pub runs: Vec<ScriptRun>,
+    /// The `wander` runs, one per seed.
+    pub wander: Vec<WanderRun>,
 }
 
 /// Runs each of [`SCRIPTS`] for `seconds` (virtual) on the image and bank of `setup` (`bank`
@@ -98,8 +119,46 @@ pub fn run_scripts(
         .collect()
 }
 
-/// [`run_scripts`], measured, and the image sized.
-pub fn run(setup: &Setup, bank: &Bank, seconds: f64) -> Result<Figures> {
+/// The `wander` path of each of `seeds` for `seconds` (virtual) on the image and bank of
+/// `setup` (`bank` parsed), side by side ([`harness::run_all`]: only their instructions
+/// count). A run the image stops early is an error.
+pub fn run_wander(
+    setup: &Setup,
+    bank: &Bank,
+    seconds: f64,
+    seeds: std::ops::Range<u64>,
+) -> Result<Vec<(u64, harness::Run)>> {
+    let jobs = seeds
+        .clone()
+        .map(|seed| {
+            let path = Trajectory::wander(bank, seed, seconds)?;
+            Ok((setup, Session::with_trajectory(bank, path, seconds)?))
+        })
+        .collect::<Result<Vec<_>>>()?;
+    seeds
+        .zip(harness::run_all(&jobs))
+        .map(|(seed, run)| {
+            let run = run?;
+            if let Some(why) = &run.stopped {
+                bail!(
+                    "wander seed {seed}: the image stopped early: {why}\n{}",
+                    run.stderr
+                );
+            }
+            Ok((seed, run))
+        })
+        .collect()
+}
+
+/// [`run_scripts`] one after the other and [`run_wander`] over `seeds`, measured, and the
+/// image sized. The groups by contact-set size and by code phase are the scripts'; the goal is
+/// checked over every run.
+pub fn run(
+    setup: &Setup,
+    bank: &Bank,
+    seconds: f64,
+    seeds: std::ops::Range<u64>,
+) -> Result<Figures> {
     let mut records = Vec::new();
     let mut runs = Vec::new();
     for (script, run) in run_scripts(setup, bank, seconds, false, &|_| {})? {
@@ -112,7 +171,21 @@ pub fn run(setup: &Setup, bank: &Bank, seconds: f64) -> Result<Figures> {
         });
         records.push(run.ticks);
     }
-    let all = records.concat();
+    let mut wander = Vec::new();
+    let mut wander_records = Vec::new();
+    for (seed, run) in run_wander(setup, bank, seconds, seeds)? {
+        let (body, tick, _) = against_goal(&run.ticks);
+        wander.push(WanderRun {
+            seed,
+            ticks: run.ticks.len(),
+            max_body_instructions: body,
+            max_tick_instructions: tick,
+            overruns: run.overruns(),
+            faults: run.faults().len(),
+        });
+        wander_records.push(run.ticks);
+    }
+    let all = [records.concat(), wander_records.concat()].concat();
     // Each run's whole-tick costs from its own ticks (a run's last tick has no successor).
     let groups = by_contact_nodes_of_runs(records.iter().map(Vec::as_slice));
     let samples = code_phase_samples_of_runs(records.iter().map(Vec::as_slice));
@@ -135,5 +208,6 @@ pub fn run(setup: &Setup, bank: &Bank, seconds: f64) -> Result<Figures> {
         met,
         size,
         runs,
+        wander,
     })
 }

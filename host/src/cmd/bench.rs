@@ -21,8 +21,9 @@ pub enum Bench {
     /// finite tool tip (the point contact's force falls under refinement, the tip's converges).
     Refinement(super::refinement::Args),
     /// Instructions per tick of the firmware image under QEMU (idle and per contact-set size,
-    /// loop body and whole tick) along the press, slide and strike scripts, and the image's
-    /// flash and RAM use against memory.x.
+    /// loop body and whole tick) along the press, slide and strike scripts, the worst loop
+    /// body over them and over seeded wander paths, and the image's flash and RAM use against
+    /// memory.x.
     Sil(SilArgs),
     /// Instructions one evaluation of the tissue law costs on the MCU (thumbv7em), per degree,
     /// counted on the disassembly of `TissueLaw::eval`.
@@ -118,9 +119,13 @@ pub struct ImageArgs {
 /// Arguments of `host bench sil`.
 #[derive(clap::Args, Debug)]
 pub struct SilArgs {
-    /// Virtual seconds per script.
+    /// Virtual seconds per script and per wander seed.
     #[arg(long, default_value_t = 3.0)]
     seconds: f64,
+    /// Wander paths (`host sil --script wander`) of seeds 0 to this less one, run side by side
+    /// after the scripts.
+    #[arg(long, default_value_t = 20)]
+    seeds: u64,
     /// Print one JSON object instead of a table.
     #[arg(long)]
     json: bool,
@@ -369,7 +374,14 @@ fn sil(args: SilArgs) -> Result<()> {
         met,
         size,
         runs,
-    } = host::bench::sil::run(&setup, &bank, args.seconds)?;
+        wander,
+    } = host::bench::sil::run(&setup, &bank, args.seconds, 0..args.seeds)?;
+    let seeds = match args.seeds {
+        0 => "no seeds".to_string(),
+        1 => "seed 0".to_string(),
+        n => format!("seeds 0-{}", n - 1),
+    };
+    let worst_wander = wander.iter().max_by_key(|w| w.max_body_instructions);
     if args.json {
         let by: serde_json::Map<String, serde_json::Value> = groups
             .iter()
@@ -399,6 +411,7 @@ fn sil(args: SilArgs) -> Result<()> {
                 "faults": r.faults,
                 "wall_s": r.wall_s,
             })).collect::<Vec<_>>(),
+            "wander": wander,
         });
         println!("{out}");
         return Ok(());
@@ -432,6 +445,23 @@ fn sil(args: SilArgs) -> Result<()> {
         );
     }
     println!("worst case       body {worst}, whole tick {worst_tick}");
+    if let Some(w) = worst_wander {
+        let worst_tick = wander.iter().map(|w| w.max_tick_instructions).max();
+        println!(
+            "wander           {seeds}, {} s each: worst body {} (seed {}), whole tick {}; \
+             faults {}, overruns {}",
+            args.seconds,
+            w.max_body_instructions,
+            w.seed,
+            worst_tick.unwrap_or(0),
+            wander.iter().map(|w| w.faults).sum::<usize>(),
+            wander.iter().map(|w| w.overruns).sum::<u32>()
+        );
+    }
+    println!(
+        "worst body over press, slide, strike and wander {seeds}: {goal_body} instructions (goal \
+         {BODY_GOAL})"
+    );
     println!(
         "goal             every tick (armed or not): body {goal_body} <= {BODY_GOAL}, whole tick \
          {goal_tick} <= {TICK_GOAL}: {}",

@@ -1,6 +1,6 @@
-//! `host sil`: run the firmware image under QEMU against the simulated device for a scripted
-//! or recorded (`--trajectory FILE`) hand motion and print a summary (one JSON object with
-//! `--json`).
+//! `host sil`: run the firmware image under QEMU against the simulated device for a scripted,
+//! seeded random (`--script wander --seed N`) or recorded (`--trajectory FILE`) hand motion and
+//! print a summary (one JSON object with `--json`).
 
 use super::script_arg::ScriptArg;
 use anyhow::{Context, Result, bail};
@@ -16,8 +16,11 @@ use std::path::{Path, PathBuf};
 #[derive(clap::Args, Debug)]
 pub struct Args {
     /// The hand's scripted motion.
-    #[arg(long, value_enum, default_value_t = ScriptArg::Press)]
-    pub script: ScriptArg,
+    #[arg(long, value_enum, default_value_t = SilScript::Press)]
+    pub script: SilScript,
+    /// The seed of `--script wander` (the same seed, the same path).
+    #[arg(long)]
+    pub seed: Option<u64>,
     /// Replay a recorded hand motion instead of a script: a CSV file with a header, either
     /// `t_s,x_m,y_m,z_m` (tip targets, m, the bank's frame) or
     /// `t_s,pitch_rad,yaw_rad,insertion_m` (joints); `#` lines are comments. The hand blends
@@ -37,6 +40,38 @@ pub struct Args {
     pub trace: Option<PathBuf>,
     #[command(flatten)]
     pub setup: SetupArgs,
+}
+
+/// `host sil --script`: the scripted hand motions ([`ScriptArg`]'s, with the SIL hand's
+/// numbers) and `wander`.
+#[derive(clap::ValueEnum, serde::Serialize, Clone, Copy, Debug, PartialEq, Eq)]
+#[serde(rename_all = "kebab-case")]
+pub enum SilScript {
+    /// 6 mm in from 5 mm above, every 2.5 s.
+    Press,
+    /// 4 mm in, a pitch sweep of +-0.05 rad, every 3 s.
+    Slide,
+    /// From 10 mm above, 18 mm down in 20 ms (1.35 m/s peak), every 1.5 s.
+    Strike,
+    /// 5 mm in over 0.5 s, held 10 s, every 11.5 s.
+    #[value(name = "press-hold")]
+    PressHold,
+    /// A seeded random path near and into the surface (presses, slides, leaving and
+    /// re-entering, holds) at tip speeds up to 0.45 m/s; `--seed N` chooses it (default 0).
+    Wander,
+}
+
+impl SilScript {
+    /// The library's script, `None` for `wander`.
+    fn script(self) -> Option<Script> {
+        match self {
+            SilScript::Press => Some(ScriptArg::Press.into()),
+            SilScript::Slide => Some(ScriptArg::Slide.into()),
+            SilScript::Strike => Some(ScriptArg::Strike.into()),
+            SilScript::PressHold => Some(ScriptArg::PressHold.into()),
+            SilScript::Wander => None,
+        }
+    }
 }
 
 /// Where the image, the bank and QEMU come from (shared with `host bench sil`).
@@ -86,7 +121,9 @@ impl SetupArgs {
 #[derive(serde::Serialize)]
 pub struct Summary {
     /// The script (`null` for a recorded trajectory).
-    script: Option<Script>,
+    script: Option<SilScript>,
+    /// The seed of `wander` (`null` otherwise).
+    seed: Option<u64>,
     /// The recorded trajectory file, if one was replayed.
     trajectory: Option<String>,
     virtual_s: f64,
@@ -125,8 +162,13 @@ struct FaultJson {
 }
 
 impl Summary {
-    /// Condense `run` of `script`, or of the recorded `trajectory` file.
-    pub fn new(script: Option<Script>, trajectory: Option<&Path>, run: &Run) -> Summary {
+    /// Condense `run` of `script` (`wander`'s `seed`), or of the recorded `trajectory` file.
+    pub fn new(
+        script: Option<SilScript>,
+        seed: Option<u64>,
+        trajectory: Option<&Path>,
+        run: &Run,
+    ) -> Summary {
         let last = run
             .telemetry()
             .last()
@@ -141,6 +183,7 @@ impl Summary {
             .unwrap_or(0);
         Summary {
             script,
+            seed,
             trajectory: trajectory.map(|p| p.display().to_string()),
             virtual_s,
             ticks: run.ticks.len(),
@@ -183,9 +226,15 @@ impl Summary {
 
 /// Runs `host sil`.
 pub fn run(args: Args) -> Result<()> {
+    if args.seed.is_some() && args.script != SilScript::Wander {
+        bail!("--seed chooses a wander path: use it with --script wander");
+    }
     let (setup, bytes) = args.setup.resolve()?;
     let bank = Bank::parse(&bytes)
         .map_err(|e| anyhow::anyhow!("{}: invalid bank: {e}", setup.bank.display()))?;
+    let seconds = args.seconds.unwrap_or(5.0);
+    let seed = (args.script == SilScript::Wander && args.trajectory.is_none())
+        .then(|| args.seed.unwrap_or(0));
     let session = match &args.trajectory {
         Some(path) => {
             let trajectory = Trajectory::from_csv(&bank, path)?;
@@ -194,7 +243,14 @@ pub fn run(args: Args) -> Result<()> {
                 .unwrap_or(trajectory.recorded_end_s().unwrap_or(0.0) + 0.2);
             Session::with_trajectory(&bank, trajectory, seconds)?
         }
-        None => Session::new(&bank, args.script.into(), args.seconds.unwrap_or(5.0))?,
+        None => match (args.script.script(), seed) {
+            (Some(script), _) => Session::new(&bank, script, seconds)?,
+            (None, seed) => Session::with_trajectory(
+                &bank,
+                Trajectory::wander(&bank, seed.unwrap_or(0), seconds)?,
+                seconds,
+            )?,
+        },
     };
     let run = harness::run(&setup, &session)?;
     if let Some(path) = &args.trace {
@@ -209,8 +265,8 @@ pub fn run(args: Args) -> Result<()> {
             &[&args.setup.scene, &setup.bank, &setup.image],
         )?;
     }
-    let script = args.trajectory.is_none().then_some(args.script.into());
-    let s = Summary::new(script, args.trajectory.as_deref(), &run);
+    let script = args.trajectory.is_none().then_some(args.script);
+    let s = Summary::new(script, seed, args.trajectory.as_deref(), &run);
     if args.json {
         println!("{}", serde_json::to_string(&s)?);
     } else {

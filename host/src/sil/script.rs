@@ -9,6 +9,10 @@
 //! - `press-hold`: down to 5 mm below the surface in 0.5 s, hold 10 s, back up in 0.5 s (a
 //!   viscoelastic tissue's relaxation, issue 30).
 //!
+//! `wander` ([`Trajectory::wander`], [`super::wander`]) is not a cycle but a seeded random path
+//! near and into the surface (presses, slides, leaving and re-entering, held contacts) at tip
+//! speeds up to 0.45 m/s: the tick's worst case searched on paths the cycles do not take.
+//!
 //! These are [`crate::trajectory`]'s strokes with the SIL hand's numbers ([`sil_stroke`]):
 //! waypoints joined by smoothstep (`3 s^2 - 2 s^3`) blends, so the hand's speed is continuous;
 //! the slide's lateral offset is the pitch.
@@ -51,6 +55,8 @@ enum Motion {
     Script(Script, Stroke),
     /// Recorded samples: times (s, from 0 at the first sample) and joints.
     Recorded(Vec<(f64, [f64; 3])>),
+    /// The `wander` path of a seed ([`super::wander::path`]), samples as recorded ones.
+    Wander(u64, Vec<(f64, [f64; 3])>),
 }
 
 /// The columns of a recorded trajectory file.
@@ -78,6 +84,21 @@ impl Trajectory {
             );
         }
         Ok(t)
+    }
+
+    /// The `wander` path of `seed` on `bank` ([`super::wander`]), generated for `seconds` of
+    /// run (the approach included; it holds its last pose after them). Fails when the bank's
+    /// reachable surface is missed straight below the trocar or is too small to wander on.
+    pub fn wander(bank: &Bank, seed: u64, seconds: f64) -> Result<Trajectory> {
+        if !(seconds.is_finite() && seconds > 0.0 && seconds <= 3600.0) {
+            bail!("a wander path lasts (0, 3600] s, not {seconds}");
+        }
+        let samples = super::wander::path(bank, seed, seconds - APPROACH_END_S)?;
+        Ok(Trajectory {
+            home: bank.device().home_joint.map(f64::from),
+            surface: surface_insertion(bank, [0.0, 0.0])?,
+            path: Motion::Wander(seed, samples),
+        })
     }
 
     /// A recorded hand motion from the CSV file at `path` (see the module notes), for `bank`'s
@@ -162,15 +183,23 @@ impl Trajectory {
     pub fn recorded_end_s(&self) -> Option<f64> {
         match &self.path {
             Motion::Recorded(s) => s.last().map(|l| APPROACH_END_S + l.0),
-            Motion::Script(..) => None,
+            Motion::Script(..) | Motion::Wander(..) => None,
         }
     }
 
-    /// The script, `None` for a recorded motion.
+    /// The script, `None` for a recorded motion or `wander`.
     pub fn script(&self) -> Option<Script> {
         match self.path {
             Motion::Script(s, _) => Some(s),
-            Motion::Recorded(_) => None,
+            Motion::Recorded(_) | Motion::Wander(..) => None,
+        }
+    }
+
+    /// The seed of a `wander` path, `None` otherwise.
+    pub fn wander_seed(&self) -> Option<u64> {
+        match self.path {
+            Motion::Wander(seed, _) => Some(seed),
+            Motion::Script(..) | Motion::Recorded(_) => None,
         }
     }
 
@@ -180,11 +209,12 @@ impl Trajectory {
         self.surface
     }
 
-    /// Deepest point of the script below the surface, m (0 for a recorded motion).
+    /// Deepest point of the script below the surface, m (0 for a recorded motion or
+    /// `wander`, whose depths follow the surface under the shaft).
     pub fn depth_m(&self) -> f64 {
         match &self.path {
             Motion::Script(_, stroke) => stroke.depth_m(),
-            Motion::Recorded(_) => 0.0,
+            Motion::Recorded(_) | Motion::Wander(..) => 0.0,
         }
     }
 
@@ -192,7 +222,9 @@ impl Trajectory {
     pub fn at(&self, t: f64) -> [f64; 3] {
         let stroke = match &self.path {
             Motion::Script(_, stroke) => stroke,
-            Motion::Recorded(samples) => return self.recorded_at(samples, t),
+            Motion::Recorded(samples) | Motion::Wander(_, samples) => {
+                return self.recorded_at(samples, t);
+            }
         };
         let s0 = self.surface;
         if t < APPROACH_END_S {
@@ -203,7 +235,8 @@ impl Trajectory {
         [p.lateral, 0.0, s0 + p.depth_m]
     }
 
-    /// A recorded motion at `t`: the approach blend, then linear interpolation of the samples.
+    /// A recorded motion (or `wander`) at `t`: the approach blend, then linear interpolation of
+    /// the samples.
     fn recorded_at(&self, samples: &[(f64, [f64; 3])], t: f64) -> [f64; 3] {
         let Some(&(_, first)) = samples.first() else {
             return self.home;
