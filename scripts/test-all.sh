@@ -105,13 +105,18 @@ python3 -c 'import gmsh; print("gmsh (Python module)", gmsh.__version__)'
 step "shell scripts"
 shellcheck scripts/*.sh .ci/run
 
+# The firmware images are workspaces of their own, built into their own target dirs (where the
+# host's image builds, `host::mcu::build_image`, look for them), whatever CARGO_TARGET_DIR says.
+own_target() { (cd "$1" && shift && env -u CARGO_TARGET_DIR "$@"); }
+
 step "format and lints"
 cargo fmt --all --check
 cargo clippy --workspace --all-targets --profile checked -- -D warnings
 # The lints' profile: the docs reuse the dependencies clippy has just checked.
 RUSTDOCFLAGS="-D warnings" cargo doc --workspace --no-deps --profile checked --quiet
 # The QEMU image is its own workspace (it only builds for the MCU).
-(cd firmware/qemu && cargo fmt --check && cargo clippy --release -- -D warnings)
+own_target firmware/qemu cargo fmt --check
+own_target firmware/qemu cargo clippy --release -- -D warnings
 
 step "the FEM engine stands alone: no web, plot, serial, probe or CLI stack under host/fem"
 if cargo tree -p fem -e normal --prefix none | grep -E '^(axum|tokio|plotters|serialport|probe-rs|indicatif|clap) '; then
@@ -121,13 +126,15 @@ fi
 
 step "no_std crates cross-compile for the MCU; the QEMU image links against memory.x"
 cargo build --release -p bank-format -p firmware --target thumbv7em-none-eabihf
-(cd firmware/qemu && cargo build --release)
+own_target firmware/qemu cargo build --release
 
 step "the board image (STM32F405RG, embassy-stm32): format, lints, build, size against memory.x, stack in CCM"
 # Its own workspace too; built only (no board here). The linker enforces memory.x's regions.
 # Lints also cover the bring-up builds' fault injection (features bringup-*).
-(cd firmware/board && cargo fmt --check && cargo clippy --release -- -D warnings &&
-    cargo clippy --release --all-features -- -D warnings && cargo build --release)
+own_target firmware/board cargo fmt --check
+own_target firmware/board cargo clippy --release -- -D warnings
+own_target firmware/board cargo clippy --release --all-features -- -D warnings
+own_target firmware/board cargo build --release
 board_size=$(cargo run --profile checked -q -p host -- bench image firmware/board/target/thumbv7em-none-eabihf/release/firmware-board)
 echo "$board_size"
 # The stack guard: the board's stack starts at the top of CCM (firmware/board/stack.x).
