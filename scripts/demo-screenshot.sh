@@ -1,11 +1,17 @@
 #!/usr/bin/env bash
 # Regenerates docs/demo.png: the `host demo` page in headless Chromium while the virtual tool
 # presses 8 mm into the embedded liver (steered through the page's own /api/steer endpoint).
+# `host demo` runs the shipped scene: docs/demo.png.sha256 records the scene file and the meshes
+# it names as they were for this picture, and host/tests/docs.rs fails when they change until
+# this script is rerun.
+# PROFILE picks the cargo profile (release unless set; `checked` reuses the test suite's build);
+# the binary is found under CARGO_TARGET_DIR when that is set.
 set -euo pipefail
 cd "$(dirname "$0")/.."
-cargo build --release -p host
+profile_name=${PROFILE:-release}
+cargo build --profile "$profile_name" -p host
 port=${PORT:-18080}
-target/release/host demo --port "$port" --seconds 120 >/dev/null 2>&1 &
+"${CARGO_TARGET_DIR:-target}/$profile_name/host" demo --port "$port" --seconds 120 >/dev/null 2>&1 &
 pid=$!
 profile=$(mktemp -d)
 trap 'kill $pid 2>/dev/null || true; rm -rf "$profile"' EXIT
@@ -19,4 +25,6 @@ chromium --headless --no-sandbox --disable-gpu --disable-quic --no-first-run \
     --use-angle=swiftshader --enable-unsafe-swiftshader --user-data-dir="$profile" \
     --window-size=1200,800 --virtual-time-budget=4000 --screenshot=docs/demo.png "$base/" \
     2>/dev/null
-echo "wrote docs/demo.png"
+sha256sum host/scenes/liver.toml host/meshes/liver-1k4.msh host/meshes/liver-reach-2.8mm.msh \
+    host/meshes/liver-reach-4mm.msh >docs/demo.png.sha256
+echo "wrote docs/demo.png and docs/demo.png.sha256"

@@ -2,7 +2,7 @@
 //! (`D x D`, row-major arrays, f32) and the solves with it: the 3 x 3 `B C_SS B^T` of the
 //! energy-minimal contact solve on the tick's path, the paper's 9 x 9 `C_SS` (eq. 6) off it.
 //! Written out by hand rather than through nalgebra's `Cholesky`: it costs fewer instructions
-//! on the MCU for the same result (README, firmware loop, "the card's crates"). Only the lower
+//! on the MCU for the same result (`docs/firmware-loop.md`, "The card's crates"). Only the lower
 //! triangle of `A` is read. No heap, no panics (every index goes through `get`).
 
 /// `L` of `A = L L^T`, lower triangular (the strict upper triangle is zero).

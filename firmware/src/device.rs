@@ -280,7 +280,8 @@ pub fn transpose_mul(j: &[[f32; 3]; 3], v: [f32; 3]) -> [f32; 3] {
 /// operations, no platform `sinf`). `libm::sincosf` is as portable but evaluates its kernels
 /// in f64, which the Cortex-M4's single-precision FPU does in software: 2,118 instructions a
 /// call against 48 here; micromath's `sin_cos` costs 47 but is off by up to 1.1e-3, 0.1 mm at
-/// the tip at 10 cm insertion (README, "the card's crates", `firmware/qemu/src/bin/mathbench.rs`).
+/// the tip at 10 cm insertion (`docs/firmware-loop.md`, "The card's crates",
+/// `firmware/qemu/src/bin/mathbench.rs`).
 ///
 /// `t = k pi/2 + r`, `|r| <= pi/4` (`k` rounded, `pi/2` split in three parts, Cody-Waite, so the
 /// reduction is exact to f32 rounding for the joint angles, `|t| <= pi`); Taylor series of

@@ -3,7 +3,8 @@
 
 /// `sqrt(x)`, correctly rounded (IEEE 754) on every target, so the MCU and a native build agree
 /// bit for bit: the Cortex-M4F's `VSQRT.F32` on the MCU (three instructions with the call;
-/// libm's software `sqrtf` took 53, README "the card's crates"), `libm::sqrtf` elsewhere.
+/// libm's software `sqrtf` took 53, `docs/firmware-loop.md`, "The card's crates"),
+/// `libm::sqrtf` elsewhere.
 #[cfg(all(target_arch = "arm", target_abi = "eabihf"))]
 pub(crate) fn sqrt(x: f32) -> f32 {
     // SAFETY: `firmware_vsqrt_f32` (below) reads s0 and writes s0, as the hard-float AAPCS

@@ -64,6 +64,12 @@ fn main() -> ExitCode {
         libc::signal(libc::SIGPIPE, libc::SIG_DFL);
     }
     let cli = Cli::parse();
+    // Test hook: with HOST_PARSE_ONLY set, exit 0 once the arguments parse (clap's usage error
+    // and exit 2 otherwise) without running anything; host/tests/docs.rs checks the guide's
+    // `sh` lines this way.
+    if std::env::var_os("HOST_PARSE_ONLY").is_some() {
+        return ExitCode::SUCCESS;
+    }
     let result = match cli.command {
         Command::Demo(args) => cmd::demo::run(args),
         Command::Compliance(args) => cmd::compliance::run(args),

@@ -64,8 +64,8 @@ impl Tissue {
             ),
         };
         let poisson = "# poisson = 0.45: nearly incompressible soft tissue held at 0.45 because the P1\n\
-# element locks above it (README, \"Nearly incompressible tissue\"; `element = \"anp\"` allows\n\
-# more).";
+# element locks above it (docs/scenes-and-banks.md, \"Nearly incompressible tissue\";\n\
+# `element = \"anp\"` allows more).";
         (young, 0.45, format!("{source}\n{poisson}"))
     }
 

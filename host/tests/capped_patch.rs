@@ -4,8 +4,9 @@
 //! whole patch? Measured on the 10k liver (3.26 mm mean surface edge) with 5 mm and 8 mm tips,
 //! which load up to 13 and 21 nodes, against the f64 solve of the uncapped patch on the
 //! untruncated compliance (`fem::compliance`'s direct solve), pressing 5 mm along the entry ray.
-//! The firmware's f32 solve of a given patch matches this f64 solve to about 1e-6 (README,
-//! "checks against f64 references"), so the cap is what this measures.
+//! The firmware's f32 solve of a given patch matches this f64 solve to about 1e-6
+//! (`docs/firmware-loop.md`, "Checks against f64 references"), so the cap is what this
+//! measures.
 
 use fem::compliance::Compliance;
 use fem::elasticity::{Elasticity, FixedSet, Material};
@@ -93,9 +94,9 @@ fn capped_patch_force_against_the_uncapped_solve_on_the_10k_liver() {
         );
         rows.push((radius, capped_sites, mean, worst, softer));
     }
-    // Bounds a little above the measured figures (README, "Fine meshes": 5 mm, 33 sites, mean
-    // 4.4 %, worst 6.8 %; 8 mm, mean 25 %, worst 30 %), and the capped patch is always the
-    // softer one.
+    // Bounds a little above the measured figures (`docs/firmware-loop.md`, "Fine meshes": 5 mm,
+    // 33 sites, mean 4.4 %, worst 6.8 %; 8 mm, mean 25 %, worst 30 %), and the capped patch is
+    // always the softer one.
     for &(radius, sites, mean, worst, softer) in &rows {
         let bound = if radius < 0.006 { 0.08 } else { 0.35 };
         assert!(worst <= bound, "r = {radius}: worst {worst} mean {mean}");

@@ -7,10 +7,16 @@
 //!   run in a scratch directory that holds the repository's top-level files and folders as
 //!   symbolic links, so that they read the repository's paths as the guide writes them and
 //!   whatever they write stays out of the tree. ` ```sh ` blocks are not run.
+//! - Every `host ...` and `cargo run ... -p host -- ...` line of the ` ```sh ` blocks parses
+//!   with the CLI's own parser (the binary with `HOST_PARSE_ONLY` set parses and exits), so a
+//!   renamed subcommand or flag fails here until the guide follows it.
 //! - Every relative link and every repository path written in backticks exists, so a file
 //!   renamed or removed fails here until the guide follows it.
+//! - `docs/demo.png` is of today's shipped scene: `docs/demo.png.sha256`, written by
+//!   `scripts/demo-screenshot.sh` with the picture, still matches the scene and its meshes.
 
 use std::path::{Path, PathBuf};
+use std::process::Command;
 use std::time::Duration;
 
 fn root() -> PathBuf {
@@ -165,4 +171,153 @@ fn the_path_check_sees_what_it_should() {
         .collect();
     assert_eq!(paths, ["host/src/bank.rs", "scripts/x.sh"]);
     assert_eq!(link_targets(text), ["../x.md"]);
+}
+
+/// The commands of the ` ```sh ` blocks: `\\`-continued lines joined, `# comments` dropped,
+/// comment-only lines left out.
+fn sh_commands(text: &str) -> Vec<String> {
+    let mut commands = Vec::new();
+    let mut in_sh = false;
+    let mut pending = String::new();
+    for line in text.lines() {
+        let fence = line.trim_start();
+        if let Some(info) = fence.strip_prefix("```") {
+            in_sh = !in_sh && info.trim() == "sh";
+            continue;
+        }
+        if !in_sh {
+            continue;
+        }
+        let code = match line.find(" #") {
+            Some(at) => &line[..at],
+            None if line.trim_start().starts_with('#') => "",
+            None => line,
+        };
+        match code.trim_end().strip_suffix('\\') {
+            Some(head) => pending.push_str(head),
+            None => {
+                pending.push_str(code);
+                let command = pending.split_whitespace().collect::<Vec<_>>().join(" ");
+                if !command.is_empty() {
+                    commands.push(command);
+                }
+                pending.clear();
+            }
+        }
+    }
+    commands
+}
+
+/// The arguments after `host` of a plain `host ...` or `cargo run ... -p host -- ...` command;
+/// `None` for anything else (another program, or shell syntax: pipes, `&&`, `$(...)`,
+/// redirections, quotes, variable assignments).
+fn host_args(command: &str) -> Option<Vec<&str>> {
+    if command.contains(|c: char| "|&;$()<>'\"`*?".contains(c)) {
+        return None;
+    }
+    let words: Vec<&str> = command.split_whitespace().collect();
+    match words.as_slice() {
+        ["host", rest @ ..] => Some(rest.to_vec()),
+        ["cargo", "run", rest @ ..] => {
+            let dashes = rest.iter().position(|w| *w == "--")?;
+            let cargo_args = &rest[..dashes];
+            cargo_args
+                .windows(2)
+                .any(|w| w == ["-p", "host"])
+                .then(|| rest[dashes + 1..].to_vec())
+        }
+        _ => None,
+    }
+}
+
+#[test]
+fn every_host_command_in_the_guides_sh_blocks_parses() {
+    let root = root();
+    let mut checked = 0;
+    let mut skipped = Vec::new();
+    let mut failures = Vec::new();
+    for file in guide_files() {
+        let text = std::fs::read_to_string(&file).unwrap();
+        let name = file.strip_prefix(&root).unwrap().display().to_string();
+        for command in sh_commands(&text) {
+            let Some(args) = host_args(&command) else {
+                skipped.push(format!("{name}: {command}"));
+                continue;
+            };
+            checked += 1;
+            let out = Command::new(env!("CARGO_BIN_EXE_host"))
+                .args(&args)
+                .env("HOST_PARSE_ONLY", "1")
+                .output()
+                .unwrap();
+            if !out.status.success() {
+                failures.push(format!(
+                    "{name}: {command}\n{}",
+                    String::from_utf8_lossy(&out.stderr).trim_end()
+                ));
+            }
+        }
+    }
+    println!(
+        "{checked} host commands parsed; {} sh commands skipped (not a plain host invocation):",
+        skipped.len()
+    );
+    for s in &skipped {
+        println!("  {s}");
+    }
+    assert!(
+        checked >= 25,
+        "only {checked} host commands found in sh blocks"
+    );
+    assert!(
+        failures.is_empty(),
+        "the guide's sh blocks hold host commands the CLI rejects:\n{}",
+        failures.join("\n\n")
+    );
+}
+
+#[test]
+fn the_sh_command_reader_sees_what_it_should() {
+    let text = "```sh\n# a comment\nhost bank build a.toml -o a.bank   # atomic\n\
+                cargo run --release -q -p host -- calibrate tissue --csv x.csv \\\n    --law P\n\
+                (cd firmware/board && cargo build --release)\nbash scripts/test-all.sh\n```\n\
+                host not-in-a-block\n```console\n$ host --help\n```\n";
+    let commands = sh_commands(text);
+    assert_eq!(
+        commands,
+        [
+            "host bank build a.toml -o a.bank",
+            "cargo run --release -q -p host -- calibrate tissue --csv x.csv --law P",
+            "(cd firmware/board && cargo build --release)",
+            "bash scripts/test-all.sh",
+        ]
+    );
+    let args: Vec<Option<Vec<&str>>> = commands.iter().map(|c| host_args(c)).collect();
+    assert_eq!(
+        args,
+        [
+            Some(vec!["bank", "build", "a.toml", "-o", "a.bank"]),
+            Some(vec!["calibrate", "tissue", "--csv", "x.csv", "--law", "P"]),
+            None,
+            None,
+        ]
+    );
+    assert_eq!(host_args("cargo run -p fem -- x"), None);
+    assert_eq!(host_args("HOST=1 host demo"), None);
+}
+
+#[test]
+fn the_demo_screenshot_is_of_todays_shipped_scene() {
+    let out = Command::new("sha256sum")
+        .args(["--check", "--quiet", "docs/demo.png.sha256"])
+        .current_dir(root())
+        .output()
+        .expect("sha256sum (coreutils) runs");
+    assert!(
+        out.status.success(),
+        "the shipped scene or its meshes changed since docs/demo.png was taken: rerun \
+         scripts/demo-screenshot.sh\n{}{}",
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
 }

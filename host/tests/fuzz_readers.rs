@@ -5,8 +5,8 @@
 //! and the bench CSV reader. Each valid sample is mutated deterministically (byte flips,
 //! insertions, deletions, duplicated runs, digits replaced by huge numbers, truncation) and
 //! every mutant is read in a thread with a time limit. Must hold: no panic, no hang; each
-//! input is either read or refused with an error. The counts are printed (and quoted in the
-//! README).
+//! input is either read or refused with an error. The counts are printed (and quoted in
+//! `docs/file-formats.md`, "Mutation fuzz").
 
 use fem::mesh::{self, Format};
 use fem::surface::{CheckOptions, SurfaceFormat, check};

@@ -326,7 +326,7 @@ fn the_organ_is_meshed_graded_near_the_reach_and_becomes_a_scene() {
             .collect();
         (v.iter().sum::<f64>() / v.len().max(1) as f64, v.len())
     };
-    // The README's table: element size (longest edge) against distance from the reach.
+    // `docs/meshing.md`'s figures: element size (longest edge) against distance from the reach.
     for w in [0.0, 0.005, 0.01, 0.02, 0.03, 1.0].windows(2) {
         let (m, n) = mean(w[0], w[1]);
         println!(
@@ -468,7 +468,7 @@ fn weight_compliance(mesh: &fem::mesh::TetMesh) -> f64 {
 
 /// The organ meshed from its 8 mm surface against meshes of the same geometry made directly
 /// from the CAD body by scripts/gen_meshes.py (host/meshes/liver-1k4.msh, liver-10k.msh, the
-/// reference). Measured (README, "From a surface to a scene"): at 9 mm the surface's mesh is
+/// reference). Measured (`docs/meshing.md`): at 9 mm the surface's mesh is
 /// -8.5% off liver-10k, a direct 9 mm mesh -8.3% (P1 at nu = 0.45 is stiff when coarse); at
 /// 6 mm -4.9% against the direct mesh's -1.5%, the rest being the 8 mm surface's faceting
 /// (1% less volume than the CAD body, W growing as the volume squared). Held here: the error

@@ -50,8 +50,8 @@ fn sampled_knobs_measure_the_shipped_bank_against_the_converged_reference() {
     // With instructions (as the report measures them on the image; equal here), the front is
     // the variants no other beats on mean error, worst error and bytes: the most accurate on
     // the mean and the most accurate at the worst site are on it, and so is the scene's choice
-    // (level 2: the lowest worst error; level 1 has the lowest mean at 20 KB less; README,
-    // "The converged force").
+    // (level 2: the lowest worst error; level 1 has the lowest mean at 20 KB less;
+    // `docs/scenes-and-banks.md`, "The converged force").
     for v in &mut variants {
         v.instructions = Some(2800.0);
     }

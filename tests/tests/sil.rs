@@ -717,7 +717,7 @@ fn a_recorded_near_surface_trajectory_replays_bit_identical_to_the_native_loop()
     let (setup, bytes) = setup();
     let bank = Bank::parse(&bytes).unwrap();
     let dir = tempfile::tempdir().unwrap();
-    // The first seed is the path the README's figures are for; the others are more of the
+    // The first seed is the path `docs/sil.md`'s figures are for; the others are more of the
     // same kind.
     for seed in [0x2545_f491, 0x9e37_79b9, 0x85eb_ca6b] {
         let file = near_surface_file(&bank, dir.path(), seed);

@@ -1,6 +1,6 @@
 //! The report page: one self-contained HTML file (inline SVG drawn by `plotters`, inline CSS,
 //! a few lines of script that check every plot drew something; nothing from the network), and
-//! the headline figure as PNG for the README.
+//! the headline figure as PNG for the guide (`docs/report-headline.png`).
 
 use super::{Knob, Report, Verdict};
 use anyhow::{Result, anyhow};
@@ -146,7 +146,7 @@ pub fn svg(knob: &Knob) -> Result<String> {
     Ok(out)
 }
 
-/// The knob as PNG bytes (the README's headline figure).
+/// The knob as PNG bytes (the guide's headline figure).
 pub fn png(knob: &Knob) -> Result<Vec<u8>> {
     crate::calibrate::plot::register_font();
     let (w, h) = SIZE;

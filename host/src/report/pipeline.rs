@@ -223,7 +223,7 @@ pub fn run(cfg: &ReportConfig, step: &dyn Fn(&str)) -> Result<Report> {
         not_measured.push(format!(
             "press-hold's force against time on the QLV scene and instructions per tick \
              against Prony terms (QEMU image): {why}; the SIL test \
-             press_hold_relaxes_as_the_scenes_qlv_law measures both (README, \
+             press_hold_relaxes_as_the_scenes_qlv_law measures both (docs/calibration.md, \
              \"Viscoelastic tissue\")"
         ));
     }

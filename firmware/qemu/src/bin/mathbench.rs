@@ -1,6 +1,6 @@
 //! Instructions and error of the maths on the tick's path, on the MCU under QEMU: for each call
-//! site's operation, the implementation in use and its alternatives (README, firmware loop,
-//! "the card's crates"). Not part of the image; run by hand:
+//! site's operation, the implementation in use and its alternatives (`docs/firmware-loop.md`,
+//! "The card's crates"). Not part of the image; run by hand:
 //!
 //! ```sh
 //! cd firmware/qemu && cargo build --release --bin mathbench

@@ -24,8 +24,8 @@
 //!
 //! On the 10k-node liver (bed fixed, tool radius 3 mm) the active columns carry 20 % of the
 //! dense forward flops. `host bench patch` times this method against full solves
-//! ([`Compliance::patch_compliances_by_full_solves`]) on a scene's FEM (README, "Sampled
-//! contact").
+//! ([`Compliance::patch_compliances_by_full_solves`]) on a scene's FEM (`docs/scenes-and-banks.md`,
+//! "The converged force").
 
 use super::gram::par_for;
 use super::{Block3, Compliance, ComplianceError};

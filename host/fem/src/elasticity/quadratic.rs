@@ -10,8 +10,8 @@
 //!
 //! It is a reference, not an [`super::Element`] of banks: its edge nodes change the node set
 //! that compliance blocks, banks, the firmware and the display index. The locking study
-//! (`examples/punch.rs`, the README's table) and the cantilever tests compare P1 and ANP with
-//! it.
+//! (`examples/punch.rs`, `docs/scenes-and-banks.md`'s table) and the cantilever tests compare
+//! P1 and ANP with it.
 
 use super::{
     Block3, Csr, FemError, FixedSet, Material, Stiffness, Tet, adjacency, assemble_upper,
