@@ -55,6 +55,8 @@ extern crate alloc;
 compile_error!("bank-format reads the bank in place and assumes a little-endian target");
 
 mod error;
+#[cfg(any(test, feature = "test-fixtures"))]
+pub mod fixtures;
 mod frame;
 mod law;
 mod layout;

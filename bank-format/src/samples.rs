@@ -390,15 +390,9 @@ mod tests {
         for level in 1..=crate::MAX_SAMPLE_LEVEL {
             let points = lattice_points(level);
             let ids: Vec<u16> = (0..points.len() as u16).collect();
-            // Deterministic values in [0, 1) (an LCG), one per sample.
-            let mut state = 12_345u32 + level;
-            let field: Vec<f32> = points
-                .iter()
-                .map(|_| {
-                    state = state.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
-                    (state >> 8) as f32 / (1u32 << 24) as f32
-                })
-                .collect();
+            // Deterministic values in [0, 1), one per sample.
+            let mut rng = crate::fixtures::SplitMix64::new(12_345 + u64::from(level));
+            let field: Vec<f32> = points.iter().map(|_| rng.unit_f32()).collect();
             let value = |b: [f32; 3]| {
                 let (c, w) = lattice_corners(&ids, level, b).unwrap();
                 c.iter()

@@ -553,7 +553,7 @@ mod tests {
     use crate::fixtures::flat_patch;
     use crate::hal::Interlocks;
     use crate::link::{DriverEnd, Link};
-    use bank_format::{FrameDecoder, MAX_FRAME, State as WireState, encode_frame};
+    use bank_format::{AlignedBytes, FrameDecoder, MAX_FRAME, State as WireState, encode_frame};
     use std::vec::Vec;
 
     /// Encoders and interlocks held (set them between ticks), what was driven recorded.
@@ -651,43 +651,97 @@ mod tests {
         FakeClock(core::cell::Cell::new(0))
     }
 
-    /// The common rig: the flat patch's bank, the link split between an [`App`] on it and a
-    /// [`FakeHost`], a fresh [`FakePlant`] and [`FakeClock`], bound to the names given.
-    macro_rules! rig {
-        ($bank:ident, $app:ident, $host:ident, $plant:ident, $clock:ident) => {
-            let bytes = flat_patch();
-            let $bank = Bank::parse(bytes.as_slice()).unwrap();
-            let mut link = Link::new();
-            let (tick_end, driver) = link.split();
-            let mut $app = App::new(Ok(&$bank), tick_end, 0);
-            let mut $host = FakeHost::new(driver);
-            let (mut $plant, $clock) = (plant(), clock());
-        };
+    /// The bank in a fixture's `bytes`.
+    fn parse(bytes: &AlignedBytes) -> Bank<'_> {
+        Bank::parse(bytes.as_slice()).unwrap()
     }
 
-    /// References the encoders at encoder zero, as a host's `ZeroEncoders` taken before the
-    /// first tick would (sent over the link, it would push a test's other commands past the
-    /// first tick's share, [`MAX_COMMANDS_PER_TICK`]). No loop without a bank.
-    fn home(app: &mut App) {
-        if let Core::Loop(lp) = &mut app.core {
-            assert!(lp.zero_encoders());
+    /// The device under test and what surrounds it: an [`App`] on a bank (or the stand-in for
+    /// an invalid one), the [`FakeHost`] at the other end of its link (the caller's: both ends
+    /// borrow it), a fresh [`FakePlant`] and [`FakeClock`].
+    struct Rig<'b, 'q> {
+        app: App<'b, 'q>,
+        host: FakeHost<'q>,
+        plant: FakePlant,
+        clock: FakeClock,
+    }
+
+    impl<'b, 'q> Rig<'b, 'q> {
+        /// With the board's link grace (none).
+        fn new(bank: Result<&'b Bank<'b>, BankError>, link: &'q mut Link) -> Rig<'b, 'q> {
+            Rig::with_grace(bank, link, 0)
+        }
+
+        /// With `grace` ticks of link grace ([`App::new`]).
+        fn with_grace(
+            bank: Result<&'b Bank<'b>, BankError>,
+            link: &'q mut Link,
+            grace: u32,
+        ) -> Rig<'b, 'q> {
+            let (tick_end, driver) = link.split();
+            Rig {
+                app: App::new(bank, tick_end, grace),
+                host: FakeHost::new(driver),
+                plant: plant(),
+                clock: clock(),
+            }
+        }
+
+        /// The encoders referenced at encoder zero, as a host's `ZeroEncoders` taken before
+        /// the first tick would (sent over the link, it would push a test's other commands
+        /// past the first tick's share, [`MAX_COMMANDS_PER_TICK`]). No loop without a bank.
+        fn homed(mut self) -> Rig<'b, 'q> {
+            if let Core::Loop(lp) = &mut self.app.core {
+                assert!(lp.zero_encoders());
+            }
+            self
+        }
+
+        /// Booted after a reset with `cause` ([`App::reset`]).
+        fn after_reset(mut self, cause: ResetCause) -> Rig<'b, 'q> {
+            self.app.reset(cause);
+            self
+        }
+
+        /// One tick (the last one on time); its report.
+        fn tick(&mut self) -> TickReport {
+            self.app.tick(&mut self.plant, &self.clock, false).unwrap()
+        }
+
+        /// One tick of a live host: the tick, then the host reads what came out and sends a
+        /// heartbeat.
+        fn step(&mut self) -> TickReport {
+            let r = self.tick();
+            self.host.pump();
+            self.host.send(&HostToDevice::Heartbeat);
+            r
+        }
+
+        /// The `Fault` frames the host has received.
+        fn faults(&self) -> Vec<DeviceToHost> {
+            self.host
+                .sent
+                .iter()
+                .filter(|m| matches!(m, DeviceToHost::Fault { .. }))
+                .cloned()
+                .collect()
         }
     }
 
     #[test]
     fn commands_arm_and_telemetry_flows() {
-        rig!(bank, app, host, plant, clock);
-        host.send(&HostToDevice::Hello);
-        host.send(&HostToDevice::SetMode(Mode::Transparent));
+        let bytes = flat_patch();
+        let bank = parse(&bytes);
+        let mut link = Link::new();
+        let mut rig = Rig::new(Ok(&bank), &mut link).homed();
+        rig.host.send(&HostToDevice::Hello);
+        rig.host.send(&HostToDevice::SetMode(Mode::Transparent));
         // A corrupt frame between them is dropped and counted.
-        host.driver.put_rx(&[0x03, 0x11, 0x22, 0x00]);
-        home(&mut app);
-        host.send(&HostToDevice::Arm);
+        rig.host.driver.put_rx(&[0x03, 0x11, 0x22, 0x00]);
+        rig.host.send(&HostToDevice::Arm);
         let mut reports = Vec::new();
         for _ in 0..20 {
-            reports.push(app.tick(&mut plant, &clock, false).unwrap());
-            host.pump();
-            host.send(&HostToDevice::Heartbeat);
+            reports.push(rig.step());
         }
         let hello = DeviceToHost::Hello {
             protocol: PROTOCOL_VERSION,
@@ -696,8 +750,8 @@ mod tests {
             node_count: bank.node_count() as u16,
         };
         // Boot Hello, the requested Hello, telemetry at ticks 10 and 20.
-        assert_eq!(host.sent[..2], [hello.clone(), hello]);
-        let tel: Vec<_> = host.sent[2..]
+        assert_eq!(rig.host.sent[..2], [hello.clone(), hello]);
+        let tel: Vec<_> = rig.host.sent[2..]
             .iter()
             .map(|m| match m {
                 DeviceToHost::Telemetry(t) => t.clone(),
@@ -714,7 +768,7 @@ mod tests {
         assert_eq!(reports.len(), 20);
         assert!(reports.iter().all(|a| a.state == WireState::Armed));
         // Armed: every tick drove the motors.
-        assert!(plant.driven.iter().all(Option::is_some));
+        assert!(rig.plant.driven.iter().all(Option::is_some));
         // The body was measured between two readings of the clock around the loop, which
         // read it five more times (the ends of its first five phases): six phases of 100
         // cycles each, which sum to the body.
@@ -727,23 +781,21 @@ mod tests {
 
     #[test]
     fn silence_while_armed_faults_and_reports_once() {
-        rig!(bank, app, host, plant, clock);
-        host.send(&HostToDevice::ZeroEncoders);
-        host.send(&HostToDevice::Arm);
+        let bytes = flat_patch();
+        let bank = parse(&bytes);
+        let mut link = Link::new();
+        let mut rig = Rig::new(Ok(&bank), &mut link);
+        rig.host.send(&HostToDevice::ZeroEncoders);
+        rig.host.send(&HostToDevice::Arm);
         let mut reports = Vec::new();
         for _ in 0..30 {
-            reports.push(app.tick(&mut plant, &clock, false).unwrap());
-            host.pump();
+            reports.push(rig.tick());
+            rig.host.pump();
         }
-        let faults: Vec<_> = host
-            .sent
-            .iter()
-            .filter(|m| matches!(m, DeviceToHost::Fault { .. }))
-            .collect();
         // The frame arrived at tick 1; tick 12 is the 11th without one.
         assert_eq!(
-            faults,
-            [&DeviceToHost::Fault {
+            rig.faults(),
+            [DeviceToHost::Fault {
                 tick: 12,
                 reason: FaultReason::LinkSilent,
                 detail: 11
@@ -751,12 +803,12 @@ mod tests {
         );
         assert!(reports[11..].iter().all(|a| a.currents_a == [0.0; 3]));
         // From the fault on, the motors are disabled, not driven with zero.
-        assert!(plant.driven[11..].iter().all(Option::is_none));
+        assert!(rig.plant.driven[11..].iter().all(Option::is_none));
         // A plant error stops the tick, disables the motors and is returned.
-        plant.fail_at = Some(31);
-        let before = plant.driven.len();
-        assert_eq!(app.tick(&mut plant, &clock, false), Err(31));
-        assert_eq!(plant.driven[before..], [None]);
+        rig.plant.fail_at = Some(31);
+        let before = rig.plant.driven.len();
+        assert_eq!(rig.app.tick(&mut rig.plant, &rig.clock, false), Err(31));
+        assert_eq!(rig.plant.driven[before..], [None]);
     }
 
     /// An e-stop pressed while armed and driving: from that tick the motors are disabled (not
@@ -764,104 +816,85 @@ mod tests {
     /// pressed, and works again once it is released and the fault cleared.
     #[test]
     fn an_estop_mid_run_disables_the_motors_and_reports_once() {
-        rig!(bank, app, host, plant, clock);
+        let bytes = flat_patch();
+        let bank = parse(&bytes);
+        let mut link = Link::new();
+        let mut rig = Rig::new(Ok(&bank), &mut link).homed();
         let drive = [0.5, -0.25, 0.0];
-        host.send(&HostToDevice::SetMode(Mode::ConstantCurrent {
+        rig.host.send(&HostToDevice::SetMode(Mode::ConstantCurrent {
             currents_a: drive,
         }));
-        home(&mut app);
-        host.send(&HostToDevice::Arm);
+        rig.host.send(&HostToDevice::Arm);
         let mut reports = Vec::new();
-        let step = |app: &mut App, plant: &mut FakePlant, host: &mut FakeHost| {
-            let r = app.tick(plant, &clock, false).unwrap();
-            host.pump();
-            host.send(&HostToDevice::Heartbeat);
-            r
-        };
         for t in 1..=40 {
-            plant.interlocks.estop = t >= 21;
-            reports.push(step(&mut app, &mut plant, &mut host));
+            rig.plant.interlocks.estop = t >= 21;
+            reports.push(rig.step());
         }
         assert!(reports[..20].iter().all(|r| r.state == WireState::Armed));
         assert!(reports[..20].iter().all(|r| r.currents_a == drive));
-        assert_eq!(plant.driven[..20], [Some(drive); 20]);
+        assert_eq!(rig.plant.driven[..20], [Some(drive); 20]);
         assert!(reports[20..].iter().all(|r| r.state == WireState::Fault));
         assert!(reports[20..].iter().all(|r| r.currents_a == [0.0; 3]));
-        assert_eq!(plant.driven[20..], [None; 20]);
-        let faults = |host: &FakeHost| -> Vec<DeviceToHost> {
-            host.sent
-                .iter()
-                .filter(|m| matches!(m, DeviceToHost::Fault { .. }))
-                .cloned()
-                .collect()
-        };
+        assert_eq!(rig.plant.driven[20..], [None; 20]);
         let e_stop = |tick| DeviceToHost::Fault {
             tick,
             reason: FaultReason::EStop,
             detail: 0,
         };
-        assert_eq!(faults(&host), [e_stop(21)]);
-        assert_eq!(app.telemetry().fault, Some(FaultReason::EStop));
+        assert_eq!(rig.faults(), [e_stop(21)]);
+        assert_eq!(rig.app.telemetry().fault, Some(FaultReason::EStop));
         // Cleared and armed while still pressed: the arm is refused with the e-stop (queued
         // before tick 41 runs), and tick 41 latches it again.
-        host.send(&HostToDevice::ClearFault);
-        host.send(&HostToDevice::Arm);
-        let r = step(&mut app, &mut plant, &mut host);
+        rig.host.send(&HostToDevice::ClearFault);
+        rig.host.send(&HostToDevice::Arm);
+        let r = rig.step();
         assert_eq!((r.state, r.currents_a), (WireState::Fault, [0.0; 3]));
-        assert_eq!(plant.driven.last(), Some(&None));
-        assert_eq!(faults(&host), [e_stop(21), e_stop(40), e_stop(41)]);
+        assert_eq!(rig.plant.driven.last(), Some(&None));
+        assert_eq!(rig.faults(), [e_stop(21), e_stop(40), e_stop(41)]);
         // Released: still latched until cleared; then arming drives the motors again.
-        plant.interlocks.estop = false;
-        let r = step(&mut app, &mut plant, &mut host);
+        rig.plant.interlocks.estop = false;
+        let r = rig.step();
         assert_eq!(
-            (r.state, plant.driven.last()),
+            (r.state, rig.plant.driven.last()),
             (WireState::Fault, Some(&None))
         );
-        host.send(&HostToDevice::ClearFault);
-        host.send(&HostToDevice::Arm);
-        let r = step(&mut app, &mut plant, &mut host);
+        rig.host.send(&HostToDevice::ClearFault);
+        rig.host.send(&HostToDevice::Arm);
+        let r = rig.step();
         assert_eq!((r.state, r.currents_a), (WireState::Armed, drive));
-        assert_eq!(plant.driven.last(), Some(&Some(drive)));
-        assert_eq!(faults(&host).len(), 3);
+        assert_eq!(rig.plant.driven.last(), Some(&Some(drive)));
+        assert_eq!(rig.faults().len(), 3);
     }
 
     /// `SetMode` while armed: refused (the mode stays), one `BadCommand` Fault frame (detail
     /// 3) at once, the motors disabled from the next tick.
     #[test]
     fn set_mode_while_armed_is_refused_with_a_fault_frame() {
-        rig!(bank, app, host, plant, clock);
-        host.send(&HostToDevice::ZeroEncoders);
-        host.send(&HostToDevice::Arm);
+        let bytes = flat_patch();
+        let bank = parse(&bytes);
+        let mut link = Link::new();
+        let mut rig = Rig::new(Ok(&bank), &mut link);
+        rig.host.send(&HostToDevice::ZeroEncoders);
+        rig.host.send(&HostToDevice::Arm);
         for _ in 0..5 {
-            assert_eq!(
-                app.tick(&mut plant, &clock, false).unwrap().state,
-                WireState::Armed
-            );
-            host.pump();
-            host.send(&HostToDevice::Heartbeat);
+            assert_eq!(rig.step().state, WireState::Armed);
         }
-        host.send(&HostToDevice::SetMode(Mode::ConstantCurrent {
+        rig.host.send(&HostToDevice::SetMode(Mode::ConstantCurrent {
             currents_a: [1.0; 3],
         }));
-        let r = app.tick(&mut plant, &clock, false).unwrap();
-        host.pump();
+        let r = rig.tick();
+        rig.host.pump();
         assert_eq!((r.state, r.currents_a), (WireState::Fault, [0.0; 3]));
-        assert_eq!(plant.driven.last(), Some(&None));
-        let faults: Vec<_> = host
-            .sent
-            .iter()
-            .filter(|m| matches!(m, DeviceToHost::Fault { .. }))
-            .cloned()
-            .collect();
+        assert_eq!(rig.plant.driven.last(), Some(&None));
         assert_eq!(
-            faults,
+            rig.faults(),
             [DeviceToHost::Fault {
                 tick: 5,
                 reason: FaultReason::BadCommand,
                 detail: crate::tick::BAD_COMMAND_SET_MODE_ARMED,
             }]
         );
-        assert_eq!(app.telemetry().mode, Mode::Render);
+        assert_eq!(rig.app.telemetry().mode, Mode::Render);
     }
 
     /// After a watchdog reset the device boots latched in `WatchdogReset`, reported once
@@ -870,47 +903,38 @@ mod tests {
     #[test]
     fn a_watchdog_reset_is_latched_until_cleared() {
         let bytes = flat_patch();
-        let bank = Bank::parse(bytes.as_slice()).unwrap();
+        let bank = parse(&bytes);
         let mut link = Link::new();
-        let (tick_end, driver) = link.split();
-        let mut app = App::new(Ok(&bank), tick_end, 0);
-        app.reset(ResetCause::IndependentWatchdog);
-        let mut host = FakeHost::new(driver);
-        let (mut plant, clock) = (plant(), clock());
-        host.send(&HostToDevice::ZeroEncoders);
-        host.send(&HostToDevice::Arm);
+        let mut rig = Rig::new(Ok(&bank), &mut link).after_reset(ResetCause::IndependentWatchdog);
+        rig.host.send(&HostToDevice::ZeroEncoders);
+        rig.host.send(&HostToDevice::Arm);
         for _ in 0..3 {
-            let r = app.tick(&mut plant, &clock, false).unwrap();
+            let r = rig.tick();
             assert_eq!((r.state, r.currents_a), (WireState::Fault, [0.0; 3]));
-            host.pump();
-            host.send(&HostToDevice::Heartbeat);
+            rig.host.pump();
+            rig.host.send(&HostToDevice::Heartbeat);
         }
-        assert!(plant.driven.iter().all(Option::is_none));
+        assert!(rig.plant.driven.iter().all(Option::is_none));
         let watchdog = DeviceToHost::Fault {
             tick: 0,
             reason: FaultReason::WatchdogReset,
             detail: 0,
         };
-        assert!(matches!(host.sent[0], DeviceToHost::Hello { .. }));
+        assert!(matches!(rig.host.sent[0], DeviceToHost::Hello { .. }));
         // At boot, then as the refusal of the Arm (applied before the first tick).
-        let faults: Vec<_> = host
-            .sent
-            .iter()
-            .filter(|m| matches!(m, DeviceToHost::Fault { .. }))
-            .cloned()
-            .collect();
+        let faults = rig.faults();
         assert_eq!(
-            host.sent[1],
+            rig.host.sent[1],
             DeviceToHost::Reset {
                 cause: ResetCause::IndependentWatchdog
             }
         );
-        assert_eq!(host.sent[2], watchdog);
+        assert_eq!(rig.host.sent[2], watchdog);
         assert_eq!(faults, [watchdog.clone(), watchdog]);
-        assert_eq!(app.telemetry().fault, Some(FaultReason::WatchdogReset));
-        host.send(&HostToDevice::ClearFault);
-        host.send(&HostToDevice::Arm);
-        let r = app.tick(&mut plant, &clock, false).unwrap();
+        assert_eq!(rig.app.telemetry().fault, Some(FaultReason::WatchdogReset));
+        rig.host.send(&HostToDevice::ClearFault);
+        rig.host.send(&HostToDevice::Arm);
+        let r = rig.tick();
         assert_eq!(r.state, WireState::Armed);
     }
 
@@ -919,21 +943,17 @@ mod tests {
     #[test]
     fn an_amplifier_fault_names_the_motor() {
         let bytes = flat_patch();
-        let bank = Bank::parse(bytes.as_slice()).unwrap();
+        let bank = parse(&bytes);
         for bank in [Ok(&bank), Err(BankError::BadMagic)] {
             let mut link = Link::new();
-            let (tick_end, driver) = link.split();
-            let mut app = App::new(bank, tick_end, 0);
-            let mut host = FakeHost::new(driver);
-            let (mut plant, clock) = (plant(), clock());
-            home(&mut app);
-            plant.interlocks.amplifier_fault = [false, false, true];
-            host.send(&HostToDevice::Arm);
-            let r = app.tick(&mut plant, &clock, false).unwrap();
-            host.pump();
+            let mut rig = Rig::new(bank, &mut link).homed();
+            rig.plant.interlocks.amplifier_fault = [false, false, true];
+            rig.host.send(&HostToDevice::Arm);
+            let r = rig.tick();
+            rig.host.pump();
             assert_eq!((r.state, r.currents_a), (WireState::Fault, [0.0; 3]));
-            assert_eq!(plant.driven, [None]);
-            let last = host.sent.last().cloned();
+            assert_eq!(rig.plant.driven, [None]);
+            let last = rig.host.sent.last().cloned();
             assert_eq!(
                 last,
                 Some(DeviceToHost::Fault {
@@ -951,15 +971,17 @@ mod tests {
     fn slow_link_stays_alive_and_garbage_alone_is_silence() {
         const GRACE: u32 = 30;
         let bytes = flat_patch();
-        let bank = Bank::parse(bytes.as_slice()).unwrap();
+        let bank = parse(&bytes);
         let mut link = Link::new();
-        let (tick_end, mut driver) = link.split();
-        let mut app = App::new(Ok(&bank), tick_end, GRACE);
-        let (mut plant, clock) = (plant(), clock());
+        let mut rig = Rig::with_grace(Ok(&bank), &mut link, GRACE);
         let mut buf = [0u8; MAX_FRAME];
-        driver.put_rx(encode_frame(&HostToDevice::ZeroEncoders, &mut buf).unwrap());
-        driver.put_rx(encode_frame(&HostToDevice::Arm, &mut buf).unwrap());
-        app.tick(&mut plant, &clock, false).unwrap();
+        rig.host
+            .driver
+            .put_rx(encode_frame(&HostToDevice::ZeroEncoders, &mut buf).unwrap());
+        rig.host
+            .driver
+            .put_rx(encode_frame(&HostToDevice::Arm, &mut buf).unwrap());
+        rig.tick();
         // Heartbeats trickled one byte per tick: never 10 ticks without a byte.
         let beat = encode_frame(&HostToDevice::Heartbeat, &mut buf)
             .unwrap()
@@ -970,18 +992,18 @@ mod tests {
             if trickle.is_empty() {
                 trickle.extend_from_slice(&beat);
             }
-            driver.put_rx(&[trickle.remove(0)]);
-            states.push(app.tick(&mut plant, &clock, false).unwrap().state);
+            rig.host.driver.put_rx(&[trickle.remove(0)]);
+            states.push(rig.tick().state);
         }
         assert!(states.iter().all(|&s| s == WireState::Armed));
-        assert!(app.telemetry().counters.rx_frames > 20);
+        assert!(rig.app.telemetry().counters.rx_frames > 20);
         // Now one garbage byte a tick (after what is left of a heartbeat): alive for the
         // grace, then silent.
         let mut states = Vec::new();
         for _ in 0..200u32 {
             trickle.push(0x55);
-            driver.put_rx(&[trickle.remove(0)]);
-            states.push(app.tick(&mut plant, &clock, false).unwrap().state);
+            rig.host.driver.put_rx(&[trickle.remove(0)]);
+            states.push(rig.tick().state);
         }
         let limit = (GRACE + firmware_link_timeout()) as usize;
         assert!(states[..limit - 1].iter().all(|&s| s == WireState::Armed));
@@ -991,7 +1013,7 @@ mod tests {
                 .iter()
                 .all(|&s| s == WireState::Fault)
         );
-        assert_eq!(app.telemetry().fault, Some(FaultReason::LinkSilent));
+        assert_eq!(rig.app.telemetry().fault, Some(FaultReason::LinkSilent));
     }
 
     /// With the board's grace (none: only valid frames count as link activity), a link that
@@ -1000,25 +1022,24 @@ mod tests {
     #[test]
     fn garbage_only_link_faults_within_the_timeout_with_the_board_grace() {
         let bytes = flat_patch();
-        let bank = Bank::parse(bytes.as_slice()).unwrap();
+        let bank = parse(&bytes);
         for garbage in [true, false] {
             let mut link = Link::new();
-            let (tick_end, mut driver) = link.split();
-            let mut app = App::new(Ok(&bank), tick_end, 0);
-            let (mut plant, clock) = (plant(), clock());
+            let mut rig = Rig::new(Ok(&bank), &mut link);
             let mut buf = [0u8; MAX_FRAME];
-            driver.put_rx(encode_frame(&HostToDevice::ZeroEncoders, &mut buf).unwrap());
-            driver.put_rx(encode_frame(&HostToDevice::Arm, &mut buf).unwrap());
-            assert_eq!(
-                app.tick(&mut plant, &clock, false).unwrap().state,
-                WireState::Armed
-            );
+            rig.host
+                .driver
+                .put_rx(encode_frame(&HostToDevice::ZeroEncoders, &mut buf).unwrap());
+            rig.host
+                .driver
+                .put_rx(encode_frame(&HostToDevice::Arm, &mut buf).unwrap());
+            assert_eq!(rig.tick().state, WireState::Armed);
             let mut armed = 0;
             for _ in 0..200 {
                 if garbage {
-                    driver.put_rx(&[0x55, 0x13, 0x00]);
+                    rig.host.driver.put_rx(&[0x55, 0x13, 0x00]);
                 }
-                if app.tick(&mut plant, &clock, false).unwrap().state == WireState::Armed {
+                if rig.tick().state == WireState::Armed {
                     armed += 1;
                 }
             }
@@ -1026,7 +1047,7 @@ mod tests {
                 armed <= firmware_link_timeout(),
                 "garbage {garbage}: {armed}"
             );
-            assert_eq!(app.telemetry().fault, Some(FaultReason::LinkSilent));
+            assert_eq!(rig.app.telemetry().fault, Some(FaultReason::LinkSilent));
         }
     }
 
@@ -1041,27 +1062,24 @@ mod tests {
     #[test]
     fn a_one_byte_per_tick_link_costs_the_tick_nothing_and_loses_only_whole_frames() {
         let bytes = flat_patch();
-        let bank = Bank::parse(bytes.as_slice()).unwrap();
+        let bank = parse(&bytes);
         let run = |per_tick: usize| {
             let mut link = Link::new();
-            let (tick_end, driver) = link.split();
-            let mut app = App::new(Ok(&bank), tick_end, 0);
-            let mut host = FakeHost::new(driver);
-            host.per_tick = per_tick;
-            let (mut plant, clock) = (plant(), clock());
-            host.send(&HostToDevice::ZeroEncoders);
-            host.send(&HostToDevice::Arm);
+            let mut rig = Rig::new(Ok(&bank), &mut link);
+            rig.host.per_tick = per_tick;
+            rig.host.send(&HostToDevice::ZeroEncoders);
+            rig.host.send(&HostToDevice::Arm);
             let mut reports = Vec::new();
             for t in 0..3000 {
                 // Heartbeats stay in the incoming direction, which is not throttled.
                 if t % 2 == 0 {
-                    host.send(&HostToDevice::Heartbeat);
+                    rig.host.send(&HostToDevice::Heartbeat);
                 }
-                plant.counts = [t / 3, -(t / 5), t / 7];
-                reports.push(app.tick(&mut plant, &clock, false).unwrap());
-                host.pump();
+                rig.plant.counts = [t / 3, -(t / 5), t / 7];
+                reports.push(rig.tick());
+                rig.host.pump();
             }
-            (reports, host.sent, app.telemetry().counters)
+            (reports, rig.host.sent, rig.app.telemetry().counters)
         };
         let (fast, fast_sent, fast_counters) = run(usize::MAX);
         let (slow, slow_sent, slow_counters) = run(1);
@@ -1090,15 +1108,15 @@ mod tests {
     /// [`MAX_COMMANDS_PER_TICK`] a tick, in order: the last of ten lands in the third tick.
     #[test]
     fn a_burst_of_commands_is_applied_a_few_a_tick_in_order() {
-        rig!(bank, app, host, plant, clock);
-        home(&mut app);
+        let bytes = flat_patch();
+        let bank = parse(&bytes);
+        let mut link = Link::new();
+        let mut rig = Rig::new(Ok(&bank), &mut link).homed();
         for _ in 0..9 {
-            host.send(&HostToDevice::ClearFault);
+            rig.host.send(&HostToDevice::ClearFault);
         }
-        host.send(&HostToDevice::Arm);
-        let states: Vec<WireState> = (0..4)
-            .map(|_| app.tick(&mut plant, &clock, false).unwrap().state)
-            .collect();
+        rig.host.send(&HostToDevice::Arm);
+        let states: Vec<WireState> = (0..4).map(|_| rig.tick().state).collect();
         assert_eq!(
             states,
             [
@@ -1108,7 +1126,7 @@ mod tests {
                 WireState::Armed
             ]
         );
-        assert_eq!(app.telemetry().counters.rx_frames, 10);
+        assert_eq!(rig.app.telemetry().counters.rx_frames, 10);
     }
 
     /// A flooding host (200 heartbeats and 40 commands, an `Arm` among them, in one burst
@@ -1117,23 +1135,22 @@ mod tests {
     /// took no queue slot, so what was shed is exactly the commands beyond the queue's 15.
     #[test]
     fn a_flooding_hosts_disarm_takes_effect_at_the_next_tick() {
-        rig!(bank, app, host, plant, clock);
-        home(&mut app);
-        host.send(&HostToDevice::Arm);
-        assert_eq!(
-            app.tick(&mut plant, &clock, false).unwrap().state,
-            WireState::Armed
-        );
+        let bytes = flat_patch();
+        let bank = parse(&bytes);
+        let mut link = Link::new();
+        let mut rig = Rig::new(Ok(&bank), &mut link).homed();
+        rig.host.send(&HostToDevice::Arm);
+        assert_eq!(rig.tick().state, WireState::Armed);
         for i in 0..240 {
-            host.send(&match i % 6 {
+            rig.host.send(&match i % 6 {
                 0 if i == 6 => HostToDevice::Arm,
                 0 => HostToDevice::ClearFault,
                 _ => HostToDevice::Heartbeat,
             });
         }
-        host.send(&HostToDevice::Disarm);
+        rig.host.send(&HostToDevice::Disarm);
         for t in 0..10 {
-            let report = app.tick(&mut plant, &clock, false).unwrap();
+            let report = rig.tick();
             assert_eq!(
                 report.state,
                 WireState::Disarmed,
@@ -1141,7 +1158,7 @@ mod tests {
             );
             assert!(report.currents_a.iter().all(|&i| i == 0.0));
         }
-        let c = app.telemetry().counters;
+        let c = rig.app.telemetry().counters;
         // Arm, 240 flood frames, Disarm; 40 commands of which 15 fit the queue.
         assert_eq!(c.rx_frames, 1 + 240 + 1);
         assert_eq!(c.rx_dropped, 40 - 15);
@@ -1152,25 +1169,28 @@ mod tests {
     /// meanwhile still reaches it once it reads again.
     #[test]
     fn a_fault_raised_while_the_host_is_not_reading_is_not_lost() {
-        rig!(bank, app, host, plant, clock);
-        host.send(&HostToDevice::ZeroEncoders);
-        host.send(&HostToDevice::Arm);
+        let bytes = flat_patch();
+        let bank = parse(&bytes);
+        let mut link = Link::new();
+        let mut rig = Rig::new(Ok(&bank), &mut link);
+        rig.host.send(&HostToDevice::ZeroEncoders);
+        rig.host.send(&HostToDevice::Arm);
         // 200 ticks unread (the host's commands still arrive: the incoming side is apart).
         for _ in 0..200 {
-            host.send(&HostToDevice::Heartbeat);
-            app.tick(&mut plant, &clock, false).unwrap();
+            rig.host.send(&HostToDevice::Heartbeat);
+            rig.tick();
         }
-        assert!(app.telemetry().counters.tx_dropped > 10);
-        plant.interlocks.estop = true;
-        let r = app.tick(&mut plant, &clock, false).unwrap();
+        assert!(rig.app.telemetry().counters.tx_dropped > 10);
+        rig.plant.interlocks.estop = true;
+        let r = rig.tick();
         assert_eq!(r.state, WireState::Fault);
-        host.pump();
+        rig.host.pump();
         let e_stop = DeviceToHost::Fault {
             tick: r.tick,
             reason: FaultReason::EStop,
             detail: 0,
         };
-        assert!(host.sent.contains(&e_stop), "{:?}", host.sent);
+        assert!(rig.host.sent.contains(&e_stop), "{:?}", rig.host.sent);
     }
 
     /// The board's tick sequence (`firmware/board/src/main.rs`, `haptic`): wait for the
@@ -1190,15 +1210,12 @@ mod tests {
             }
         }
         let bytes = flat_patch();
-        let bank = Bank::parse(bytes.as_slice()).unwrap();
+        let bank = parse(&bytes);
         let mut link = Link::new();
-        let (tick_end, driver) = link.split();
-        let mut app = App::new(Ok(&bank), tick_end, 0);
-        let mut host = FakeHost::new(driver);
-        let mut plant = plant();
+        let mut rig = Rig::new(Ok(&bank), &mut link);
         let clock = Counter(core::cell::Cell::new(0));
-        host.send(&HostToDevice::ZeroEncoders);
-        host.send(&HostToDevice::Arm);
+        rig.host.send(&HostToDevice::ZeroEncoders);
+        rig.host.send(&HostToDevice::Arm);
         let mut watch = TickWatch::new(P);
         let (mut expiry, mut overrun) = (u32::MAX - 500 * P, false);
         let mut states = Vec::new();
@@ -1207,37 +1224,32 @@ mod tests {
             let wake = expiry.wrapping_add(latency);
             clock.0.set(wake);
             watch.begin(clock.cycles());
-            states.push(app.tick(&mut plant, &clock, overrun).unwrap().state);
+            states.push(rig.app.tick(&mut rig.plant, &clock, overrun).unwrap().state);
             let end = wake.wrapping_add(20_000);
             clock.0.set(end);
             let timing = watch.end(clock.cycles());
-            app.record_tick_cycles(timing.cycles);
+            rig.app.record_tick_cycles(timing.cycles);
             overrun = timing.overrun;
             expiry = expiry.wrapping_add(P);
             if overrun {
                 expiry = end.wrapping_add(30 + P);
             }
-            host.pump();
-            host.send(&HostToDevice::Heartbeat);
+            rig.host.pump();
+            rig.host.send(&HostToDevice::Heartbeat);
             if k == 1_500 {
-                host.send(&HostToDevice::ClearFault);
-                host.send(&HostToDevice::Arm);
+                rig.host.send(&HostToDevice::ClearFault);
+                rig.host.send(&HostToDevice::Arm);
             }
         }
-        assert_eq!(app.telemetry().counters.overruns, 1);
+        assert_eq!(rig.app.telemetry().counters.overruns, 1);
         // Tick 1,001 woke late; tick 1,002 is told and faults; from tick 1,502 (after the
         // commands sent at tick 1,501) it runs armed again.
         assert!(states[..1_001].iter().all(|&s| s == WireState::Armed));
         assert!(states[1_001..1_501].iter().all(|&s| s == WireState::Fault));
         assert!(states[1_501..].iter().all(|&s| s == WireState::Armed));
-        let faults: Vec<_> = host
-            .sent
-            .iter()
-            .filter(|m| matches!(m, DeviceToHost::Fault { .. }))
-            .collect();
         assert_eq!(
-            faults,
-            [&DeviceToHost::Fault {
+            rig.faults(),
+            [DeviceToHost::Fault {
                 tick: 1_002,
                 reason: FaultReason::Overrun,
                 detail: 0
@@ -1252,51 +1264,41 @@ mod tests {
     #[test]
     fn arming_needs_homing_and_every_reset_cause_is_reported() {
         let bytes = flat_patch();
-        let bank = Bank::parse(bytes.as_slice()).unwrap();
+        let bank = parse(&bytes);
         let mut link = Link::new();
-        let (tick_end, driver) = link.split();
-        let mut app = App::new(Ok(&bank), tick_end, 0);
-        app.reset(ResetCause::BrownOut);
-        let mut host = FakeHost::new(driver);
-        let (mut plant, clock) = (plant(), clock());
+        let mut rig = Rig::new(Ok(&bank), &mut link).after_reset(ResetCause::BrownOut);
         let drive = [0.5, -0.25, 0.0];
-        host.send(&HostToDevice::SetMode(Mode::ConstantCurrent {
+        rig.host.send(&HostToDevice::SetMode(Mode::ConstantCurrent {
             currents_a: drive,
         }));
-        host.send(&HostToDevice::Arm);
-        let mut step = |app: &mut App, host: &mut FakeHost| {
-            let r = app.tick(&mut plant, &clock, false).unwrap();
-            host.pump();
-            host.send(&HostToDevice::Heartbeat);
-            r
-        };
+        rig.host.send(&HostToDevice::Arm);
         for _ in 0..3 {
-            let r = step(&mut app, &mut host);
+            let r = rig.step();
             assert_eq!((r.state, r.currents_a), (WireState::Fault, [0.0; 3]));
         }
         let reset = DeviceToHost::Reset {
             cause: ResetCause::BrownOut,
         };
-        assert!(matches!(host.sent[0], DeviceToHost::Hello { .. }));
-        assert_eq!(host.sent[1], reset);
+        assert!(matches!(rig.host.sent[0], DeviceToHost::Hello { .. }));
+        assert_eq!(rig.host.sent[1], reset);
         assert_eq!(
-            host.sent[2],
+            rig.host.sent[2],
             DeviceToHost::Fault {
                 tick: 0,
                 reason: FaultReason::NotReferenced,
                 detail: 0
             }
         );
-        assert_eq!(app.telemetry().fault, Some(FaultReason::NotReferenced));
-        host.send(&HostToDevice::Hello);
-        step(&mut app, &mut host);
-        let n = host.sent.len();
-        assert!(matches!(host.sent[n - 2], DeviceToHost::Hello { .. }));
-        assert_eq!(host.sent[n - 1], reset);
-        host.send(&HostToDevice::ClearFault);
-        host.send(&HostToDevice::ZeroEncoders);
-        host.send(&HostToDevice::Arm);
-        let r = step(&mut app, &mut host);
+        assert_eq!(rig.app.telemetry().fault, Some(FaultReason::NotReferenced));
+        rig.host.send(&HostToDevice::Hello);
+        rig.step();
+        let n = rig.host.sent.len();
+        assert!(matches!(rig.host.sent[n - 2], DeviceToHost::Hello { .. }));
+        assert_eq!(rig.host.sent[n - 1], reset);
+        rig.host.send(&HostToDevice::ClearFault);
+        rig.host.send(&HostToDevice::ZeroEncoders);
+        rig.host.send(&HostToDevice::Arm);
+        let r = rig.step();
         assert_eq!((r.state, r.currents_a), (WireState::Armed, drive));
     }
 
@@ -1314,22 +1316,24 @@ mod tests {
             ResetCause::LowPower,
             ResetCause::Unknown,
         ] {
-            rig!(bank, app, host, plant, clock);
-            app.reset(cause);
-            app.tick(&mut plant, &clock, false).unwrap();
-            host.send(&HostToDevice::ClearFault);
-            host.send(&HostToDevice::Arm);
-            let r = app.tick(&mut plant, &clock, false).unwrap();
+            let bytes = flat_patch();
+            let bank = parse(&bytes);
+            let mut link = Link::new();
+            let mut rig = Rig::new(Ok(&bank), &mut link).after_reset(cause);
+            rig.tick();
+            rig.host.send(&HostToDevice::ClearFault);
+            rig.host.send(&HostToDevice::Arm);
+            let r = rig.tick();
             assert_eq!(r.state, WireState::Fault, "{cause:?}");
             assert_eq!(
-                app.telemetry().fault,
+                rig.app.telemetry().fault,
                 Some(FaultReason::NotReferenced),
                 "{cause:?}"
             );
-            host.send(&HostToDevice::ClearFault);
-            host.send(&HostToDevice::ZeroEncoders);
-            host.send(&HostToDevice::Arm);
-            let r = app.tick(&mut plant, &clock, false).unwrap();
+            rig.host.send(&HostToDevice::ClearFault);
+            rig.host.send(&HostToDevice::ZeroEncoders);
+            rig.host.send(&HostToDevice::Arm);
+            let r = rig.tick();
             assert_eq!(r.state, WireState::Armed, "{cause:?}");
         }
     }
@@ -1341,7 +1345,7 @@ mod tests {
     fn a_current_limit_over_the_amplifier_range_refuses_to_arm() {
         use crate::amplifier::Amplifier;
         let bytes = flat_patch();
-        let bank = Bank::parse(bytes.as_slice()).unwrap();
+        let bank = parse(&bytes);
         assert_eq!(bank.device().current_limit_a, [2.0; 3]);
         let amps = |last: f32| {
             [
@@ -1351,38 +1355,31 @@ mod tests {
             ]
         };
         let mut link = Link::new();
-        let (tick_end, driver) = link.split();
-        let mut app = App::new(Ok(&bank), tick_end, 0);
-        app.check_amplifiers(&amps(1.5));
-        home(&mut app);
-        let mut host = FakeHost::new(driver);
-        let (mut plant, clock) = (plant(), clock());
+        let mut rig = Rig::new(Ok(&bank), &mut link).homed();
+        rig.app.check_amplifiers(&amps(1.5));
         let range = |tick| DeviceToHost::Fault {
             tick,
             reason: FaultReason::AmplifierRange,
             detail: 2,
         };
-        host.pump();
-        assert_eq!(host.sent[1], range(0));
+        rig.host.pump();
+        assert_eq!(rig.host.sent[1], range(0));
         for _ in 0..3 {
-            host.send(&HostToDevice::ClearFault);
-            host.send(&HostToDevice::Arm);
-            let r = app.tick(&mut plant, &clock, false).unwrap();
+            rig.host.send(&HostToDevice::ClearFault);
+            rig.host.send(&HostToDevice::Arm);
+            let r = rig.tick();
             assert_eq!((r.state, r.currents_a), (WireState::Fault, [0.0; 3]));
-            host.pump();
-            assert_eq!(host.sent.last(), Some(&range(r.tick - 1)));
+            rig.host.pump();
+            assert_eq!(rig.host.sent.last(), Some(&range(r.tick - 1)));
         }
-        assert!(plant.driven.iter().all(Option::is_none));
-        assert_eq!(app.telemetry().fault, Some(FaultReason::AmplifierRange));
+        assert!(rig.plant.driven.iter().all(Option::is_none));
+        assert_eq!(rig.app.telemetry().fault, Some(FaultReason::AmplifierRange));
 
         let mut link = Link::new();
-        let (tick_end, driver) = link.split();
-        let mut app = App::new(Ok(&bank), tick_end, 0);
-        app.check_amplifiers(&amps(2.0));
-        home(&mut app);
-        let mut host = FakeHost::new(driver);
-        host.send(&HostToDevice::Arm);
-        let r = app.tick(&mut plant, &clock, false).unwrap();
+        let mut rig = Rig::new(Ok(&bank), &mut link).homed();
+        rig.app.check_amplifiers(&amps(2.0));
+        rig.host.send(&HostToDevice::Arm);
+        let r = rig.tick();
         assert_eq!(r.state, WireState::Armed);
     }
 
@@ -1393,67 +1390,58 @@ mod tests {
     #[test]
     fn brown_out_below_level_3_refuses_to_arm() {
         let bytes = flat_patch();
-        let bank = Bank::parse(bytes.as_slice()).unwrap();
+        let bank = parse(&bytes);
         let mut link = Link::new();
-        let (tick_end, driver) = link.split();
-        let mut app = App::new(Ok(&bank), tick_end, 0);
-        app.check_brown_out(0x0FFF_AAED);
-        home(&mut app);
-        let mut host = FakeHost::new(driver);
-        let (mut plant, clock) = (plant(), clock());
+        let mut rig = Rig::new(Ok(&bank), &mut link).homed();
+        rig.app.check_brown_out(0x0FFF_AAED);
         let brown_out = |tick| DeviceToHost::Fault {
             tick,
             reason: FaultReason::BrownOutLevel,
             detail: 0,
         };
-        host.pump();
-        assert_eq!(host.sent[1], brown_out(0));
+        rig.host.pump();
+        assert_eq!(rig.host.sent[1], brown_out(0));
         for _ in 0..3 {
-            host.send(&HostToDevice::ClearFault);
-            host.send(&HostToDevice::ZeroEncoders);
-            host.send(&HostToDevice::Arm);
-            let r = app.tick(&mut plant, &clock, false).unwrap();
+            rig.host.send(&HostToDevice::ClearFault);
+            rig.host.send(&HostToDevice::ZeroEncoders);
+            rig.host.send(&HostToDevice::Arm);
+            let r = rig.tick();
             assert_eq!((r.state, r.currents_a), (WireState::Fault, [0.0; 3]));
-            host.pump();
-            assert_eq!(host.sent.last(), Some(&brown_out(r.tick - 1)));
+            rig.host.pump();
+            assert_eq!(rig.host.sent.last(), Some(&brown_out(r.tick - 1)));
         }
-        assert!(plant.driven.iter().all(Option::is_none));
-        assert_eq!(app.telemetry().fault, Some(FaultReason::BrownOutLevel));
+        assert!(rig.plant.driven.iter().all(Option::is_none));
+        assert_eq!(rig.app.telemetry().fault, Some(FaultReason::BrownOutLevel));
 
         // Level 3: no fault at boot; not homed, Arm is refused NotReferenced; after
         // ZeroEncoders it arms.
         let mut link = Link::new();
-        let (tick_end, driver) = link.split();
-        let mut app = App::new(Ok(&bank), tick_end, 0);
-        app.check_brown_out(0x0FFF_AAE1);
-        let mut host = FakeHost::new(driver);
-        host.pump();
-        assert_eq!(host.sent.len(), 1, "{:?}", host.sent);
-        host.send(&HostToDevice::Arm);
-        let r = app.tick(&mut plant, &clock, false).unwrap();
+        let mut rig = Rig::new(Ok(&bank), &mut link);
+        rig.app.check_brown_out(0x0FFF_AAE1);
+        rig.host.pump();
+        assert_eq!(rig.host.sent.len(), 1, "{:?}", rig.host.sent);
+        rig.host.send(&HostToDevice::Arm);
+        let r = rig.tick();
         assert_eq!(r.state, WireState::Fault);
-        assert_eq!(app.telemetry().fault, Some(FaultReason::NotReferenced));
-        host.send(&HostToDevice::ClearFault);
-        host.send(&HostToDevice::ZeroEncoders);
-        host.send(&HostToDevice::Arm);
-        let r = app.tick(&mut plant, &clock, false).unwrap();
+        assert_eq!(rig.app.telemetry().fault, Some(FaultReason::NotReferenced));
+        rig.host.send(&HostToDevice::ClearFault);
+        rig.host.send(&HostToDevice::ZeroEncoders);
+        rig.host.send(&HostToDevice::Arm);
+        let r = rig.tick();
         assert_eq!(r.state, WireState::Armed);
     }
 
     #[test]
     fn invalid_bank_refuses_to_arm_and_says_why() {
         let mut link = Link::new();
-        let (tick_end, driver) = link.split();
-        let mut app = App::new(Err(BankError::BadMagic), tick_end, 0);
-        assert!(app.haptic_loop().is_none());
-        let mut host = FakeHost::new(driver);
-        let (mut plant, clock) = (plant(), clock());
-        host.send(&HostToDevice::Arm);
-        host.send(&HostToDevice::Hello);
+        let mut rig = Rig::new(Err(BankError::BadMagic), &mut link);
+        assert!(rig.app.haptic_loop().is_none());
+        rig.host.send(&HostToDevice::Arm);
+        rig.host.send(&HostToDevice::Hello);
         let mut reports = Vec::new();
         for _ in 0..3 {
-            reports.push(app.tick(&mut plant, &clock, false).unwrap());
-            host.pump();
+            reports.push(rig.tick());
+            rig.host.pump();
         }
         let code = u32::from(BankError::BadMagic.code());
         let no_bank = DeviceToHost::Hello {
@@ -1468,11 +1456,14 @@ mod tests {
             detail: code,
         };
         // Boot Hello; the arm refusal (before tick 1 ran); the Hello reply; the tick-1 fault.
-        assert_eq!(host.sent, [no_bank.clone(), fault(0), no_bank, fault(1)]);
+        assert_eq!(
+            rig.host.sent,
+            [no_bank.clone(), fault(0), no_bank, fault(1)]
+        );
         assert!(reports.iter().all(|a| a.currents_a == [0.0; 3]));
         assert!(reports.iter().all(|a| a.state == WireState::Fault));
-        assert!(plant.driven.iter().all(Option::is_none));
-        assert_eq!(app.telemetry().fault, Some(FaultReason::InvalidBank));
+        assert!(rig.plant.driven.iter().all(Option::is_none));
+        assert_eq!(rig.app.telemetry().fault, Some(FaultReason::InvalidBank));
         // No loop: the body (two clock readings, 100 cycles apart) is all supervisor.
         for r in &reports {
             assert_eq!(r.body_cycles, 100);

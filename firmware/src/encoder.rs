@@ -39,29 +39,18 @@ impl Extender {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    /// A small deterministic generator (xorshift64*), so the test needs no dependency.
-    struct Rng(u64);
-
-    impl Rng {
-        fn next(&mut self) -> u64 {
-            self.0 ^= self.0 >> 12;
-            self.0 ^= self.0 << 25;
-            self.0 ^= self.0 >> 27;
-            self.0.wrapping_mul(0x2545_f491_4f6c_dd1d)
-        }
-    }
+    use bank_format::fixtures::SplitMix64;
 
     #[test]
     fn matches_an_i64_reference_over_a_million_steps_with_wraps() {
-        let mut rng = Rng(0x9e37_79b9_7f4a_7c15);
+        let mut rng = SplitMix64::new(0x9e37_79b9_7f4a_7c15);
         let start: i64 = 40_000;
         let mut position = start;
         let mut enc = Extender::new(start as u16);
         let (mut wraps, mut max) = (0u32, 0i64);
         for i in 0..1_000_000 {
             // Mostly small steps, some near the largest legal one (+-32,767), both ways.
-            let r = rng.next();
+            let r = rng.next_u64();
             let step = if i % 100 == 0 {
                 (r % 65_535) as i64 - 32_767
             } else {

@@ -10,9 +10,7 @@ extern crate alloc;
 use alloc::vec::Vec;
 use bank_format::{AlignedBytes, BankBuilder, DeviceCalibration, TissueLaw};
 
-/// The fixture devices' link timeout, ms: 10 ticks at 1 kHz, which the tests' silence counts
-/// are written against (a scene's default is `bank_format::DEFAULT_LINK_TIMEOUT_MS`).
-pub const FIXTURE_LINK_TIMEOUT_MS: u32 = 10;
+pub use bank_format::fixtures::{FIXTURE_LINK_TIMEOUT_MS, SplitMix64, bench_device};
 
 /// The liver scene's device (`host/scenes/liver.toml`).
 pub fn liver_device() -> DeviceCalibration {
@@ -32,29 +30,6 @@ pub fn liver_device() -> DeviceCalibration {
         tip_radius_m: 0.003,
         // The scene's defaults (`host::scene`): 1 m/s at the tip; 10 rad/s (1 m/s at 0.1 m
         // insertion) and 1 m/s along the shaft.
-        max_tip_speed_m_s: 1.0,
-        max_joint_speed: [10.0, 10.0, 1.0],
-        link_timeout_ms: FIXTURE_LINK_TIMEOUT_MS,
-    }
-}
-
-/// A bench gimbal for hand-made test banks: shaft down from `fulcrum_m` (m), pitch and yaw
-/// +-0.8 rad, insertion 2-20 cm (home 5 cm), a 2 mm tool tip.
-pub fn bench_device(fulcrum_m: [f32; 3]) -> DeviceCalibration {
-    DeviceCalibration {
-        fulcrum_m,
-        shaft_axis: [0.0, 0.0, -1.0],
-        pitch_axis: [1.0, 0.0, 0.0],
-        yaw_axis: [0.0, 1.0, 0.0],
-        joint_min: [-0.8, -0.8, 0.02],
-        joint_max: [0.8, 0.8, 0.2],
-        home_joint: [0.0, 0.0, 0.05],
-        counts_per_rev: [4096, 4096, 2048],
-        transmission: [10.0, -10.0, 100.0],
-        torque_constant_nm_per_a: [0.03, 0.03, 0.025],
-        current_limit_a: [2.0, 2.0, 1.5],
-        max_force_n: 5.0,
-        tip_radius_m: 0.002,
         max_tip_speed_m_s: 1.0,
         max_joint_speed: [10.0, 10.0, 1.0],
         link_timeout_ms: FIXTURE_LINK_TIMEOUT_MS,

@@ -3,7 +3,7 @@
 
 use bank_format::{
     AlignedBytes, Bank, BankBuilder, BankError, DeviceCalibration, HEADER_LEN, SECTION_ENTRY_LEN,
-    SectionKind, TissueLaw, reseal,
+    SectionKind, TissueLaw, fixtures::bench_device, reseal,
 };
 
 /// Side of the square the four nodes sit on, m.
@@ -74,24 +74,13 @@ pub fn law() -> TissueLaw {
     TissueLaw::chebyshev(&[2.6, 2.5, 0.1], [0.0, 5.0]).unwrap()
 }
 
+/// The bench gimbal ([`bench_device`]) over the square, with a distinct joint speed per axis
+/// and a 20 ms link timeout.
 pub fn device() -> DeviceCalibration {
     DeviceCalibration {
-        fulcrum_m: [0.005, 0.005, 0.1],
-        shaft_axis: [0.0, 0.0, -1.0],
-        pitch_axis: [1.0, 0.0, 0.0],
-        yaw_axis: [0.0, 1.0, 0.0],
-        joint_min: [-0.8, -0.8, 0.02],
-        joint_max: [0.8, 0.8, 0.2],
-        home_joint: [0.0, 0.0, 0.05],
-        counts_per_rev: [4096, 4096, 2048],
-        transmission: [10.0, -10.0, 100.0],
-        torque_constant_nm_per_a: [0.03, 0.03, 0.025],
-        current_limit_a: [2.0, 2.0, 1.5],
-        max_force_n: 5.0,
-        tip_radius_m: 0.002,
-        max_tip_speed_m_s: 1.0,
         max_joint_speed: [10.0, 12.0, 1.5],
         link_timeout_ms: 20,
+        ..bench_device([0.005, 0.005, 0.1])
     }
 }
 
