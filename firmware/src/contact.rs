@@ -19,9 +19,11 @@
 //! within [`BARY_TOL`] of the triangle and then clamped to `[0, 1]` and renormalised. The plane
 //! test reads only the triangle's stored plane (`SPEC.md`, "triangle planes": `m = n / |n|^2`,
 //! `off = m . a`, so the plane value `m . p - off` has the sign of `(p - a) . n`): four loads
-//! and two dot products per candidate. Only the few candidates whose plane the segment crosses
-//! load their vertices, for the barycentric coordinates, which the plane gives without a
-//! division (`plane_bary`). A hit
+//! and two dot products per candidate. Only candidates whose plane the segment crosses load
+//! their vertices, for the barycentric coordinates, which the plane gives without a division
+//! (`plane_bary`); a path entering a convex part of the surface also crosses the planes of the
+//! triangles around its crossing, up to the cell's whole candidate list (`docs/known-gaps.md`,
+//! "Tick budget"). A hit
 //! exactly on an edge or a vertex is accepted by every triangle around it; the first hit along
 //! the segment wins, ties going to the lowest triangle index, so it is reported once and
 //! deterministically. The lists are complete for any cell size (the rule is structural, not a
@@ -299,7 +301,8 @@ pub fn detect(bank: &Bank, p0: [f32; 3], p1: [f32; 3]) -> Option<Hit> {
 /// The plane first, from the stored plane alone: the plane values `s0 = m . p0 - off` and
 /// `s1 = m . p1 - off` have the signs of `(p0 - a) . n` and `(p1 - a) . n`, and the segment
 /// enters when `s0 >= 0`, `s1 <= 0` and `s0 > s1`, at `t = s0 / (s0 - s1)`. A tick's short
-/// segment crosses the planes of few candidates, so most stop after `s0` or `s1`. For a
+/// segment away from the surface crosses no candidate's plane, so each stops after `s0` or
+/// `s1`. For a
 /// crossing the caller keeps, and only then, the vertices: the crossing point's barycentric
 /// coordinates (`plane_bary`'s, each tested as soon as it is known), then not grazing
 /// (`(m . d)^2 > PARALLEL_TOL^2 (d . d) (m . m)` for `d = p1 - p0`: the cosine test on `n`).

@@ -946,18 +946,19 @@ fn press_hold_relaxes_as_the_scenes_qlv_law() {
     }
 }
 
-/// Issue 41, item 10: the worst tick on paths the scripts do not take. Three seeded `wander`
+/// Issue 41, item 10: the worst tick on paths the scripts do not take. Four seeded `wander`
 /// paths (`host sil --script wander --seed N`: presses, slides, leaving and re-entering, held
 /// contacts, at tip speeds up to 0.45 m/s), 5 s each under QEMU: no fault, no overrun, held
 /// and first contacts present, and every tick's loop body within the 3,000-instruction goal.
-/// Before a held contact's slide was bounded to `SLIDE_STEPS_PER_TICK` walk steps a tick
-/// (`firmware::contact`), a slide near a vertex walked 3 or 4 steps in one tick: seed 3
-/// reached 3,234, seed 12 3,507 and seed 19 3,357.
+/// Seeds 3, 12 and 19 slide past vertices, where a slide's walk takes more than
+/// `SLIDE_STEPS_PER_TICK` steps (`firmware::contact`); seed 32 holds the costliest detection of
+/// seeds 0-39, in the tick whose detection finds a contact (measured: body 2,985, detection
+/// 1,933, the closest of those seeds to the goal).
 #[test]
 fn wander_paths_keep_the_loop_body_within_the_goal() {
     let (setup, bytes) = setup();
     let bank = Bank::parse(&bytes).unwrap();
-    let seeds = [3u64, 12, 19];
+    let seeds = [3u64, 12, 19, 32];
     let jobs: Vec<_> = seeds
         .iter()
         .map(|&seed| {
