@@ -119,6 +119,12 @@ if cargo tree -p fem -e normal --prefix none | grep -E '^(axum|tokio|plotters|se
     exit 1
 fi
 
+step "the host library stands alone: no CLI (clap) or terminal signal (ctrlc) stack under host/haptic"
+if cargo tree -p haptic -e normal --prefix none | grep -E '^(clap|ctrlc) '; then
+    echo "error: the haptic crate depends on the stacks above; they belong to the host CLI" >&2
+    exit 1
+fi
+
 step "no_std crates cross-compile for the MCU; the QEMU image links against memory.x"
 cargo build --release -p bank-format -p firmware --target thumbv7em-none-eabihf
 (cd firmware/qemu && cargo build --release)

@@ -7,7 +7,7 @@
 use fem::compliance::Compliance;
 use fem::elasticity::{Elasticity, FixedSet, Material};
 use fem::mesh::structured::box_mesh;
-use host::contact::{ContactSurface, patch_force};
+use haptic::contact::{ContactSurface, patch_force};
 
 /// Force (N) on the tool pressing 1 mm into the top centre of a 40 x 40 x 20 mm box held at
 /// its base, for point contact and a 5 mm tip: `(point, tip)`.

@@ -5,8 +5,8 @@
 use anyhow::{Context, Result, bail};
 use fem::mesh::quality::{QualitySummary, SLIVER_DIHEDRAL_DEG};
 use fem::surface::{CheckOptions, read_surface};
-use host::meshing::{self, Sizes, Units};
-use host::scene::Scene;
+use haptic::meshing::{self, Sizes, Units};
+use haptic::scene::Scene;
 use std::path::PathBuf;
 use std::time::Instant;
 
@@ -179,7 +179,7 @@ pub fn run(a: Args) -> Result<()> {
     let mesh = meshing::run_gmsh(&surface_m, &sizes)?;
     let mut bytes = Vec::new();
     mesh.write_msh4_ascii(&mut bytes)?;
-    host::fsio::write_atomic(output, &bytes, &[&a.surface])?;
+    haptic::fsio::write_atomic(output, &bytes, &[&a.surface])?;
     let tet_volume: f64 = (0..mesh.tets.len()).map(|t| mesh.signed_volume(t)).sum();
     println!(
         "{}: {} nodes, {} tetrahedra, volume {:.4e} m^3 ({:+.2}% of the surface's), {:.1} s",

@@ -9,7 +9,7 @@ use anyhow::{Context, Result};
 use fem::compliance::Compliance;
 use fem::elasticity::{Elasticity, FixedSet, Material};
 use firmware::solve::MAX_CONTACT_NODES;
-use host::contact::{ContactSurface, capped_patch, patch_force};
+use haptic::contact::{ContactSurface, capped_patch, patch_force};
 use std::path::PathBuf;
 use std::time::Instant;
 
