@@ -119,8 +119,8 @@ if cargo tree -p fem -e normal --prefix none | grep -E '^(axum|tokio|plotters|se
     exit 1
 fi
 
-step "the host library stands alone: no CLI (clap) or terminal signal (ctrlc) stack under host/haptic"
-if cargo tree -p haptic -e normal --prefix none | grep -E '^(clap|ctrlc) '; then
+step "the host library stands alone: no CLI or terminal stack (clap, ctrlc, indicatif) under host/haptic"
+if cargo tree -p haptic -e normal --prefix none | grep -E '^(clap|ctrlc|indicatif) '; then
     echo "error: the haptic crate depends on the stacks above; they belong to the host CLI" >&2
     exit 1
 fi

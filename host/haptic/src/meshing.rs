@@ -21,7 +21,7 @@ use std::process::Command;
 const SCRIPT: &str = include_str!("../../../scripts/mesh_surface.py");
 
 /// Length units of a surface or tetrahedral mesh file (`--units`, a scene's `mesh_units`).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Units {
     /// Metres.
     M,

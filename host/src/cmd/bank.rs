@@ -1,5 +1,6 @@
 //! `host bank build | inspect | sweep`: firmware banks from scene files.
 
+use crate::progress::Bar;
 use anyhow::{Context, Result, bail};
 use bank_format::region::BANK_LEN;
 use bank_format::{AlignedBytes, Bank, LawKind, SectionKind};
@@ -7,7 +8,6 @@ use haptic::bank::stats;
 use haptic::bank::sweep::{self, SweepConfig};
 use haptic::bank::{BuiltBank, Prepared};
 use haptic::fsio::write_atomic;
-use haptic::progress::Bar;
 use haptic::scene::{ContactModel, Couplings, MeshSource};
 use std::path::PathBuf;
 use std::time::Instant;

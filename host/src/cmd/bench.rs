@@ -231,7 +231,7 @@ fn patch(args: PatchArgs) -> Result<()> {
 fn precompute(args: PrecomputeArgs) -> Result<()> {
     let larger_fem = args.fem.fem_mesh.is_some();
     let (scene, overrides) = args.fem.resolve(args.no_richardson)?;
-    let progress = haptic::progress::Bar::new("chunks (patch compliance, then display fields)");
+    let progress = crate::progress::Bar::new("chunks (patch compliance, then display fields)");
     let f = haptic::bank::precompute::measure(scene, &overrides, Some(&progress))?;
     progress.finish();
     if args.json {
@@ -310,8 +310,11 @@ fn compliance(args: ComplianceArgs) -> Result<()> {
         );
     }
     for path in meshes {
-        let r = haptic::bench::compliance::run(&path, &config)
-            .with_context(|| format!("benchmark on {}", path.display()))?;
+        let bar = crate::progress::Bar::new("supernodes");
+        let r = haptic::bench::compliance::run(&path, &config, &bar)
+            .with_context(|| format!("benchmark on {}", path.display()));
+        bar.finish();
+        let r = r?;
         if args.json {
             println!("{}", serde_json::to_string(&r)?);
         } else {

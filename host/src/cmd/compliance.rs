@@ -1,10 +1,10 @@
 //! `host compliance`: compliance blocks of requested nodes as JSON (a stable interface).
 
 use super::fixing::{FixArgs, parse_list};
+use crate::progress::Bar;
 use anyhow::{Context, Result, bail};
 use fem::compliance::Compliance;
 use fem::elasticity::{Elasticity, Element, Material};
-use haptic::progress::Bar;
 use haptic::scene::{Locking, p1_locking};
 use std::io::Write;
 use std::path::PathBuf;

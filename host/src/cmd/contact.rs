@@ -1,11 +1,11 @@
 //! `host contact`: what a scene's bank renders at a point of the organ (`probe`), and the
 //! convergence study of the patch compliance (`study`).
 
+use crate::progress::Bar;
 use anyhow::{Context, Result, bail};
 use bank_format::{AlignedBytes, Bank};
 use haptic::bank::Prepared;
 use haptic::organ::Organ;
-use haptic::progress::Bar;
 use haptic::reach::Region;
 use haptic::scene::Scene;
 use std::path::PathBuf;

@@ -43,7 +43,7 @@ pub struct Args {
     /// Units of --mesh's coordinates; default: guessed from its bounding box (an organ is 4 to
     /// 40 cm across) and printed, refused when no unit fits.
     #[arg(long, value_enum, requires = "mesh")]
-    units: Option<haptic::meshing::Units>,
+    units: Option<crate::cmd::units_arg::UnitsArg>,
     /// Telemetry source: `virtual` (the firmware loop on this PC), `sil` (the QEMU image) or
     /// `serial:<port>` (a device).
     #[arg(long, default_value = "virtual")]
@@ -101,8 +101,12 @@ pub fn run(args: Args) -> Result<()> {
         }
         let mesh = fem::mesh::read(m)?;
         let side = haptic::meshing::largest_side(mesh.bounding_box());
-        let (units, note) =
-            haptic::meshing::resolve_units(args.units, side, &m.display().to_string(), "--units")?;
+        let (units, note) = haptic::meshing::resolve_units(
+            args.units.map(Into::into),
+            side,
+            &m.display().to_string(),
+            "--units",
+        )?;
         if let Some(n) = note {
             eprintln!("{}: {n}", m.display());
         }
@@ -124,7 +128,7 @@ pub fn run(args: Args) -> Result<()> {
         },
         cached,
     ) = {
-        let progress = haptic::progress::Bar::new("patch compliance chunks");
+        let progress = crate::progress::Bar::new("patch compliance chunks");
         let built = haptic::bank::cache::scene_bank_cached(&prep, Some(&progress))?;
         progress.finish();
         built
@@ -163,7 +167,7 @@ pub fn run(args: Args) -> Result<()> {
         haptic::scene::ContactModel::Nodal => prep.organ.mesh_name.clone(),
     };
     let fields = {
-        let progress = haptic::progress::Bar::new("display field chunks");
+        let progress = crate::progress::Bar::new("display field chunks");
         let t = Instant::now();
         let fields = haptic::bank::cache::display_fields_cached(&prep, &bank, Some(&progress))?;
         progress.finish();

@@ -4,12 +4,12 @@
 //! brown-out reset level 3, checked and confirmed. Either way a connected device is sent
 //! `Disarm` first ([`haptic::link::disarm_connected`]).
 
+use crate::progress::Bar;
 use anyhow::{Context, Result, bail};
 use bank_format::region::BANK_LEN;
 use fem::progress::Progress as _;
 use flash::{Layout, Part, Phase, Plan, Progress, What};
 use haptic::link::{Disarmed, await_identity, check_identity, disarm_connected, open_device_port};
-use haptic::progress::Bar;
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 

@@ -37,7 +37,7 @@ pub struct NewArgs {
     /// from the bounding box (an organ is 4 to 40 cm across) and printed, refused when no unit
     /// fits. The trocar and supports are in metres whatever the mesh's units.
     #[arg(long, value_enum)]
-    units: Option<Units>,
+    units: Option<crate::cmd::units_arg::UnitsArg>,
     /// The trocar (the gimbal's fulcrum), m: `X,Y,Z`, outside the organ.
     #[arg(long, value_name = "X,Y,Z")]
     trocar: String,
@@ -89,7 +89,8 @@ fn numbers<const N: usize>(s: &str, what: &str) -> Result<[f64; N]> {
 }
 
 fn new(a: NewArgs) -> Result<()> {
-    let (mesh, ignored, units) = haptic::meshing::load_mesh_in_units(&a.mesh, a.units, "--units")?;
+    let (mesh, ignored, units) =
+        haptic::meshing::load_mesh_in_units(&a.mesh, a.units.map(Into::into), "--units")?;
     let skipped = if ignored.total() > 0 {
         format!(" (skipped: {ignored})")
     } else {
