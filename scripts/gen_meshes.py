@@ -32,7 +32,7 @@ default scene and its convergence study (fine in the tool's reach).  Same organ;
 size h_fine in the *fine zone*, the points within ZONE_BAND = 10 mm of the boundary that
 are also within tip radius + reach margin + 10 mm (3 + 2 + 10 mm) of the tip's workspace
 of ``host/scenes/liver.toml`` (trocar at (0, 0, 0.16) m, shaft along -z at rest, pitch and
-yaw in [-0.35, 0.35] rad, insertion in [0.03, 0.14] m), measured as ``host/src/reach.rs``
+yaw in [-0.35, 0.35] rad, insertion in [0.03, 0.14] m), measured as ``host/haptic/src/reach.rs``
 does (``sector_distance``).  Away from the zone the size grows by 0.3 mm per mm of
 distance from it, up to 8 mm.  Gmsh size fields: a ``Distance`` field to the boundary
 surfaces and a ``MathEval`` field of it and x, y, z (``_reach_size_field``).  No
@@ -216,7 +216,7 @@ CHECK_TOL = 0.10  # final acceptance
 
 # The default scene's device and tool (host/scenes/liver.toml: [device], [tool]; the default
 # bank.reach_margin_m).  The shaft points along -z at rest; pitch about x (inner axis), yaw
-# about y (outer, ground-fixed).  Inverse kinematics as host/src/kinematics.rs: with
+# about y (outer, ground-fixed).  Inverse kinematics as host/haptic/src/kinematics.rs: with
 # v = x - fulcrum, pitch = asin(v_y / |v|), yaw = atan2(v_x, -v_z) (up to sign; the ranges are
 # symmetric).
 REACH_FULCRUM = (0.0, 0.0, 0.16)
@@ -257,7 +257,7 @@ REACH_SCALED = {f"liver-reach-scaled-{h_mm:g}mm": h_mm / 1000.0 for h_mm in (2.8
 def sector_distance(p):
     """Approximate distance (m) of points p (N,3) from the tip's sector (the spherical-shell
     sector swept by the tip over the joint ranges): the larger of the radial excess and
-    rho sin(angular excess).  ``sector_distance(x) <= m`` is exactly host/src/reach.rs's
+    rho sin(angular excess).  ``sector_distance(x) <= m`` is exactly host/haptic/src/reach.rs's
     ``Workspace::reaches(x, m)`` (for rho > m).  Like that test it takes the radial and the
     angular excess separately, so near the sector's corners it under-estimates the true
     distance (by up to a factor sqrt(2)); it is negative inside the shell."""

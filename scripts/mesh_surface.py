@@ -5,7 +5,7 @@ Run by ``host mesh`` (the binary embeds this file and runs it with ``python3``);
 called by hand.  The one argument is a JSON job file written by the Rust side, which has
 already checked the surface (closed, manifold, oriented, one shell, no self-intersection),
 scaled it to metres and, with ``--refine-near``, computed the points the scene's tool can
-reach (``host/src/reach.rs``):
+reach (``host/haptic/src/reach.rs``):
 
     {"surface": "in.stl", "output": "out.msh", "size": 0.008, "fine": 0.003,
      "gradient": 0.3, "reach_points": [[x, y, z], ...], "feature_angle_deg": 40}

@@ -124,6 +124,12 @@ if cargo tree -p fem -e normal --prefix none | grep -E '^(axum|tokio|plotters|se
     exit 1
 fi
 
+step "the host library stands alone: no CLI or terminal stack (clap, ctrlc, indicatif) under host/haptic"
+if cargo tree -p haptic -e normal --prefix none | grep -E '^(clap|ctrlc|indicatif) '; then
+    echo "error: the haptic crate depends on the stacks above; they belong to the host CLI" >&2
+    exit 1
+fi
+
 step "no_std crates cross-compile for the MCU; the QEMU image links against memory.x"
 cargo build --release -p bank-format -p firmware --target thumbv7em-none-eabihf
 own_target firmware/qemu cargo build --release

@@ -1,7 +1,7 @@
 //! The laparoscopic gimbal (paper, section 2): pitch and yaw about the fulcrum (the trocar),
 //! insertion along the shaft, roll passive. Everything here is `f32`, fixed-size, heap-free and
 //! panic-free; it follows the bank's [`DeviceCalibration`] record (`bank-format/SPEC.md`,
-//! "device") and the host's f64 model (`host/src/reach.rs`).
+//! "device") and the host's f64 model (`host/haptic/src/reach.rs`).
 //!
 //! - Joints are indexed 0 = pitch (rad), 1 = yaw (rad), 2 = insertion (m, fulcrum to tip).
 //! - Encoder counts `n` give `q = home + 2 pi n / (counts_per_rev * transmission)`; for

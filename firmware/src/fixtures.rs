@@ -28,7 +28,7 @@ pub fn liver_device() -> DeviceCalibration {
         current_limit_a: [2.0, 2.0, 2.0],
         max_force_n: 5.0,
         tip_radius_m: 0.003,
-        // The scene's defaults (`host::scene`): 1 m/s at the tip; 10 rad/s (1 m/s at 0.1 m
+        // The scene's defaults (`haptic::scene`): 1 m/s at the tip; 10 rad/s (1 m/s at 0.1 m
         // insertion) and 1 m/s along the shaft.
         max_tip_speed_m_s: 1.0,
         max_joint_speed: [10.0, 10.0, 1.0],

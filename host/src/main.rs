@@ -2,6 +2,7 @@
 //! errors to stderr; every failure exits non-zero with a message naming what and where.
 
 mod cmd;
+mod progress;
 
 use clap::{Parser, Subcommand};
 use std::process::ExitCode;

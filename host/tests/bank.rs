@@ -82,7 +82,7 @@ fn shipped_scene_builds_a_valid_bank_and_inspect_refuses_damaged_copies() {
     assert!(text.contains("\nlink      timeout 50 ms\n"), "{text}");
     // The tool patches at the triangles' centroids, as the build printed them: the 3 mm tip
     // covers a few nodes, never more than the firmware's solve takes.
-    let patches = host::bank::stats::tool_patches(&bank);
+    let patches = haptic::bank::stats::tool_patches(&bank);
     assert!(
         (1..=firmware::solve::MAX_CONTACT_NODES).contains(&patches.max_nodes),
         "{patches:?}"
@@ -101,7 +101,7 @@ fn shipped_scene_builds_a_valid_bank_and_inspect_refuses_damaged_copies() {
     assert!(o.status.success(), "{}", stderr(&o));
     let v: serde_json::Value = serde_json::from_slice(&o.stdout).expect("one JSON object");
     assert_eq!(v["nodes"], n);
-    let candidates = host::bank::stats::grid_candidates(&bank);
+    let candidates = haptic::bank::stats::grid_candidates(&bank);
     assert!(candidates.max >= 1 && candidates.mean_near_surface > 0.0);
     assert_eq!(v["grid"]["max_candidates"], candidates.max);
     assert_eq!(
@@ -253,7 +253,7 @@ fn outputs_never_replace_inputs_links_or_special_files() {
 fn scenes_that_cannot_work_are_refused() {
     let dir = tempfile::tempdir().unwrap();
     let text = std::fs::read_to_string(scene()).unwrap();
-    let liver = fem::mesh::parse_msh(host::scene::BUILTIN_LIVER).unwrap();
+    let liver = fem::mesh::parse_msh(haptic::scene::BUILTIN_LIVER).unwrap();
     let build = |from: &str, to: &str| {
         let edited = text.replacen(from, to, 1);
         assert!(edited != text, "{from} not in the scene");
@@ -420,10 +420,10 @@ fn sweep_prints_a_row_per_rule_and_radius() {
 /// none faults, and the scripted path touches exactly where it goes below the surface.
 #[test]
 fn the_firmware_loop_runs_on_the_shipped_bank_without_faults() {
-    let bytes = host::bank::scene_bank(&scene()).unwrap();
+    let bytes = haptic::bank::scene_bank(&scene()).unwrap();
     let aligned = AlignedBytes::new(&bytes);
     let bank = Bank::parse(&aligned).unwrap();
-    let r = host::bench::tick::run(&bank, 3000, 0.005).unwrap();
+    let r = haptic::bench::tick::run(&bank, 3000, 0.005).unwrap();
     assert_eq!((r.ticks, r.faults), (3000, 0), "{r:?}");
     // The path (0.05 mm a tick): 100 ticks down to the surface, 100 more to 5 mm, 2,000 of
     // sweep at that depth, 200 back out, then again: 300 of the 3,000 ticks are above the

@@ -6,15 +6,15 @@
 use faer::Mat;
 use faer::linalg::solvers::Solve;
 use fem::elasticity::Material;
-use host::calibrate::fit::{self, FitError};
-use host::calibrate::motor::{self, Sample};
-use host::calibrate::scene_edit::{self, Law};
-use host::calibrate::{cheb, csv, specimen};
-use host::scene::Scene;
+use haptic::calibrate::fit::{self, FitError};
+use haptic::calibrate::motor::{self, Sample};
+use haptic::calibrate::scene_edit::{self, Law};
+use haptic::calibrate::{cheb, csv, specimen};
+use haptic::scene::Scene;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
-use host::rng::SplitMix64;
+use haptic::rng::SplitMix64;
 
 fn monomial(c: &[f64], x: f64) -> f64 {
     c.iter().rev().fold(0.0, |acc, &ci| acc * x + ci)
@@ -529,7 +529,7 @@ fn a_fit_to_noise_or_a_pulling_law_is_refused() {
     let text = std::fs::read_to_string(&scene).unwrap();
     if ok {
         assert!(text.contains("written with --accept-poor-fit"), "{text}");
-        assert!(host::scene::pull_at_first_contact(&Scene::load(&scene).unwrap().law).is_none());
+        assert!(haptic::scene::pull_at_first_contact(&Scene::load(&scene).unwrap().law).is_none());
     } else {
         assert!(err.contains("pull the tool"), "{err}");
         assert_eq!(text, original);

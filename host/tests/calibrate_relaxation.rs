@@ -5,9 +5,9 @@
 //! refuses noise and data that does not relax, and writes the scene atomically (a refused fit
 //! leaves it untouched).
 
-use host::calibrate::csv;
-use host::calibrate::relaxation::{self, RelaxationError, Test};
-use host::scene::Scene;
+use haptic::calibrate::csv;
+use haptic::calibrate::relaxation::{self, RelaxationError, Test};
+use haptic::scene::Scene;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
@@ -38,7 +38,7 @@ fn columns(text: &str) -> (Vec<f64>, Vec<f64>, Vec<f64>) {
     (col(0), col(1), col(2))
 }
 
-use host::rng::SplitMix64;
+use haptic::rng::SplitMix64;
 
 #[test]
 fn the_fit_recovers_the_published_brain_law_within_the_noise() {

@@ -11,7 +11,7 @@
 use fem::compliance::Compliance;
 use fem::elasticity::{Elasticity, FixedSet, Material};
 use firmware::solve::MAX_CONTACT_NODES;
-use host::contact::{ContactSurface, capped_patch, patch_force};
+use haptic::contact::{ContactSurface, capped_patch, patch_force};
 use std::path::Path;
 
 fn norm(v: [f64; 3]) -> f64 {

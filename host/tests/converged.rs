@@ -15,14 +15,14 @@
 //! scaled 2.8, 2, 1.4 and 1 mm meshes): the patch compliance `W` of the scene's 3 mm tool at 14
 //! sites of the reachable surface on meshes that refine as a whole by the ratio 1.4,
 //! Richardson-extrapolated with one pooled order, each site with its own grid convergence
-//! index (`host::study`). The two series use different elements on different meshes; their
+//! index (`haptic::study`). The two series use different elements on different meshes; their
 //! limits must agree within their error estimates.
 
 use bank_format::{AlignedBytes, Bank};
-use host::organ::Organ;
-use host::reach::Region;
-use host::report::sampled;
-use host::study::{Study, normal_compliance};
+use haptic::organ::Organ;
+use haptic::reach::Region;
+use haptic::report::sampled;
+use haptic::study::{Study, normal_compliance};
 use std::path::Path;
 
 fn manifest(p: &str) -> std::path::PathBuf {
@@ -57,11 +57,11 @@ fn the_p1_and_p2_limits_agree_within_their_error_estimates() {
 fn the_study_sites_are_the_default_scenes() {
     let st = study("patch-study-p2.json");
     let liver = Organ::load(&manifest("scenes/liver.toml")).unwrap();
-    let given: Vec<(String, [f64; 3])> = host::study::DEFAULT_SITES
+    let given: Vec<(String, [f64; 3])> = haptic::study::DEFAULT_SITES
         .iter()
         .map(|(n, p)| (n.to_string(), *p))
         .collect();
-    let sites = host::study::sites(&liver, &Region::of(&liver).unwrap(), &given).unwrap();
+    let sites = haptic::study::sites(&liver, &Region::of(&liver).unwrap(), &given).unwrap();
     assert_eq!(sites.len(), st.sites.len());
     for (a, b) in sites.iter().zip(&st.sites) {
         assert_eq!(a.name, b.name);
@@ -81,7 +81,7 @@ fn the_shipped_bank_renders_the_converged_force() {
     let st = study("patch-study-p2.json");
     let scene = manifest("scenes/liver.toml");
     let liver = Organ::load(&scene).unwrap();
-    let bytes = host::bank::scene_bank(&scene).unwrap();
+    let bytes = haptic::bank::scene_bank(&scene).unwrap();
     assert!(bytes.len() <= 128 * 1024, "{} bytes", bytes.len());
     let aligned = AlignedBytes::new(&bytes);
     let bank = Bank::parse(&aligned).unwrap();

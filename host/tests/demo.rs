@@ -34,12 +34,12 @@ fn assert_peak_is_the_probes(v: &serde_json::Value, depth: f64) {
         .map(|x| x.as_f64().unwrap())
         .collect();
     let scene = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/liver.toml");
-    let liver = host::organ::Organ::load(&scene).unwrap();
-    let bytes = host::bank::scene_bank(&scene).unwrap();
+    let liver = haptic::organ::Organ::load(&scene).unwrap();
+    let bytes = haptic::bank::scene_bank(&scene).unwrap();
     let aligned = bank_format::AlignedBytes::new(&bytes);
     let bank = bank_format::Bank::parse(&aligned).unwrap();
     let organ = (&liver.mesh.nodes[..], &liver.surface.triangles[..]);
-    let pressed = host::probe::probe(&bank, organ, [at[0], at[1], at[2]], Some(depth), true)
+    let pressed = haptic::probe::probe(&bank, organ, [at[0], at[1], at[2]], Some(depth), true)
         .unwrap()
         .force_n
         .unwrap();
@@ -113,7 +113,7 @@ fn sil_source_drives_the_display() {
     let v: serde_json::Value = serde_json::from_str(&json).unwrap();
     let rate = v["tick_rate_hz"].as_f64().unwrap();
     assert!((900.0..1100.0).contains(&rate), "{json}");
-    // The SIL session's press (`host::sil::script`) goes 6 mm deep.
+    // The SIL session's press (`haptic::sil::script`) goes 6 mm deep.
     assert_peak_is_the_probes(&v, 0.006);
     assert_eq!(v["faults"], 0, "{json}");
     assert!(v["frames"].as_u64().unwrap() >= 90, "{json}");

@@ -11,9 +11,9 @@ use bank_format::{
     Mode, PROTOCOL_VERSION, ResetCause, State, Telemetry, encode_frame,
 };
 use firmware::tick::Contacts;
-use host::display::source::{SerialSource, Source};
-use host::kinematics::{Workspace, counts_for};
-use host::link::{Identity, await_identity};
+use haptic::display::source::{SerialSource, Source};
+use haptic::kinematics::{Workspace, counts_for};
+use haptic::link::{Identity, await_identity};
 use std::fs::File;
 use std::io::{Read, Write};
 use std::os::fd::FromRawFd;

@@ -6,11 +6,11 @@
 //! file round-trips and a damaged one is refused.
 
 use bank_format::{AlignedBytes, Bank};
-use host::bank::Prepared;
-use host::bank::cache::{display_fields_cached, scene_bank_cached};
-use host::bank::sampled::lattice_points;
-use host::display::fields::DisplayFields;
-use host::scene::ContactModel;
+use haptic::bank::Prepared;
+use haptic::bank::cache::{display_fields_cached, scene_bank_cached};
+use haptic::bank::sampled::lattice_points;
+use haptic::display::fields::DisplayFields;
+use haptic::scene::ContactModel;
 use std::path::Path;
 
 #[test]
@@ -93,7 +93,7 @@ fn fields_match_direct_solves_and_put_the_tool_at_w_f() {
                 row[k] = load.iter().map(|&(n, wt)| wt * x[3 * n + r]).sum();
             }
         }
-        let direct = under(host::study::solve3(&w_p1, d));
+        let direct = under(haptic::study::solve3(&w_p1, d));
         let (mut worst, mut peak) = (0.0f64, 0.0f64);
         for (i, &n) in boundary.nodes.iter().enumerate() {
             for r in 0..3 {

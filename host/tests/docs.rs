@@ -161,7 +161,7 @@ fn every_link_and_repository_path_in_the_guide_exists() {
 #[test]
 fn the_path_check_sees_what_it_should() {
     let top = vec!["host".to_string(), "scripts".to_string()];
-    let text = "see `host/src/bank.rs`, `scripts/x.sh`: and ` ```console ` or `host` \
+    let text = "see `host/haptic/src/bank.rs`, `scripts/x.sh`: and ` ```console ` or `host` \
                 `host/meshes/generated/a.msh` `a/b` `host/data/{a,b}.csv` [c](../x.md#y) \
                 [d](https://e.org/f)";
     let spans = code_spans(text);
@@ -169,7 +169,7 @@ fn the_path_check_sees_what_it_should() {
         .iter()
         .filter_map(|s| repository_path(s, &top))
         .collect();
-    assert_eq!(paths, ["host/src/bank.rs", "scripts/x.sh"]);
+    assert_eq!(paths, ["host/haptic/src/bank.rs", "scripts/x.sh"]);
     assert_eq!(link_targets(text), ["../x.md"]);
 }
 

@@ -8,15 +8,15 @@
 //! format 5.0 triangle planes need): its error is then that rounding's, which the second test
 //! bounds site by site.
 //! The reference weights are the firmware's patch rule on a probe bank that couples every pair
-//! a patch can load (see `host::bank::sweep`); the reference forces come from the compliance's
+//! a patch can load (see `haptic::bank::sweep`); the reference forces come from the compliance's
 //! direct solves, not from the bank.
 
 #![allow(clippy::needless_range_loop)] // index loops read best for 3x3 blocks
 
 use bank_format::{AlignedBytes, Bank, Precision};
 use firmware::solve::WeightedSolve;
-use host::bank::sweep;
-use host::bank::{Prepared, ToolPairs};
+use haptic::bank::sweep;
+use haptic::bank::{Prepared, ToolPairs};
 use std::path::Path;
 
 #[test]
@@ -25,7 +25,7 @@ fn the_tool_bank_is_exact_on_every_contact_the_tool_can_make() {
     let prep = Prepared::load(&scene).unwrap();
     assert_eq!(
         prep.organ.scene.bank.couplings,
-        host::scene::Couplings::Tool
+        haptic::scene::Couplings::Tool
     );
     let built = prep.build_bank(None).unwrap();
     assert!(
@@ -99,7 +99,7 @@ fn bfp16_blocks_stay_within_their_rounding_bound() {
     let pairs = ToolPairs::sample(
         &probe,
         prep.organ.scene.tip_radius_m,
-        host::bank::TOOL_DIVISIONS,
+        haptic::bank::TOOL_DIVISIONS,
     )
     .unwrap()
     .pairs;

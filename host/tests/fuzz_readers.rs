@@ -10,7 +10,7 @@
 
 use fem::mesh::{self, Format};
 use fem::surface::{CheckOptions, SurfaceFormat, check};
-use host::rng::SplitMix64;
+use haptic::rng::SplitMix64;
 use std::path::Path;
 use std::sync::mpsc;
 use std::time::Duration;
@@ -182,7 +182,7 @@ fn every_reader_survives_mutated_input() {
     let seed = std::fs::read(csv).unwrap();
     let parse_csv: Parse = |b| {
         let text = String::from_utf8_lossy(&b);
-        host::calibrate::csv::parse("bench.csv", &text, &["linear_force_n", "force_n"])
+        haptic::calibrate::csv::parse("bench.csv", &text, &["linear_force_n", "force_n"])
             .and_then(|t| t.numbers(0).and(t.numbers(1)))
             .is_ok()
     };

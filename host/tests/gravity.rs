@@ -2,8 +2,8 @@
 //! the CLI into the scene's `[gravity]` table; bad files name their line and leave the scene
 //! alone; too few or degenerate poses are refused naming what to add.
 
-use host::calibrate::gravity;
-use host::scene::Scene;
+use haptic::calibrate::gravity;
+use haptic::scene::Scene;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
@@ -100,13 +100,13 @@ fn cli_fits_held_poses_into_the_scene() {
         "{text}"
     );
     // The scene's bank carries the coefficients (f32) in its gravity section.
-    let bytes = bank_format::AlignedBytes::new(&host::bank::scene_bank(&scene_path).unwrap());
+    let bytes = bank_format::AlignedBytes::new(&haptic::bank::scene_bank(&scene_path).unwrap());
     let bank = bank_format::Bank::parse(bytes.as_slice()).unwrap();
     let carried = bank.gravity().unwrap().coeffs;
     for (c, w) in carried.iter().zip(got) {
         assert_eq!(*c, w as f32);
     }
-    let plain = host::bank::scene_bank(&manifest("scenes/liver-nodal.toml")).unwrap();
+    let plain = haptic::bank::scene_bank(&manifest("scenes/liver-nodal.toml")).unwrap();
     let plain = bank_format::AlignedBytes::new(&plain);
     assert_eq!(
         bank_format::Bank::parse(plain.as_slice())
@@ -212,7 +212,7 @@ fn release(
     q0: [f64; 3],
     ticks: usize,
 ) -> ([f64; 3], bool) {
-    use host::sil::plant::{Gimbal, PlantParams};
+    use haptic::sil::plant::{Gimbal, PlantParams};
     let bank = bank_format::Bank::parse(bytes.as_slice()).unwrap();
     let params = PlantParams {
         hand_stiffness: [0.0; 3],

@@ -8,7 +8,7 @@ use bank_format::{AlignedBytes, Bank};
 use fem::compliance::{Compliance, contact_forces};
 use fem::elasticity::{Elasticity, FixedSet};
 use fem::mesh::TetMesh;
-use host::scene::Scene;
+use haptic::scene::Scene;
 use std::path::Path;
 use std::process::Command;
 
@@ -120,7 +120,7 @@ fn relative(got: &[[f32; 3]], want: &[[f64; 3]]) -> f64 {
 fn full_tick_forces_match_the_host_f64_reference_on_the_liver_bank() {
     use firmware::contact::ContactState;
     use firmware::tick::{HapticLoop, LoopInput};
-    use host::contact::{ContactSurface, SurfaceHit, patch_force};
+    use haptic::contact::{ContactSurface, SurfaceHit, patch_force};
 
     let liver = Liver::build();
     let bank = liver.bank();

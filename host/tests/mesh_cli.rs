@@ -312,12 +312,12 @@ fn the_organ_is_meshed_graded_near_the_reach_and_becomes_a_scene() {
         "{err}"
     );
     let graded = fem::mesh::load(&graded_path).unwrap();
-    let scene = host::scene::Scene::load(&scenes).unwrap();
+    let scene = haptic::scene::Scene::load(&scenes).unwrap();
     let surface_m = fem::surface::read_surface(Path::new(&surface("organ_cm.obj")))
         .unwrap()
         .scaled(0.01);
-    let reach = host::meshing::reach_points(&surface_m, &scene);
-    let pairs = host::meshing::size_against_distance(&graded, &reach);
+    let reach = haptic::meshing::reach_points(&surface_m, &scene);
+    let pairs = haptic::meshing::size_against_distance(&graded, &reach);
     let mean = |lo: f64, hi: f64| {
         let v: Vec<f64> = pairs
             .iter()
@@ -586,8 +586,8 @@ fn a_tetrahedral_mesh_in_millimetres_is_the_same_organ() {
         .collect();
     assert_eq!(differ.len(), 3, "{differ:?}"); // the header's name, mesh and mesh_units
     // The same compliance, to rounding (the coordinates are scaled by 1000 and back).
-    let pm = host::bank::Prepared::load(&m_scene).unwrap();
-    let pmm = host::bank::Prepared::load(&mm_scene).unwrap();
+    let pm = haptic::bank::Prepared::load(&m_scene).unwrap();
+    let pmm = haptic::bank::Prepared::load(&mm_scene).unwrap();
     assert_eq!(pm.region.nodes, pmm.region.nodes);
     let nodes: Vec<usize> = pm.region.nodes.iter().step_by(97).copied().collect();
     let (a, b) = (
@@ -607,7 +607,7 @@ fn a_tetrahedral_mesh_in_millimetres_is_the_same_organ() {
     // The same scene without mesh_units: the millimetre mesh is refused, with the fix.
     let bare = dir.path().join("bare.toml");
     std::fs::write(&bare, mm_text.replace("mesh_units = \"mm\"\n", "")).unwrap();
-    let e = host::bank::Prepared::load(&bare).err().unwrap();
+    let e = haptic::bank::Prepared::load(&bare).err().unwrap();
     assert!(
         format!("{e:#}").contains("no organ in metres; in mm it is 0.139 m")
             && format!("{e:#}").contains("set mesh_units = \"mm\""),
@@ -620,7 +620,7 @@ fn a_tetrahedral_mesh_in_millimetres_is_the_same_organ() {
         mm_text.replace("mesh_units = \"mm\"", "mesh_units = \"in\""),
     )
     .unwrap();
-    let e = host::scene::Scene::load(&inch).unwrap_err().to_string();
+    let e = haptic::scene::Scene::load(&inch).unwrap_err().to_string();
     assert!(
         e.contains("mesh_units") && e.contains("must be \"m\", \"cm\" or \"mm\", got \"in\""),
         "{e}"
@@ -757,15 +757,15 @@ fn a_fem_mesh_makes_a_sampled_scene_whose_bank_builds() {
         err.contains("4751 nodes, 21394 tetrahedra (the FEM mesh of the sampled contact)"),
         "{err}"
     );
-    let prep = host::bank::Prepared::load(&out).unwrap();
-    let host::scene::ContactModel::Sampled(spec) = &prep.organ.scene.contact else {
+    let prep = haptic::bank::Prepared::load(&out).unwrap();
+    let haptic::scene::ContactModel::Sampled(spec) = &prep.organ.scene.contact else {
         panic!("--fem-mesh makes a sampled scene");
     };
     assert_eq!(
         std::fs::canonicalize(&spec.fem_mesh).unwrap(),
         std::fs::canonicalize(&fine).unwrap()
     );
-    assert_eq!(spec.element, host::scene::FemElement::Quadratic);
+    assert_eq!(spec.element, haptic::scene::FemElement::Quadratic);
     let built = prep.sampled_bank(spec, None).unwrap();
     let aligned = bank_format::AlignedBytes::new(&built.bytes);
     let bank = bank_format::Bank::parse(&aligned).unwrap();

@@ -2,42 +2,34 @@
 //! point contact and with a tool tip of finite radius, on three mesh sizes. A point force has
 //! unbounded displacement (Boussinesq), so the point contact's force keeps falling as the mesh
 //! is refined (about in proportion to the mesh size); the tip's pressure patch converges. The
-//! liver series is `host bench refinement`.
+//! liver series is `host bench refinement`; both run `haptic::bench::refinement::press`.
 
-use fem::compliance::Compliance;
-use fem::elasticity::{Elasticity, FixedSet, Material};
+use fem::elasticity::Material;
 use fem::mesh::structured::box_mesh;
-use host::contact::{ContactSurface, patch_force};
+use haptic::bench::refinement::{Config, press};
 
 /// Force (N) on the tool pressing 1 mm into the top centre of a 40 x 40 x 20 mm box held at
 /// its base, for point contact and a 5 mm tip: `(point, tip)`.
-fn press(cells: usize) -> (f64, f64) {
+fn box_press(cells: usize) -> (f64, f64) {
     let (l, h) = (0.04, 0.02);
     let mesh = box_mesh([l, l, h], [cells, cells, cells / 2]);
-    let surface = fem::mesh::boundary(&mesh).unwrap();
-    let mut fixed = FixedSet::none(mesh.nodes.len());
-    fixed
-        .fix_box(&mesh, [-1.0, -1.0, -1.0, 1.0, 1.0, 1e-9], [true; 3])
-        .unwrap();
-    let body = Elasticity::new(&mesh, Material::new(3000.0, 0.3).unwrap()).unwrap();
-    let compliance = Compliance::factorize(&body, &fixed).unwrap();
-    let contact = ContactSurface::new(&mesh, &surface);
-    // Slightly off the grid's nodes and diagonals, so no quadrature point sits on an edge.
-    let hit = contact
-        .ray_entry([0.0203, 0.0198, 0.05], [0.0, 0.0, -1.0])
-        .unwrap();
-    assert!((hit.point[2] - h).abs() < 1e-12);
-    let free = |k: usize| (0..3).all(|c| !fixed.is_fixed(k, c));
-    let d = [0.0, 0.0, -0.001];
-    let point = -patch_force(&compliance, &contact.tool_patch(&hit, 0.0, free), d).unwrap()[2];
-    let tip = -patch_force(&compliance, &contact.tool_patch(&hit, 0.005, free), d).unwrap()[2];
-    (point, tip)
+    let config = Config {
+        material: Material::new(3000.0, 0.3).unwrap(),
+        bed_m: 1e-9,
+        // Slightly off the grid's nodes and diagonals, so no quadrature point sits on an edge.
+        from: [0.0203, 0.0198, 0.05],
+        depth_m: 0.001,
+        radii_m: vec![0.005],
+    };
+    let f = press(&mesh, &config).unwrap();
+    assert_eq!(f.tips.len(), 1);
+    (f.point_force_n, f.tips[0].2)
 }
 
 #[test]
 fn point_contact_softens_under_refinement_and_the_tip_converges() {
     let levels = [8, 16, 32];
-    let forces: Vec<(f64, f64)> = levels.iter().map(|&n| press(n)).collect();
+    let forces: Vec<(f64, f64)> = levels.iter().map(|&n| box_press(n)).collect();
     for (n, (p, t)) in levels.iter().zip(&forces) {
         println!(
             "box h = {:.2} mm: point {p:.5} N, 5 mm tip {t:.5} N",

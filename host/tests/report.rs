@@ -1,4 +1,4 @@
-//! The quick report ([`host::report::pipeline::run`], what `host report --quick` runs): the page
+//! The quick report ([`haptic::report::pipeline::run`], what `host report --quick` runs): the page
 //! renders in headless Chromium with every plot drawn and no console error; `report.json` holds
 //! each knob's series with at least three finite points; and its numbers agree with the tests'
 //! references (the relaxation section's with the SIL test's), and with the user guide's figures
@@ -8,9 +8,9 @@
 mod support;
 use support::chromium;
 
-use host::bank::Prepared;
-use host::report::pipeline::{self, ReportConfig};
-use host::sil::cost::CODE_PHASES;
+use haptic::bank::Prepared;
+use haptic::report::pipeline::{self, ReportConfig};
+use haptic::sil::cost::CODE_PHASES;
 use std::path::Path;
 use std::process::Command;
 
@@ -214,7 +214,7 @@ fn quick_report_renders_every_plot_and_agrees_with_the_references() {
     let worst = find("worst-case tick on the MCU");
     let worst_tick = worst["value"].as_f64().unwrap();
     assert!(
-        worst_tick > 0.0 && worst_tick <= f64::from(host::sil::cost::NODAL_TICK_GOAL),
+        worst_tick > 0.0 && worst_tick <= f64::from(haptic::sil::cost::NODAL_TICK_GOAL),
         "{worst_tick}"
     );
     assert_eq!(worst["verdict"], "bounded", "{worst}");
@@ -296,7 +296,7 @@ fn quick_report_renders_every_plot_and_agrees_with_the_references() {
     let committed =
         std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("../docs/figures.md"))
             .unwrap();
-    let problems = host::report::figures::compare(&committed, &fresh);
+    let problems = haptic::report::figures::compare(&committed, &fresh);
     assert!(
         problems.is_empty(),
         "docs/figures.md disagrees with this report (run scripts/gen-figures.sh if the change \

@@ -4,9 +4,9 @@
 //! off on the same axis, and the knob marks the scene's choice on its Pareto front.
 
 use bank_format::{AlignedBytes, Bank};
-use host::bank::Prepared;
-use host::report::sampled::{self, NodalPoint};
-use host::scene::Scene;
+use haptic::bank::Prepared;
+use haptic::report::sampled::{self, NodalPoint};
+use haptic::scene::Scene;
 use std::path::Path;
 
 #[test]
@@ -25,7 +25,7 @@ fn sampled_knobs_measure_the_shipped_bank_against_the_converged_reference() {
     // The chosen variant is the shipped bank byte for byte: the report's own sampling against
     // the scene's bank as `host demo` and `host flash --scene` get it (the bank cache, whose
     // samples come from `Prepared::sampled_parts` or the samples cache).
-    let shipped = host::bank::scene_bank(&dir.join("scenes/liver.toml")).unwrap();
+    let shipped = haptic::bank::scene_bank(&dir.join("scenes/liver.toml")).unwrap();
     assert_eq!(chosen.bank.len(), shipped.len());
     let first_difference = chosen.bank.iter().zip(&shipped).position(|(a, b)| a != b);
     assert_eq!(first_difference, None, "the banks differ from that byte on");
@@ -40,7 +40,7 @@ fn sampled_knobs_measure_the_shipped_bank_against_the_converged_reference() {
     // The nodal scene's bank on the same axis renders well over twice the force.
     let nodal_scene = dir.join("scenes/liver-nodal.toml");
     let prep = Prepared::load(&nodal_scene).unwrap();
-    let bytes = host::bank::scene_bank(&nodal_scene).unwrap();
+    let bytes = haptic::bank::scene_bank(&nodal_scene).unwrap();
     let aligned = AlignedBytes::new(&bytes);
     let bank = Bank::parse(&aligned).unwrap();
     let study = sampled::reference().unwrap();
@@ -97,5 +97,5 @@ fn sampled_knobs_measure_the_shipped_bank_against_the_converged_reference() {
     assert!(per_fem.iter().all(|s| s.points.len() == 3));
     assert_eq!(rows.len(), 1);
     let row = sampled::refinement_case(&study).unwrap();
-    assert_eq!(row.verdict, host::report::Verdict::Bounded, "{row:?}");
+    assert_eq!(row.verdict, haptic::report::Verdict::Bounded, "{row:?}");
 }

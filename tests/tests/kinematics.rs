@@ -1,5 +1,5 @@
 //! The firmware's f32 gimbal kinematics against an independent f64 reference (Rodrigues'
-//! formula written out here, the convention of `host/src/reach.rs` and the bank's SPEC:
+//! formula written out here, the convention of `host/haptic/src/reach.rs` and the bank's SPEC:
 //! `tip = fulcrum + insertion * Rot(yaw_axis, yaw) Rot(pitch_axis, pitch) shaft_axis`), over a
 //! grid of joint values covering the calibrated ranges.
 

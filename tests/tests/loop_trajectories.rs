@@ -14,7 +14,7 @@ use firmware::fixtures::{flat_patch, patch_device};
 use firmware::hal::Interlocks;
 use firmware::safety::{Fault, State};
 use firmware::tick::{Contacts, HapticLoop, LoopInput, LoopOutput};
-use host::kinematics::{Workspace, counts_for};
+use haptic::kinematics::{Workspace, counts_for};
 
 /// The encoder counts that put the tip at `tip` (the host's inverse kinematics).
 fn counts_for_tip(cal: &DeviceCalibration, tip: [f64; 3]) -> [i32; 3] {
@@ -288,7 +288,7 @@ fn sliding_faster_than_the_tip_threshold_faults_overspeed() {
     assert!(out.currents_a.iter().any(|&i| i != 0.0), "{out:?}");
 }
 
-/// The SIL harness's `strike` (`host::sil::script`: from 10 mm above the liver, 18 mm down in
+/// The SIL harness's `strike` (`haptic::sil::script`: from 10 mm above the liver, 18 mm down in
 /// 20 ms), natively: the simulated gimbal, pulled by the hand, reaches about 1.4 m/s, over the
 /// shipped scene's 1 m/s, while still above the surface. The loop, armed at the harness's arm
 /// tick, faults `Overspeed` at the tip during the descent, before any contact, and drives no
@@ -296,12 +296,12 @@ fn sliding_faster_than_the_tip_threshold_faults_overspeed() {
 /// same of the QEMU image.
 #[test]
 fn the_sil_strike_trips_overspeed_before_contact() {
-    use host::sil::harness::ARM_TICK;
-    use host::sil::plant::{Gimbal, PlantParams, TICK_S};
-    use host::sil::script::Trajectory;
-    use host::trajectory::Script;
+    use haptic::sil::harness::ARM_TICK;
+    use haptic::sil::plant::{Gimbal, PlantParams, TICK_S};
+    use haptic::sil::script::Trajectory;
+    use haptic::trajectory::Script;
     let scene = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../host/scenes/liver.toml");
-    let raw = host::bank::scene_bank(&scene).unwrap();
+    let raw = haptic::bank::scene_bank(&scene).unwrap();
     let bytes = bank_format::AlignedBytes::new(&raw);
     let bank = Bank::parse(&bytes).unwrap();
     let cal = *bank.device();

@@ -1,18 +1,18 @@
 //! Software in the loop: the firmware image under QEMU against the simulated device
-//! (`host::sil`). Needs `qemu-system-arm`, the `thumbv7em-none-eabihf` target (the image is
+//! (`haptic::sil`). Needs `qemu-system-arm`, the `thumbv7em-none-eabihf` target (the image is
 //! built here if stale); scripts/test-all.sh installs both. The liver bank is built here too,
-//! by the library's bank stage (`host::bank`), exactly as `host bank build` builds it.
+//! by the library's bank stage (`haptic::bank`), exactly as `host bank build` builds it.
 
 use bank_format::{
     AlignedBytes, Bank, DeviceCalibration, DeviceToHost, FaultReason, HostToDevice, MAX_FRAME,
     Mode, State, encode_frame, reseal,
 };
 use firmware::tick::{HapticLoop, LoopInput};
-use host::report::relaxation;
-use host::sil::cost::{CodePhaseMax, Phases};
-use host::sil::harness::{self, ARM_TICK, LinkSend, Run, Session, Setup};
-use host::sil::script::{Trajectory, surface_insertion};
-use host::trajectory::Script;
+use haptic::report::relaxation;
+use haptic::sil::cost::{CodePhaseMax, Phases};
+use haptic::sil::harness::{self, ARM_TICK, LinkSend, Run, Session, Setup};
+use haptic::sil::script::{Trajectory, surface_insertion};
+use haptic::trajectory::Script;
 use std::path::PathBuf;
 use std::sync::{Mutex, OnceLock};
 
@@ -22,13 +22,13 @@ fn setup() -> (Setup, AlignedBytes) {
     static IMAGE: OnceLock<PathBuf> = OnceLock::new();
     static BANK: OnceLock<(PathBuf, Vec<u8>)> = OnceLock::new();
     let image = IMAGE
-        .get_or_init(|| host::mcu::build_qemu_image().expect("building the QEMU image"))
+        .get_or_init(|| haptic::mcu::build_qemu_image().expect("building the QEMU image"))
         .clone();
     let (bank, raw) = BANK.get_or_init(|| {
-        let scene = host::mcu::repo_root().join("host/scenes/liver.toml");
-        let bytes = host::bank::scene_bank(&scene).expect("the liver scene's bank");
+        let scene = haptic::mcu::repo_root().join("host/scenes/liver.toml");
+        let bytes = haptic::bank::scene_bank(&scene).expect("the liver scene's bank");
         let path = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("sil-liver.bank");
-        host::fsio::write_atomic(&path, &bytes, &[]).expect("writing the bank for QEMU");
+        haptic::fsio::write_atomic(&path, &bytes, &[]).expect("writing the bank for QEMU");
         (path, bytes)
     });
     let bank = bank.clone();
@@ -235,7 +235,7 @@ fn press_and_strike_match_the_native_loop() {
 /// Runs side by side (`harness::run_all`, as the report runs its tick costs and press-holds)
 /// give the figures of a run alone. Not bit for bit: the arm command travels on the
 /// asynchronous link, so the tick it lands on follows the wall clock (module notes of
-/// `host::sil::harness`), and so does everything after it by a few ticks.
+/// `haptic::sil::harness`), and so does everything after it by a few ticks.
 #[test]
 fn runs_side_by_side_match_a_run_alone() {
     let (setup, bytes) = setup();
@@ -562,8 +562,8 @@ fn near_surface_file(bank: &Bank, dir: &std::path::Path, seed: u64) -> std::path
 /// The nodal liver (`scenes/liver-nodal.toml`: the tool's patch rebuilt under a sliding tip,
 /// 34 neighbours a node at most) on `grid_cell_m` cells: its bank, and the file QEMU loads.
 fn nodal_bank(grid_cell_m: f64, dir: &std::path::Path) -> Result<(PathBuf, AlignedBytes), String> {
-    let scene = host::mcu::repo_root().join("host/scenes/liver-nodal.toml");
-    let mut prep = host::bank::Prepared::load(&scene).map_err(|e| format!("{e:#}"))?;
+    let scene = haptic::mcu::repo_root().join("host/scenes/liver-nodal.toml");
+    let mut prep = haptic::bank::Prepared::load(&scene).map_err(|e| format!("{e:#}"))?;
     prep.organ.scene.bank.grid_cell_m = Some(grid_cell_m);
     let bytes = prep.build_bank(None).map_err(|e| format!("{e:#}"))?.bytes;
     let path = dir.join(format!("nodal-{grid_cell_m}.bank"));
@@ -759,7 +759,7 @@ fn a_recorded_near_surface_trajectory_replays_bit_identical_to_the_native_loop()
 fn presses_at_study_sites_render_the_converged_force_under_qemu() {
     let (setup, raw) = setup();
     let bank = Bank::parse(&raw).unwrap();
-    let study = host::report::sampled::reference().unwrap();
+    let study = haptic::report::sampled::reference().unwrap();
     let fulcrum = bank.device().fulcrum_m.map(f64::from);
     for name in [
         "right lobe top",
@@ -813,7 +813,7 @@ fn presses_at_study_sites_render_the_converged_force_under_qemu() {
             "{name}: anchor {anchor:?} is {off} m from the site"
         );
         let d: [f64; 3] = std::array::from_fn(|k| anchor[k] - f64::from(last.tip_m[k]));
-        let want = host::study::solve3(&study.reference_w[s], d);
+        let want = haptic::study::solve3(&study.reference_w[s], d);
         let got = last.tool_force_n.map(f64::from);
         let err = (0..3)
             .map(|k| (got[k] - want[k]).powi(2))
@@ -840,10 +840,10 @@ fn presses_at_study_sites_render_the_converged_force_under_qemu() {
 #[test]
 fn press_hold_relaxes_as_the_scenes_qlv_law() {
     let (elastic_setup, elastic_raw) = setup();
-    let scene = host::mcu::repo_root().join("host/scenes/liver-qlv.toml");
-    let bytes = host::bank::scene_bank(&scene).expect("the liver-qlv scene's bank");
+    let scene = haptic::mcu::repo_root().join("host/scenes/liver-qlv.toml");
+    let bytes = haptic::bank::scene_bank(&scene).expect("the liver-qlv scene's bank");
     let path = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("sil-liver-qlv.bank");
-    host::fsio::write_atomic(&path, &bytes, &[]).expect("writing the bank for QEMU");
+    haptic::fsio::write_atomic(&path, &bytes, &[]).expect("writing the bank for QEMU");
     let qlv_raw = AlignedBytes::new(&bytes);
     let qlv_bank = Bank::parse(&qlv_raw).unwrap();
     let elastic_bank = Bank::parse(&elastic_raw).unwrap();
@@ -860,7 +860,7 @@ fn press_hold_relaxes_as_the_scenes_qlv_law() {
     assert!(assert_matches_native(&qlv_bank, &run) > 5000);
 
     // The elastic force of the same motion (forces on the tool; QLV is linear in it), and
-    // QLV's response to it (`host::report::relaxation`, which the report plots too).
+    // QLV's response to it (`haptic::report::relaxation`, which the report plots too).
     let q = relaxation::elastic_replay(&elastic_bank, &run.ticks);
     let want = relaxation::qlv_response(&q, &law);
     let g_inf = 1.0 - law.terms().map(|(g, _)| f64::from(g)).sum::<f64>();
@@ -899,7 +899,7 @@ fn press_hold_relaxes_as_the_scenes_qlv_law() {
     };
     assert_eq!(four_bank.relaxation(), Some(&law4));
     let four_path = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("sil-liver-qlv4.bank");
-    host::fsio::write_atomic(&four_path, &four, &[]).unwrap();
+    haptic::fsio::write_atomic(&four_path, &four, &[]).unwrap();
     let four_setup = Setup {
         bank: four_path,
         ..elastic_setup.clone()
@@ -988,9 +988,9 @@ fn wander_paths_keep_the_loop_body_within_the_goal() {
             CodePhaseMax::of(&run.ticks)
         );
         assert!(
-            body <= host::sil::cost::BODY_GOAL,
+            body <= haptic::sil::cost::BODY_GOAL,
             "seed {seed}: loop body {body} > {}",
-            host::sil::cost::BODY_GOAL
+            haptic::sil::cost::BODY_GOAL
         );
     }
 }

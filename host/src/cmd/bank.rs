@@ -1,14 +1,14 @@
 //! `host bank build | inspect | sweep`: firmware banks from scene files.
 
+use crate::progress::Bar;
 use anyhow::{Context, Result, bail};
 use bank_format::region::BANK_LEN;
 use bank_format::{AlignedBytes, Bank, LawKind, SectionKind};
-use host::bank::stats;
-use host::bank::sweep::{self, SweepConfig};
-use host::bank::{BuiltBank, Prepared};
-use host::fsio::write_atomic;
-use host::progress::Bar;
-use host::scene::{ContactModel, Couplings, MeshSource};
+use haptic::bank::stats;
+use haptic::bank::sweep::{self, SweepConfig};
+use haptic::bank::{BuiltBank, Prepared};
+use haptic::fsio::write_atomic;
+use haptic::scene::{ContactModel, Couplings, MeshSource};
 use std::path::PathBuf;
 use std::time::Instant;
 
@@ -99,7 +99,7 @@ fn print_nodal(prep: &Prepared, bank: &Bank, pairs: usize) {
              anchors per triangle), every triangle edge, pairs within {radius} m; all pairs \
              within {:.4} m are kept",
             prep.organ.scene.tip_radius_m,
-            (host::bank::TOOL_DIVISIONS + 1) * (host::bank::TOOL_DIVISIONS + 2) / 2,
+            (haptic::bank::TOOL_DIVISIONS + 1) * (haptic::bank::TOOL_DIVISIONS + 2) / 2,
             bank.truncation_radius_m()
         ),
     };

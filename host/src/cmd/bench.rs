@@ -1,5 +1,5 @@
-//! `host bench …`: parses a benchmark's arguments, runs it ([`host::bench`],
-//! [`host::bank::precompute`]) and prints its figures (speed is measured, never asserted by
+//! `host bench …`: parses a benchmark's arguments, runs it ([`haptic::bench`],
+//! [`haptic::bank::precompute`]) and prints its figures (speed is measured, never asserted by
 //! tests; tests check behaviour).
 
 use super::organ::{OrganArgs, default_meshes};
@@ -65,15 +65,15 @@ impl SampledFemArgs {
     fn resolve(
         self,
         no_richardson: bool,
-    ) -> Result<(host::scene::Scene, host::bank::precompute::Overrides)> {
-        let scene = host::scene::Scene::load_or_default(self.scene.as_deref())?;
+    ) -> Result<(haptic::scene::Scene, haptic::bank::precompute::Overrides)> {
+        let scene = haptic::scene::Scene::load_or_default(self.scene.as_deref())?;
         let element = self
             .element
             .as_deref()
-            .map(str::parse::<host::scene::FemElement>)
+            .map(str::parse::<haptic::scene::FemElement>)
             .transpose()
             .map_err(|why| anyhow::anyhow!("--element: {why}"))?;
-        let overrides = host::bank::precompute::Overrides {
+        let overrides = haptic::bank::precompute::Overrides {
             fem_mesh: self.fem_mesh,
             element,
             no_richardson,
@@ -192,7 +192,7 @@ pub fn run(bench: Bench) -> Result<()> {
 fn patch(args: PatchArgs) -> Result<()> {
     let (scene, overrides) = args.fem.resolve(true)?;
     eprintln!("factorising the FEM, then W of the loads twice ...");
-    let m = host::bank::precompute::patch_methods(scene, &overrides, args.loads)?;
+    let m = haptic::bank::precompute::patch_methods(scene, &overrides, args.loads)?;
     if args.json {
         println!("{}", serde_json::to_string(&m)?);
         return Ok(());
@@ -231,8 +231,8 @@ fn patch(args: PatchArgs) -> Result<()> {
 fn precompute(args: PrecomputeArgs) -> Result<()> {
     let larger_fem = args.fem.fem_mesh.is_some();
     let (scene, overrides) = args.fem.resolve(args.no_richardson)?;
-    let progress = host::progress::Bar::new("chunks (patch compliance, then display fields)");
-    let f = host::bank::precompute::measure(scene, &overrides, Some(&progress))?;
+    let progress = crate::progress::Bar::new("chunks (patch compliance, then display fields)");
+    let f = haptic::bank::precompute::measure(scene, &overrides, Some(&progress))?;
     progress.finish();
     if args.json {
         println!("{}", serde_json::to_string(&f)?);
@@ -285,7 +285,7 @@ fn compliance(args: ComplianceArgs) -> Result<()> {
     } else {
         args.mesh.clone()
     };
-    let config = host::bench::compliance::Config {
+    let config = haptic::bench::compliance::Config {
         material: Material::new(args.organ.young, args.organ.poisson)?,
         bed_m: args.organ.bed,
         max_nodes: args.max_nodes,
@@ -310,8 +310,11 @@ fn compliance(args: ComplianceArgs) -> Result<()> {
         );
     }
     for path in meshes {
-        let r = host::bench::compliance::run(&path, &config)
-            .with_context(|| format!("benchmark on {}", path.display()))?;
+        let bar = crate::progress::Bar::new("supernodes");
+        let r = haptic::bench::compliance::run(&path, &config, &bar)
+            .with_context(|| format!("benchmark on {}", path.display()));
+        bar.finish();
+        let r = r?;
         if args.json {
             println!("{}", serde_json::to_string(&r)?);
         } else {
@@ -341,7 +344,7 @@ fn tick(args: TickArgs) -> Result<()> {
     let aligned = bank_format::AlignedBytes::new(&bytes);
     let bank = bank_format::Bank::parse(&aligned)
         .map_err(|e| anyhow::anyhow!("{}: invalid bank: {e}", args.bank.display()))?;
-    let r = host::bench::tick::run(&bank, args.ticks, args.depth)?;
+    let r = haptic::bench::tick::run(&bank, args.ticks, args.depth)?;
     println!(
         "ticks {} ({} in contact, up to {} contact nodes), peak force {:.3} N, faults {}",
         r.ticks, r.touching, r.max_contact_nodes, r.peak_force_n, r.faults
@@ -359,12 +362,12 @@ fn tick(args: TickArgs) -> Result<()> {
 
 fn sil(args: SilArgs) -> Result<()> {
     use bank_format::region::{FIRMWARE_LEN, RAM_LEN};
-    use host::sil::cost::{BODY_GOAL, TICK_GOAL};
-    use host::sil::harness;
+    use haptic::sil::cost::{BODY_GOAL, TICK_GOAL};
+    use haptic::sil::harness;
     let (setup, bytes) = args.setup.resolve()?;
     let bank = bank_format::Bank::parse(&bytes)
         .map_err(|e| anyhow::anyhow!("{}: invalid bank: {e}", setup.bank.display()))?;
-    let host::bench::sil::Figures {
+    let haptic::bench::sil::Figures {
         by_contact_nodes: groups,
         code_phases: code,
         worst_body: worst,
@@ -375,7 +378,7 @@ fn sil(args: SilArgs) -> Result<()> {
         size,
         runs,
         wander,
-    } = host::bench::sil::run(&setup, &bank, args.seconds, 0..args.seeds)?;
+    } = haptic::bench::sil::run(&setup, &bank, args.seconds, 0..args.seeds)?;
     let seeds = match args.seeds {
         0 => "no seeds".to_string(),
         1 => "seed 0".to_string(),
@@ -486,8 +489,8 @@ fn sil(args: SilArgs) -> Result<()> {
 
 fn image(args: ImageArgs) -> Result<()> {
     use bank_format::region::{RAM_LEN, RAM_ORIGIN};
-    let size = host::mcu::image_size(&args.elf, RAM_ORIGIN, RAM_LEN as u32)?;
-    let sp = host::mcu::initial_stack_pointer(&args.elf, bank_format::region::FIRMWARE_ORIGIN)?;
+    let size = haptic::mcu::image_size(&args.elf, RAM_ORIGIN, RAM_LEN as u32)?;
+    let sp = haptic::mcu::initial_stack_pointer(&args.elf, bank_format::region::FIRMWARE_ORIGIN)?;
     println!("{}", size_line(&size));
     println!("initial stack pointer {sp:#010x}");
     Ok(())
@@ -495,7 +498,7 @@ fn image(args: ImageArgs) -> Result<()> {
 
 /// An image's flash and static RAM against the firmware and RAM regions of memory.x, as
 /// `bench sil` and `bench image` print it.
-fn size_line(size: &host::mcu::ImageSize) -> String {
+fn size_line(size: &haptic::mcu::ImageSize) -> String {
     use bank_format::region::{FIRMWARE_LEN, RAM_LEN};
     format!(
         "flash {} B of {} B ({:.1}%), static RAM {} B of {} B ({:.1}%)",
@@ -515,7 +518,7 @@ mod tests {
     #[test]
     fn size_line_against_the_regions() {
         use bank_format::region::{FIRMWARE_LEN, RAM_LEN};
-        let size = host::mcu::ImageSize {
+        let size = haptic::mcu::ImageSize {
             flash: FIRMWARE_LEN as u64 / 4,
             ram: 1_000,
         };

@@ -1,5 +1,5 @@
 //! `host bench heartbeat`: how regularly the host's link thread sends heartbeats, as a device
-//! sees them ([`host::link::heartbeat_intervals`]), with an optional CPU load; the figures the
+//! sees them ([`haptic::link::heartbeat_intervals`]), with an optional CPU load; the figures the
 //! firmware's link timeout (`[device] link_timeout_ms`) is chosen from.
 
 use anyhow::{Result, bail};
@@ -24,7 +24,7 @@ pub fn run(args: HeartbeatArgs) -> Result<()> {
     if !(args.seconds > 0.0 && args.seconds <= 3600.0) {
         bail!("--seconds must be in (0, 3600], not {}", args.seconds);
     }
-    let run = host::link::heartbeat_intervals(Duration::from_secs_f64(args.seconds), args.load)?;
+    let run = haptic::link::heartbeat_intervals(Duration::from_secs_f64(args.seconds), args.load)?;
     let ms = |q: f64| run.quantile(q).map_or(f64::NAN, |d| d.as_secs_f64() * 1e3);
     let over = |limit_ms: u64| run.longer_than(Duration::from_millis(limit_ms));
     if args.json {

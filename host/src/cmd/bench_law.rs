@@ -1,9 +1,9 @@
 //! `host bench law`: instructions one in-domain evaluation of the tissue law Q costs on the
 //! MCU, per degree, from the thumbv7em disassembly of `TissueLaw::eval`
-//! ([`host::mcu::law_cost`] explains the count: instructions on the path, not cycles).
+//! ([`haptic::mcu::law_cost`] explains the count: instructions on the path, not cycles).
 
 use anyhow::Result;
-use host::mcu::law_cost;
+use haptic::mcu::law_cost;
 use std::path::PathBuf;
 
 /// Arguments of `host bench law`.
@@ -30,13 +30,13 @@ pub fn run(args: LawArgs) -> Result<()> {
     if args.json {
         println!(
             "{}",
-            serde_json::json!({ "rlib": rlib, "target": host::mcu::TARGET, "cost": c, "per_degree": degrees })
+            serde_json::json!({ "rlib": rlib, "target": haptic::mcu::TARGET, "cost": c, "per_degree": degrees })
         );
         return Ok(());
     }
     println!(
         "TissueLaw::eval, {}, {} ({} instructions)",
-        host::mcu::TARGET,
+        haptic::mcu::TARGET,
         rlib.display(),
         c.instructions
     );

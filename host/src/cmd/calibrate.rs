@@ -7,13 +7,13 @@
 
 use anyhow::{Context, Result, bail};
 use fem::elasticity::Material;
-use host::calibrate::fit::{self, ChebFit, DegreeRow};
-use host::calibrate::motor::{self, AXES, AxisFit};
-use host::calibrate::plot::{self, PlotSpec};
-use host::calibrate::scene_edit::{self, Law};
-use host::calibrate::{csv, gravity, specimen};
-use host::fsio::write_atomic;
-use host::scene::Scene;
+use haptic::calibrate::fit::{self, ChebFit, DegreeRow};
+use haptic::calibrate::motor::{self, AXES, AxisFit};
+use haptic::calibrate::plot::{self, PlotSpec};
+use haptic::calibrate::scene_edit::{self, Law};
+use haptic::calibrate::{csv, gravity, specimen};
+use haptic::fsio::write_atomic;
+use haptic::scene::Scene;
 use std::path::{Path, PathBuf};
 
 /// Calibration commands.
@@ -260,7 +260,7 @@ struct RelaxationTestReport<'a> {
 }
 
 fn relaxation_cmd(a: RelaxationArgs) -> Result<()> {
-    use host::calibrate::relaxation::{self, Test};
+    use haptic::calibrate::relaxation::{self, Test};
     let mut tests = Vec::with_capacity(a.csv.len());
     for path in &a.csv {
         let table = csv::read(path, &[&a.t, &a.x, &a.f])?;
@@ -539,14 +539,14 @@ fn tissue(a: TissueArgs) -> Result<()> {
         );
     }
     if matches!(which_law, Law::Q)
-        && let Some(q0) = host::scene::pull_at_first_contact(&law)
+        && let Some(q0) = haptic::scene::pull_at_first_contact(&law)
     {
         bail!(
             "{}: the fitted law gives Q(0) = {q0:.4} N, below -{:.1} % of its largest force: \
              rendered, it would pull the tool into the tissue at first contact; nothing was \
              written (check that the data starts at zero force, or fit a lower --degree)",
             a.csv.display(),
-            100.0 * host::scene::PULL_TOLERANCE
+            100.0 * haptic::scene::PULL_TOLERANCE
         );
     }
     let name = match which_law {

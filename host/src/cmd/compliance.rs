@@ -1,11 +1,11 @@
 //! `host compliance`: compliance blocks of requested nodes as JSON (a stable interface).
 
 use super::fixing::{FixArgs, parse_list};
+use crate::progress::Bar;
 use anyhow::{Context, Result, bail};
 use fem::compliance::Compliance;
 use fem::elasticity::{Elasticity, Element, Material};
-use host::progress::Bar;
-use host::scene::{Locking, p1_locking};
+use haptic::scene::{Locking, p1_locking};
 use std::io::Write;
 use std::path::PathBuf;
 
@@ -41,7 +41,7 @@ pub struct Args {
 /// Runs the command.
 pub fn run(args: Args) -> Result<()> {
     let mesh = fem::mesh::load(&args.mesh)?;
-    if let Some(w) = host::organ::mesh_size_warning(&mesh, &args.mesh.display().to_string()) {
+    if let Some(w) = haptic::organ::mesh_size_warning(&mesh, &args.mesh.display().to_string()) {
         eprintln!("{w}");
     }
     let nodes = parse_list::<usize>(&args.nodes).context("--nodes")?;

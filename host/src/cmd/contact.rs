@@ -1,13 +1,13 @@
 //! `host contact`: what a scene's bank renders at a point of the organ (`probe`), and the
 //! convergence study of the patch compliance (`study`).
 
+use crate::progress::Bar;
 use anyhow::{Context, Result, bail};
 use bank_format::{AlignedBytes, Bank};
-use host::bank::Prepared;
-use host::organ::Organ;
-use host::progress::Bar;
-use host::reach::Region;
-use host::scene::Scene;
+use haptic::bank::Prepared;
+use haptic::organ::Organ;
+use haptic::reach::Region;
+use haptic::scene::Scene;
 use std::path::PathBuf;
 
 /// `host contact ...`.
@@ -93,14 +93,14 @@ fn probe(args: ProbeArgs) -> Result<()> {
         Some(file) => std::fs::read(file).with_context(|| format!("--bank {}", file.display()))?,
         None => {
             let progress = Bar::new("patch compliance chunks");
-            let (built, _) = host::bank::cache::scene_bank_cached(&prep, Some(&progress))?;
+            let (built, _) = haptic::bank::cache::scene_bank_cached(&prep, Some(&progress))?;
             progress.finish();
             built.bytes
         }
     };
     let aligned = AlignedBytes::new(&bytes);
     let bank = Bank::parse(&aligned).map_err(|e| anyhow::anyhow!("built bank invalid: {e}"))?;
-    let p = host::probe::probe(
+    let p = haptic::probe::probe(
         &bank,
         (&prep.organ.mesh.nodes, &prep.organ.surface.triangles),
         at,
@@ -161,8 +161,8 @@ fn probe(args: ProbeArgs) -> Result<()> {
 }
 
 fn study(args: StudyArgs) -> Result<()> {
-    use host::scene::FemElement;
-    use host::study::{self, DEFAULT_SITES, normal_compliance};
+    use haptic::scene::FemElement;
+    use haptic::study::{self, DEFAULT_SITES, normal_compliance};
     let element: FemElement = args
         .element
         .parse()
@@ -253,7 +253,7 @@ fn study(args: StudyArgs) -> Result<()> {
             reference_error,
         };
         let text = serde_json::to_string_pretty(&st)?;
-        host::fsio::write_atomic(out, text.as_bytes(), &[])?;
+        haptic::fsio::write_atomic(out, text.as_bytes(), &[])?;
         eprintln!("wrote {}", out.display());
     }
     Ok(())

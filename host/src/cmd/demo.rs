@@ -10,19 +10,19 @@
 use super::script_arg::ScriptArg;
 use anyhow::{Context, Result, bail};
 use bank_format::{AlignedBytes, Bank};
-use host::bank::{BuiltBank, Prepared};
-use host::deform::Deformer;
-use host::display::server::{Server, SteerFn};
-use host::display::source::{LoopStats, SerialSource, Source, SourceSpec};
-use host::display::{DisplayMesh, DisplayStats, Pipeline, SurfaceModel, surface_neighbours};
-use host::kinematics::Workspace;
-use host::organ::Organ;
-use host::record::{Recorded, Recorder};
-use host::scene::{MeshSource, Scene};
-use host::script::{Scripted, aim_joints, press_point};
-use host::sil::source::SilSource;
-use host::trajectory::Script;
-use host::virtual_device::VirtualDevice;
+use haptic::bank::{BuiltBank, Prepared};
+use haptic::deform::Deformer;
+use haptic::display::server::{Server, SteerFn};
+use haptic::display::source::{LoopStats, SerialSource, Source, SourceSpec};
+use haptic::display::{DisplayMesh, DisplayStats, Pipeline, SurfaceModel, surface_neighbours};
+use haptic::kinematics::Workspace;
+use haptic::organ::Organ;
+use haptic::record::{Recorded, Recorder};
+use haptic::scene::{MeshSource, Scene};
+use haptic::script::{Scripted, aim_joints, press_point};
+use haptic::sil::source::SilSource;
+use haptic::trajectory::Script;
+use haptic::virtual_device::VirtualDevice;
 use std::collections::HashMap;
 use std::path::PathBuf;
 use std::sync::Arc;
@@ -43,7 +43,7 @@ pub struct Args {
     /// Units of --mesh's coordinates; default: guessed from its bounding box (an organ is 4 to
     /// 40 cm across) and printed, refused when no unit fits.
     #[arg(long, value_enum, requires = "mesh")]
-    units: Option<host::meshing::Units>,
+    units: Option<crate::cmd::units_arg::UnitsArg>,
     /// Telemetry source: `virtual` (the firmware loop on this PC), `sil` (the QEMU image) or
     /// `serial:<port>` (a device).
     #[arg(long, default_value = "virtual")]
@@ -100,9 +100,13 @@ pub fn run(args: Args) -> Result<()> {
             bail!("--mesh {}: no such file", m.display());
         }
         let mesh = fem::mesh::read(m)?;
-        let side = host::meshing::largest_side(mesh.bounding_box());
-        let (units, note) =
-            host::meshing::resolve_units(args.units, side, &m.display().to_string(), "--units")?;
+        let side = haptic::meshing::largest_side(mesh.bounding_box());
+        let (units, note) = haptic::meshing::resolve_units(
+            args.units.map(Into::into),
+            side,
+            &m.display().to_string(),
+            "--units",
+        )?;
         if let Some(n) = note {
             eprintln!("{}: {n}", m.display());
         }
@@ -124,8 +128,8 @@ pub fn run(args: Args) -> Result<()> {
         },
         cached,
     ) = {
-        let progress = host::progress::Bar::new("patch compliance chunks");
-        let built = host::bank::cache::scene_bank_cached(&prep, Some(&progress))?;
+        let progress = crate::progress::Bar::new("patch compliance chunks");
+        let built = haptic::bank::cache::scene_bank_cached(&prep, Some(&progress))?;
         progress.finish();
         built
     };
@@ -156,24 +160,25 @@ pub fn run(args: Args) -> Result<()> {
     // collision mesh with columns solved on demand.
     // The name the viewer shows for the displayed surface: a sampled scene's FEM mesh.
     let display_name = match &prep.organ.scene.contact {
-        host::scene::ContactModel::Sampled(spec) => spec.fem_mesh.file_name().map_or_else(
+        haptic::scene::ContactModel::Sampled(spec) => spec.fem_mesh.file_name().map_or_else(
             || spec.fem_mesh.display().to_string(),
             |n| n.to_string_lossy().into(),
         ),
-        host::scene::ContactModel::Nodal => prep.organ.mesh_name.clone(),
+        haptic::scene::ContactModel::Nodal => prep.organ.mesh_name.clone(),
     };
     let fields = {
-        let progress = host::progress::Bar::new("display field chunks");
+        let progress = crate::progress::Bar::new("display field chunks");
         let t = Instant::now();
-        let fields = host::bank::cache::display_fields_cached(&prep, &bank, Some(&progress))?;
+        let fields = haptic::bank::cache::display_fields_cached(&prep, &bank, Some(&progress))?;
         progress.finish();
         if let Some((f, cached)) = &fields {
             eprintln!(
                 "display   {} surface nodes of {}, {} fields ({:.1} MiB), {} in {:.2} s",
                 f.mesh.rest.len(),
                 match &prep.organ.scene.contact {
-                    host::scene::ContactModel::Sampled(spec) => spec.fem_mesh.display().to_string(),
-                    host::scene::ContactModel::Nodal => String::new(),
+                    haptic::scene::ContactModel::Sampled(spec) =>
+                        spec.fem_mesh.display().to_string(),
+                    haptic::scene::ContactModel::Nodal => String::new(),
                 },
                 f.samples(),
                 f.bytes() as f64 / (1 << 20) as f64,
@@ -216,16 +221,16 @@ pub fn run(args: Args) -> Result<()> {
             // image's hand follows the script (default press) for --seconds (default 60 s).
             let file = sil_bank.insert(tempfile::NamedTempFile::new()?);
             std::io::Write::write_all(file, &bank_bytes)?;
-            let setup = host::sil::harness::Setup {
+            let setup = haptic::sil::harness::Setup {
                 qemu: PathBuf::from("qemu-system-arm"),
-                image: host::mcu::build_qemu_image()?,
+                image: haptic::mcu::build_qemu_image()?,
                 bank: file.path().to_path_buf(),
             };
             let seconds = args
                 .seconds
                 .unwrap_or(if args.headless { 10.0 } else { 60.0 });
             let script = script_arg.unwrap_or(Script::Press);
-            let session = host::sil::harness::Session::new(&bank, script, seconds + 1.0)?;
+            let session = haptic::sil::harness::Session::new(&bank, script, seconds + 1.0)?;
             Box::new(SilSource::start(setup, session)?)
         }
         SourceSpec::Serial(port) => Box::new(SerialSource::open(
@@ -340,7 +345,7 @@ pub fn run(args: Args) -> Result<()> {
         run_for,
         recorder
             .as_mut()
-            .map(|r| r as &mut dyn host::display::FrameSink),
+            .map(|r| r as &mut dyn haptic::display::FrameSink),
     )?;
     stop.store(true, Ordering::Relaxed);
     if let Some(t) = scripter {

@@ -6,8 +6,8 @@
 
 use anyhow::{Context, Result, bail};
 use bank_format::{AlignedBytes, Bank, DeviceCalibration, FaultReason, HostToDevice, Mode, State};
-use host::display::source::{Sample, SerialSource, Source};
-use host::kinematics::{Workspace, counts_for};
+use haptic::display::source::{Sample, SerialSource, Source};
+use haptic::kinematics::{Workspace, counts_for};
 use std::path::PathBuf;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -19,7 +19,7 @@ pub enum DeviceCmd {
     /// Print the device's joint angles (pitch, yaw in degrees; insertion in mm), tip (mm),
     /// the encoder counts those joints mean, and its state, about ten times a second. The
     /// joints are the inverse kinematics of the telemetry's tip with the bank's calibration
-    /// (`host::kinematics`), so the device must run that bank (checked from its Hello).
+    /// (`haptic::kinematics`), so the device must run that bank (checked from its Hello).
     Check(CheckArgs),
     /// Select a mode, arm the device and print its state, currents and rendered force about
     /// ten times a second; disarm after --seconds or on Ctrl-C. If this host dies instead, the
@@ -131,7 +131,7 @@ pub fn run(cmd: DeviceCmd) -> Result<()> {
 fn bank(args: &DeviceArgs) -> Result<(DeviceCalibration, u32, String)> {
     let (bytes, name) = match (&args.scene, &args.bank) {
         (Some(scene), None) => (
-            host::bank::scene_bank(scene)?,
+            haptic::bank::scene_bank(scene)?,
             format!("the bank of {}", scene.display()),
         ),
         (None, Some(bank)) => (

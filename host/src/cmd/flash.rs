@@ -2,14 +2,14 @@
 //! [`flash`], probe-rs as a library), checked before (bank, image, layout) and after (the
 //! device's `Hello` reports the bank written); `--set-bor` instead programs the option bytes'
 //! brown-out reset level 3, checked and confirmed. Either way a connected device is sent
-//! `Disarm` first ([`host::link::disarm_connected`]).
+//! `Disarm` first ([`haptic::link::disarm_connected`]).
 
+use crate::progress::Bar;
 use anyhow::{Context, Result, bail};
 use bank_format::region::BANK_LEN;
 use fem::progress::Progress as _;
 use flash::{Layout, Part, Phase, Plan, Progress, What};
-use host::link::{Disarmed, await_identity, check_identity, disarm_connected, open_device_port};
-use host::progress::Bar;
+use haptic::link::{Disarmed, await_identity, check_identity, disarm_connected, open_device_port};
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 
@@ -256,7 +256,7 @@ fn bor_plan_text() -> Result<String> {
 fn bank_bytes(args: &Args) -> Result<(Vec<u8>, String)> {
     match (&args.scene, &args.bank) {
         (Some(scene), None) => Ok((
-            host::bank::scene_bank(scene)?,
+            haptic::bank::scene_bank(scene)?,
             format!("the bank of {}", scene.display()),
         )),
         (None, Some(bank)) => Ok((
@@ -271,9 +271,9 @@ fn bank_bytes(args: &Args) -> Result<(Vec<u8>, String)> {
 /// `cargo build --release` in firmware/board (its own workspace; a no-op when up to date) and
 /// the path of its release image.
 fn build_board_image() -> Result<PathBuf> {
-    let dir = host::mcu::repo_root().join("firmware/board");
+    let dir = haptic::mcu::repo_root().join("firmware/board");
     eprintln!("building the board image in {} ...", dir.display());
-    host::mcu::build_image(&dir, "the board image", " (or pass --elf F)")?;
+    haptic::mcu::build_image(&dir, "the board image", " (or pass --elf F)")?;
     Ok(board_image(&dir))
 }
 

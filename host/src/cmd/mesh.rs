@@ -5,8 +5,8 @@
 use anyhow::{Context, Result, bail};
 use fem::mesh::quality::{QualitySummary, SLIVER_DIHEDRAL_DEG};
 use fem::surface::{CheckOptions, read_surface};
-use host::meshing::{self, Sizes, Units};
-use host::scene::Scene;
+use haptic::meshing::{self, Sizes};
+use haptic::scene::Scene;
 use std::path::PathBuf;
 use std::time::Instant;
 
@@ -33,7 +33,7 @@ pub struct Args {
     /// Units of the surface's coordinates; default: guessed from the bounding box (an organ is
     /// 4 to 40 cm across) and printed, refused when no unit fits.
     #[arg(long, value_enum)]
-    units: Option<Units>,
+    units: Option<crate::cmd::units_arg::UnitsArg>,
     /// Element size in metres (away from the reach with --refine-near); default: the largest
     /// side of the bounding box / 15.
     #[arg(long, value_name = "M")]
@@ -89,7 +89,7 @@ pub fn run(a: Args) -> Result<()> {
         surface.triangles.len()
     );
     let (units, note) = meshing::resolve_units(
-        a.units,
+        a.units.map(Into::into),
         meshing::largest_side(surface.bounding_box()),
         &name,
         "--units",
@@ -179,7 +179,7 @@ pub fn run(a: Args) -> Result<()> {
     let mesh = meshing::run_gmsh(&surface_m, &sizes)?;
     let mut bytes = Vec::new();
     mesh.write_msh4_ascii(&mut bytes)?;
-    host::fsio::write_atomic(output, &bytes, &[&a.surface])?;
+    haptic::fsio::write_atomic(output, &bytes, &[&a.surface])?;
     let tet_volume: f64 = (0..mesh.tets.len()).map(|t| mesh.signed_volume(t)).sum();
     println!(
         "{}: {} nodes, {} tetrahedra, volume {:.4e} m^3 ({:+.2}% of the surface's), {:.1} s",
@@ -198,7 +198,7 @@ pub fn run(a: Args) -> Result<()> {
 /// slivers are a warning (the FEM takes them, with a worse conditioned stiffness).
 fn check_volume(a: &Args) -> Result<()> {
     let name = a.surface.display();
-    let c = meshing::check_volume(&a.surface, a.units)?;
+    let c = meshing::check_volume(&a.surface, a.units.map(Into::into))?;
     let skipped = if c.ignored.total() > 0 {
         format!(" (skipped: {})", c.ignored)
     } else {

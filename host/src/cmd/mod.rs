@@ -19,3 +19,4 @@ pub mod report;
 pub mod scene;
 pub mod script_arg;
 pub mod sil;
+pub mod units_arg;

@@ -1,9 +1,9 @@
-//! `host report`: runs the measurements of [`host::report`] ([`host::report::pipeline::run`])
+//! `host report`: runs the measurements of [`haptic::report`] ([`haptic::report::pipeline::run`])
 //! and prints the summary; the page, the JSON and the headline figure are written by the
 //! library.
 
 use anyhow::{Result, bail};
-use host::report::pipeline::{self, ReportConfig};
+use haptic::report::pipeline::{self, ReportConfig};
 use std::path::PathBuf;
 use std::time::Instant;
 

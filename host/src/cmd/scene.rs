@@ -1,8 +1,8 @@
 //! `host scene new`: a complete, commented scene for a tetrahedral organ mesh.
 
 use anyhow::{Context, Result, bail};
-use host::meshing::Units;
-use host::scene_new::{NewScene, Support, Tissue, relative_to, scene_text};
+use haptic::meshing::Units;
+use haptic::scene_new::{NewScene, Support, Tissue, relative_to, scene_text};
 use std::path::PathBuf;
 
 /// `host scene` subcommands.
@@ -37,7 +37,7 @@ pub struct NewArgs {
     /// from the bounding box (an organ is 4 to 40 cm across) and printed, refused when no unit
     /// fits. The trocar and supports are in metres whatever the mesh's units.
     #[arg(long, value_enum)]
-    units: Option<Units>,
+    units: Option<crate::cmd::units_arg::UnitsArg>,
     /// The trocar (the gimbal's fulcrum), m: `X,Y,Z`, outside the organ.
     #[arg(long, value_name = "X,Y,Z")]
     trocar: String,
@@ -89,7 +89,8 @@ fn numbers<const N: usize>(s: &str, what: &str) -> Result<[f64; N]> {
 }
 
 fn new(a: NewArgs) -> Result<()> {
-    let (mesh, ignored, units) = host::meshing::load_mesh_in_units(&a.mesh, a.units, "--units")?;
+    let (mesh, ignored, units) =
+        haptic::meshing::load_mesh_in_units(&a.mesh, a.units.map(Into::into), "--units")?;
     let skipped = if ignored.total() > 0 {
         format!(" (skipped: {ignored})")
     } else {
@@ -138,7 +139,7 @@ fn new(a: NewArgs) -> Result<()> {
     );
     let mut inputs = vec![a.mesh.as_path()];
     inputs.extend(a.fem_mesh.as_deref());
-    host::fsio::write_atomic(&a.output, text.as_bytes(), &inputs)?;
+    haptic::fsio::write_atomic(&a.output, text.as_bytes(), &inputs)?;
     println!(
         "{}: scene for {} ({} tissue); the tool reaches {reachable} surface nodes",
         a.output.display(),
@@ -155,9 +156,9 @@ fn check_same_organ(
     fem_mesh: &std::path::Path,
     units: Units,
 ) -> Result<()> {
-    let (fine, _, _) = host::meshing::load_mesh_in_units(fem_mesh, Some(units), "--units")?;
+    let (fine, _, _) = haptic::meshing::load_mesh_in_units(fem_mesh, Some(units), "--units")?;
     let ((lo, hi), (flo, fhi)) = (mesh.bounding_box(), fine.bounding_box());
-    let side = host::meshing::largest_side((lo, hi));
+    let side = haptic::meshing::largest_side((lo, hi));
     let off = (0..3)
         .map(|i| (lo[i] - flo[i]).abs().max((hi[i] - fhi[i]).abs()))
         .fold(0.0f64, f64::max);

@@ -1,7 +1,7 @@
 //! `--script` on the command line (`host demo`, `host sil`): the names of the scripted hand
 //! motions, converted to the library's [`Script`].
 
-use host::trajectory::Script;
+use haptic::trajectory::Script;
 
 /// A scripted hand motion, repeated for as long as the run lasts (the demo's steering, the SIL
 /// plant's hand).

@@ -5,11 +5,11 @@
 use super::script_arg::ScriptArg;
 use anyhow::{Context, Result, bail};
 use bank_format::{AlignedBytes, Bank};
-use host::fsio::write_atomic;
-use host::sil::cost::{CodePhaseMax, Phases};
-use host::sil::harness::{self, Run, Session, Setup};
-use host::sil::script::Trajectory;
-use host::trajectory::Script;
+use haptic::fsio::write_atomic;
+use haptic::sil::cost::{CodePhaseMax, Phases};
+use haptic::sil::harness::{self, Run, Session, Setup};
+use haptic::sil::script::Trajectory;
+use haptic::trajectory::Script;
 use std::path::{Path, PathBuf};
 
 /// Arguments of `host sil`.
@@ -98,11 +98,11 @@ impl SetupArgs {
     pub fn resolve(&self) -> Result<(Setup, AlignedBytes)> {
         let image = match &self.image {
             Some(p) => p.clone(),
-            None => host::mcu::build_qemu_image()?,
+            None => haptic::mcu::build_qemu_image()?,
         };
         let bank = match &self.bank {
             Some(p) => p.clone(),
-            None => host::sil::bank::cached(&self.scene)?,
+            None => haptic::sil::bank::cached(&self.scene)?,
         };
         let raw =
             std::fs::read(&bank).with_context(|| format!("cannot read {}", bank.display()))?;

@@ -394,7 +394,7 @@ mod tests {
         // the insertion starts where the default scene's does (0.03 m: the liver's top is
         // 0.091 m away) and ends 0.13 m (half the 0.077 m depth past the top; the default
         // scene's 0.14 reaches 0.05 m past it).
-        let mesh = fem::mesh::parse_msh(include_bytes!("../meshes/liver-1k4.msh")).unwrap();
+        let mesh = fem::mesh::parse_msh(include_bytes!("../../meshes/liver-1k4.msh")).unwrap();
         let w = aim(&mesh, [0.0, 0.0, 0.16]).unwrap();
         assert!(w.shaft[2] < -0.95, "{:?}", w.shaft);
         assert!((w.insertion[0] - 0.03).abs() < 0.005, "{:?}", w.insertion);

@@ -233,7 +233,7 @@ mod tests {
         assert!(m.max_difference < 1e-10, "{m:?}");
         let nodal = Scene::load(std::path::Path::new(concat!(
             env!("CARGO_MANIFEST_DIR"),
-            "/scenes/liver-nodal.toml"
+            "/../scenes/liver-nodal.toml"
         )))
         .unwrap();
         let err = patch_methods(nodal, &overrides, 5).unwrap_err().to_string();

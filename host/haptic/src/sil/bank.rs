@@ -67,12 +67,12 @@ mod tests {
     #[test]
     fn the_key_covers_the_scene_and_its_mesh() {
         let dir = tempfile::tempdir().unwrap();
-        let shipped = Path::new(env!("CARGO_MANIFEST_DIR")).join("meshes/liver-1k4.msh");
+        let shipped = Path::new(env!("CARGO_MANIFEST_DIR")).join("../meshes/liver-1k4.msh");
         let mesh = dir.path().join("organ.msh");
         std::fs::copy(&shipped, &mesh).unwrap();
         let scene = dir.path().join("organ.toml");
         let text = std::fs::read_to_string(
-            Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/liver-nodal.toml"),
+            Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes/liver-nodal.toml"),
         )
         .unwrap();
         let edited = text.replacen("mesh = \"builtin:liver-1k4\"", "mesh = \"organ.msh\"", 1);

@@ -17,10 +17,11 @@ use std::process::Command;
 /// The MCU's Rust target (Cortex-M4F).
 pub const TARGET: &str = "thumbv7em-none-eabihf";
 
-/// The repository root (the parent of the `host` package).
+/// The repository root (two levels above this package, `host/haptic`).
 pub fn repo_root() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR"))
-        .parent()
+        .ancestors()
+        .nth(2)
         .map_or_else(|| PathBuf::from("."), Path::to_path_buf)
 }
 

@@ -24,7 +24,6 @@ pub mod mcu;
 pub mod meshing;
 pub mod organ;
 pub mod probe;
-pub mod progress;
 pub mod reach;
 pub mod record;
 pub mod report;

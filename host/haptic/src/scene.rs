@@ -27,10 +27,10 @@ use std::path::{Path, PathBuf};
 use toml::Spanned;
 
 /// The embedded 1.4k-node liver (`mesh = "builtin:liver-1k4"`).
-pub const BUILTIN_LIVER: &[u8] = include_bytes!("../meshes/liver-1k4.msh");
+pub const BUILTIN_LIVER: &[u8] = include_bytes!("../../meshes/liver-1k4.msh");
 /// The default scene (`host/scenes/liver.toml`, embedded): what `demo` and `report` use
 /// without `--scene`.
-pub const DEFAULT_SCENE: &str = include_str!("../scenes/liver.toml");
+pub const DEFAULT_SCENE: &str = include_str!("../../scenes/liver.toml");
 /// The scene value that selects [`BUILTIN_LIVER`].
 pub const BUILTIN_LIVER_NAME: &str = "builtin:liver-1k4";
 
@@ -621,7 +621,7 @@ impl Scene {
             None => Scene::parse(
                 Path::new(concat!(
                     env!("CARGO_MANIFEST_DIR"),
-                    "/scenes/liver.toml (embedded)"
+                    "/../scenes/liver.toml (embedded)"
                 )),
                 DEFAULT_SCENE,
             ),
@@ -1737,7 +1737,7 @@ mod tests {
     use super::*;
 
     fn shipped() -> (PathBuf, String) {
-        let p = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/liver.toml");
+        let p = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes/liver.toml");
         let t = std::fs::read_to_string(&p).unwrap();
         (p, t)
     }
@@ -2093,7 +2093,7 @@ mod tests {
     /// a different FEM mesh file gives another.
     #[test]
     fn inputs_hash_ignores_the_path_spelling_not_the_files() {
-        let dir = Path::new(env!("CARGO_MANIFEST_DIR"));
+        let dir = Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/.."));
         let a = Scene::load(&dir.join("scenes/liver.toml")).unwrap();
         let b = Scene::load(&dir.join("../tests/../host/scenes/liver.toml")).unwrap();
         assert_ne!(a.input_files(), b.input_files());

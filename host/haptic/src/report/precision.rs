@@ -2,7 +2,7 @@
 //! (`firmware::solve`, the code the tick runs) on a bank built by the host, against the host's
 //! f64 solves of the same contact on the same compliance (the paper's `f_S = C_SS^-1 u*_S`,
 //! eq. 7, by `fem::compliance::contact_forces`; the energy-minimal 3 x 3 solve by
-//! `host::contact::weighted_tool_force`). A point or triangle contact only uses blocks the bank
+//! `haptic::contact::weighted_tool_force`). A point or triangle contact only uses blocks the bank
 //! always keeps (own blocks and triangle edges), so the truncation does not enter: the
 //! reference is the untruncated compliance, as in `host/tests/loop_vs_host.rs`.
 //!

@@ -497,7 +497,7 @@ pub fn section(m: &Measured) -> (Vec<Knob>, HardCase) {
 
 /// The shipped QLV scene and its elastic twin (the checkout's; named when missing).
 pub fn shipped_scenes() -> Result<(PathBuf, PathBuf)> {
-    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes");
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes");
     let (qlv, elastic) = (dir.join("liver-qlv.toml"), dir.join("liver.toml"));
     for p in [&qlv, &elastic] {
         if !p.exists() {

@@ -17,7 +17,7 @@ use anyhow::{Context, Result};
 use std::path::{Path, PathBuf};
 
 /// The bench data the tissue-law knob fits (model-generated; see its header).
-const BRAIN_DATA: &str = include_str!("../../data/brain-compression-500mm-min.csv");
+const BRAIN_DATA: &str = include_str!("../../../data/brain-compression-500mm-min.csv");
 const BRAIN_DATA_NAME: &str = "host/data/brain-compression-500mm-min.csv";
 
 /// What `host report` measures and where it writes.
@@ -36,7 +36,7 @@ pub struct ReportConfig {
 /// A finer mesh of the shipped organ, when the checkout has it.
 fn shipped(name: &str) -> Option<PathBuf> {
     let p = Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("meshes")
+        .join("../meshes")
         .join(name);
     p.exists().then_some(p)
 }

@@ -10,7 +10,7 @@ use std::sync::{Arc, Mutex};
 use std::thread::JoinHandle;
 use std::time::Duration;
 
-/// The QEMU image through the plant simulator (`host::sil`): a scripted hand, the image's
+/// The QEMU image through the plant simulator (`haptic::sil`): a scripted hand, the image's
 /// telemetry over its emulated USART. Runs in real time (1 ms of wall time per tick) so the
 /// display follows it; `latest` reports an error once the run is over.
 pub struct SilSource {

@@ -18,10 +18,10 @@ use fem::surface::TriSurface;
 use std::process::Command;
 
 /// The meshing script, run by [`run_gmsh`].
-const SCRIPT: &str = include_str!("../../scripts/mesh_surface.py");
+const SCRIPT: &str = include_str!("../../../scripts/mesh_surface.py");
 
 /// Length units of a surface or tetrahedral mesh file (`--units`, a scene's `mesh_units`).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Units {
     /// Metres.
     M,

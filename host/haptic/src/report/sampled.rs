@@ -32,7 +32,7 @@ use fem::compliance::Block3;
 use std::time::Instant;
 
 /// The converged reference (module notes).
-const REFERENCE: &str = include_str!("../../tests/data/patch-study-p2.json");
+const REFERENCE: &str = include_str!("../../../tests/data/patch-study-p2.json");
 
 /// One sampled bank.
 #[derive(Debug, Clone)]

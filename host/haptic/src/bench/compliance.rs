@@ -63,9 +63,13 @@ pub struct Figures {
     pub factor_peak_rss_mib: f64,
 }
 
-/// Measures the compliance precompute of `config` on the mesh at `path` (a progress bar of the
-/// column solves on stderr).
-pub fn run(path: &Path, config: &Config) -> Result<Figures> {
+/// Measures the compliance precompute of `config` on the mesh at `path`, reporting the column
+/// solves (supernodes) to `progress`.
+pub fn run(
+    path: &Path,
+    config: &Config,
+    progress: &dyn fem::progress::Progress,
+) -> Result<Figures> {
     let t = Instant::now();
     let mesh = fem::mesh::load(path)?;
     let surface = fem::mesh::boundary(&mesh)?;
@@ -106,20 +110,18 @@ pub fn run(path: &Path, config: &Config) -> Result<Figures> {
     let factor_s = t.elapsed().as_secs_f64();
     let factor_peak_rss_mib = crate::rss::peak_mib();
 
-    let bar = crate::progress::Bar::new("supernodes");
     let t = Instant::now();
     let pairs = match config.radius_m {
-        None => c.blocks(&candidates, Some(&bar))?.len().pow(2),
+        None => c.blocks(&candidates, Some(progress))?.len().pow(2),
         Some(radius) => {
             let positions: Vec<[f64; 3]> = candidates.iter().map(|&k| mesh.nodes[k]).collect();
-            c.blocks_within(&candidates, &positions, radius, Some(&bar))?
+            c.blocks_within(&candidates, &positions, radius, Some(progress))?
                 .iter()
                 .map(Vec::len)
                 .sum()
         }
     };
     let columns_s = t.elapsed().as_secs_f64();
-    bar.finish();
     let stats = c.stats();
     Ok(Figures {
         mesh: path.file_name().map_or_else(

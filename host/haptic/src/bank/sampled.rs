@@ -279,7 +279,7 @@ mod tests {
         mesh.write_msh4_ascii(&mut bytes).unwrap();
         std::fs::write(dir.join(format!("{name}.msh")), bytes).unwrap();
         let mut text = String::new();
-        for line in include_str!("../../scenes/liver.toml").lines() {
+        for line in include_str!("../../../scenes/liver.toml").lines() {
             let key = line.split('=').next().unwrap_or("").trim();
             match key {
                 "mesh" => text += &format!("mesh = \"{name}.msh\"\nmesh_units = \"{units}\"\n"),
@@ -298,7 +298,7 @@ mod tests {
     #[test]
     fn millimetre_meshes_give_the_compliance_of_metres() {
         let dir = tempfile::tempdir().unwrap();
-        let metres = fem::mesh::parse_msh(include_bytes!("../../meshes/liver-1k4.msh")).unwrap();
+        let metres = fem::mesh::parse_msh(include_bytes!("../../../meshes/liver-1k4.msh")).unwrap();
         let mut millimetres = metres.clone();
         millimetres
             .nodes

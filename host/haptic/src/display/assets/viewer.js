@@ -1,4 +1,4 @@
-// WebGL viewer of the host display (see host/src/display/mod.rs for the wire format).
+// WebGL viewer of the host display (see host/haptic/src/display/mod.rs for the wire format).
 // Plain WebGL, no build step: the organ surface (shaded, tinted by displacement), the tool
 // (shaft from the trocar, tip sphere), the force arrow with its magnitude in newtons, and a HUD
 // with a scrolling trace of the tool force's magnitude against time (the last TRACE_S seconds,

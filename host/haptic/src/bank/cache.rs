@@ -52,13 +52,13 @@ pub fn cache_dir() -> Option<PathBuf> {
 /// The source files whose text decides a sampled bank's bytes besides its inputs: the tool
 /// load and patch compliance (`fem`), the sampling stage, the bank writer and reader.
 pub const SAMPLING_SOURCES: [&str; 7] = [
-    include_str!("../../fem/src/tool.rs"),
-    include_str!("../../fem/src/compliance/patch.rs"),
-    include_str!("../../fem/src/elasticity/quadratic.rs"),
+    include_str!("../../../fem/src/tool.rs"),
+    include_str!("../../../fem/src/compliance/patch.rs"),
+    include_str!("../../../fem/src/elasticity/quadratic.rs"),
     include_str!("sampled.rs"),
     include_str!("../bank.rs"),
-    include_str!("../../../bank-format/src/writer.rs"),
-    include_str!("../../../bank-format/src/samples.rs"),
+    include_str!("../../../../bank-format/src/writer.rs"),
+    include_str!("../../../../bank-format/src/samples.rs"),
 ];
 
 /// FNV-1a 64 over [`SAMPLING_SOURCES`].
@@ -314,7 +314,7 @@ fn decode_parts(bytes: &[u8]) -> Option<SampledParts> {
 /// The source files whose text decides the display fields besides the bank's inputs.
 const FIELDS_SOURCES: [&str; 2] = [
     include_str!("../display/fields.rs"),
-    include_str!("../../fem/src/elasticity/mod.rs"),
+    include_str!("../../../fem/src/elasticity/mod.rs"),
 ];
 
 /// A sampled scene's display fields ([`DisplayFields::compute`] for `bank`, the scene's bank)
@@ -424,7 +424,7 @@ mod tests {
     /// samples but not their banks; another Young's modulus or tool radius has its own samples.
     #[test]
     fn the_samples_key_covers_the_body_not_the_relaxation() {
-        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes");
+        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes");
         let key = |p: &Prepared| {
             let ContactModel::Sampled(spec) = &p.organ.scene.contact else {
                 panic!("the shipped scenes are sampled")
@@ -531,7 +531,8 @@ mod tests {
     /// A scene edited in memory after loading gets its own key, not its file's.
     #[test]
     fn the_key_covers_a_scene_edited_in_memory() {
-        let file = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/liver-qlv.toml");
+        let file =
+            std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes/liver-qlv.toml");
         let mut prep = Prepared::load(&file).unwrap();
         assert!(matches!(prep.organ.scene.contact, ContactModel::Sampled(_)));
         let with = bank_key(&prep).unwrap();

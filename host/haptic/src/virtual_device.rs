@@ -235,7 +235,7 @@ mod tests {
     fn the_hand_at_top_speed_never_trips_the_speed_checks() {
         use firmware::device::Device;
         use firmware::safety::{SafetyConfig, Supervisor, TickInput};
-        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/liver.toml");
+        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes/liver.toml");
         let cal = crate::scene::Scene::load(&path).unwrap().device;
         let dev = Device::new(&cal);
         let mut sup = Supervisor::new(SafetyConfig::new(&cal));

@@ -152,7 +152,7 @@ mod tests {
 
     #[test]
     fn counts_invert_the_firmware_joint_map() {
-        let scene = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/liver.toml");
+        let scene = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes/liver.toml");
         let cal = crate::scene::Scene::load(&scene).unwrap().device;
         let dev = Device::new(&cal);
         for q in [[0.0, 0.0, 0.03], [0.2, -0.3, 0.1], [-0.34, 0.34, 0.139]] {
