@@ -71,34 +71,38 @@ pub fn build_image(dir: &Path, what: &str, hint: &str) -> Result<()> {
     Ok(())
 }
 
-/// Build the workspace package `package` for [`TARGET`] (release) and return its newest rlib
-/// (`lib<crate>-*.rlib` in the target's `deps`, `crate` being the package name with `_`).
+/// Build the workspace package `package` for [`TARGET`] (release) and return the rlib cargo
+/// reports for it (its `compiler-artifact` message): not the newest `lib<crate>-*.rlib` of the
+/// target's `deps`, which may be another build's (the firmware images' LTO builds leave
+/// bitcode-only rlibs there when they share a target dir).
 pub fn build_rlib(package: &str) -> Result<PathBuf> {
     let root = repo_root();
     eprintln!("building {package} for {TARGET} ...");
-    let status = Command::new(cargo())
+    let out = Command::new(cargo())
         .args(["build", "--release", "-p", package, "--target", TARGET])
+        .args(["--message-format", "json-render-diagnostics"])
         .current_dir(&root)
-        .status()
+        .stderr(std::process::Stdio::inherit())
+        .output()
         .context("running cargo")?;
-    if !status.success() {
+    if !out.status.success() {
         bail!("cargo build -p {package} --target {TARGET} failed");
     }
-    let target_dir =
-        std::env::var_os("CARGO_TARGET_DIR").map_or_else(|| root.join("target"), PathBuf::from);
-    let deps = target_dir.join(TARGET).join("release").join("deps");
-    let prefix = format!("lib{}-", package.replace('-', "_"));
-    std::fs::read_dir(&deps)
-        .with_context(|| format!("reading {}", deps.display()))?
-        .filter_map(|e| e.ok())
-        .filter(|e| {
-            let n = e.file_name();
-            let n = n.to_string_lossy();
-            n.starts_with(&prefix) && n.ends_with(".rlib")
+    let name = package.replace('-', "_");
+    String::from_utf8_lossy(&out.stdout)
+        .lines()
+        .filter_map(|l| serde_json::from_str::<serde_json::Value>(l).ok())
+        .filter(|m| m["reason"] == "compiler-artifact" && m["target"]["name"] == name.as_str())
+        .flat_map(|m| {
+            m["filenames"]
+                .as_array()
+                .into_iter()
+                .flatten()
+                .filter_map(|f| f.as_str().map(PathBuf::from))
+                .collect::<Vec<_>>()
         })
-        .max_by_key(|e| e.metadata().and_then(|m| m.modified()).ok())
-        .map(|e| e.path())
-        .with_context(|| format!("no {prefix}*.rlib in {}", deps.display()))
+        .find(|f| f.extension().is_some_and(|e| e == "rlib"))
+        .with_context(|| format!("cargo reported no rlib for {package}"))
 }
 
 /// The `llvm-objdump` that `rustup component add llvm-tools` installs.
