@@ -13,18 +13,21 @@
 
 pub mod bank;
 pub mod bench;
+pub mod cache;
 pub mod calibrate;
 pub mod contact;
 pub mod deform;
 pub mod display;
 pub mod fsio;
 pub mod kinematics;
+pub mod linalg;
 pub mod link;
 pub mod mcu;
 pub mod meshing;
 pub mod organ;
 pub mod probe;
 pub mod reach;
+pub mod realtime;
 pub mod record;
 pub mod report;
 pub mod rng;
@@ -35,4 +38,5 @@ pub mod script;
 pub mod sil;
 pub mod study;
 pub mod trajectory;
+pub mod units;
 pub mod virtual_device;

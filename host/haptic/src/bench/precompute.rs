@@ -4,8 +4,8 @@
 //! both in the cache (read and validate the bank, read the fields). And the patch compliance's
 //! two methods side by side (`host bench patch`, [`patch_methods`]).
 
-use super::{BuiltBank, Prepared};
 use crate::bank::sampled::{SampledFem, lattice_points};
+use crate::bank::{BankSpec, BuiltBank, Prepared};
 use crate::display::fields::DisplayFields;
 use crate::organ::Organ;
 use crate::reach::Region;
@@ -101,7 +101,7 @@ pub fn measure(
     let prep = Prepared::from_scene(scene.clone())?;
     let prepare_s = t0.elapsed().as_secs_f64();
     let t1 = Instant::now();
-    let BuiltBank { bytes, sampled, .. } = prep.build_bank(progress)?;
+    let BuiltBank { bytes, sampled, .. } = prep.bank(&BankSpec::Scene { progress })?;
     let bank_s = t1.elapsed().as_secs_f64();
     let aligned = AlignedBytes::new(&bytes);
     let bank = Bank::parse(&aligned).map_err(|e| anyhow::anyhow!("built bank invalid: {e}"))?;
