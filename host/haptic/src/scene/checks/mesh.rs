@@ -33,7 +33,7 @@ pub(super) fn parse_mesh(
 
 /// `mesh_units`: "m", "cm" or "mm", only for a mesh file (the embedded liver is in metres). It
 /// holds for every mesh of the organ: `mesh` and a sampled `[contact]`'s `fem_mesh` and
-/// `richardson_mesh` ([`Scene::read_organ_mesh`]).
+/// `richardson_mesh` ([`crate::scene::Scene::read_organ_mesh`]).
 pub(super) fn parse_mesh_units(
     ctx: &Ctx,
     raw: &RawScene,
