@@ -10,6 +10,8 @@
 //! and the scripted hand motions, on [`trajectory`]'s tool paths). [`link`] is the client of a
 //! device's serial link (port, frames, greeting). [`sil`] runs the firmware image under QEMU,
 //! [`calibrate`] fits the tissue laws and the motor constants; [`mod@bench`] measures.
+//! Leaves the others share: [`units`] (mesh units), [`cache`] (the on-disk cache and FNV-1a),
+//! [`linalg`] (3 x 3 blocks) and [`realtime`] (thread scheduling).
 
 pub mod bank;
 pub mod bench;
