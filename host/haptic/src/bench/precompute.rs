@@ -1,4 +1,4 @@
-//! What a sampled scene's precompute costs (`host bench precompute`, issue 26): the bank (FEM
+//! What a sampled scene's precompute costs (`host bench precompute`): the bank (FEM
 //! factor and `W` at every sample, with its Richardson partner) and the display fields, timed
 //! and with the process's peak memory, without the cache; then the start of a run that finds
 //! both in the cache (read and validate the bank, read the fields). And the patch compliance's

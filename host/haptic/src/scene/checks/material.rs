@@ -85,9 +85,8 @@ pub enum Locking {
 }
 
 /// P1 locking at Poisson's ratio `nu`, with the stiffening measured against quadratic
-/// elements on the shipped livers (bed fixed, a 10 mm flat punch pressed 5 mm; issue 18's
-/// table: P1 / P2 force 1.21 / 1.03 at 0.45, 1.49 / 1.16 at 0.49, 2.85 / 1.80 at 0.499 on the
-/// 1.4k / 10k liver).
+/// elements on the shipped livers (bed fixed, a 10 mm flat punch pressed 5 mm; P1 / P2 force
+/// 1.21 / 1.03 at 0.45, 1.49 / 1.16 at 0.49, 2.85 / 1.80 at 0.499 on the 1.4k / 10k liver).
 pub fn p1_locking(nu: f64) -> Locking {
     if nu > P1_LOCKING_REFUSE {
         Locking::Meaningless(format!(
