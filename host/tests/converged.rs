@@ -19,10 +19,11 @@
 //! limits must agree within their error estimates.
 
 use bank_format::{AlignedBytes, Bank};
+use haptic::linalg::normal_compliance;
 use haptic::organ::Organ;
 use haptic::reach::Region;
 use haptic::report::sampled;
-use haptic::study::{Study, normal_compliance};
+use haptic::study::Study;
 use std::path::Path;
 
 fn manifest(p: &str) -> std::path::PathBuf {

@@ -7,7 +7,7 @@
 
 use bank_format::{AlignedBytes, Bank};
 use haptic::bank::Prepared;
-use haptic::bank::cache::{display_fields_cached, scene_bank_cached};
+use haptic::bank::cache::scene_bank_cached;
 use haptic::bank::sampled::lattice_points;
 use haptic::display::fields::DisplayFields;
 use haptic::scene::ContactModel;
@@ -24,7 +24,7 @@ fn fields_match_direct_solves_and_put_the_tool_at_w_f() {
     let aligned = AlignedBytes::new(&built.bytes);
     let bank = Bank::parse(&aligned).unwrap();
     let samples = bank.samples().unwrap();
-    let (fields, _) = display_fields_cached(&prep, &bank, None).unwrap().unwrap();
+    let (fields, _) = DisplayFields::cached(&prep, &bank, None).unwrap().unwrap();
 
     // The P1 body of the FEM mesh, built here on its own.
     let mesh = fem::mesh::load(&spec.fem_mesh).unwrap();
@@ -93,7 +93,7 @@ fn fields_match_direct_solves_and_put_the_tool_at_w_f() {
                 row[k] = load.iter().map(|&(n, wt)| wt * x[3 * n + r]).sum();
             }
         }
-        let direct = under(haptic::study::solve3(&w_p1, d));
+        let direct = under(haptic::linalg::solve3(&w_p1, d));
         let (mut worst, mut peak) = (0.0f64, 0.0f64);
         for (i, &n) in boundary.nodes.iter().enumerate() {
             for r in 0..3 {

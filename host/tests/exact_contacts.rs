@@ -16,7 +16,7 @@
 use bank_format::{AlignedBytes, Bank, Precision};
 use firmware::solve::WeightedSolve;
 use haptic::bank::sweep;
-use haptic::bank::{Prepared, ToolPairs};
+use haptic::bank::{BankSpec, Prepared, ToolPairs};
 use std::path::Path;
 
 #[test]
@@ -27,7 +27,7 @@ fn the_tool_bank_is_exact_on_every_contact_the_tool_can_make() {
         prep.organ.scene.bank.couplings,
         haptic::scene::Couplings::Tool
     );
-    let built = prep.build_bank(None).unwrap();
+    let built = prep.bank(&BankSpec::Scene { progress: None }).unwrap();
     assert!(
         built.bytes.len() <= 128 * 1024,
         "the tool bank is {} bytes, over the demo's 128 KiB",
@@ -105,10 +105,20 @@ fn bfp16_blocks_stay_within_their_rounding_bound() {
     .pairs;
     let radius_m = prep.organ.scene.bank.truncation_radius_m;
     let f32_bank = prep
-        .bank_in(&rows, radius_m, Some(&pairs), Precision::F32)
+        .bank(&BankSpec::Nodal {
+            rows: &rows,
+            radius: radius_m,
+            extra: Some(&pairs),
+            precision: Precision::F32,
+        })
         .unwrap();
     let b16_bank = prep
-        .bank_in(&rows, radius_m, Some(&pairs), Precision::Bfp16)
+        .bank(&BankSpec::Nodal {
+            rows: &rows,
+            radius: radius_m,
+            extra: Some(&pairs),
+            precision: Precision::Bfp16,
+        })
         .unwrap();
     assert_eq!(
         f32_bank.bytes.len() - b16_bank.bytes.len(),

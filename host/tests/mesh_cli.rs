@@ -766,7 +766,8 @@ fn a_fem_mesh_makes_a_sampled_scene_whose_bank_builds() {
         std::fs::canonicalize(&fine).unwrap()
     );
     assert_eq!(spec.element, haptic::scene::FemElement::Quadratic);
-    let built = prep.sampled_bank(spec, None).unwrap();
+    let parts = prep.sampled_parts(spec, None).unwrap();
+    let built = prep.bank(&haptic::bank::BankSpec::Sampled(parts)).unwrap();
     let aligned = bank_format::AlignedBytes::new(&built.bytes);
     let bank = bank_format::Bank::parse(&aligned).unwrap();
     assert!(bank.samples().unwrap().count() > 100);

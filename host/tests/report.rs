@@ -8,7 +8,7 @@
 mod support;
 use support::chromium;
 
-use haptic::bank::Prepared;
+use haptic::bank::{BankSpec, Prepared};
 use haptic::report::pipeline::{self, ReportConfig};
 use haptic::sil::cost::CODE_PHASES;
 use std::path::Path;
@@ -263,7 +263,10 @@ fn quick_report_renders_every_plot_and_agrees_with_the_references() {
         "{terms:?}"
     );
     // The scene's bank on the plot is the one `host bank build` writes.
-    let built = Prepared::load(&scene).unwrap().build_bank(None).unwrap();
+    let built = Prepared::load(&scene)
+        .unwrap()
+        .bank(&BankSpec::Scene { progress: None })
+        .unwrap();
     let chosen = knob("mesh-bank")["chosen"]["y"].as_f64().unwrap();
     assert_eq!(chosen, built.bytes.len() as f64);
 

@@ -565,7 +565,10 @@ fn nodal_bank(grid_cell_m: f64, dir: &std::path::Path) -> Result<(PathBuf, Align
     let scene = haptic::mcu::repo_root().join("host/scenes/liver-nodal.toml");
     let mut prep = haptic::bank::Prepared::load(&scene).map_err(|e| format!("{e:#}"))?;
     prep.organ.scene.bank.grid_cell_m = Some(grid_cell_m);
-    let bytes = prep.build_bank(None).map_err(|e| format!("{e:#}"))?.bytes;
+    let bytes = prep
+        .bank(&haptic::bank::BankSpec::Scene { progress: None })
+        .map_err(|e| format!("{e:#}"))?
+        .bytes;
     let path = dir.join(format!("nodal-{grid_cell_m}.bank"));
     std::fs::write(&path, &bytes).unwrap();
     Ok((path, AlignedBytes::new(&bytes)))
@@ -813,7 +816,7 @@ fn presses_at_study_sites_render_the_converged_force_under_qemu() {
             "{name}: anchor {anchor:?} is {off} m from the site"
         );
         let d: [f64; 3] = std::array::from_fn(|k| anchor[k] - f64::from(last.tip_m[k]));
-        let want = haptic::study::solve3(&study.reference_w[s], d);
+        let want = haptic::linalg::solve3(&study.reference_w[s], d);
         let got = last.tool_force_n.map(f64::from);
         let err = (0..3)
             .map(|k| (got[k] - want[k]).powi(2))

@@ -3,13 +3,17 @@
 //! bank models only what the scene's tool can reach.
 //!
 //! [`Prepared`] holds the three stages (the compliance stays factorised, so the display can
-//! produce any column on demand); [`Prepared::build_bank`] writes the scene's bank. `host bank`,
-//! `host demo`, `host sil` and the tests all go through here. [`tool_pairs`] finds the pairs a
-//! tool contact loads together; [`stats`] measures what a built bank gives the firmware (tool
-//! patches, detection candidates).
+//! produce any column on demand); [`Prepared::bank`] writes a bank, the one [`BankSpec`] names
+//! (the scene's, a nodal one at another radius or precision, a sampled one from samples
+//! computed already). `host bank`, `host demo`, `host sil` and the tests all go through here.
+//! Two other products are not firmware banks and keep their own names: the contact samples
+//! ([`Prepared::sampled_parts`], the costly part of a sampled bank, cached on their own) and
+//! the host's probe bank ([`Prepared::probe_bank`]: unbounded, every pair one tool patch can
+//! load, read only on the host). [`tool_pairs`] finds the pairs a tool contact loads together;
+//! [`stats`] measures what a built bank gives the firmware (tool patches, detection
+//! candidates).
 
 pub mod cache;
-pub mod precompute;
 pub mod sampled;
 pub mod stats;
 pub mod sweep;
@@ -17,9 +21,10 @@ pub mod tool_pairs;
 
 pub use tool_pairs::{TOOL_DIVISIONS, ToolPairs, UNCOUPLED_TOL};
 
+use crate::cache::fnv1a;
 use crate::organ::Organ;
 use crate::reach::Region;
-use crate::scene::{ContactModel, Couplings, SampledContact, Scene, fnv1a};
+use crate::scene::{ContactModel, Couplings, SampledContact, Scene};
 use anyhow::{Context, Result, bail};
 use bank_format::region::BANK_LEN;
 use bank_format::{AlignedBytes, Bank, BankBuilder};
@@ -51,6 +56,39 @@ pub struct SampledParts {
     pub stats: sampled::SampleStats,
     /// The FEM mesh's hash, then the Richardson partner's if any.
     pub mesh_hashes: Vec<u64>,
+}
+
+/// Which bank [`Prepared::bank`] writes.
+pub enum BankSpec<'a> {
+    /// The scene's bank, as `host bank build` writes it: a sampled scene's from its contact
+    /// samples ([`Prepared::sampled_parts`], then as [`BankSpec::Sampled`]); a nodal scene's by
+    /// its coupling rule (`bank.couplings`): the pairs within `bank.truncation_radius_m`, with
+    /// "tool" also [`ToolPairs::sample`]'s, in `bank.precision`. The progress, if any, counts
+    /// the compliance's supernodes (or the samples).
+    Scene {
+        /// Progress of the precompute.
+        progress: Option<&'a dyn Progress>,
+    },
+    /// A nodal bank from `rows` (computed by [`Prepared::blocks`] for at least `radius`, and
+    /// holding the pairs of `extra`): every pair within `radius`, every triangle edge and every
+    /// pair of `extra` (`(a, b)`, `a < b`, indices into R) coupled. With `extra` the bank's
+    /// truncation radius (its coverage guarantee, `SPEC.md` check 14) is the distance of the
+    /// closest pair left uncoupled, if that exceeds `radius`.
+    Nodal {
+        /// Compliance rows over R.
+        rows: &'a [Vec<(usize, Block3)>],
+        /// Truncation radius, m.
+        radius: f64,
+        /// Pairs coupled besides those within `radius` and the triangle edges.
+        extra: Option<&'a BTreeSet<(usize, usize)>>,
+        /// Storage precision of the coupling blocks `C_kl`.
+        precision: bank_format::Precision,
+    },
+    /// A sampled bank from contact samples already computed: R's collision data, the nodal
+    /// compliance with only the triangle edges coupled (the nodal contact models' minimum, for
+    /// comparison), the samples; its scene id is the scene's, then each FEM mesh's hash
+    /// ([`SampledParts::mesh_hashes`]), and the blocks are stored in `bank.precision`.
+    Sampled(SampledParts),
 }
 
 /// The pipeline's three stages up to the bank, for one scene: the organ, its reachable region
@@ -103,46 +141,66 @@ impl Prepared {
         2.0 * (self.organ.scene.tip_radius_m.max(0.0) + self.region.longest_edge()) * (1.0 + 1e-3)
     }
 
-    /// The bank for truncation radius `radius` from `rows` (computed for at least that
-    /// radius by [`Prepared::blocks`]).
-    pub fn bank(&self, rows: &[Vec<(usize, Block3)>], radius: f64) -> Result<BuiltBank> {
-        self.bank_keeping(rows, radius, None)
+    /// The bank `spec` describes (see [`BankSpec`]).
+    pub fn bank(&self, spec: &BankSpec<'_>) -> Result<BuiltBank> {
+        match spec {
+            BankSpec::Scene { progress } => self.by_scene(*progress),
+            BankSpec::Nodal {
+                rows,
+                radius,
+                extra,
+                precision,
+            } => {
+                let (builder, pairs) = self.builder_in(rows, *radius, *extra)?;
+                Ok(BuiltBank {
+                    bytes: write(builder, *precision)?,
+                    pairs,
+                    sampled: None,
+                })
+            }
+            BankSpec::Sampled(parts) => {
+                let scene_id = parts
+                    .mesh_hashes
+                    .iter()
+                    .fold(self.organ.scene_id, |id, h| fnv1a(id, &h.to_le_bytes()));
+                let rows = self.blocks(0.0, None)?;
+                let (mut builder, pairs) = self.builder_in(&rows, 0.0, None)?;
+                builder.samples = Some(parts.samples.clone());
+                builder.scene_id = scene_id;
+                Ok(BuiltBank {
+                    bytes: write(builder, self.organ.scene.bank.precision)?,
+                    pairs,
+                    sampled: Some(parts.stats),
+                })
+            }
+        }
     }
 
-    /// The bank that couples every pair within `radius`, every triangle edge and, if given,
-    /// every pair of `extra` (`(a, b)`, `a < b`, indices into R; `rows` must hold them). With
-    /// `extra` the bank's truncation radius (its coverage guarantee, `SPEC.md` check 14) is the
-    /// distance of the closest pair left uncoupled, if that exceeds `radius`.
-    pub fn bank_keeping(
-        &self,
-        rows: &[Vec<(usize, Block3)>],
-        radius: f64,
-        extra: Option<&BTreeSet<(usize, usize)>>,
-    ) -> Result<BuiltBank> {
-        self.bank_in(rows, radius, extra, self.organ.scene.bank.precision)
-    }
-
-    /// [`Prepared::bank_keeping`] with the coupling blocks stored in `precision` (the scene's
-    /// `bank.precision` aside).
-    pub fn bank_in(
-        &self,
-        rows: &[Vec<(usize, Block3)>],
-        radius: f64,
-        extra: Option<&BTreeSet<(usize, usize)>>,
-        precision: bank_format::Precision,
-    ) -> Result<BuiltBank> {
-        let (builder, pairs) = self.builder_in(rows, radius, extra)?;
-        let bytes = builder
-            .build_with_precision(precision)
-            .map_err(|e| anyhow::anyhow!("the bank writer refused the scene's data: {e}"))?;
-        Ok(BuiltBank {
-            bytes,
-            pairs,
-            sampled: None,
+    /// The scene's bank ([`BankSpec::Scene`]).
+    fn by_scene(&self, progress: Option<&dyn Progress>) -> Result<BuiltBank> {
+        let scene = &self.organ.scene;
+        if let ContactModel::Sampled(spec) = &scene.contact {
+            return self.bank(&BankSpec::Sampled(self.sampled_parts(spec, progress)?));
+        }
+        let radius = scene.bank.truncation_radius_m;
+        let (rows, extra) = match scene.bank.couplings {
+            Couplings::Radius => (self.blocks(radius, progress)?, None),
+            Couplings::Tool => {
+                let rows = self.blocks(radius.max(self.probe_radius()), progress)?;
+                let pairs = self.tool_pairs_from(&rows)?.pairs;
+                (rows, Some(pairs))
+            }
+        };
+        self.bank(&BankSpec::Nodal {
+            rows: &rows,
+            radius,
+            extra: extra.as_ref(),
+            precision: scene.bank.precision,
         })
     }
 
-    /// The writer's input for [`Prepared::bank_in`], and the number of coupled pairs.
+    /// The writer's input for a nodal bank ([`BankSpec::Nodal`]), and the number of coupled
+    /// pairs.
     fn builder_in(
         &self,
         rows: &[Vec<(usize, Block3)>],
@@ -223,38 +281,6 @@ impl Prepared {
 }
 
 impl Prepared {
-    /// The scene's bank by its coupling rule (`bank.couplings`): the pairs within
-    /// `bank.truncation_radius_m`, and with "tool" also [`ToolPairs::sample`].
-    pub fn build_bank(&self, progress: Option<&dyn Progress>) -> Result<BuiltBank> {
-        if let ContactModel::Sampled(spec) = &self.organ.scene.contact {
-            return self.sampled_bank(spec, progress);
-        }
-        let radius = self.organ.scene.bank.truncation_radius_m;
-        match self.organ.scene.bank.couplings {
-            Couplings::Radius => {
-                let rows = self.blocks(radius, progress)?;
-                self.bank(&rows, radius)
-            }
-            Couplings::Tool => {
-                let rows = self.blocks(radius.max(self.probe_radius()), progress)?;
-                let pairs = self.tool_pairs_from(&rows)?.pairs;
-                self.bank_keeping(&rows, radius, Some(&pairs))
-            }
-        }
-    }
-
-    /// The bank of a sampled scene: R's collision data and nodal compliance with only the
-    /// triangle edges coupled (the nodal contact models' minimum, for comparison), plus the
-    /// contact samples computed on the scene's FEM mesh ([`Prepared::sampled_parts`]). The
-    /// scene id also covers the FEM mesh's bytes.
-    pub fn sampled_bank(
-        &self,
-        spec: &SampledContact,
-        progress: Option<&dyn Progress>,
-    ) -> Result<BuiltBank> {
-        self.sampled_bank_from(self.sampled_parts(spec, progress)?)
-    }
-
     /// The contact samples of a sampled scene ([`sampled::contact_samples`] on the scene's FEM
     /// mesh, Richardson-extrapolated with the coarse one when the scene says so) and the hashes
     /// of the FEM meshes, which the bank's scene id covers.
@@ -311,60 +337,6 @@ impl Prepared {
         })
     }
 
-    /// The sampled bank from [`Prepared::sampled_parts`]: its scene id is the scene's, then
-    /// each FEM mesh's hash.
-    pub fn sampled_bank_from(&self, parts: SampledParts) -> Result<BuiltBank> {
-        let id = parts
-            .mesh_hashes
-            .iter()
-            .fold(self.organ.scene_id, |id, h| fnv1a(id, &h.to_le_bytes()));
-        self.sampled_bank_with(parts.samples, parts.stats, id)
-    }
-
-    /// [`Prepared::sampled_bank`] on an already factorised FEM body, at lattice level `level`.
-    pub fn sampled_bank_on(
-        &self,
-        fem: &sampled::SampledFem,
-        level: u32,
-        progress: Option<&dyn Progress>,
-    ) -> Result<BuiltBank> {
-        let (samples, stats) = sampled::contact_samples(
-            fem,
-            &self.region.positions,
-            &self.region.triangles,
-            level,
-            self.organ.scene.tip_radius_m,
-            progress,
-        )?;
-        self.sampled_bank_from(SampledParts {
-            samples,
-            stats,
-            mesh_hashes: vec![fem.mesh_hash],
-        })
-    }
-
-    /// The sampled bank from its samples: R's collision data, the nodal compliance with the
-    /// triangle edges coupled, the samples, scene id `scene_id`.
-    pub fn sampled_bank_with(
-        &self,
-        samples: bank_format::ContactSamples,
-        stats: sampled::SampleStats,
-        scene_id: u64,
-    ) -> Result<BuiltBank> {
-        let rows = self.blocks(0.0, None)?;
-        let (mut builder, pairs) = self.builder_in(&rows, 0.0, None)?;
-        builder.samples = Some(samples);
-        builder.scene_id = scene_id;
-        let bytes = builder
-            .build_with_precision(self.organ.scene.bank.precision)
-            .map_err(|e| anyhow::anyhow!("the bank writer refused the scene's data: {e}"))?;
-        Ok(BuiltBank {
-            bytes,
-            pairs,
-            sampled: Some(stats),
-        })
-    }
-
     /// The probe bank: every pair within [`Prepared::probe_radius`] coupled, from `rows`
     /// (computed for at least that radius), f32 blocks. The host's own: it couples every pair
     /// one tool patch can load, however many a node (about 200 on the shipped liver), beyond
@@ -386,6 +358,13 @@ impl Prepared {
             .map_err(|e| anyhow::anyhow!("internal: the probe bank is invalid: {e}"))?;
         ToolPairs::sample(&bank, self.organ.scene.tip_radius_m, TOOL_DIVISIONS)
     }
+}
+
+/// The bank's bytes from the writer's input, blocks stored in `precision`.
+fn write(builder: BankBuilder, precision: bank_format::Precision) -> Result<Vec<u8>> {
+    builder
+        .build_with_precision(precision)
+        .map_err(|e| anyhow::anyhow!("the bank writer refused the scene's data: {e}"))
 }
 
 /// The bank of the scene file at `scene` (what `host bank build` writes), refused when it does

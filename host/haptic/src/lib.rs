@@ -10,21 +10,26 @@
 //! and the scripted hand motions, on [`trajectory`]'s tool paths). [`link`] is the client of a
 //! device's serial link (port, frames, greeting). [`sil`] runs the firmware image under QEMU,
 //! [`calibrate`] fits the tissue laws and the motor constants; [`mod@bench`] measures.
+//! Leaves the others share: [`units`] (mesh units), [`cache`] (the on-disk cache and FNV-1a),
+//! [`linalg`] (3 x 3 blocks) and [`realtime`] (thread scheduling).
 
 pub mod bank;
 pub mod bench;
+pub mod cache;
 pub mod calibrate;
 pub mod contact;
 pub mod deform;
 pub mod display;
 pub mod fsio;
 pub mod kinematics;
+pub mod linalg;
 pub mod link;
 pub mod mcu;
 pub mod meshing;
 pub mod organ;
 pub mod probe;
 pub mod reach;
+pub mod realtime;
 pub mod record;
 pub mod report;
 pub mod rng;
@@ -35,4 +40,5 @@ pub mod script;
 pub mod sil;
 pub mod study;
 pub mod trajectory;
+pub mod units;
 pub mod virtual_device;

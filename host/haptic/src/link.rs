@@ -90,7 +90,7 @@ impl DeviceLink {
             .spawn(move || {
                 // The heartbeat must not wait behind the desktop's other work: a stall longer
                 // than the bank's link timeout faults the device (`host bench heartbeat`).
-                rt.store(crate::virtual_device::request_realtime(), Ordering::Relaxed);
+                rt.store(crate::realtime::request(), Ordering::Relaxed);
                 thread.run(on_message, &st);
             })?;
         Ok(DeviceLink {
@@ -419,7 +419,7 @@ pub fn heartbeat_intervals(duration: Duration, load_threads: usize) -> Result<He
     let stand_in = std::thread::Builder::new()
         .name("stand-in-device".into())
         .spawn(move || {
-            let realtime = crate::virtual_device::request_realtime();
+            let realtime = crate::realtime::request();
             stand_in_device(&mut device, &st).map(|arrivals| (arrivals, realtime))
         })?;
     let link = DeviceLink::open(&name, 115_200, BENCH_BANK_CRC, "the bench's bank", |_| {});

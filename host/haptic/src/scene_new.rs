@@ -3,10 +3,10 @@
 //! loading it as any scene ([`Scene::parse`]) before it is written.
 
 use crate::kinematics::Workspace;
-use crate::meshing::Units;
 use crate::organ::Organ;
 use crate::reach::Region;
 use crate::scene::Scene;
+use crate::units::Units;
 use anyhow::{Result, bail};
 use fem::mesh::TetMesh;
 use fem::vec3::{cross, dot, norm, scale, sub};

@@ -27,13 +27,13 @@
 //! factor 1.25 being the one for a three-grid study whose observed order is that of the method.
 
 use crate::bank::sampled::SampledFem;
+use crate::linalg::normal_compliance;
 use crate::organ::Organ;
 use crate::probe::closest_reachable;
 use crate::reach::Region;
 use crate::scene::{FemElement, SampledContact, Scene};
 use anyhow::{Context, Result, bail};
 use fem::compliance::Block3;
-use fem::vec3::dot;
 use serde::{Deserialize, Serialize};
 use std::path::Path;
 
@@ -110,30 +110,6 @@ pub struct Study {
     /// Estimated relative error of the reference's `n . W n` per site (the grid convergence
     /// index).
     pub reference_error: Vec<f64>,
-}
-
-/// `W^-1 d` (Cramer's rule): the tool force of a patch compliance `W` (m/N) at displacement
-/// `d` (m), N.
-pub fn solve3(w: &Block3, d: [f64; 3]) -> [f64; 3] {
-    let det = |m: [[f64; 3]; 3]| {
-        m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1])
-            - m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0])
-            + m[0][2] * (m[1][0] * m[2][1] - m[1][1] * m[2][0])
-    };
-    let whole = det(*w);
-    std::array::from_fn(|c| {
-        let mut m = *w;
-        for (r, row) in m.iter_mut().enumerate() {
-            row[c] = d[r];
-        }
-        det(m) / whole
-    })
-}
-
-/// `n . W n`.
-pub fn normal_compliance(w: &Block3, n: [f64; 3]) -> f64 {
-    let wn: [f64; 3] = std::array::from_fn(|i| dot(w[i], n));
-    dot(n, wn)
 }
 
 /// The sites' contact points on the scene's collision surface (R's triangles).
@@ -299,17 +275,5 @@ mod tests {
             .map(|&(h, like)| level(h, at(like)))
             .collect();
         assert!(extrapolate(&sites, &wrong).is_err());
-    }
-
-    #[test]
-    fn solve3_inverts_a_general_matrix() {
-        let a = [[4.0, 1.0, 0.5], [2.0, 3.0, 1.0], [0.0, 1.0, 5.0]];
-        let d = [1.0, -2.0, 0.5];
-        let x = solve3(&a, d);
-        for (row, want) in a.iter().zip(d) {
-            assert!((dot(*row, x) - want).abs() < 1e-12, "{x:?}");
-        }
-        let singular = [[1.0, 2.0, 3.0], [2.0, 4.0, 6.0], [0.0, 0.0, 1.0]];
-        assert!(!solve3(&singular, d).iter().all(|v| v.is_finite()));
     }
 }

@@ -104,29 +104,13 @@ impl Source for VirtualDevice {
     }
 }
 
-/// Asks for the real-time FIFO scheduling class for the calling thread (Linux; needs
-/// CAP_SYS_NICE or an rtprio limit); returns whether it was granted. The thread sleeps between
-/// ticks, so it cannot starve the machine.
-pub(crate) fn request_realtime() -> bool {
-    #[cfg(target_os = "linux")]
-    {
-        let param = libc::sched_param { sched_priority: 20 };
-        // SAFETY: `pthread_self()` is the calling thread and `param` a valid sched_param.
-        unsafe { libc::pthread_setschedparam(libc::pthread_self(), libc::SCHED_FIFO, &param) == 0 }
-    }
-    #[cfg(not(target_os = "linux"))]
-    {
-        false
-    }
-}
-
 /// The loop thread.
 fn run(bytes: &AlignedBytes, shared: &Shared, home: [f64; 3]) {
     let Ok(bank) = Bank::parse(bytes) else {
         return;
     };
     let cal = *bank.device();
-    let realtime = request_realtime();
+    let realtime = crate::realtime::request();
     let mut haptic = HapticLoop::new(&bank);
     // The hand starts at the home pose (encoder zero): the homing the loop needs to arm.
     haptic.zero_encoders();

@@ -6,7 +6,7 @@ use bank_format::region::BANK_LEN;
 use bank_format::{AlignedBytes, Bank, LawKind, SectionKind};
 use haptic::bank::stats;
 use haptic::bank::sweep::{self, SweepConfig};
-use haptic::bank::{BuiltBank, Prepared};
+use haptic::bank::{BankSpec, BuiltBank, Prepared};
 use haptic::fsio::write_atomic;
 use haptic::scene::{ContactModel, Couplings, MeshSource};
 use std::path::PathBuf;
@@ -158,7 +158,9 @@ fn build(args: BuildArgs) -> Result<()> {
         bytes,
         pairs,
         sampled,
-    } = prep.build_bank(Some(&progress))?;
+    } = prep.bank(&BankSpec::Scene {
+        progress: Some(&progress),
+    })?;
     progress.finish();
     if bytes.len() > args.region_bytes {
         bail!(

@@ -1,5 +1,5 @@
 //! `host bench …`: parses a benchmark's arguments, runs it ([`haptic::bench`],
-//! [`haptic::bank::precompute`]) and prints its figures (speed is measured, never asserted by
+//! [`haptic::bench::precompute`]) and prints its figures (speed is measured, never asserted by
 //! tests; tests check behaviour).
 
 use super::organ::{OrganArgs, default_meshes};
@@ -65,7 +65,7 @@ impl SampledFemArgs {
     fn resolve(
         self,
         no_richardson: bool,
-    ) -> Result<(haptic::scene::Scene, haptic::bank::precompute::Overrides)> {
+    ) -> Result<(haptic::scene::Scene, haptic::bench::precompute::Overrides)> {
         let scene = haptic::scene::Scene::load_or_default(self.scene.as_deref())?;
         let element = self
             .element
@@ -73,7 +73,7 @@ impl SampledFemArgs {
             .map(str::parse::<haptic::scene::FemElement>)
             .transpose()
             .map_err(|why| anyhow::anyhow!("--element: {why}"))?;
-        let overrides = haptic::bank::precompute::Overrides {
+        let overrides = haptic::bench::precompute::Overrides {
             fem_mesh: self.fem_mesh,
             element,
             no_richardson,
@@ -192,7 +192,7 @@ pub fn run(bench: Bench) -> Result<()> {
 fn patch(args: PatchArgs) -> Result<()> {
     let (scene, overrides) = args.fem.resolve(true)?;
     eprintln!("factorising the FEM, then W of the loads twice ...");
-    let m = haptic::bank::precompute::patch_methods(scene, &overrides, args.loads)?;
+    let m = haptic::bench::precompute::patch_methods(scene, &overrides, args.loads)?;
     if args.json {
         println!("{}", serde_json::to_string(&m)?);
         return Ok(());
@@ -232,7 +232,7 @@ fn precompute(args: PrecomputeArgs) -> Result<()> {
     let larger_fem = args.fem.fem_mesh.is_some();
     let (scene, overrides) = args.fem.resolve(args.no_richardson)?;
     let progress = crate::progress::Bar::new("chunks (patch compliance, then display fields)");
-    let f = haptic::bank::precompute::measure(scene, &overrides, Some(&progress))?;
+    let f = haptic::bench::precompute::measure(scene, &overrides, Some(&progress))?;
     progress.finish();
     if args.json {
         println!("{}", serde_json::to_string(&f)?);

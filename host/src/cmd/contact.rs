@@ -161,8 +161,9 @@ fn probe(args: ProbeArgs) -> Result<()> {
 }
 
 fn study(args: StudyArgs) -> Result<()> {
+    use haptic::linalg::normal_compliance;
     use haptic::scene::FemElement;
-    use haptic::study::{self, DEFAULT_SITES, normal_compliance};
+    use haptic::study::{self, DEFAULT_SITES};
     let element: FemElement = args
         .element
         .parse()

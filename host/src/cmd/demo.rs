@@ -100,7 +100,7 @@ pub fn run(args: Args) -> Result<()> {
             bail!("--mesh {}: no such file", m.display());
         }
         let mesh = fem::mesh::read(m)?;
-        let side = haptic::meshing::largest_side(mesh.bounding_box());
+        let side = haptic::units::largest_side(mesh.bounding_box());
         let (units, note) = haptic::meshing::resolve_units(
             args.units.map(Into::into),
             side,
@@ -169,7 +169,7 @@ pub fn run(args: Args) -> Result<()> {
     let fields = {
         let progress = crate::progress::Bar::new("display field chunks");
         let t = Instant::now();
-        let fields = haptic::bank::cache::display_fields_cached(&prep, &bank, Some(&progress))?;
+        let fields = haptic::display::fields::DisplayFields::cached(&prep, &bank, Some(&progress))?;
         progress.finish();
         if let Some((f, cached)) = &fields {
             eprintln!(

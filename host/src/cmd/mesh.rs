@@ -90,7 +90,7 @@ pub fn run(a: Args) -> Result<()> {
     );
     let (units, note) = meshing::resolve_units(
         a.units.map(Into::into),
-        meshing::largest_side(surface.bounding_box()),
+        haptic::units::largest_side(surface.bounding_box()),
         &name,
         "--units",
     )?;
@@ -125,7 +125,7 @@ pub fn run(a: Args) -> Result<()> {
     }
     let surface_m = checked.scaled(units.to_metres());
     // The default size is the kept surface's (--largest may have dropped a far shell).
-    let side_m = meshing::largest_side(surface_m.bounding_box());
+    let side_m = haptic::units::largest_side(surface_m.bounding_box());
     let volume = surface_m.signed_volume();
     eprintln!(
         "surface: closed, {} faces, volume {:.4e} m^3 ({:.1} cm^3), largest side {:.4} m",
@@ -212,7 +212,7 @@ fn check_volume(a: &Args) -> Result<()> {
         c.units.name(),
         c.volume_m3,
         c.volume_m3 * 1e6,
-        meshing::largest_side(c.mesh.bounding_box()),
+        haptic::units::largest_side(c.mesh.bounding_box()),
         c.boundary.0,
         c.boundary.1
     );

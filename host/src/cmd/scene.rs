@@ -1,8 +1,8 @@
 //! `host scene new`: a complete, commented scene for a tetrahedral organ mesh.
 
 use anyhow::{Context, Result, bail};
-use haptic::meshing::Units;
 use haptic::scene_new::{NewScene, Support, Tissue, relative_to, scene_text};
+use haptic::units::Units;
 use std::path::PathBuf;
 
 /// `host scene` subcommands.
@@ -158,7 +158,7 @@ fn check_same_organ(
 ) -> Result<()> {
     let (fine, _, _) = haptic::meshing::load_mesh_in_units(fem_mesh, Some(units), "--units")?;
     let ((lo, hi), (flo, fhi)) = (mesh.bounding_box(), fine.bounding_box());
-    let side = haptic::meshing::largest_side((lo, hi));
+    let side = haptic::units::largest_side((lo, hi));
     let off = (0..3)
         .map(|i| (lo[i] - flo[i]).abs().max((hi[i] - fhi[i]).abs()))
         .fold(0.0f64, f64::max);

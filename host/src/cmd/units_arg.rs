@@ -1,7 +1,7 @@
 //! `--units` on the command line (`host demo`, `host mesh`, `host scene new`): the length
 //! units of a mesh file, converted to the library's [`Units`].
 
-use haptic::meshing::Units;
+use haptic::units::Units;
 
 /// Length units of a surface or tetrahedral mesh file.
 #[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]

@@ -1,36 +1,28 @@
-//! A cache of sampled banks, so that a command that needs a sampled scene's bank (`host demo`,
-//! `host contact probe`, `host sil`) pays the FEM precompute once per set of inputs.
+//! The bank caches, so that a command that needs a sampled scene's bank (`host demo`,
+//! `host contact probe`, `host sil`) pays the FEM precompute once per set of inputs; the files
+//! are kept by [`crate::cache::Store`].
 //!
-//! The key is FNV-1a 64 over [`crate::scene::Scene::inputs_hash`] (the scene file's text, the
-//! validated scene itself, say without the `[viscoelastic]` table a caller removed in memory,
-//! the bytes of the collision, FEM and Richardson meshes, the bank format version: the hash
-//! `host sil`'s bank key starts from too) and the source text of the code that computes and
-//! writes the samples ([`SAMPLING_SOURCES`], compiled in), so a build whose sampling differs
-//! never reuses another's bank, while every binary of one source tree (the CLI, each test)
-//! shares it.
-//! Files live in `$HAPTIC_CACHE_DIR`, else `$XDG_CACHE_HOME/haptic-host`, else
-//! `~/.cache/haptic-host`, named `bank-<key>.bin`, written atomically; a cached file is
-//! validated by the bank reader before use, and one that fails is rebuilt. A sampled scene's
-//! display fields ([`DisplayFields`]) go beside it as `fields-<key>.bin`, keyed by what they
-//! are computed from: the samples' key (below), the samples as the bank stores them and the
-//! text of the code that computes them.
+//! A bank's key is FNV-1a 64 over [`inputs_hash`] (the scene file's text, the validated scene
+//! itself, say without the `[viscoelastic]` table a caller removed in memory, the bytes of the
+//! collision, FEM and Richardson meshes, the bank format version: the hash `host sil`'s bank key
+//! starts from too) and the source text of the code that computes and writes the samples
+//! ([`SAMPLING_SOURCES`], compiled in), so a build whose sampling differs never reuses another's
+//! bank, while every binary of one source tree (the CLI, each test) shares it. Files are named
+//! `bank-<key>.bin`; a cached file is validated by the bank reader before use, and one that
+//! fails is rebuilt.
 //!
 //! A bank that is not in the cache takes its contact samples, the costly part, from
 //! `samples-<key>.bin` when another scene of the same organ computed them: that key
-//! (`samples_key`) covers only what the samples depend on (the FEM meshes' bytes, the body,
+//! ([`samples_key`]) covers only what the samples depend on (the FEM meshes' bytes, the body,
 //! the tool, the lattice), so adding a `[viscoelastic]` table or editing the law rebuilds the
-//! bank in a second. [`Prepared::build_bank`] itself (`host bank build`, the precompute bench)
-//! never reads the cache.
-//!
-//! Each new key (a new scene, an edited one, a new build of the sampling code) adds files, so
-//! the cache is bounded: when a file is stored, the least recently used files of its kind go
-//! until that kind holds at most [`BANKS_KEPT`] banks or sample sets or [`FIELDS_KEPT`] field
-//! sets (a hit counts as a use). An evicted entry only costs its next user the precompute.
+//! bank in a second; a sampled scene's display fields are keyed from it too
+//! ([`crate::display::fields::DisplayFields::cached`]). [`BankSpec::Scene`] itself
+//! (`host bank build`, the precompute bench) never reads the cache.
 
 use super::sampled::SampleStats;
-use super::{BuiltBank, Prepared, SampledParts};
-use crate::display::fields::DisplayFields;
-use crate::scene::{ContactModel, FNV_OFFSET, SampledContact, fnv1a};
+use super::{BankSpec, BuiltBank, Prepared, SampledParts};
+use crate::cache::{FNV_OFFSET, Store, fnv1a};
+use crate::scene::{ContactModel, MeshSource, SampledContact, Scene};
 use anyhow::Result;
 use bank_format::{AlignedBytes, Bank, ContactSamples};
 use fem::compliance::FactorStats;
@@ -38,16 +30,16 @@ use fem::progress::Progress;
 use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
 
-/// The cache directory (module notes), `None` without a home directory.
-pub fn cache_dir() -> Option<PathBuf> {
-    if let Some(d) = std::env::var_os("HAPTIC_CACHE_DIR") {
-        return Some(PathBuf::from(d));
-    }
-    if let Some(d) = std::env::var_os("XDG_CACHE_HOME") {
-        return Some(PathBuf::from(d).join("haptic-host"));
-    }
-    std::env::var_os("HOME").map(|h| PathBuf::from(h).join(".cache").join("haptic-host"))
-}
+/// Sampled banks kept (about 0.1 MiB each).
+pub const BANKS: Store = Store {
+    kind: "bank",
+    kept: 32,
+};
+/// Sets of contact samples kept (about as large as a bank).
+pub const SAMPLES: Store = Store {
+    kind: "samples",
+    kept: 32,
+};
 
 /// The source files whose text decides a sampled bank's bytes besides its inputs: the tool
 /// load and patch compliance (`fem`), the sampling stage, the bank writer and reader.
@@ -71,15 +63,53 @@ fn code_hash() -> u64 {
     })
 }
 
+/// FNV-1a 64 of the bytes of `file`, one the scene names (the error says so).
+pub fn file_hash(scene: &Scene, file: &Path) -> Result<u64> {
+    use anyhow::Context;
+    let bytes = std::fs::read(file).with_context(|| {
+        format!(
+            "cannot read {}, named by {}",
+            file.display(),
+            scene.path.display()
+        )
+    })?;
+    Ok(fnv1a(FNV_OFFSET, &bytes))
+}
+
+/// FNV-1a 64 over everything a bank is built from: the scene file's text, the validated
+/// scene (its `Debug` text without its path and its files' directories: a scene edited in
+/// memory after loading is not its file's), the bytes of every file it reads
+/// ([`Scene::input_files`]) or of the embedded liver, and the bank format version. The bank
+/// caches key on it (this module and [`crate::sil::bank`], each adding the code that builds).
+pub fn inputs_hash(scene: &Scene) -> Result<u64> {
+    let mut h = scene.text_hash;
+    if scene.mesh == MeshSource::BuiltinLiver {
+        h = fnv1a(h, crate::scene::BUILTIN_LIVER);
+    }
+    for file in scene.input_files() {
+        h = fnv1a(h, &file_hash(scene, file)?.to_le_bytes());
+    }
+    // Where the files lie is no input, their bytes are (above): the same scene reached as
+    // `host/scenes/liver.toml` and as `tests/../host/scenes/liver.toml` has one key.
+    let mut scene = scene.clone();
+    scene.path = PathBuf::new();
+    for p in scene.input_files_mut() {
+        *p = p.file_name().map(PathBuf::from).unwrap_or_default();
+    }
+    h = fnv1a(h, format!("{scene:?}").as_bytes());
+    h = fnv1a(h, &bank_format::VERSION_MAJOR.to_le_bytes());
+    Ok(fnv1a(h, &bank_format::VERSION_MINOR.to_le_bytes()))
+}
+
 /// The cache key of a sampled scene's bank (module notes).
 fn bank_key(prep: &Prepared) -> Result<u64> {
     Ok(fnv1a(
-        prep.organ.scene.inputs_hash()?,
+        inputs_hash(&prep.organ.scene)?,
         &code_hash().to_le_bytes(),
     ))
 }
 
-/// The scene's bank ([`Prepared::build_bank`]); a sampled scene's comes from the cache when
+/// The scene's bank ([`BankSpec::Scene`]); a sampled scene's comes from the cache when
 /// its inputs are unchanged, and goes into it when built. The second value says whether it
 /// came from the cache.
 pub fn scene_bank_cached(
@@ -87,34 +117,27 @@ pub fn scene_bank_cached(
     progress: Option<&dyn Progress>,
 ) -> Result<(BuiltBank, bool)> {
     let ContactModel::Sampled(spec) = &prep.organ.scene.contact else {
-        return Ok((prep.build_bank(progress)?, false));
+        return Ok((prep.bank(&BankSpec::Scene { progress })?, false));
     };
     let key = bank_key(prep)?;
-    let file = cache_dir().map(|d| d.join(format!("bank-{key:016x}.bin")));
-    if let Some(f) = &file
-        && let Ok(bytes) = std::fs::read(f)
-        && let Ok(bank) = Bank::parse(&AlignedBytes::new(&bytes))
-    {
-        touch(f);
-        let pairs = bank.pair_count();
-        return Ok((
-            BuiltBank {
-                bytes,
-                pairs,
-                sampled: None,
-            },
-            true,
-        ));
+    let cached = BANKS.load(key, |bytes| {
+        let pairs = Bank::parse(&AlignedBytes::new(&bytes))?.pair_count();
+        Ok::<_, bank_format::BankError>(BuiltBank {
+            bytes,
+            pairs,
+            sampled: None,
+        })
+    });
+    if let Some(built) = cached {
+        return Ok((built, true));
     }
     let (parts, samples_cached) = sampled_parts_cached(prep, spec, progress)?;
-    let mut built = prep.sampled_bank_from(parts)?;
+    let mut built = prep.bank(&BankSpec::Sampled(parts))?;
     if samples_cached {
         // What the sampling measured was another run's.
         built.sampled = None;
     }
-    if let Some(f) = &file {
-        store(f, &built.bytes);
-    }
+    BANKS.save(key, &built.bytes);
     Ok((built, samples_cached))
 }
 
@@ -123,7 +146,7 @@ pub fn scene_bank_cached(
 /// tool's radius, the lattice (level, R's positions and triangles) and the Richardson pair.
 /// The law, the device past R, the display law, gravity and relaxation are not in it: the
 /// same organ with another `[viscoelastic]` table shares its samples.
-fn samples_key(prep: &Prepared, spec: &SampledContact) -> Result<u64> {
+pub fn samples_key(prep: &Prepared, spec: &SampledContact) -> Result<u64> {
     let scene = &prep.organ.scene;
     let mut h = fnv1a(FNV_OFFSET, &code_hash().to_le_bytes());
     let files = [
@@ -131,7 +154,7 @@ fn samples_key(prep: &Prepared, spec: &SampledContact) -> Result<u64> {
         spec.richardson.as_ref().map(|r| &r.mesh),
     ];
     for file in files.into_iter().flatten() {
-        h = fnv1a(h, &scene.file_hash(file)?.to_le_bytes());
+        h = fnv1a(h, &file_hash(scene, file)?.to_le_bytes());
     }
     let boxes: Vec<_> = scene.fix_boxes.iter().map(|b| (b.bounds, b.axes)).collect();
     let richardson = spec.richardson.as_ref().map(|r| (r.ratio, r.order));
@@ -172,18 +195,11 @@ fn sampled_parts_cached(
     progress: Option<&dyn Progress>,
 ) -> Result<(SampledParts, bool)> {
     let key = samples_key(prep, spec)?;
-    let file = cache_dir().map(|d| d.join(format!("samples-{key:016x}.bin")));
-    if let Some(f) = &file
-        && let Ok(bytes) = std::fs::read(f)
-        && let Some(parts) = decode_parts(&bytes)
-    {
-        touch(f);
+    if let Some(parts) = SAMPLES.load(key, |bytes| decode_parts(&bytes).ok_or(())) {
         return Ok((parts, true));
     }
     let parts = prep.sampled_parts(spec, progress)?;
-    if let Some(f) = &file {
-        store(f, &encode_parts(&parts));
-    }
+    SAMPLES.save(key, &encode_parts(&parts));
     Ok((parts, false))
 }
 
@@ -311,111 +327,6 @@ fn decode_parts(bytes: &[u8]) -> Option<SampledParts> {
     })
 }
 
-/// The source files whose text decides the display fields besides the bank's inputs.
-const FIELDS_SOURCES: [&str; 2] = [
-    include_str!("../display/fields.rs"),
-    include_str!("../../../fem/src/elasticity/mod.rs"),
-];
-
-/// A sampled scene's display fields ([`DisplayFields::compute`] for `bank`, the scene's bank)
-/// from the cache, or computed and cached; `None` for a nodal scene. The second value says
-/// whether they came from the cache.
-pub fn display_fields_cached(
-    prep: &Prepared,
-    bank: &Bank,
-    progress: Option<&dyn Progress>,
-) -> Result<Option<(DisplayFields, bool)>> {
-    let (ContactModel::Sampled(spec), Some(samples)) = (&prep.organ.scene.contact, bank.samples())
-    else {
-        return Ok(None);
-    };
-    // What the fields are computed from: the samples' inputs and the samples as the bank
-    // stores them (so the same organ under another law or relaxation shares its fields).
-    let mut key = samples_key(prep, spec)?;
-    key = fnv1a(key, &samples.tip_radius_m().to_bits().to_le_bytes());
-    for s in 0..samples.count() {
-        for v in samples.sample(s).unwrap_or_default() {
-            key = fnv1a(key, &v.to_bits().to_le_bytes());
-        }
-    }
-    let key = FIELDS_SOURCES
-        .iter()
-        .fold(key, |h, s| fnv1a(h, s.as_bytes()));
-    let file = cache_dir().map(|d| d.join(format!("fields-{key:016x}.bin")));
-    if let Some(f) = &file
-        && let Ok(bytes) = std::fs::read(f)
-        && let Ok(fields) = DisplayFields::decode(&bytes)
-    {
-        touch(f);
-        return Ok(Some((fields, true)));
-    }
-    let Some(fields) = DisplayFields::for_bank(prep, bank, progress)? else {
-        return Ok(None);
-    };
-    if let Some(f) = &file {
-        store(f, &fields.encode());
-    }
-    Ok(Some((fields, false)))
-}
-
-/// Sampled banks kept (about 0.1 MiB each), and as many sets of contact samples.
-pub const BANKS_KEPT: usize = 32;
-/// Display field sets kept (about 71 MiB each for the default scene).
-pub const FIELDS_KEPT: usize = 4;
-
-/// Writes a cache file, then evicts the least recently used files of its kind beyond what is
-/// kept (module notes); a file that cannot be written only costs the next run the precompute.
-fn store(f: &Path, bytes: &[u8]) {
-    let written = f
-        .parent()
-        .map(std::fs::create_dir_all)
-        .transpose()
-        .ok()
-        .and_then(|_| crate::fsio::write_atomic(f, bytes, &[]).ok());
-    if written.is_none() {
-        eprintln!("note: could not write the cache file {}", f.display());
-        return;
-    }
-    let name = f.file_name().map(|n| n.to_string_lossy().into_owned());
-    let (prefix, kept) = match name.as_deref() {
-        Some(n) if n.starts_with("fields-") => ("fields-", FIELDS_KEPT),
-        Some(n) if n.starts_with("samples-") => ("samples-", BANKS_KEPT),
-        _ => ("bank-", BANKS_KEPT),
-    };
-    if let Some(dir) = f.parent() {
-        evict(dir, prefix, kept);
-    }
-}
-
-/// Marks a cache hit as a use (its modification time), so eviction keeps what is in use.
-fn touch(f: &Path) {
-    let _ = std::fs::File::options()
-        .append(true)
-        .open(f)
-        .and_then(|file| file.set_modified(std::time::SystemTime::now()));
-}
-
-/// Removes the oldest `<prefix>*.bin` files of `dir` (by modification time) beyond the
-/// `kept` newest; errors (a file another process removed first) are ignored.
-fn evict(dir: &Path, prefix: &str, kept: usize) {
-    let Ok(entries) = std::fs::read_dir(dir) else {
-        return;
-    };
-    let mut files: Vec<_> = entries
-        .filter_map(|e| e.ok())
-        .filter(|e| {
-            let n = e.file_name();
-            let n = n.to_string_lossy();
-            n.starts_with(prefix) && n.ends_with(".bin")
-        })
-        .filter_map(|e| Some((e.metadata().ok()?.modified().ok()?, e.path())))
-        .collect();
-    files.sort_by_key(|f| std::cmp::Reverse(f.0));
-    for (_, old) in files.iter().skip(kept) {
-        let _ = std::fs::remove_file(old);
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -485,49 +396,6 @@ mod tests {
         assert_eq!(decode_parts(b"HSAMPLE0"), None);
     }
 
-    /// Eviction keeps the newest files of one kind and leaves the other kind and other files.
-    #[test]
-    fn eviction_keeps_the_most_recently_used() {
-        let dir = tempfile::tempdir().unwrap();
-        let t0 = std::time::SystemTime::now() - std::time::Duration::from_secs(100);
-        for i in 0..5u64 {
-            for kind in ["bank", "fields"] {
-                let f = dir.path().join(format!("{kind}-{i:016x}.bin"));
-                std::fs::write(&f, b"x").unwrap();
-                let file = std::fs::File::options().append(true).open(&f).unwrap();
-                file.set_modified(t0 + std::time::Duration::from_secs(i))
-                    .unwrap();
-            }
-        }
-        std::fs::write(dir.path().join("notes.txt"), b"kept").unwrap();
-        // The oldest bank used again: it stays, the next oldest goes.
-        touch(&dir.path().join(format!("bank-{:016x}.bin", 0)));
-        evict(dir.path(), "bank-", 3);
-        let mut left: Vec<String> = std::fs::read_dir(dir.path())
-            .unwrap()
-            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
-            .filter(|n| n.starts_with("bank-"))
-            .collect();
-        left.sort();
-        let want: Vec<String> = [0u64, 3, 4]
-            .iter()
-            .map(|i| format!("bank-{i:016x}.bin"))
-            .collect();
-        assert_eq!(left, want);
-        let fields = std::fs::read_dir(dir.path())
-            .unwrap()
-            .filter(|e| {
-                e.as_ref()
-                    .unwrap()
-                    .file_name()
-                    .to_string_lossy()
-                    .starts_with("fields-")
-            })
-            .count();
-        assert_eq!(fields, 5);
-        assert!(dir.path().join("notes.txt").exists());
-    }
-
     /// A scene edited in memory after loading gets its own key, not its file's.
     #[test]
     fn the_key_covers_a_scene_edited_in_memory() {
@@ -540,5 +408,22 @@ mod tests {
         assert!(prep.organ.scene.viscoelastic.is_some());
         prep.organ.scene.viscoelastic = None;
         assert_ne!(bank_key(&prep).unwrap(), with);
+    }
+
+    /// One scene reached by two spellings of its path has one key (the caches share its bank);
+    /// a different FEM mesh file gives another.
+    #[test]
+    fn inputs_hash_ignores_the_path_spelling_not_the_files() {
+        let dir = Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/.."));
+        let a = Scene::load(&dir.join("scenes/liver.toml")).unwrap();
+        let b = Scene::load(&dir.join("../tests/../host/scenes/liver.toml")).unwrap();
+        assert_ne!(a.input_files(), b.input_files());
+        assert_eq!(inputs_hash(&a).unwrap(), inputs_hash(&b).unwrap());
+        let mut c = a.clone();
+        let ContactModel::Sampled(spec) = &mut c.contact else {
+            panic!("the shipped scene is sampled")
+        };
+        spec.fem_mesh = dir.join("meshes/liver-1k4.msh");
+        assert_ne!(inputs_hash(&a).unwrap(), inputs_hash(&c).unwrap());
     }
 }

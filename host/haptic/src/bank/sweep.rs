@@ -13,7 +13,7 @@
 //! compliance blocks `C_ab` of the patch's nodes. So the error is what the bank's truncation,
 //! its f32 storage and the f32 solve cost, nothing else.
 
-use super::{BlockRows, Prepared, ToolPairs, UNCOUPLED_TOL};
+use super::{BankSpec, BlockRows, Prepared, ToolPairs, UNCOUPLED_TOL};
 use crate::contact::weighted_tool_force;
 use anyhow::{Context, Result, bail};
 use bank_format::region::BANK_LEN;
@@ -311,9 +311,19 @@ pub fn run(
                     .pairs,
                 ),
             };
-            prep.bank_in(&rows, radius, Some(pairs), precision)?
+            prep.bank(&BankSpec::Nodal {
+                rows: &rows,
+                radius,
+                extra: Some(pairs),
+                precision,
+            })?
         } else {
-            prep.bank_in(&rows, radius, None, precision)?
+            prep.bank(&BankSpec::Nodal {
+                rows: &rows,
+                radius,
+                extra: None,
+                precision,
+            })?
         };
         let aligned = AlignedBytes::new(&built.bytes);
         let bank = Bank::parse(&aligned)

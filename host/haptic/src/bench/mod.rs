@@ -6,11 +6,12 @@
 //! memory) on a mesh; [`refinement`]: one tool press, point contact against the tool tip, on an
 //! organ meshed at several sizes; [`sil`]: instructions per tick of the firmware image under
 //! QEMU along the press, slide and strike scripts, and its flash and RAM; [`tick`]: the
-//! firmware's loop run natively on a bank. A sampled scene's precompute and its patch
-//! compliance are measured by [`crate::bank::precompute::measure`] and
-//! [`crate::bank::precompute::patch_methods`].
+//! firmware's loop run natively on a bank; [`precompute`]: a sampled scene's precompute (its
+//! contact samples and display fields, [`precompute::measure`]) and the patch compliance's
+//! methods ([`precompute::patch_methods`]).
 
 pub mod compliance;
+pub mod precompute;
 pub mod refinement;
 pub mod sil;
 pub mod tick;

@@ -1,4 +1,4 @@
-//! A sampled scene's display (issue 26): the fine FEM mesh's surface deformed by precomputed
+//! A sampled scene's display: the fine FEM mesh's surface deformed by precomputed
 //! displacement fields, `u = U(p) F`, with no solve after a contact.
 //!
 //! For each contact sample `s` of the bank (a lattice point of the collision surface, the same
@@ -17,13 +17,16 @@
 //! shape around it is P1's. Stored as f16 (half the memory of f32; 3 significant digits are
 //! below what a display shows); [`DisplayFields::bytes`] states the memory.
 //!
-//! Cache file (little-endian, written atomically, see [`super::super::bank::cache`]): `b"HDF1"`,
+//! Cached by [`DisplayFields::cached`] beside the scene's bank ([`crate::cache`]). Cache file
+//! (little-endian): `b"HDF1"`,
 //! `u32 version` (1), `u32 nodes, u32 triangles, u32 samples, u32 level, u32 bank triangles`,
 //! `f32 rest[3 nodes]`, `u32 tri[3 triangles]`, `u16 ids[bank triangles x lattice_len(level)]`,
 //! `u16 f16 U[samples][nodes][9]` (row-major 3 x 3: displacement component, load component).
 
 use super::DisplayMesh;
-use crate::scene::Scene;
+use crate::bank::Prepared;
+use crate::cache::{Store, fnv1a};
+use crate::scene::{ContactModel, Scene};
 use anyhow::{Context, Result, bail};
 use fem::compliance::{Block3, Compliance};
 use fem::elasticity::{Elasticity, Element};
@@ -39,6 +42,16 @@ const MAGIC: &[u8; 4] = b"HDF1";
 const VERSION: u32 = 1;
 /// Tool loads solved at once (three right-hand sides each).
 const CHUNK_LOADS: usize = 64;
+/// The cached field sets: about 71 MiB each for the default scene, four kept.
+pub const FIELDS: Store = Store {
+    kind: "fields",
+    kept: 4,
+};
+/// The source files whose text decides the display fields besides the bank's inputs.
+pub const FIELDS_SOURCES: [&str; 2] = [
+    include_str!("fields.rs"),
+    include_str!("../../../fem/src/elasticity/mod.rs"),
+];
 
 /// The fine surface and its displacement fields (module notes).
 #[derive(Debug, Clone, PartialEq)]
@@ -137,7 +150,7 @@ impl DisplayFields {
                     }
                     // M = W_P1^-1 W, column by column.
                     let cols: Block3 = std::array::from_fn(|k| {
-                        crate::study::solve3(&w_p1, std::array::from_fn(|r| w[first + j][r][k]))
+                        crate::linalg::solve3(&w_p1, std::array::from_fn(|r| w[first + j][r][k]))
                     });
                     if !cols.iter().flatten().all(|v| v.is_finite()) {
                         bail!(
@@ -179,11 +192,11 @@ impl DisplayFields {
     /// The fields of `prep`'s scene for `bank` (built from it); `None` for a nodal scene or a
     /// bank without samples.
     pub fn for_bank(
-        prep: &crate::bank::Prepared,
+        prep: &Prepared,
         bank: &bank_format::Bank<'_>,
         progress: Option<&dyn Progress>,
     ) -> Result<Option<DisplayFields>> {
-        let (crate::scene::ContactModel::Sampled(spec), Some(samples)) =
+        let (ContactModel::Sampled(spec), Some(samples)) =
             (&prep.organ.scene.contact, bank.samples())
         else {
             return Ok(None);
@@ -202,6 +215,42 @@ impl DisplayFields {
             progress,
         )
         .map(Some)
+    }
+
+    /// The fields of a sampled scene ([`DisplayFields::for_bank`] for `bank`, the scene's bank)
+    /// from the cache, or computed and cached; `None` for a nodal scene. The second value says
+    /// whether they came from the cache. The key is what they are computed from: the samples'
+    /// inputs ([`crate::bank::cache::samples_key`]), the samples as the bank stores them (so
+    /// the same organ under another law or relaxation shares its fields) and the text of the
+    /// code that computes them ([`FIELDS_SOURCES`]).
+    pub fn cached(
+        prep: &Prepared,
+        bank: &bank_format::Bank<'_>,
+        progress: Option<&dyn Progress>,
+    ) -> Result<Option<(DisplayFields, bool)>> {
+        let (ContactModel::Sampled(spec), Some(samples)) =
+            (&prep.organ.scene.contact, bank.samples())
+        else {
+            return Ok(None);
+        };
+        let mut key = crate::bank::cache::samples_key(prep, spec)?;
+        key = fnv1a(key, &samples.tip_radius_m().to_bits().to_le_bytes());
+        for s in 0..samples.count() {
+            for v in samples.sample(s).unwrap_or_default() {
+                key = fnv1a(key, &v.to_bits().to_le_bytes());
+            }
+        }
+        let key = FIELDS_SOURCES
+            .iter()
+            .fold(key, |h, s| fnv1a(h, s.as_bytes()));
+        if let Some(fields) = FIELDS.load(key, |bytes| DisplayFields::decode(&bytes)) {
+            return Ok(Some((fields, true)));
+        }
+        let Some(fields) = DisplayFields::for_bank(prep, bank, progress)? else {
+            return Ok(None);
+        };
+        FIELDS.save(key, &fields.encode());
+        Ok(Some((fields, false)))
     }
 
     /// Bytes held in memory (positions, triangles, lattice ids, fields).

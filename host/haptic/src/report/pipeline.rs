@@ -7,7 +7,7 @@ use super::{
     Report, couplings, hard, html, law, locking, loops, pareto, precision, precompute_cost,
     relaxation, sampled, scale, tick_cost,
 };
-use crate::bank::Prepared;
+use crate::bank::{BankSpec, Prepared};
 use crate::calibrate::{csv, fit};
 use crate::fsio::write_atomic;
 use crate::mcu::law_cost;
@@ -118,7 +118,7 @@ pub fn run(cfg: &ReportConfig, step: &dyn Fn(&str)) -> Result<Report> {
     // The scene's bank: f32 against f64, the loop's hard cases, the firmware under QEMU.
     step("the scene's bank");
     let prepared = Prepared::from_scene(scene.clone())?;
-    let built = prepared.build_bank(None)?;
+    let built = prepared.bank(&BankSpec::Scene { progress: None })?;
     let bytes = bank_format::AlignedBytes::new(&built.bytes);
     let bank = bank_format::Bank::parse(&bytes)
         .map_err(|e| anyhow::anyhow!("the scene's bank does not parse: {e}"))?;
@@ -127,7 +127,7 @@ pub fn run(cfg: &ReportConfig, step: &dyn Fn(&str)) -> Result<Report> {
     // the bank-couplings knob's).
     let mut p32 = Prepared::from_scene(scene.clone())?;
     p32.organ.scene.bank.precision = bank_format::Precision::F32;
-    let built32 = p32.build_bank(None)?;
+    let built32 = p32.bank(&BankSpec::Scene { progress: None })?;
     let bytes32 = bank_format::AlignedBytes::new(&built32.bytes);
     let bank32 = bank_format::Bank::parse(&bytes32)
         .map_err(|e| anyhow::anyhow!("the scene's f32 bank does not parse: {e}"))?;

@@ -11,7 +11,7 @@
 //! eigenvalues).
 
 use super::{HardCase, Knob, Point, Series, Verdict};
-use crate::bank::Prepared;
+use crate::bank::{BankSpec, Prepared};
 use crate::contact::weighted_tool_force;
 use anyhow::{Result, anyhow};
 use bank_format::Bank;
@@ -237,7 +237,12 @@ pub fn nu_rows(p: &Prepared, nus: &[f64], step: &dyn Fn(&str)) -> Result<Vec<NuR
         scene.material = Material::new(scene.material.young, nu)?;
         let q = Prepared::from_scene(scene)?;
         let radius = q.organ.scene.bank.truncation_radius_m;
-        let built = q.bank(&q.blocks(radius, None)?, radius)?;
+        let built = q.bank(&BankSpec::Nodal {
+            rows: &q.blocks(radius, None)?,
+            radius,
+            extra: None,
+            precision: q.organ.scene.bank.precision,
+        })?;
         let bytes = bank_format::AlignedBytes::new(&built.bytes);
         let bank = Bank::parse(&bytes).map_err(|e| anyhow!("bank at nu = {nu}: {e}"))?;
         let ids: Vec<usize> = bank.mesh_ids().iter().map(|&i| i as usize).collect();

@@ -21,8 +21,8 @@
 //! **Precision.** The samples are f32 only (bank format 6 has no bfp16 samples): not a knob.
 
 use super::{HardCase, Knob, Point, Series, Verdict};
-use crate::bank::Prepared;
 use crate::bank::sampled::{SampledFem, extrapolated, lattice_points, samples_from, spd};
+use crate::bank::{BankSpec, Prepared, SampledParts};
 use crate::organ::Organ;
 use crate::scene::{ContactModel, FemElement, Scene};
 use crate::study::Study;
@@ -146,30 +146,34 @@ pub fn measure(scene: &Scene, quick: bool, step: &dyn Fn(&str)) -> Result<Vec<Va
         ));
     }
     let mut variants = Vec::new();
-    let mut push = |fem: String, level_index: usize, samples, stats, id, seconds: f64, chosen| {
-        let built = prep.sampled_bank_with(samples, stats, id)?;
-        variants.push(Variant {
-            fem,
-            level: levels[level_index],
-            bank: built.bytes,
-            precompute_s: seconds,
-            error: (0.0, 0.0),
-            chosen,
-            instructions: None,
-        });
-        anyhow::Ok(())
-    };
+    let mut push =
+        |fem: String, level_index: usize, samples, stats, mesh_hashes, seconds: f64, chosen| {
+            let built = prep.bank(&BankSpec::Sampled(SampledParts {
+                samples,
+                stats,
+                mesh_hashes,
+            }))?;
+            variants.push(Variant {
+                fem,
+                level: levels[level_index],
+                bank: built.bytes,
+                precompute_s: seconds,
+                error: (0.0, 0.0),
+                chosen,
+                instructions: None,
+            });
+            anyhow::Ok(())
+        };
     for (b, (name, factor_s, hash, per_level)) in computed.iter().enumerate() {
         for (i, (samples, stats)) in per_level.iter().enumerate() {
             let chosen = b == 0 && spec.richardson.is_none() && levels[i] == spec.level;
             let seconds = factor_s + stats.w_s;
-            let id = crate::scene::fnv1a(prep.organ.scene_id, &hash.to_le_bytes());
             push(
                 name.clone(),
                 i,
                 samples.clone(),
                 *stats,
-                id,
+                vec![*hash],
                 seconds,
                 chosen,
             )?;
@@ -184,16 +188,12 @@ pub fn measure(scene: &Scene, quick: bool, step: &dyn Fn(&str)) -> Result<Vec<Va
                 continue;
             }
             let seconds = fine.1 + stats.w_s + coarse.1 + coarse.3[i].1.w_s;
-            let id = crate::scene::fnv1a(
-                crate::scene::fnv1a(prep.organ.scene_id, &fine.2.to_le_bytes()),
-                &coarse.2.to_le_bytes(),
-            );
             push(
                 format!("{} + Richardson ({})", fine.0, short(&rich.mesh)),
                 i,
                 samples,
                 stats,
-                id,
+                vec![fine.2, coarse.2],
                 seconds,
                 level == spec.level,
             )?;
@@ -252,7 +252,7 @@ pub fn press_errors(
             .with_context(|| format!("site {}", site.name))?;
             let rendered = p.force_n.context("the probe rendered no force")?;
             let reference =
-                crate::study::solve3(&study.reference_w[s], p.normal.map(|x| depth * x));
+                crate::linalg::solve3(&study.reference_w[s], p.normal.map(|x| depth * x));
             let diff = (0..3)
                 .map(|c| (rendered[c] - reference[c]).powi(2))
                 .sum::<f64>()
@@ -482,8 +482,8 @@ pub fn refinement_case(study: &Study) -> Option<HardCase> {
         .enumerate()
         .map(|(s, site)| {
             let (ka, kb) = (
-                crate::study::normal_compliance(&a.w[s], site.normal),
-                crate::study::normal_compliance(&b.w[s], site.normal),
+                crate::linalg::normal_compliance(&a.w[s], site.normal),
+                crate::linalg::normal_compliance(&b.w[s], site.normal),
             );
             ((kb - ka) / kb).abs()
         })

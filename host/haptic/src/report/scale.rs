@@ -14,7 +14,7 @@
 //!   (three column solves with the factorisation, [`Deformer::displacement_exact`]).
 
 use super::{HardCase, Knob, Point, Series, Verdict};
-use crate::bank::Prepared;
+use crate::bank::{BankSpec, Prepared};
 use crate::contact::{ContactSurface, capped_patch, patch_force};
 use crate::deform::Deformer;
 use crate::display::{FrameInfo, encode_frame};
@@ -99,10 +99,10 @@ pub fn measure(
     drop(file);
     let mut s = scene.clone();
     s.mesh = MeshSource::File(path);
-    s.mesh_units = Some(crate::meshing::Units::M);
+    s.mesh_units = Some(crate::units::Units::M);
     let q = Prepared::from_scene(s).with_context(|| format!("the scene on {name}"))?;
     let t = Instant::now();
-    let bank = q.build_bank(None)?;
+    let bank = q.bank(&BankSpec::Scene { progress: None })?;
     let bank_s = t.elapsed().as_secs_f64();
 
     let surface = ContactSurface::new(&q.organ.mesh, &q.organ.surface);

@@ -1,15 +1,17 @@
 //! The bank a SIL run loads when none is given: the scene's, built once per set of inputs
 //! into `target/sil/` (QEMU loads it from a file into the flash's bank region).
 
+use crate::bank::cache::inputs_hash;
 use crate::bank::scene_bank;
+use crate::cache::fnv1a;
 use crate::fsio::write_atomic;
-use crate::scene::{Scene, fnv1a};
+use crate::scene::Scene;
 use anyhow::{Context, Result};
 use std::path::{Path, PathBuf};
 
 /// `target/sil/<scene stem>-<key>.bank`, built when missing. The key hashes what the bank is made
-/// from ([`Scene::inputs_hash`]: the scene, every file it reads, the bank format version) and
-/// the building executable (its path and modification time), so an edited scene or mesh, a new
+/// from ([`inputs_hash`]: the scene, every file it reads, the bank format version) and the
+/// building executable (its path and modification time), so an edited scene or mesh, a new
 /// format or a rebuilt host never reuses a stale bank.
 /// Older cached banks of the same scene are removed.
 pub fn cached(scene: &Path) -> Result<PathBuf> {
@@ -43,10 +45,10 @@ pub fn cached(scene: &Path) -> Result<PathBuf> {
     Ok(out)
 }
 
-/// The cache key of `scene`'s bank ([`cached`]): the scene's [`Scene::inputs_hash`], then the
-/// building executable's path and modification time.
+/// The cache key of `scene`'s bank ([`cached`]): the scene's [`inputs_hash`], then the building
+/// executable's path and modification time.
 fn key(scene: &Path) -> Result<u64> {
-    let mut key = Scene::load(scene)?.inputs_hash()?;
+    let mut key = inputs_hash(&Scene::load(scene)?)?;
     if let Ok(exe) = std::env::current_exe() {
         key = fnv1a(key, exe.as_os_str().as_encoded_bytes());
         let modified = std::fs::metadata(&exe)

@@ -1,11 +1,11 @@
-//! What a sampled scene's precompute costs (`host bench precompute`, issue 26): the bank (FEM
+//! What a sampled scene's precompute costs (`host bench precompute`): the bank (FEM
 //! factor and `W` at every sample, with its Richardson partner) and the display fields, timed
 //! and with the process's peak memory, without the cache; then the start of a run that finds
 //! both in the cache (read and validate the bank, read the fields). And the patch compliance's
 //! two methods side by side (`host bench patch`, [`patch_methods`]).
 
-use super::{BuiltBank, Prepared};
 use crate::bank::sampled::{SampledFem, lattice_points};
+use crate::bank::{BankSpec, BuiltBank, Prepared};
 use crate::display::fields::DisplayFields;
 use crate::organ::Organ;
 use crate::reach::Region;
@@ -101,7 +101,7 @@ pub fn measure(
     let prep = Prepared::from_scene(scene.clone())?;
     let prepare_s = t0.elapsed().as_secs_f64();
     let t1 = Instant::now();
-    let BuiltBank { bytes, sampled, .. } = prep.build_bank(progress)?;
+    let BuiltBank { bytes, sampled, .. } = prep.bank(&BankSpec::Scene { progress })?;
     let bank_s = t1.elapsed().as_secs_f64();
     let aligned = AlignedBytes::new(&bytes);
     let bank = Bank::parse(&aligned).map_err(|e| anyhow::anyhow!("built bank invalid: {e}"))?;
