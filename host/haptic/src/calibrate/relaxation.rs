@@ -1,4 +1,4 @@
-//! Fung's quasi-linear viscoelasticity fitted to a bench ramp-and-hold test (issue 30): the
+//! Fung's quasi-linear viscoelasticity fitted to a bench ramp-and-hold test: the
 //! reduced relaxation function `G(t) = g_inf + sum_k g_k exp(-t / tau_k)`, `G(0) = 1`, and
 //! the instantaneous elastic response `Q_e(x)`, a monotone law of the displacement, together.
 //!
@@ -30,13 +30,17 @@
 //! [`RATE_WARN_RMS_OVER_NOISE`] noise levels or [`RATE_WARN_PEAK_SE`] standard errors is
 //! warned about (QLV's `G` does not depend on the rate: a material whose relaxation does is
 //! outside the model). The parameters' linearised standard errors (`standard_errors`) come
-//! with the fit.
+//! with the fit. [`run`] is `host calibrate relaxation`: files in, plot and scene out.
 //!
 //! **Refusals.** Data that is noise (the elastic response explains less than
 //! [`MIN_SIGNAL_TO_NOISE`] times the noise) and data that does not relax (the fitted terms
 //! lower the residual by less than [`MIN_RELAXATION_GAIN`] against the best elastic fit, or
 //! relax less than [`MIN_RELAXATION_SNR`] noise levels of force) are refused, as is a test
 //! without a hold.
+
+mod command;
+
+pub use command::{Config, Report, TestReport, run};
 
 use bank_format::MAX_PRONY_TERMS;
 
