@@ -107,12 +107,8 @@ pub fn run(config: &DemoConfig, ui: &dyn Frontend, stop: &AtomicBool) -> Result<
         }
         let mesh = fem::mesh::read(m)?;
         let side = crate::meshing::largest_side(mesh.bounding_box());
-        let (units, note) = crate::meshing::resolve_units(
-            args.units,
-            side,
-            &m.display().to_string(),
-            "--units",
-        )?;
+        let (units, note) =
+            crate::meshing::resolve_units(args.units, side, &m.display().to_string(), "--units")?;
         if let Some(n) = note {
             ui.note(&format!("{}: {n}", m.display()));
         }

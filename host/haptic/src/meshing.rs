@@ -388,8 +388,12 @@ pub fn mesh_surface(config: &MeshConfig, note: &mut dyn FnMut(&str)) -> Result<M
         surface.vertices.len(),
         surface.triangles.len()
     ));
-    let (units, guessed) =
-        resolve_units(a.units, largest_side(surface.bounding_box()), &name, "--units")?;
+    let (units, guessed) = resolve_units(
+        a.units,
+        largest_side(surface.bounding_box()),
+        &name,
+        "--units",
+    )?;
     if let Some(n) = guessed {
         note(&n);
     }

@@ -269,13 +269,16 @@ fn relaxation_cmd(a: RelaxationArgs) -> Result<()> {
             100.0 * s
         );
     }
-    println!("plot: {} and {}", rep.plot[0].display(), rep.plot[1].display());
+    println!(
+        "plot: {} and {}",
+        rep.plot[0].display(),
+        rep.plot[1].display()
+    );
     if let Some(scene) = &rep.scene {
         println!("wrote [viscoelastic] into {}", scene.display());
     }
     Ok(())
 }
-
 
 fn tissue_cmd(a: TissueArgs) -> Result<()> {
     let degree = parse_degree(&a.degree)?;

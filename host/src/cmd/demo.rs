@@ -5,6 +5,7 @@
 
 use super::script_arg::ScriptArg;
 use anyhow::{Context, Result};
+use fem::progress::Progress;
 use haptic::demo::{self, DemoConfig, DemoSummary, Frontend};
 use haptic::display::DisplayStats;
 use haptic::display::source::SourceSpec;
@@ -77,7 +78,7 @@ struct Terminal {
 /// A progress bar that clears itself when the computation ends.
 struct Clearing(crate::progress::Bar);
 
-impl fem::progress::Progress for Clearing {
+impl Progress for Clearing {
     fn start(&self, total: u64) {
         self.0.start(total);
     }
@@ -98,7 +99,7 @@ impl Frontend for Terminal {
         eprintln!("{line}");
     }
 
-    fn progress(&self, what: &str) -> Box<dyn fem::progress::Progress + '_> {
+    fn progress(&self, what: &str) -> Box<dyn Progress + '_> {
         Box::new(Clearing(crate::progress::Bar::new(what)))
     }
 
@@ -152,11 +153,8 @@ pub fn run(args: Args) -> Result<()> {
 /// Prints the figures of a run.
 fn report(args: &Args, summary: &DemoSummary) {
     let (d, l) = (&summary.display, &summary.loop_stats);
-    let (recorded, nodes, press_point) = (
-        summary.recorded,
-        summary.display_nodes,
-        summary.press_point,
-    );
+    let (recorded, nodes, press_point) =
+        (summary.recorded, summary.display_nodes, summary.press_point);
     if args.json {
         let v = serde_json::json!({
             "tick_rate_hz": l.tick_rate_hz, "max_jitter_us": l.max_jitter_us,

@@ -253,7 +253,11 @@ fn mode(mode: ModeArg, currents: Option<&[f32]>, limit: [f32; 3]) -> Result<Mode
 fn arm(args: ArmArgs) -> Result<()> {
     // Bad currents are refused before the port is opened.
     let bank = bank(&args.device)?;
-    let mode = mode(args.mode, args.currents.as_deref(), bank.calibration.current_limit_a)?;
+    let mode = mode(
+        args.mode,
+        args.currents.as_deref(),
+        bank.calibration.current_limit_a,
+    )?;
     let mut session = open(&args.device, &bank)?;
     session.ready_to_arm(args.clear_fault)?;
     let stop = Arc::new(AtomicBool::new(false));

@@ -300,4 +300,3 @@ pub fn run(a: &Config) -> Result<Report> {
         scene: a.scene.clone(),
     })
 }
-

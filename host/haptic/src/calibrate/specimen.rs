@@ -169,4 +169,3 @@ pub fn run(a: &Config) -> Result<SpecimenResponse> {
     let material = Material::new(a.young_pa, a.poisson)?;
     compress(&mesh, material).with_context(|| format!("{}: specimen compression", a.mesh.display()))
 }
-

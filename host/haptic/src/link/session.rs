@@ -49,8 +49,7 @@ impl ExpectedBank {
             ),
         };
         let aligned = AlignedBytes::new(&bytes);
-        let bank =
-            Bank::parse(&aligned).map_err(|e| anyhow!("{name}: invalid bank: {e}"))?;
+        let bank = Bank::parse(&aligned).map_err(|e| anyhow!("{name}: invalid bank: {e}"))?;
         Ok(ExpectedBank {
             calibration: *bank.device(),
             crc: bank.crc(),
