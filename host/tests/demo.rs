@@ -1,4 +1,4 @@
-//! `host demo`: the headless figures, its errors, recording (through the library's
+//! `host demo`: the headless figures, Ctrl-C, its errors, recording (through the library's
 //! `haptic::demo::run`), and the viewer in headless Chromium.
 
 mod support;
@@ -85,6 +85,48 @@ fn headless_press_prints_the_figures_as_json() {
     let rate = v["tick_rate_hz"].as_f64().unwrap();
     assert!((900.0..1100.0).contains(&rate), "{json}");
     assert!(v["frames"].as_u64().unwrap() >= 90, "{json}");
+}
+
+/// Ctrl-C (SIGINT) ends a run as the end of its `--seconds` would: the figures are printed
+/// and the demo exits 0, long before its two minutes.
+#[test]
+fn ctrl_c_ends_the_run_with_its_figures() {
+    let _turn = one_at_a_time();
+    let t0 = Instant::now();
+    let mut child = host()
+        .args([
+            "demo",
+            "--headless",
+            "--seconds",
+            "120",
+            "--json",
+            "--port",
+            "0",
+        ])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    // Running once the viewer's address is printed (on stderr, with --json).
+    let mut err = BufReader::new(child.stderr.take().unwrap());
+    let mut line = String::new();
+    while !line.starts_with("viewer") {
+        line.clear();
+        assert!(
+            err.read_line(&mut line).unwrap() > 0,
+            "the demo ended before serving"
+        );
+    }
+    std::thread::sleep(Duration::from_secs(2));
+    // SAFETY: kill(2) on the child's pid, which has not been reaped (no wait yet).
+    assert_eq!(unsafe { libc::kill(child.id() as i32, libc::SIGINT) }, 0);
+    let out = child.wait_with_output().unwrap();
+    assert!(out.status.success(), "{:?}", out.status);
+    assert!(t0.elapsed() < Duration::from_secs(60), "{:?}", t0.elapsed());
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    // At least half the display's 60 frames a second over the 2 s before the signal.
+    assert!(v["frames"].as_u64().unwrap() >= 60, "{v}");
+    assert_eq!(v["faults"], 0, "{v}");
 }
 
 /// The same display on the QEMU image (`--source sil`): its telemetry over the emulated USART,
