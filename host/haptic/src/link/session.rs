@@ -30,7 +30,7 @@ pub struct ExpectedBank {
     pub calibration: DeviceCalibration,
     /// The bank's CRC, which the device's `Hello` must report.
     pub crc: u32,
-    /// The bank in messages: "the bank of <scene>" or the bank file's path.
+    /// The bank in messages: "the bank of" and the scene's path, or the bank file's path.
     pub name: String,
 }
 
