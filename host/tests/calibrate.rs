@@ -1,4 +1,4 @@
-//! Bench calibration (issue 8): the fits recover known laws and motor constants from noisy
+//! Bench calibration: the fits recover known laws and motor constants from noisy
 //! synthetic data, the chosen basis survives degree 10 where monomial normal equations do not,
 //! the shipped brain-tissue data meets the accuracy goal and matches the host FEM, and bad
 //! bench files fail with the line named and the scene untouched.
@@ -9,7 +9,7 @@ use fem::elasticity::Material;
 use haptic::calibrate::fit::{self, FitError};
 use haptic::calibrate::motor::{self, Sample};
 use haptic::calibrate::scene_edit::{self, Law};
-use haptic::calibrate::{cheb, csv, specimen};
+use haptic::calibrate::{cheb, csv, specimen, tissue};
 use haptic::scene::Scene;
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -665,46 +665,43 @@ fn bad_csvs_name_the_line_and_leave_the_scene_alone() {
     assert!(leftovers.is_empty());
 }
 
+/// The library's tissue fit ([`tissue::run`]) on the displacement column with the specimen's
+/// FEM prediction gives the law fitted to the linear-model columns the bench file also holds
+/// (computed from the same mesh and material).
 #[test]
-fn cli_displacement_curve_with_specimen_fem_equals_the_linear_columns() {
+fn displacement_curve_with_specimen_fem_equals_the_linear_columns() {
     let dir = tempfile::tempdir().unwrap();
-    let brain = manifest(BRAIN);
-    let mesh = manifest("meshes/brain-specimen.msh");
-    let fit_json = |extra: &[&str]| -> serde_json::Value {
-        let mut args = vec!["calibrate", "tissue", "--csv", brain.to_str().unwrap()];
-        args.extend_from_slice(extra);
-        let plot = dir.path().join("p");
-        args.extend_from_slice(&["--degree", "5", "--plot", plot.to_str().unwrap(), "--json"]);
-        let (ok, out, err) = run(&args);
-        assert!(ok, "{err}");
-        serde_json::from_str(&out).unwrap()
+    let fit_law = |law: Law, x: &str, y: &str, specimen: Option<tissue::Specimen>| {
+        tissue::run(&tissue::Config {
+            csv: manifest(BRAIN),
+            x: x.into(),
+            y: y.into(),
+            degree: Some(5),
+            law,
+            target_rms: fit::DEFAULT_TARGET_RMS,
+            max_rms: 0.05,
+            accept_poor_fit: false,
+            specimen,
+            scene: None,
+            plot: dir.path().join("p"),
+        })
+        .unwrap()
     };
     for (law, linear, measured) in [
-        ("Q", "linear_force_n", "force_n"),
-        ("P", "linear_radial_m", "radial_m"),
+        (Law::Q, "linear_force_n", "force_n"),
+        (Law::P, "linear_radial_m", "radial_m"),
     ] {
-        let a = fit_json(&["--law", law, "--x", linear, "--y", measured]);
-        let b = fit_json(&[
-            "--law",
-            law,
-            "--x",
-            "displacement_m",
-            "--y",
-            measured,
-            "--specimen",
-            mesh.to_str().unwrap(),
-            "--young",
-            "2526",
-            "--poisson",
-            "0.45",
-        ]);
-        let (ca, cb): (Vec<f64>, Vec<f64>) = (
-            serde_json::from_value(a["coefficients"].clone()).unwrap(),
-            serde_json::from_value(b["coefficients"].clone()).unwrap(),
-        );
+        let a = fit_law(law, linear, measured, None);
+        let specimen = tissue::Specimen {
+            mesh: manifest("meshes/brain-specimen.msh"),
+            young_pa: 2526.0,
+            poisson: 0.45,
+        };
+        let b = fit_law(law, "displacement_m", measured, Some(specimen));
+        let (ca, cb) = (&a.coefficients, &b.coefficients);
         let scale = ca.iter().fold(0.0f64, |m, c| m.max(c.abs()));
-        for (x, y) in ca.iter().zip(&cb) {
-            assert!((x - y).abs() < 1e-5 * scale, "{law}: {ca:?} vs {cb:?}");
+        for (x, y) in ca.iter().zip(cb) {
+            assert!((x - y).abs() < 1e-5 * scale, "{law:?}: {ca:?} vs {cb:?}");
         }
     }
 }

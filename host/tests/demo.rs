@@ -1,12 +1,16 @@
-//! `host demo`: the headless figures, its errors, recording, and the viewer in headless Chromium.
+//! `host demo`: the headless figures, Ctrl-C, its errors, recording (through the library's
+//! `haptic::demo::run`), and the viewer in headless Chromium.
 
 mod support;
 use support::chromium;
 
+use haptic::demo::{DemoConfig, Frontend};
+use haptic::display::source::SourceSpec;
 use std::io::{BufRead, BufReader, Read, Write};
 use std::net::TcpStream;
 use std::path::Path;
 use std::process::{Child, Command, Stdio};
+use std::sync::atomic::AtomicBool;
 use std::time::{Duration, Instant};
 
 fn host() -> Command {
@@ -81,6 +85,48 @@ fn headless_press_prints_the_figures_as_json() {
     let rate = v["tick_rate_hz"].as_f64().unwrap();
     assert!((900.0..1100.0).contains(&rate), "{json}");
     assert!(v["frames"].as_u64().unwrap() >= 90, "{json}");
+}
+
+/// Ctrl-C (SIGINT) ends a run as the end of its `--seconds` would: the figures are printed
+/// and the demo exits 0, long before its two minutes.
+#[test]
+fn ctrl_c_ends_the_run_with_its_figures() {
+    let _turn = one_at_a_time();
+    let t0 = Instant::now();
+    let mut child = host()
+        .args([
+            "demo",
+            "--headless",
+            "--seconds",
+            "120",
+            "--json",
+            "--port",
+            "0",
+        ])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    // Running once the viewer's address is printed (on stderr, with --json).
+    let mut err = BufReader::new(child.stderr.take().unwrap());
+    let mut line = String::new();
+    while !line.starts_with("viewer") {
+        line.clear();
+        assert!(
+            err.read_line(&mut line).unwrap() > 0,
+            "the demo ended before serving"
+        );
+    }
+    std::thread::sleep(Duration::from_secs(2));
+    // SAFETY: kill(2) on the child's pid, which has not been reaped (no wait yet).
+    assert_eq!(unsafe { libc::kill(child.id() as i32, libc::SIGINT) }, 0);
+    let out = child.wait_with_output().unwrap();
+    assert!(out.status.success(), "{:?}", out.status);
+    assert!(t0.elapsed() < Duration::from_secs(60), "{:?}", t0.elapsed());
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    // At least half the display's 60 frames a second over the 2 s before the signal.
+    assert!(v["frames"].as_u64().unwrap() >= 60, "{v}");
+    assert_eq!(v["faults"], 0, "{v}");
 }
 
 /// The same display on the QEMU image (`--source sil`): its telemetry over the emulated USART,
@@ -164,42 +210,60 @@ fn bad_sources_and_meshes_are_refused_with_a_clear_message() {
     assert!(String::from_utf8_lossy(&out.stderr).contains("/nonexistent/tty"));
 }
 
+/// A demo run without a terminal: notes and progress go nowhere, the viewer's address is
+/// kept.
+struct Quiet(std::sync::Mutex<Option<String>>);
+
+impl Frontend for Quiet {
+    fn note(&self, _: &str) {}
+
+    fn progress(&self, _: &str) -> Box<dyn fem::progress::Progress + '_> {
+        struct Nothing;
+        impl fem::progress::Progress for Nothing {
+            fn start(&self, _: u64) {}
+            fn advance(&self, _: u64) {}
+        }
+        Box::new(Nothing)
+    }
+
+    fn viewer(&self, url: &str) {
+        *self.0.lock().unwrap() = Some(url.to_string());
+    }
+}
+
+/// The library's demo ([`haptic::demo::run`]), headless for 3 s with `--record`: every recorded
+/// frame is the displayed surface, and the run's summary counts them.
 #[test]
 fn recorded_sequence_is_the_displayed_surface() {
     let _turn = one_at_a_time();
     let dir = tempfile::tempdir().unwrap();
     let rec = dir.path().join("rec");
-    let out = host()
-        .args([
-            "demo",
-            "--headless",
-            "--seconds",
-            "3",
-            "--port",
-            "0",
-            "--json",
-            "--record",
-        ])
-        .arg(&rec)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let summary: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
-    let nodes = summary["display_nodes"].as_u64().unwrap() as usize;
+    let config = DemoConfig {
+        scene: None,
+        mesh: None,
+        units: None,
+        source: SourceSpec::Virtual,
+        baud: 921_600,
+        port: 0,
+        headless: true,
+        seconds: Some(3.0),
+        script: None,
+        fps: 60.0,
+        record: Some(rec.clone()),
+        cache_nodes: 256,
+    };
+    let ui = Quiet(std::sync::Mutex::new(None));
+    let summary = haptic::demo::run(&config, &ui, &AtomicBool::new(false)).unwrap();
+    let url = ui.0.lock().unwrap().clone().expect("the viewer's address");
+    assert!(url.starts_with("http://127.0.0.1:"), "{url}");
+    let nodes = summary.display_nodes;
     let pvd = std::fs::read_to_string(rec.join("demo.pvd")).unwrap();
     let files: Vec<&str> = pvd
         .lines()
         .filter_map(|l| l.split("file=\"").nth(1)?.split('"').next())
         .collect();
     assert!(files.len() >= 5, "{pvd}");
-    assert_eq!(
-        summary["recorded_frames"].as_u64(),
-        Some(files.len() as u64)
-    );
+    assert_eq!(summary.recorded, Some(files.len()));
     // The default scene is sampled: every frame is the displayed fine surface (triangles, VTK
     // type 5) with the displacement the viewer shows; the press moves it where the tool pushes.
     let array = |text: &str, name: &str| -> Vec<f64> {

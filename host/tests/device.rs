@@ -2,7 +2,8 @@
 //! source decodes telemetry, keeps the link alive and refuses a device that is not the scene
 //! displayed; `check` prints the joints of the telemetry's tip (the forward kinematics of known
 //! joint values) and the encoder counts they mean; `arm` and `zero` send the commands a person
-//! at bring-up needs, following the firmware's state machine.
+//! at bring-up needs, following the firmware's state machine; the library's arm guard
+//! (`haptic::link::Session::arm`) disarms the device when dropped.
 #![cfg(target_os = "linux")]
 
 use bank_format::Contact;
@@ -13,7 +14,7 @@ use bank_format::{
 use firmware::tick::Contacts;
 use haptic::display::source::{SerialSource, Source};
 use haptic::kinematics::{Workspace, counts_for};
-use haptic::link::{Identity, await_identity};
+use haptic::link::{BankSource, ExpectedBank, Identity, Session, await_identity};
 use std::fs::File;
 use std::io::{Read, Write};
 use std::os::fd::FromRawFd;
@@ -678,6 +679,72 @@ fn device_arm_reports_a_fault_during_the_run_and_fails() {
         "{err}"
     );
     assert_eq!(log.last(), Some(&HostToDevice::Disarm));
+}
+
+/// The library's arm guard (`haptic::link::Armed`): an error returned from inside an armed
+/// run drops the guard without `Armed::disarm`, and the drop sends `Disarm` and waits for the
+/// device to leave the armed state, so the device is disarmed before the session (and its
+/// link) ends.
+#[test]
+fn arm_guard_disarms_when_dropped_on_an_error_path() {
+    let dir = tempfile::tempdir().unwrap();
+    let (bytes, bank_path) = patch_bank(dir.path());
+    let bank = ExpectedBank::load(&BankSource::File(bank_path.into())).unwrap();
+    assert_eq!(bank.crc, Bank::parse(&bytes).unwrap().crc());
+    let (master, name, slave) = pty();
+    let stop = Arc::new(AtomicBool::new(false));
+    let (dev, log) = device(master, fake(bank.crc, [0.0; 3]), Arc::clone(&stop));
+    let mut session = Session::open(&name, 115_200, &bank).unwrap();
+    session.ready_to_arm(false).unwrap();
+    // Armed, one armed sample seen, then an error: `?` returns with the guard alive.
+    fn armed_then_fail(session: &mut Session) -> anyhow::Result<()> {
+        let mut armed = session.arm(Mode::Transparent)?;
+        let end = Instant::now() + Duration::from_secs(5);
+        while armed.latest(Duration::from_millis(20))?.is_none() {
+            anyhow::ensure!(Instant::now() < end, "no armed sample within 5 s");
+        }
+        assert!(armed.is_armed());
+        Err(anyhow::anyhow!("the run failed while armed"))
+    }
+    let err = armed_then_fail(&mut session).unwrap_err();
+    assert_eq!(err.to_string(), "the run failed while armed");
+    assert_eq!(
+        log.lock().unwrap().clone(),
+        [
+            HostToDevice::Hello,
+            HostToDevice::SetMode(Mode::Transparent),
+            HostToDevice::Arm,
+            HostToDevice::Disarm,
+        ],
+        "the dropped guard disarmed the device before returning"
+    );
+    // The device's own telemetry says so.
+    let end = Instant::now() + Duration::from_secs(5);
+    loop {
+        let s = session.source().latest(Duration::from_millis(50)).unwrap();
+        if let Some(s) = s {
+            assert_eq!(s.state, State::Disarmed);
+            break;
+        }
+        assert!(Instant::now() < end, "no telemetry after the drop");
+    }
+    // A guard dropped at the end of its scope, with no error, disarms too.
+    {
+        let _armed = session.arm(Mode::Render).unwrap();
+    }
+    let sent = log.lock().unwrap().clone();
+    assert_eq!(
+        sent[4..],
+        [
+            HostToDevice::SetMode(Mode::Render),
+            HostToDevice::Arm,
+            HostToDevice::Disarm,
+        ]
+    );
+    drop(session);
+    stop.store(true, Ordering::Relaxed);
+    drop(slave);
+    dev.join().unwrap();
 }
 
 #[test]

@@ -4,6 +4,7 @@
 //! graded near the reach, and a new scene builds a bank. Meshing needs Python with the gmsh
 //! 4.15.2 module (`scripts/test-all.sh` installs it).
 
+use haptic::meshing::{MeshConfig, MeshOutcome, mesh_surface};
 use std::path::Path;
 use std::process::{Command, Output};
 
@@ -466,7 +467,7 @@ fn weight_compliance(mesh: &fem::mesh::TetMesh) -> f64 {
     f.iter().zip(&u).map(|(a, b)| a * b).sum()
 }
 
-/// The organ meshed from its 8 mm surface against meshes of the same geometry made directly
+/// The organ meshed from its 8 mm surface (by the library, [`mesh_surface`]) against meshes of the same geometry made directly
 /// from the CAD body by scripts/gen_meshes.py (host/meshes/liver-1k4.msh, liver-10k.msh, the
 /// reference). Measured (`docs/meshing.md`): at 9 mm the surface's mesh is
 /// -8.5% off liver-10k, a direct 9 mm mesh -8.3% (P1 at nu = 0.45 is stiff when coarse); at
@@ -480,17 +481,24 @@ fn the_meshed_surface_has_the_compliance_of_a_direct_mesh() {
     let direct_fine = fem::mesh::load(&meshes.join("liver-10k.msh")).unwrap();
     let dir = tempfile::tempdir().unwrap();
     let mut from_surface = Vec::new();
-    for size in ["0.009", "0.006"] {
+    for size in [0.009, 0.006] {
         let out = dir.path().join(format!("organ-{size}.msh"));
-        let o = host(&[
-            "mesh",
-            &surface("organ_cm.obj"),
-            "-o",
-            out.to_str().unwrap(),
-            "--size",
-            size,
-        ]);
-        assert!(o.status.success(), "{}", text(&o).1);
+        let config = MeshConfig {
+            surface: surface("organ_cm.obj").into(),
+            output: Some(out.clone()),
+            units: None,
+            size: Some(size),
+            refine_near: None,
+            fine: None,
+            gradient: 0.3,
+            repair: false,
+            fill_holes: 32,
+            merge_tolerance: 1e-7,
+            largest: false,
+            check: false,
+        };
+        let outcome = mesh_surface(&config, &mut |_| {}).unwrap();
+        assert!(matches!(outcome, MeshOutcome::Meshed { .. }));
         from_surface.push((size, fem::mesh::load(&out).unwrap()));
     }
     let wc = weight_compliance(&direct_coarse);
@@ -514,7 +522,7 @@ fn the_meshed_surface_has_the_compliance_of_a_direct_mesh() {
         let w = weight_compliance(m);
         let vol: f64 = (0..m.tets.len()).map(|t| m.signed_volume(t)).sum();
         println!(
-            "from the surface, --size {size}: {} nodes, volume {vol:.4e} m^3, {w:.6e} ({:+.2}% of liver-10k)",
+            "from the surface, size {size} m: {} nodes, volume {vol:.4e} m^3, {w:.6e} ({:+.2}% of liver-10k)",
             m.nodes.len(),
             100.0 * (w / wf - 1.0)
         );

@@ -1,6 +1,6 @@
-//! From a closed surface to a tetrahedral mesh (`host mesh`): units, the size field near the
-//! tool's reach, and Gmsh (its Python module, pinned to 4.15.2 and installed by
-//! `scripts/test-all.sh`) as the mesher.
+//! From a closed surface to a tetrahedral mesh (`host mesh`, [`mesh_surface`]): units, surface
+//! checks and repairs, the size field near the tool's reach, and Gmsh (its Python module,
+//! pinned to 4.15.2 and installed by `scripts/test-all.sh`) as the mesher.
 //!
 //! Why Gmsh through Python: Gmsh is the project's mesher already (`scripts/gen_meshes.py`
 //! makes every shipped mesh with the same pinned module), its pip wheel carries the whole
@@ -15,8 +15,10 @@ use crate::scene::Scene;
 use crate::units::{Units, guess_units, largest_side, scale_mesh};
 use anyhow::{Context, Result, bail};
 use fem::mesh::TetMesh;
-use fem::surface::TriSurface;
+use fem::surface::{CheckOptions, TriSurface, read_surface};
+use std::path::PathBuf;
 use std::process::Command;
+use std::time::Instant;
 
 /// The meshing script, run by [`run_gmsh`].
 const SCRIPT: &str = include_str!("../../../scripts/mesh_surface.py");
@@ -239,6 +241,173 @@ pub fn size_against_distance(mesh: &TetMesh, points: &[[f64; 3]]) -> Vec<(f64, f
             (d, longest)
         })
         .collect()
+}
+
+/// Largest [`MeshConfig::fill_holes`].
+pub const MAX_FILL_HOLES: usize = 1000;
+
+/// What `host mesh` does with a surface: its options, in SI units.
+#[derive(Debug, Clone)]
+pub struct MeshConfig {
+    /// The closed triangulated surface file (.stl, .obj, .ply, .vtk polydata, .vtp).
+    pub surface: PathBuf,
+    /// Where the tetrahedral mesh goes (Gmsh 4.1 ASCII, metres, written atomically); `None`
+    /// or [`MeshConfig::check`]: check only.
+    pub output: Option<PathBuf>,
+    /// Units of the surface's coordinates; `None`: guessed from its bounding box.
+    pub units: Option<Units>,
+    /// Element size away from the reach, m; `None`: the largest side of the bounding box / 15.
+    pub size: Option<f64>,
+    /// A scene whose tool reach gets the fine size.
+    pub refine_near: Option<PathBuf>,
+    /// Element size where the tool reaches, m; `None`: the size / 3.
+    pub fine: Option<f64>,
+    /// Growth of the element size per metre away from the reach.
+    pub gradient: f64,
+    /// Make the safe repairs ([`fem::surface::check`]).
+    pub repair: bool,
+    /// Largest hole the repairs fill, in boundary edges (at most [`MAX_FILL_HOLES`]).
+    pub fill_holes: usize,
+    /// Vertices closer than this fraction of the bounding-box diagonal are duplicates.
+    pub merge_tolerance: f64,
+    /// Keep the largest shell instead of refusing several.
+    pub largest: bool,
+    /// Check (and repair) the surface without meshing.
+    pub check: bool,
+}
+
+/// What [`mesh_surface`] made.
+pub enum MeshOutcome {
+    /// [`MeshConfig::check`] (or no output): the surface passed its checks, nothing meshed.
+    Checked,
+    /// The mesh, written to `output`.
+    Meshed {
+        /// Where it was written.
+        output: PathBuf,
+        /// The mesh, metres.
+        mesh: TetMesh,
+        /// The sum of the tetrahedra's volumes, m^3.
+        volume_m3: f64,
+        /// The checked surface's enclosed volume, m^3.
+        surface_volume_m3: f64,
+        /// Time from the start of [`mesh_surface`] to the mesh written, s.
+        seconds: f64,
+    },
+}
+
+/// Meshes the surface of `config`: reads it, resolves its units, checks (and with
+/// [`MeshConfig::repair`] repairs) it, sets the sizes (fine within the reach of
+/// [`MeshConfig::refine_near`]'s tool, [`reach_points`]), runs Gmsh ([`run_gmsh`]) and writes
+/// the mesh atomically. Each step's figures go to `note` as a line of text, as they are known.
+pub fn mesh_surface(config: &MeshConfig, note: &mut dyn FnMut(&str)) -> Result<MeshOutcome> {
+    let t0 = Instant::now();
+    let a = config;
+    let surface = read_surface(&a.surface)?;
+    let name = a.surface.display().to_string();
+    note(&format!(
+        "{name}: {} vertices, {} faces",
+        surface.vertices.len(),
+        surface.triangles.len()
+    ));
+    let (units, guessed) = resolve_units(
+        a.units,
+        largest_side(surface.bounding_box()),
+        &name,
+        "--units",
+    )?;
+    if let Some(n) = guessed {
+        note(&n);
+    }
+    // The least-area filling is O(n^3) in time and O(n^2) in memory: 1,000 edges take about
+    // 10^8 steps and 16 MB.
+    if a.fill_holes > MAX_FILL_HOLES {
+        bail!(
+            "--fill-holes {}: at most {MAX_FILL_HOLES} edges (a larger hole is no small defect: \
+             close it where the surface was made)",
+            a.fill_holes
+        );
+    }
+    if !(a.merge_tolerance >= 0.0 && a.merge_tolerance < 0.01) {
+        bail!(
+            "--merge-tolerance {}: must be in [0, 0.01)",
+            a.merge_tolerance
+        );
+    }
+    let opts = CheckOptions {
+        repair: a.repair,
+        merge_tolerance: a.merge_tolerance,
+        fill_holes: a.fill_holes,
+        largest: a.largest,
+    };
+    let (checked, repairs) =
+        fem::surface::check(&surface, opts).with_context(|| format!("{name}: refused"))?;
+    for n in &repairs {
+        note(&format!("repaired: {n}"));
+    }
+    let surface_m = checked.scaled(units.to_metres());
+    // The default size is the kept surface's (--largest may have dropped a far shell).
+    let side_m = largest_side(surface_m.bounding_box());
+    let volume = surface_m.signed_volume();
+    note(&format!(
+        "surface: closed, {} faces, volume {:.4e} m^3 ({:.1} cm^3), largest side {:.4} m",
+        surface_m.triangles.len(),
+        volume,
+        volume * 1e6,
+        side_m
+    ));
+    let size = a.size.unwrap_or(side_m / 15.0);
+    if !(size > 0.0 && size.is_finite()) {
+        bail!("--size {size}: must be a positive length in metres");
+    }
+    let mut sizes = Sizes {
+        size,
+        fine: None,
+        reach: Vec::new(),
+    };
+    if let Some(scene_path) = &a.refine_near {
+        let scene = Scene::load(scene_path)?;
+        let fine = a.fine.unwrap_or(size / 3.0);
+        if !(fine > 0.0 && fine <= size) {
+            bail!("--fine {fine}: must be positive and at most the size {size} m");
+        }
+        if !(a.gradient > 0.0 && a.gradient.is_finite()) {
+            bail!("--gradient {}: must be positive", a.gradient);
+        }
+        sizes.reach = reach_points(&surface_m, &scene);
+        if sizes.reach.is_empty() {
+            bail!(
+                "{}: the tool reaches no point of {name} (in {}): is the organ where the scene's \
+                 trocar and insertion range expect it?",
+                scene_path.display(),
+                units.name()
+            );
+        }
+        note(&format!(
+            "reach: {} surface points within the tool's reach ({}); size {fine:.4} m there, \
+             growing by {} per m to {size:.4} m",
+            sizes.reach.len(),
+            scene_path.display(),
+            a.gradient
+        ));
+        sizes.fine = Some((fine, a.gradient));
+    } else {
+        note(&format!("size: {size:.4} m everywhere"));
+    }
+    let Some(output) = a.output.as_ref().filter(|_| !a.check) else {
+        return Ok(MeshOutcome::Checked);
+    };
+    let mesh = run_gmsh(&surface_m, &sizes)?;
+    let mut bytes = Vec::new();
+    mesh.write_msh4_ascii(&mut bytes)?;
+    crate::fsio::write_atomic(output, &bytes, &[&a.surface])?;
+    let volume_m3 = (0..mesh.tets.len()).map(|t| mesh.signed_volume(t)).sum();
+    Ok(MeshOutcome::Meshed {
+        output: output.clone(),
+        mesh,
+        volume_m3,
+        surface_volume_m3: volume,
+        seconds: t0.elapsed().as_secs_f64(),
+    })
 }
 
 #[cfg(test)]

@@ -1,20 +1,15 @@
-//! `host calibrate …`: bench calibration (issue 8). `tissue` fits the tissue law Q or the
-//! display law P to a compression curve, `motor` the torque constants to load-cell
-//! measurements, `gravity` the feed-forward for the instrument's weight to held poses,
-//! `specimen` computes the linear FEM prediction for a compression specimen
-//! (the x of Q and P). Results go into a scene file (comments kept, written atomically) and
-//! plots (SVG and PNG).
+//! `host calibrate …`: bench calibration ([`haptic::calibrate`]). `tissue` fits the tissue
+//! law Q or the display law P to a compression curve, `motor` the torque constants to
+//! load-cell measurements, `gravity` the feed-forward for the instrument's weight to held
+//! poses, `specimen` computes the linear FEM prediction for a compression specimen (the x of Q
+//! and P), `relaxation` the viscoelastic relaxation to ramp-and-hold tests. Results go into a scene file (comments kept, written atomically) and
+//! plots (SVG and PNG); each command prints its library report as text or as JSON.
 
-use anyhow::{Context, Result, bail};
-use fem::elasticity::Material;
-use haptic::calibrate::fit::{self, ChebFit, DegreeRow};
-use haptic::calibrate::motor::{self, AXES, AxisFit};
-use haptic::calibrate::plot::{self, PlotSpec};
-use haptic::calibrate::scene_edit::{self, Law};
-use haptic::calibrate::{csv, gravity, specimen};
-use haptic::fsio::write_atomic;
-use haptic::scene::Scene;
-use std::path::{Path, PathBuf};
+use anyhow::{Result, bail};
+use haptic::calibrate::fit;
+use haptic::calibrate::scene_edit::Law;
+use haptic::calibrate::{gravity, motor, relaxation, specimen, tissue};
+use std::path::PathBuf;
 
 /// Calibration commands.
 #[derive(clap::Subcommand, Debug)]
@@ -197,7 +192,7 @@ pub struct SpecimenArgs {
 /// Runs a calibration command.
 pub fn run(cmd: Calibrate) -> Result<()> {
     match cmd {
-        Calibrate::Tissue(a) => tissue(a),
+        Calibrate::Tissue(a) => tissue_cmd(a),
         Calibrate::Motor(a) => motor_cmd(a),
         Calibrate::Gravity(a) => gravity_cmd(a),
         Calibrate::Specimen(a) => specimen_cmd(a),
@@ -218,445 +213,108 @@ fn parse_degree(s: &str) -> Result<Option<usize>> {
     }
 }
 
-#[derive(serde::Serialize)]
-struct RelaxationReport<'a> {
-    g_inf: f64,
-    g: &'a [f64],
-    tau_s: &'a [f64],
-    /// Linearised standard errors of g and tau_s.
-    g_se: &'a [f64],
-    tau_s_se: &'a [f64],
-    /// `Q_e(x) = sum_j c_j (x / x_max)^j`, j = 1.., N.
-    elastic_coeffs_n: &'a [f64],
-    x_max_m: f64,
-    rms_n: f64,
-    elastic_only_rms_n: f64,
-    noise_n: f64,
-    survey: Vec<[f64; 2]>,
-    /// Rows of all tests.
-    rows: usize,
-    tests: Vec<RelaxationTestReport<'a>>,
-    /// Slope of the relative peak-force error per decade of ramp speed (null for one speed).
-    peak_error_per_decade: Option<f64>,
-    warnings: &'a [String],
-    scene: Option<&'a Path>,
-    plot: [PathBuf; 2],
-}
-
-/// One test of `RelaxationReport`.
-#[derive(serde::Serialize)]
-struct RelaxationTestReport<'a> {
-    csv: &'a Path,
-    rows: usize,
-    ramp_s: f64,
-    ramp_speed_m_s: f64,
-    rms_n: f64,
-    noise_n: f64,
-    rms_over_noise: f64,
-    unexplained_n: f64,
-    peak_force_n: f64,
-    peak_error_n: f64,
-    peak_error_se_n: f64,
-}
-
 fn relaxation_cmd(a: RelaxationArgs) -> Result<()> {
-    use haptic::calibrate::relaxation::{self, Test};
-    let mut tests = Vec::with_capacity(a.csv.len());
-    for path in &a.csv {
-        let table = csv::read(path, &[&a.t, &a.x, &a.f])?;
-        table.require_rows(20, "a ramp and a hold")?;
-        let t = table.numbers(0)?;
-        table.require_increasing(0, &t)?;
-        tests.push(Test {
-            name: path.display().to_string(),
-            t,
-            x: table.numbers(1)?,
-            f: table.numbers(2)?,
-        });
-    }
-    let names = a
-        .csv
-        .iter()
-        .map(|p| p.display().to_string())
-        .collect::<Vec<_>>()
-        .join(", ");
-    let fit = relaxation::fit_tests(&tests)
-        .with_context(|| format!("{names}: fitting the relaxation; nothing was written"))?;
-    let residuals: Vec<(f64, f64)> = tests
-        .iter()
-        .zip(&fit.tests)
-        .flat_map(|(test, tf)| {
-            test.t
-                .iter()
-                .zip(test.f.iter().zip(&tf.model))
-                .map(|(&ti, (&fi, &mi))| (ti, 1e3 * (fi - mi)))
-        })
-        .collect();
-    let rounded = |v: &[f64]| {
-        v.iter()
-            .map(|v| (v * 1e3).round() / 1e3)
-            .collect::<Vec<_>>()
-    };
-    let law = format!(
-        "g = {:?}, tau = {:?} s",
-        rounded(&fit.g),
-        rounded(&fit.tau_s)
-    );
-    let mut curves: Vec<(String, Vec<(f64, f64)>)> = tests
-        .iter()
-        .zip(&fit.tests)
-        .map(|(test, tf)| {
-            let name = if tests.len() == 1 {
-                format!("QLV fit: {law}")
-            } else {
-                format!("joint QLV fit, ramp {:.3} s", tf.ramp_s)
-            };
-            (
-                name,
-                test.t
-                    .iter()
-                    .copied()
-                    .zip(tf.model.iter().copied())
-                    .collect(),
-            )
-        })
-        .collect();
-    if let [test] = &tests[..] {
-        curves.push((
-            "instantaneous elastic response Q_e(x(t))".into(),
-            test.t
-                .iter()
-                .zip(&test.x)
-                .map(|(&ti, &xi)| (ti, fit.elastic_at(xi)))
-                .collect(),
-        ));
-    }
-    // One file by its name; several by their count (the legend names their ramps).
-    let file_names = match &a.csv[..] {
-        [one] => one
-            .file_name()
-            .map_or(String::new(), |n| n.to_string_lossy().into_owned()),
-        several => format!("{} tests", several.len()),
-    };
-    let spec = PlotSpec {
-        title: format!(
-            "QLV relaxation: {file_names} (g_inf {:.3}, {} term(s), RMS {:.3e} N)",
-            fit.g_inf,
-            fit.g.len(),
-            fit.rms
-        ),
-        x_label: format!("time ({}), s", a.t),
-        y_label: format!("force ({}), N", a.f),
-        data: (
-            if tests.len() == 1 {
-                "bench data".into()
-            } else {
-                format!("bench data, {} tests ({law})", tests.len())
-            },
-            tests
-                .iter()
-                .flat_map(|test| test.t.iter().copied().zip(test.f.iter().copied()))
-                .collect(),
-        ),
-        curves,
-        residual_label: "residual, mN".into(),
-        residuals,
-    };
-    let plots = plot::write(&a.plot, &spec)?;
-    if let Some(scene) = &a.scene {
-        let source = format!(
-            "{names}, columns {}, {}, {}: g_inf {:.4}, RMS residual {:.3e} N (noise {:.3e} N){}",
-            a.t,
-            a.x,
-            a.f,
-            fit.g_inf,
-            fit.rms,
-            fit.noise,
-            if fit.warnings.is_empty() {
-                String::new()
-            } else {
-                "; WARNING: rate dependence not explained (see the calibration's output)".into()
-            }
-        );
-        write_scene(scene, |text| {
-            Ok(scene_edit::set_viscoelastic(
-                scene, text, &fit.g, &fit.tau_s, &source,
-            )?)
-        })?;
-    }
-    for w in &fit.warnings {
+    let rep = relaxation::run(&relaxation::Config {
+        csv: a.csv.clone(),
+        t: a.t.clone(),
+        x: a.x.clone(),
+        f: a.f.clone(),
+        scene: a.scene.clone(),
+        plot: a.plot.clone(),
+    })?;
+    for w in &rep.warnings {
         eprintln!("warning: {w}");
     }
     if a.json {
-        let report = RelaxationReport {
-            g_inf: fit.g_inf,
-            g: &fit.g,
-            tau_s: &fit.tau_s,
-            g_se: &fit.g_se,
-            tau_s_se: &fit.tau_se,
-            elastic_coeffs_n: &fit.elastic,
-            x_max_m: fit.x_max,
-            rms_n: fit.rms,
-            elastic_only_rms_n: fit.elastic_rms,
-            noise_n: fit.noise,
-            survey: fit.survey.iter().map(|&(n, r)| [n as f64, r]).collect(),
-            rows: tests.iter().map(|t| t.t.len()).sum(),
-            tests: a
-                .csv
-                .iter()
-                .zip(&fit.tests)
-                .map(|(csv, tf)| RelaxationTestReport {
-                    csv,
-                    rows: tf.rows,
-                    ramp_s: tf.ramp_s,
-                    ramp_speed_m_s: tf.rate_m_s,
-                    rms_n: tf.rms,
-                    noise_n: tf.noise,
-                    rms_over_noise: tf.rms_over_noise(),
-                    unexplained_n: tf.unexplained(),
-                    peak_force_n: tf.peak_force,
-                    peak_error_n: tf.peak_error,
-                    peak_error_se_n: tf.peak_error_se,
-                })
-                .collect(),
-            peak_error_per_decade: fit.peak_error_per_decade,
-            warnings: &fit.warnings,
-            scene: a.scene.as_deref(),
-            plot: plots,
-        };
-        println!("{}", serde_json::to_string(&report)?);
+        println!("{}", serde_json::to_string(&rep)?);
         return Ok(());
     }
     println!("terms  rms residual (N)");
-    for (n, r) in &fit.survey {
-        let mark = if *n == fit.g.len() { "  <- chosen" } else { "" };
+    for (n, r) in &rep.survey {
+        let mark = if *n == rep.g.len() { "  <- chosen" } else { "" };
         println!("{n:>5}  {r:.4e}{mark}");
     }
     println!(
         "elastic only (G = 1): rms {:.4e} N; noise estimate {:.4e} N",
-        fit.elastic_rms, fit.noise
+        rep.elastic_only_rms_n, rep.noise_n
     );
-    println!("g_inf = {:.5}", fit.g_inf);
-    for (k, (g, tau)) in fit.g.iter().zip(&fit.tau_s).enumerate() {
+    println!("g_inf = {:.5}", rep.g_inf);
+    for (k, (g, tau)) in rep.g.iter().zip(&rep.tau_s).enumerate() {
         println!(
             "term {k}: g = {g:.5} +- {:.1e}, tau = {tau:.5} +- {:.1e} s (standard errors)",
-            fit.g_se[k], fit.tau_se[k]
+            rep.g_se[k], rep.tau_s_se[k]
         );
     }
     println!(
         "instantaneous elastic law: Q_e(x) = sum_j c_j (x / {:.4e} m)^j, c = {:?} N",
-        fit.x_max, fit.elastic
+        rep.x_max_m, rep.elastic_coeffs_n
     );
     println!("test  ramp (s)  speed (m/s)  rms (N)    rms/noise  peak error (N, %, std errors)");
-    for (i, tf) in fit.tests.iter().enumerate() {
+    for (i, tf) in rep.tests.iter().enumerate() {
         println!(
             "{i:>4}  {:>8.3}  {:>11.3e}  {:.3e}  {:>9.2}  {:+.3e} ({:+.2} %, {:+.1})  {}",
             tf.ramp_s,
-            tf.rate_m_s,
-            tf.rms,
-            tf.rms_over_noise(),
-            tf.peak_error,
-            100.0 * tf.peak_error / tf.peak_force,
-            tf.peak_error / tf.peak_error_se,
-            tf.name
+            tf.ramp_speed_m_s,
+            tf.rms_n,
+            tf.rms_over_noise,
+            tf.peak_error_n,
+            100.0 * tf.peak_error_n / tf.peak_force_n,
+            tf.peak_error_n / tf.peak_error_se_n,
+            tf.csv.display()
         );
     }
-    if let Some(s) = fit.peak_error_per_decade {
+    if let Some(s) = rep.peak_error_per_decade {
         println!(
             "peak-force error against ramp speed: {:+.3} % per decade",
             100.0 * s
         );
     }
-    println!("plot: {} and {}", plots[0].display(), plots[1].display());
-    if let Some(scene) = &a.scene {
+    println!(
+        "plot: {} and {}",
+        rep.plot[0].display(),
+        rep.plot[1].display()
+    );
+    if let Some(scene) = &rep.scene {
         println!("wrote [viscoelastic] into {}", scene.display());
     }
     Ok(())
 }
 
-fn write_scene(path: &Path, edit: impl FnOnce(&str) -> Result<String>) -> Result<()> {
-    let text = std::fs::read_to_string(path)
-        .with_context(|| format!("{}: cannot read the scene", path.display()))?;
-    let new = edit(&text)?;
-    // The scene is edited in place on purpose (through a link to it, with its mode kept).
-    write_atomic(path, new.as_bytes(), &[]).with_context(|| format!("writing {}", path.display()))
-}
-
-#[derive(serde::Serialize)]
-struct TissueReport<'a> {
-    law: &'static str,
-    degree: usize,
-    basis: &'static str,
-    domain: [f64; 2],
-    coefficients: &'a [f64],
-    rms_rel_error: f64,
-    max_rel_error: f64,
-    points: usize,
-    survey: &'a [DegreeRow],
-    scene: Option<&'a Path>,
-    plot: [PathBuf; 2],
-}
-
-fn tissue(a: TissueArgs) -> Result<()> {
-    let which_law = Law::from(a.law);
+fn tissue_cmd(a: TissueArgs) -> Result<()> {
     let degree = parse_degree(&a.degree)?;
-    if !(a.target_rms.is_finite() && a.target_rms >= 0.0) {
-        bail!("--target-rms must be >= 0, got {}", a.target_rms);
-    }
-    let table = csv::read(&a.csv, &[&a.x, &a.y])?;
-    let need = degree.map_or(fit::AUTO_DEGREES.start() + 2, |d| d + 2);
-    table.require_rows(need, "a fit needs more points than coefficients")?;
-    let (mut x, y) = (table.numbers(0)?, table.numbers(1)?);
-    table.require_increasing(0, &x)?;
-    let mut x_name = a.x.clone();
-    if let (Some(mesh), Some(young), Some(poisson)) = (&a.specimen, a.young, a.poisson) {
-        let r = specimen::compress(&fem::mesh::load(mesh)?, Material::new(young, poisson)?)
-            .with_context(|| format!("{}: specimen compression", mesh.display()))?;
-        let per_m = match which_law {
-            Law::Q => r.force_per_m,
-            Law::P => r.radial_per_m,
-        };
-        x.iter_mut().for_each(|v| *v *= per_m);
-        x_name = format!("FEM x {}", a.x);
-    }
-    if !(a.max_rms.is_finite() && a.max_rms > 0.0) {
-        bail!("--max-rms must be > 0, got {}", a.max_rms);
-    }
-    let (f, law, survey) = fit::fit_law(&x, &y, degree, a.target_rms)
-        .with_context(|| format!("{}: fitting {:?}", a.csv.display(), which_law))?;
-    let errors = f.errors(&x, &y);
-    let poor = errors.rms_rel > a.max_rms;
-    if poor && !a.accept_poor_fit {
-        bail!(
-            "{}: the degree-{} fit leaves an RMS error of {:.1} % of full scale, more than \
-             --max-rms {:.1} %: the data does not follow a smooth increasing law (noise, a \
-             wrong column, mixed runs?); nothing was written. Pass --accept-poor-fit to write \
-             it anyway",
-            a.csv.display(),
-            f.degree,
-            100.0 * errors.rms_rel,
-            100.0 * a.max_rms
-        );
-    }
-    if matches!(which_law, Law::Q)
-        && let Some(q0) = haptic::scene::pull_at_first_contact(&law)
-    {
-        bail!(
-            "{}: the fitted law gives Q(0) = {q0:.4} N, below -{:.1} % of its largest force: \
-             rendered, it would pull the tool into the tissue at first contact; nothing was \
-             written (check that the data starts at zero force, or fit a lower --degree)",
-            a.csv.display(),
-            100.0 * haptic::scene::PULL_TOLERANCE
-        );
-    }
-    let name = match which_law {
-        Law::Q => "Q",
-        Law::P => "P",
+    let specimen = match (&a.specimen, a.young, a.poisson) {
+        (Some(mesh), Some(young_pa), Some(poisson)) => Some(tissue::Specimen {
+            mesh: mesh.clone(),
+            young_pa,
+            poisson,
+        }),
+        _ => None,
     };
-
-    let residuals: Vec<f64> = x.iter().zip(&y).map(|(&xi, &yi)| yi - f.eval(xi)).collect();
-    let scale = y.iter().fold(0.0f64, |m, v| m.max(v.abs()));
-    let [lo, hi] = f.domain;
-    let curve: Vec<(f64, f64)> = (0..=400)
-        .map(|i| lo + (hi - lo) * 1.08 * f64::from(i) / 400.0)
-        .map(|v| (v, f64::from(law.eval(v as f32))))
-        .collect();
-    let (unit, what) = match which_law {
-        Law::Q => ("N", "force"),
-        Law::P => ("m", "radial displacement"),
-    };
-    let spec = PlotSpec {
-        title: format!(
-            "{name}: {} (degree {}, RMS {:.2} %, max {:.2} % of full scale)",
-            a.csv
-                .file_name()
-                .map_or(String::new(), |n| n.to_string_lossy().into_owned()),
-            f.degree,
-            100.0 * errors.rms_rel,
-            100.0 * errors.max_rel
-        ),
-        x_label: format!("linear model {what} ({x_name}), {unit}"),
-        y_label: format!("measured {what} ({}), {unit}", a.y),
-        data: (
-            "bench data".into(),
-            x.iter().copied().zip(y.iter().copied()).collect(),
-        ),
-        curves: vec![
-            (
-                format!(
-                    "{name}: Chebyshev degree {}, f32 Clenshaw as on the MCU (linear past the domain)",
-                    f.degree
-                ),
-                curve,
-            ),
-            (
-                "linear model (y = x)".into(),
-                vec![(lo, lo), (hi * 1.08, hi * 1.08)],
-            ),
-        ],
-        residual_label: "residual, % of full scale".into(),
-        residuals: x
-            .iter()
-            .zip(&residuals)
-            .map(|(&xi, &r)| (xi, 100.0 * r / scale))
-            .collect(),
-    };
-    let plots = plot::write(&a.plot, &spec)?;
-
-    if let Some(scene) = &a.scene {
-        let source = format!(
-            "{}, columns {} -> {}, degree {}, RMS {:.3} % of full scale{}",
-            a.csv.display(),
-            a.x,
-            a.y,
-            f.degree,
-            100.0 * errors.rms_rel,
-            if poor {
-                format!(
-                    "; ABOVE --max-rms {:.1} %, written with --accept-poor-fit",
-                    100.0 * a.max_rms
-                )
-            } else {
-                String::new()
-            }
-        );
-        write_scene(scene, |text| {
-            Ok(scene_edit::set_law(
-                scene, text, which_law, &f.coeffs, f.domain, &source,
-            )?)
-        })?;
-    }
-
+    let rep = tissue::run(&tissue::Config {
+        csv: a.csv.clone(),
+        x: a.x.clone(),
+        y: a.y.clone(),
+        degree,
+        law: a.law.into(),
+        target_rms: a.target_rms,
+        max_rms: a.max_rms,
+        accept_poor_fit: a.accept_poor_fit,
+        specimen,
+        scene: a.scene.clone(),
+        plot: a.plot.clone(),
+    })?;
     if a.json {
-        let report = TissueReport {
-            law: name,
-            degree: f.degree,
-            basis: "chebyshev",
-            domain: f.domain,
-            coefficients: &f.coeffs,
-            rms_rel_error: errors.rms_rel,
-            max_rel_error: errors.max_rel,
-            points: x.len(),
-            survey: &survey,
-            scene: a.scene.as_deref(),
-            plot: plots,
-        };
-        println!("{}", serde_json::to_string(&report)?);
+        println!("{}", serde_json::to_string(&rep)?);
         return Ok(());
     }
-    print_tissue(&a, name, &f, (&x, &y), &survey, &plots);
+    print_tissue(&a, &rep);
     Ok(())
 }
 
 /// The degree survey, the residual table and the result, for people.
-fn print_tissue(
-    a: &TissueArgs,
-    name: &str,
-    f: &ChebFit,
-    (x, y): (&[f64], &[f64]),
-    survey: &[DegreeRow],
-    plots: &[PathBuf; 2],
-) {
+fn print_tissue(a: &TissueArgs, rep: &tissue::Report) {
+    let (name, f, survey, plots) = (rep.law, &rep.fit, &rep.survey, &rep.plot);
+    let (x, y) = (&rep.x, &rep.y);
     let residuals: Vec<f64> = x.iter().zip(y).map(|(&xi, &yi)| yi - f.eval(xi)).collect();
     let scale = y.iter().fold(0.0f64, |m, v| m.max(v.abs()));
     if !survey.is_empty() {
@@ -718,100 +376,22 @@ fn print_tissue(
     println!("plots: {} {}", plots[0].display(), plots[1].display());
 }
 
-#[derive(serde::Serialize)]
-struct MotorRow<'a> {
-    axis: &'static str,
-    #[serde(flatten)]
-    fit: &'a AxisFit,
-    torque_constant_nm_per_a: Option<f64>,
-}
-
 fn motor_cmd(a: MotorArgs) -> Result<()> {
-    let table = csv::read(&a.csv, &motor::COLUMNS)?;
-    table.require_rows(motor::MIN_POINTS, "three per fitted axis")?;
-    let samples = motor::samples(&table)?;
-    let fits = motor::fit(&samples).with_context(|| a.csv.display().to_string())?;
-    let scene = a.scene.as_deref().map(Scene::load).transpose()?;
-    let mut kt = [None; 3];
-    let mut friction = [None; 3];
-    for f in &fits {
-        friction[f.axis] = Some(f.friction);
-        if let Some(s) = &scene {
-            let g = f64::from(s.device.transmission[f.axis]);
-            let k = f.gain / g;
-            if !(k > 0.0 && k.is_finite()) {
-                bail!(
-                    "{}: axis {}: fitted gain {:.6} has the opposite sign of gear_ratio {g}: \
-                     check the load cell's direction or the motor wiring",
-                    a.csv.display(),
-                    AXES[f.axis],
-                    f.gain
-                );
-            }
-            kt[f.axis] = Some(k);
-        }
-    }
-    let mut plots = Vec::new();
-    for f in &fits {
-        let name = AXES[f.axis];
-        let unit = if f.axis == 2 { "N" } else { "N m" };
-        let pts: Vec<(f64, f64)> = samples
-            .iter()
-            .filter(|s| s.axis == f.axis)
-            .map(|s| (s.current_a, s.effort()))
-            .collect();
-        let (lo, hi) = pts
-            .iter()
-            .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), p| {
-                (l.min(p.0), h.max(p.0))
-            });
-        let line = |i: f64| f.gain * i - f.friction;
-        let mut stem = a.plot.clone().into_os_string();
-        stem.push(format!("-{name}"));
-        let spec = PlotSpec {
-            title: format!(
-                "{name}: k = {:.5} {unit}/A, friction {:.4} {unit}, RMS {:.2} %",
-                f.gain,
-                f.friction,
-                100.0 * f.rms_rel
-            ),
-            x_label: "commanded current, A".into(),
-            y_label: format!("joint effort from the load cell, {unit}"),
-            data: ("bench data".into(), pts),
-            curves: vec![(
-                "fit: k i - friction".into(),
-                vec![(lo, line(lo)), (hi, line(hi))],
-            )],
-            residual_label: format!("residual, {unit}"),
-            residuals: f.residuals.clone(),
-        };
-        plots.extend(plot::write(Path::new(&stem), &spec)?);
-    }
-    if let Some(path) = &a.scene {
-        write_scene(path, |text| {
-            Ok(scene_edit::set_motor(path, text, kt, friction)?)
-        })?;
-    }
-    let rows: Vec<MotorRow> = fits
-        .iter()
-        .map(|f| MotorRow {
-            axis: AXES[f.axis],
-            fit: f,
-            torque_constant_nm_per_a: kt[f.axis],
-        })
-        .collect();
+    let rep = motor::run(&motor::Config {
+        csv: a.csv.clone(),
+        scene: a.scene.clone(),
+        plot: a.plot.clone(),
+    })?;
     if a.json {
-        println!(
-            "{}",
-            serde_json::json!({ "axes": rows, "scene": a.scene, "plots": plots })
-        );
+        // Through a JSON value, whose objects list their keys in sorted order.
+        println!("{}", serde_json::to_value(&rep)?);
         return Ok(());
     }
     println!(
         "{:>10} {:>6} {:>14} {:>14} {:>12} {:>12} {:>8}",
         "axis", "points", "k (/A)", "Kt (N m/A)", "friction", "rms", "rms %"
     );
-    for r in &rows {
+    for r in &rep.axes {
         println!(
             "{:>10} {:>6} {:>14.6} {:>14} {:>12.5} {:>12.3e} {:>8.3}",
             r.axis,
@@ -825,46 +405,32 @@ fn motor_cmd(a: MotorArgs) -> Result<()> {
         );
     }
     println!("(pitch, yaw: k in N m/A, friction in N m; insertion: N/A and N)");
-    if let Some(s) = &a.scene {
+    if let Some(s) = &rep.scene {
         println!(
             "wrote [device] torque_constant_nm_per_a and friction_offset of {}",
             s.display()
         );
     }
-    for p in &plots {
+    for p in &rep.plots {
         println!("plot: {}", p.display());
     }
     Ok(())
 }
 
 fn gravity_cmd(a: GravityArgs) -> Result<()> {
-    let scene = Scene::load(&a.scene)?;
-    let table = csv::read(&a.csv, &gravity::COLUMNS)?;
-    let poses = gravity::poses(&table, &scene.device)?;
-    let f = gravity::fit(&poses).with_context(|| a.csv.display().to_string())?;
-    let source = format!(
-        "{}, {} poses, residual RMS {:.3e} N m (worst {:.3e}), insertion {:.3e} N (worst {:.3e})",
-        a.csv.display(),
-        f.poses,
-        f.rms_nm,
-        f.worst_nm.0.abs(),
-        f.rms_n,
-        f.worst_n.0.abs()
-    );
-    let text = std::fs::read_to_string(&a.scene)
-        .with_context(|| format!("{}: cannot read the scene", a.scene.display()))?;
-    let out = a.out.as_deref().unwrap_or(&a.scene);
-    let new = scene_edit::set_gravity(out, &text, &f.coeffs, &source)?;
-    write_atomic(out, new.as_bytes(), &[]).with_context(|| format!("writing {}", out.display()))?;
+    let rep = gravity::run(&gravity::Config {
+        csv: a.csv.clone(),
+        scene: a.scene.clone(),
+        out: a.out.clone(),
+    })?;
     if a.json {
-        println!(
-            "{}",
-            serde_json::json!({ "fit": f, "names": gravity::NAMES, "scene": out })
-        );
+        // Through a JSON value, whose objects list their keys in sorted order.
+        println!("{}", serde_json::to_value(&rep)?);
         return Ok(());
     }
+    let f = &rep.fit;
     println!("{:>6} {:>14}", "coeff", "value");
-    for (name, c) in gravity::NAMES.iter().zip(&f.coeffs) {
+    for (name, c) in rep.names.iter().zip(&f.coeffs) {
         let unit = if name.starts_with('b') { "N" } else { "N m" };
         println!("{name:>6} {c:>14.6e} {unit}");
     }
@@ -880,15 +446,16 @@ fn gravity_cmd(a: GravityArgs) -> Result<()> {
         f.worst_n.1,
         f.conditioning
     );
-    println!("wrote [gravity] coeffs of {}", out.display());
+    println!("wrote [gravity] coeffs of {}", rep.scene.display());
     Ok(())
 }
 
 fn specimen_cmd(a: SpecimenArgs) -> Result<()> {
-    let mesh = fem::mesh::load(&a.mesh)?;
-    let material = Material::new(a.young, a.poisson)?;
-    let r = specimen::compress(&mesh, material)
-        .with_context(|| format!("{}: specimen compression", a.mesh.display()))?;
+    let r = specimen::run(&specimen::Config {
+        mesh: a.mesh.clone(),
+        young_pa: a.young,
+        poisson: a.poisson,
+    })?;
     println!("{}", serde_json::to_string(&r)?);
     Ok(())
 }

@@ -1,33 +1,18 @@
-//! `host demo`: the default liver scene in the browser, the firmware's loop on the PC.
-//!
-//! Builds the scene's bank in memory (as `host bank build` does) and keeps the factorised
-//! compliance for the display; starts the source (by default the virtual device: the firmware's
-//! `HapticLoop` at 1 kHz in its own thread); serves the viewer on 127.0.0.1 and prints its
-//! address; then produces display frames (surface displacement `u = C[:, S] f_S`) until
-//! `--seconds` pass or the process is stopped. With `--headless --script ...` it runs a
-//! scripted hand motion without a browser and prints the loop and display figures.
+//! `host demo`: the default liver scene in the browser, the firmware's loop on the PC
+//! ([`haptic::demo::run`]). Prints the preparation's figures and the viewer's address, then
+//! runs until `--seconds` pass or Ctrl-C, and prints the loop and display figures. With
+//! `--headless --script ...` it runs a scripted hand motion without a browser.
 
 use super::script_arg::ScriptArg;
-use anyhow::{Context, Result, bail};
-use bank_format::{AlignedBytes, Bank};
-use haptic::bank::{BuiltBank, Prepared};
-use haptic::deform::Deformer;
-use haptic::display::server::{Server, SteerFn};
-use haptic::display::source::{LoopStats, SerialSource, Source, SourceSpec};
-use haptic::display::{DisplayMesh, DisplayStats, Pipeline, SurfaceModel, surface_neighbours};
-use haptic::kinematics::Workspace;
-use haptic::organ::Organ;
-use haptic::record::{Recorded, Recorder};
-use haptic::scene::{MeshSource, Scene};
-use haptic::script::{Scripted, aim_joints, press_point};
-use haptic::sil::source::SilSource;
+use anyhow::{Context, Result};
+use fem::progress::Progress;
+use haptic::demo::{self, DemoConfig, DemoSummary, Frontend};
+use haptic::display::DisplayStats;
+use haptic::display::source::SourceSpec;
 use haptic::trajectory::Script;
-use haptic::virtual_device::VirtualDevice;
-use std::collections::HashMap;
 use std::path::PathBuf;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
-use std::time::{Duration, Instant};
 
 /// Arguments of `host demo`.
 #[derive(clap::Args, Debug)]
@@ -83,295 +68,93 @@ pub struct Args {
     cache_nodes: usize,
 }
 
-/// Runs the command.
+/// The terminal side of a demo run: notes and progress bars on stderr, the viewer's address
+/// on stdout (stderr with --json, whose stdout is one JSON object), opened with --open.
+struct Terminal {
+    json: bool,
+    open: bool,
+}
+
+/// A progress bar that clears itself when the computation ends.
+struct Clearing(crate::progress::Bar);
+
+impl Progress for Clearing {
+    fn start(&self, total: u64) {
+        self.0.start(total);
+    }
+
+    fn advance(&self, steps: u64) {
+        self.0.advance(steps);
+    }
+}
+
+impl Drop for Clearing {
+    fn drop(&mut self) {
+        self.0.finish();
+    }
+}
+
+impl Frontend for Terminal {
+    fn note(&self, line: &str) {
+        eprintln!("{line}");
+    }
+
+    fn progress(&self, what: &str) -> Box<dyn Progress + '_> {
+        Box::new(Clearing(crate::progress::Bar::new(what)))
+    }
+
+    fn viewer(&self, url: &str) {
+        if self.json {
+            // With --json, stdout carries exactly one JSON object.
+            eprintln!("viewer    {url}");
+        } else {
+            println!("viewer    {url}");
+        }
+        if self.open {
+            let _ = std::process::Command::new("xdg-open").arg(url).spawn();
+        }
+    }
+}
+
+/// Runs the command: the first Ctrl-C ends the run as `--seconds` would (figures printed, the
+/// recording finished), a second one exits at once.
 pub fn run(args: Args) -> Result<()> {
-    if !(args.fps.is_finite() && args.fps > 0.0 && args.fps <= 1000.0) {
-        bail!("--fps must lie in (0, 1000], got {}", args.fps);
-    }
-    if let Some(s) = args.seconds
-        && !(s.is_finite() && s > 0.0)
-    {
-        bail!("--seconds must be a positive number, got {s}");
-    }
-    let script_arg = args.script.map(Script::from);
-    let mut scene = Scene::load_or_default(args.scene.as_deref())?;
-    if let Some(m) = &args.mesh {
-        if !m.is_file() {
-            bail!("--mesh {}: no such file", m.display());
-        }
-        let mesh = fem::mesh::read(m)?;
-        let side = haptic::units::largest_side(mesh.bounding_box());
-        let (units, note) = haptic::meshing::resolve_units(
-            args.units.map(Into::into),
-            side,
-            &m.display().to_string(),
-            "--units",
-        )?;
-        if let Some(n) = note {
-            eprintln!("{}: {n}", m.display());
-        }
-        scene.mesh = MeshSource::File(m.clone());
-        scene.mesh_units = Some(units);
-    }
-    let t = Instant::now();
-    eprintln!(
-        "preparing the scene (compliance factorisation, bank; a sampled scene's first run computes its \
-         patch compliance, about a minute, then it is cached) ..."
-    );
-    let prep = Prepared::from_scene(scene)?;
-    prep.organ.warnings.iter().for_each(|w| eprintln!("{w}"));
-    let (
-        BuiltBank {
-            bytes: bank_bytes,
-            pairs,
-            ..
-        },
-        cached,
-    ) = {
-        let progress = crate::progress::Bar::new("patch compliance chunks");
-        let built = haptic::bank::cache::scene_bank_cached(&prep, Some(&progress))?;
-        progress.finish();
-        built
-    };
-    eprintln!(
-        "scene     {}: {} nodes, {} surface nodes; bank {} reachable nodes, {pairs} coupled \
-         pairs, {:.1} KiB, {} in {:.2} s",
-        prep.organ.mesh_name,
-        prep.organ.mesh.nodes.len(),
-        prep.organ.surface.nodes.len(),
-        prep.region.len(),
-        bank_bytes.len() as f64 / 1024.0,
-        if cached { "from the cache" } else { "built" },
-        t.elapsed().as_secs_f64()
-    );
-    if bank_bytes.len() > bank_format::region::BANK_LEN {
-        eprintln!(
-            "note      this bank is larger than the MCU's 768 KiB bank region: fine for the \
-             virtual device, too big for the board"
-        );
-    }
-    let aligned = AlignedBytes::new(&bank_bytes);
-    let bank = Bank::parse(&aligned).map_err(|e| anyhow::anyhow!("built bank invalid: {e}"))?;
-    let bank_to_mesh: Vec<usize> = bank.mesh_ids().iter().map(|&k| k as usize).collect();
-    let cal = *bank.device();
-    let workspace = Workspace::from_device(&cal);
-
-    // A sampled scene shows its fine FEM surface under precomputed fields; a nodal one its
-    // collision mesh with columns solved on demand.
-    // The name the viewer shows for the displayed surface: a sampled scene's FEM mesh.
-    let display_name = match &prep.organ.scene.contact {
-        haptic::scene::ContactModel::Sampled(spec) => spec.fem_mesh.file_name().map_or_else(
-            || spec.fem_mesh.display().to_string(),
-            |n| n.to_string_lossy().into(),
-        ),
-        haptic::scene::ContactModel::Nodal => prep.organ.mesh_name.clone(),
-    };
-    let fields = {
-        let progress = crate::progress::Bar::new("display field chunks");
-        let t = Instant::now();
-        let fields = haptic::display::fields::DisplayFields::cached(&prep, &bank, Some(&progress))?;
-        progress.finish();
-        if let Some((f, cached)) = &fields {
-            eprintln!(
-                "display   {} surface nodes of {}, {} fields ({:.1} MiB), {} in {:.2} s",
-                f.mesh.rest.len(),
-                match &prep.organ.scene.contact {
-                    haptic::scene::ContactModel::Sampled(spec) =>
-                        spec.fem_mesh.display().to_string(),
-                    haptic::scene::ContactModel::Nodal => String::new(),
-                },
-                f.samples(),
-                f.bytes() as f64 / (1 << 20) as f64,
-                if *cached {
-                    "from the cache"
-                } else {
-                    "computed"
-                },
-                t.elapsed().as_secs_f64()
-            );
-        }
-        fields.map(|(f, _)| Arc::new(f))
-    };
-    let Prepared {
-        organ:
-            Organ {
-                mesh,
-                mesh_name,
-                surface,
-                ..
-            },
-        compliance,
-        ..
-    } = prep;
-    let (display, neighbours) = match &fields {
-        Some(f) => (f.mesh.clone(), HashMap::new()),
-        None => (
-            DisplayMesh::of_surface(&mesh.nodes, &surface),
-            surface_neighbours(&surface.triangles),
-        ),
-    };
-    let aim = press_point(&mesh, &surface.triangles)
-        .context("the organ's surface has no point under its top centre")?;
-
-    let mut sil_bank: Option<tempfile::NamedTempFile> = None;
-    let mut source: Box<dyn Source> = match &args.source {
-        SourceSpec::Virtual => Box::new(VirtualDevice::start(bank_bytes.clone())?),
-        SourceSpec::Sil => {
-            // The bank built above, loaded into QEMU's flash as the board's would be; the
-            // image's hand follows the script (default press) for --seconds (default 60 s).
-            let file = sil_bank.insert(tempfile::NamedTempFile::new()?);
-            std::io::Write::write_all(file, &bank_bytes)?;
-            let setup = haptic::sil::harness::Setup {
-                qemu: PathBuf::from("qemu-system-arm"),
-                image: haptic::mcu::build_qemu_image()?,
-                bank: file.path().to_path_buf(),
-            };
-            let seconds = args
-                .seconds
-                .unwrap_or(if args.headless { 10.0 } else { 60.0 });
-            let script = script_arg.unwrap_or(Script::Press);
-            let session = haptic::sil::harness::Session::new(&bank, script, seconds + 1.0)?;
-            Box::new(SilSource::start(setup, session)?)
-        }
-        SourceSpec::Serial(port) => Box::new(SerialSource::open(
-            port,
-            args.baud,
-            bank.crc(),
-            &format!(
-                "the bank of {}",
-                args.scene.as_deref().map_or_else(
-                    || "host/scenes/liver.toml (embedded)".into(),
-                    |p| p.display().to_string()
-                )
-            ),
-        )?),
-    };
-    let steering = source.steering();
-    let script = match (script_arg, args.headless) {
-        (Some(s), _) => Some(s),
-        (None, true) => Some(Script::Press),
-        (None, false) => None,
-    };
-    if script_arg.is_some() && steering.is_none() && args.source != SourceSpec::Sil {
-        bail!("--script needs a source that can be steered (--source virtual) or sil");
-    }
-
-    let (lo, hi) = display.bounding_box();
-    let info = serde_json::json!({
-        "mesh": display_name, "collision_mesh": mesh_name, "mesh_nodes": mesh.nodes.len(), "display_nodes": display.rest.len(),
-        "triangles": display.triangles.len(), "fulcrum_m": cal.fulcrum_m,
-        "tip_radius_m": cal.tip_radius_m, "max_force_n": cal.max_force_n,
-        "bbox_min": lo, "bbox_max": hi, "press_point": aim,
-        "source": format!("{:?}", args.source),
-    });
-    let steer_fn: Option<SteerFn> = steering.clone().map(|s| {
-        let f: SteerFn = Arc::new(move |aim: [f64; 3], depth: f64| {
-            s(aim_joints(&workspace, aim, depth));
-        });
-        f
-    });
-    let display_nodes = display.rest.len();
-    let mesh_bytes = Arc::new(display);
-    let port = args.port.unwrap_or(if args.headless { 0 } else { 8080 });
-    let server = Server::start(port, mesh_bytes.encode(), info, steer_fn)?;
-    let url = format!("http://{}/", server.addr);
-    if args.json {
-        // With --json, stdout carries exactly one JSON object.
-        eprintln!("viewer    {url}");
-    } else {
-        println!("viewer    {url}");
-    }
-    if args.open {
-        let _ = std::process::Command::new("xdg-open").arg(&url).spawn();
-    }
-
-    let stop = Arc::new(AtomicBool::new(false));
-    let scripter = match (script, &steering) {
-        (Some(s), Some(steer)) => {
-            let scripted = Scripted::new(s, &workspace, &mesh.nodes, &surface.triangles, aim)
-                .context("the scripted path misses the organ")?;
-            let (steer, stop) = (Arc::clone(steer), Arc::clone(&stop));
-            Some(std::thread::spawn(move || {
-                let t0 = Instant::now();
-                while !stop.load(Ordering::Relaxed) {
-                    steer(scripted.joints(t0.elapsed().as_secs_f64()));
-                    std::thread::sleep(Duration::from_millis(5));
-                }
-            }))
-        }
-        _ => None,
-    };
-
-    let seconds = args.seconds.or(args.headless.then_some(10.0));
-    let run_for = seconds.map(Duration::from_secs_f64);
-    let mesh = Arc::new(mesh);
-    let compliance = Arc::new(compliance);
-    let mut recorder = match &args.record {
-        Some(dir) => {
-            let what = if fields.is_some() {
-                Recorded::Surface(Arc::clone(&mesh_bytes))
-            } else {
-                Recorded::Volume {
-                    mesh: Arc::clone(&mesh),
-                    compliance: Arc::clone(&compliance),
-                }
-            };
-            Some(Recorder::start(dir, what)?)
-        }
-        None => None,
-    };
-    let surface_model = match fields {
-        Some(f) => SurfaceModel::Sampled(f),
-        None => SurfaceModel::Nodal {
-            deformer: Box::new(Deformer::new(
-                Arc::clone(&compliance),
-                &mesh.nodes,
-                surface.nodes.clone(),
-                args.cache_nodes,
-            )),
-            neighbours,
-        },
-    };
-    let mut pipeline = Pipeline {
-        source: source.as_mut(),
-        surface: surface_model,
-        mesh: mesh_bytes,
-        bank_to_mesh,
-        hub: server.hub.clone(),
+    let config = DemoConfig {
+        scene: args.scene.clone(),
+        mesh: args.mesh.clone(),
+        units: args.units.map(Into::into),
+        source: args.source.clone(),
+        baud: args.baud,
+        port: args.port.unwrap_or(if args.headless { 0 } else { 8080 }),
+        headless: args.headless,
+        seconds: args.seconds,
+        script: args.script.map(Script::from),
         fps: args.fps,
+        record: args.record.clone(),
+        cache_nodes: args.cache_nodes,
     };
-    let (display_stats, loop_stats) = pipeline.run(
-        &stop,
-        run_for,
-        recorder
-            .as_mut()
-            .map(|r| r as &mut dyn haptic::display::FrameSink),
-    )?;
-    stop.store(true, Ordering::Relaxed);
-    if let Some(t) = scripter {
-        let _ = t.join();
-    }
-    let recorded = match recorder {
-        Some(r) => Some(r.finish()?),
-        None => None,
+    let stop = Arc::new(AtomicBool::new(false));
+    let flag = Arc::clone(&stop);
+    ctrlc::set_handler(move || {
+        if flag.swap(true, Ordering::Relaxed) {
+            std::process::exit(130);
+        }
+    })
+    .context("cannot install the Ctrl-C handler")?;
+    let ui = Terminal {
+        json: args.json,
+        open: args.open,
     };
-    report(
-        &args,
-        &display_stats,
-        &loop_stats,
-        (recorded, display_nodes, aim),
-    );
+    let summary = demo::run(&config, &ui, &stop)?;
+    report(&args, &summary);
     Ok(())
 }
 
-/// Prints the figures of a run: `(recorded frames, display nodes, press point)` besides the
-/// statistics.
-fn report(
-    args: &Args,
-    d: &DisplayStats,
-    l: &LoopStats,
-    (recorded, nodes, press_point): (Option<usize>, usize, [f64; 3]),
-) {
+/// Prints the figures of a run.
+fn report(args: &Args, summary: &DemoSummary) {
+    let (d, l) = (&summary.display, &summary.loop_stats);
+    let (recorded, nodes, press_point) =
+        (summary.recorded, summary.display_nodes, summary.press_point);
     if args.json {
         let v = serde_json::json!({
             "tick_rate_hz": l.tick_rate_hz, "max_jitter_us": l.max_jitter_us,

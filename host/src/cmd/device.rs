@@ -5,9 +5,10 @@
 //! end or on Ctrl-C.
 
 use anyhow::{Context, Result, bail};
-use bank_format::{AlignedBytes, Bank, DeviceCalibration, FaultReason, HostToDevice, Mode, State};
-use haptic::display::source::{Sample, SerialSource, Source};
+use bank_format::{HostToDevice, Mode};
+use haptic::display::source::{Sample, Source};
 use haptic::kinematics::{Workspace, counts_for};
+use haptic::link::{BankSource, ExpectedBank, Session};
 use std::path::PathBuf;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -127,33 +128,26 @@ pub fn run(cmd: DeviceCmd) -> Result<()> {
     }
 }
 
-/// The bank the device should run: its calibration, its CRC and a name for messages.
-fn bank(args: &DeviceArgs) -> Result<(DeviceCalibration, u32, String)> {
-    let (bytes, name) = match (&args.scene, &args.bank) {
-        (Some(scene), None) => (
-            haptic::bank::scene_bank(scene)?,
-            format!("the bank of {}", scene.display()),
-        ),
-        (None, Some(bank)) => (
-            std::fs::read(bank)
-                .with_context(|| format!("cannot read the bank {}", bank.display()))?,
-            bank.display().to_string(),
-        ),
+/// The bank the device should run ([`ExpectedBank`]), from --scene or --bank.
+fn bank(args: &DeviceArgs) -> Result<ExpectedBank> {
+    let source = match (&args.scene, &args.bank) {
+        (Some(scene), None) => BankSource::Scene(scene.clone()),
+        (None, Some(bank)) => BankSource::File(bank.clone()),
         _ => bail!("give the bank the device runs: --scene S or --bank F"),
     };
-    let aligned = AlignedBytes::new(&bytes);
-    let bank = Bank::parse(&aligned).map_err(|e| anyhow::anyhow!("{name}: invalid bank: {e}"))?;
-    Ok((*bank.device(), bank.crc(), name))
+    ExpectedBank::load(&source)
 }
 
 /// Opens the link to the device, its identity checked against the bank ([`bank`]).
-fn open(args: &DeviceArgs, crc: u32, name: &str) -> Result<SerialSource> {
-    SerialSource::open(&args.port, args.baud, crc, name)
+fn open(args: &DeviceArgs, bank: &ExpectedBank) -> Result<Session> {
+    Session::open(&args.port, args.baud, bank)
 }
 
 fn check(args: CheckArgs) -> Result<()> {
-    let (cal, crc, name) = bank(&args.device)?;
-    let mut source = open(&args.device, crc, &name)?;
+    let bank = bank(&args.device)?;
+    let (cal, name) = (bank.calibration, &bank.name);
+    let mut session = open(&args.device, &bank)?;
+    let source = session.source();
     let workspace = Workspace::from_device(&cal);
     if !args.json {
         eprintln!(
@@ -256,148 +250,46 @@ fn mode(mode: ModeArg, currents: Option<&[f32]>, limit: [f32; 3]) -> Result<Mode
     }
 }
 
-/// How long `arm` waits for the device to confirm a command.
-const CONFIRM: Duration = Duration::from_secs(1);
-
-/// Waits up to [`CONFIRM`] for a sample satisfying `ok`, returning it, or the newest sample seen
-/// (`None` if none came).
-fn await_sample(
-    source: &mut SerialSource,
-    ok: impl Fn(&Sample) -> bool,
-) -> Result<std::result::Result<Sample, Option<Sample>>> {
-    let end = Instant::now() + CONFIRM;
-    let mut newest = None;
-    while Instant::now() < end {
-        if let Some(s) = source.latest(Duration::from_millis(20))? {
-            if ok(&s) {
-                return Ok(Ok(s));
-            }
-            newest = Some(s);
-        }
-    }
-    Ok(Err(newest))
-}
-
-/// What a sample says of the device's state, for messages.
-fn describe(s: &Option<Sample>) -> String {
-    match s {
-        None => "no telemetry".into(),
-        Some(s) => match s.fault {
-            Some(f) => format!("{:?} ({f:?}), mode {:?}", s.state, s.mode),
-            None => format!("{:?}, mode {:?}", s.state, s.mode),
-        },
-    }
-}
-
 fn arm(args: ArmArgs) -> Result<()> {
     // Bad currents are refused before the port is opened.
-    let (cal, crc, name) = bank(&args.device)?;
-    let mode = mode(args.mode, args.currents.as_deref(), cal.current_limit_a)?;
-    let mut source = open(&args.device, crc, &name)?;
-    let port = &args.device.port;
-    let first = await_sample(&mut source, |_| true)?
-        .map_err(|_| anyhow::anyhow!("{port}: no telemetry from the device within 1 s"))?;
-    match first.state {
-        State::Armed => bail!(
-            "{port}: the device is armed already (another host, or a previous run still \
-             holding it): disarm it first"
-        ),
-        State::Fault if !args.clear_fault => bail!(
-            "{port}: the device is in a fault ({:?}): fix its cause and rerun with \
-             --clear-fault{}",
-            first.fault,
-            fault_hint(first.fault)
-        ),
-        State::Fault => {
-            source.command(HostToDevice::ClearFault)?;
-            await_sample(&mut source, |s| s.state == State::Disarmed)?.map_err(|seen| {
-                anyhow::anyhow!(
-                    "{port}: the fault did not clear (its cause remains?): {}",
-                    describe(&seen)
-                )
-            })?;
-        }
-        State::Disarmed => {}
-    }
+    let bank = bank(&args.device)?;
+    let mode = mode(
+        args.mode,
+        args.currents.as_deref(),
+        bank.calibration.current_limit_a,
+    )?;
+    let mut session = open(&args.device, &bank)?;
+    session.ready_to_arm(args.clear_fault)?;
     let stop = Arc::new(AtomicBool::new(false));
     let flag = Arc::clone(&stop);
     ctrlc::set_handler(move || flag.store(true, Ordering::Relaxed))
         .context("cannot install the Ctrl-C handler")?;
-    source.command(HostToDevice::SetMode(mode))?;
-    source.command(HostToDevice::Arm)?;
-    // The first telemetry after Arm that is not Disarmed: armed in the mode, or why not.
-    let seen = match await_sample(&mut source, |s| s.state != State::Disarmed)? {
-        Ok(s) if s.state == State::Armed && s.mode == mode => None,
-        Ok(s) => Some(Some(s)),
-        Err(seen) => Some(seen),
-    };
-    if let Some(seen) = seen {
-        let _ = source.command(HostToDevice::Disarm);
-        let hint = fault_hint(seen.as_ref().and_then(|s| s.fault));
-        bail!(
-            "{port}: the device did not arm in mode {mode:?}: {}{hint}",
-            describe(&seen)
-        );
-    }
+    let port = args.device.port.clone();
+    let mut armed = session.arm(mode)?;
     if !args.json {
         eprintln!(
-            "device on {port}: {name}; armed in mode {mode:?} for {} s (Ctrl-C disarms)",
-            args.seconds
+            "device on {port}: {}; armed in mode {mode:?} for {} s (Ctrl-C disarms)",
+            bank.name, args.seconds
         );
     }
     let period = Duration::from_secs_f64(1.0 / args.rate.clamp(0.1, 1000.0));
     let end = Instant::now() + Duration::from_secs_f64(args.seconds.max(0.0));
     let mut next = Instant::now();
-    let mut fault = None;
-    while Instant::now() < end && !stop.load(Ordering::Relaxed) {
-        let Some(s) = source.latest(Duration::from_millis(20))? else {
+    while Instant::now() < end && !stop.load(Ordering::Relaxed) && armed.is_armed() {
+        let Some(s) = armed.latest(Duration::from_millis(20))? else {
             continue;
         };
-        if s.state != State::Armed {
-            fault = Some(describe(&Some(s)));
-            break;
-        }
         if Instant::now() < next {
             continue;
         }
         next += period;
         print_armed(&s, args.json);
     }
-    source.command(HostToDevice::Disarm)?;
-    let disarmed = await_sample(&mut source, |s| s.state != State::Armed)?;
-    if let Some(f) = fault {
-        bail!("{port}: the device left the armed state: {f}");
+    armed.disarm()?;
+    if !args.json {
+        eprintln!("disarmed");
     }
-    match disarmed {
-        Ok(s) if s.state == State::Disarmed => {
-            if !args.json {
-                eprintln!("disarmed");
-            }
-            Ok(())
-        }
-        Ok(s) => bail!("{port}: after Disarm the device is {}", describe(&Some(s))),
-        Err(seen) => bail!(
-            "{port}: the device did not confirm Disarm within 1 s ({}); it faults LinkSilent \
-             once this host stops",
-            describe(&seen)
-        ),
-    }
-}
-
-/// What to do about the faults an operator fixes outside the device (appended to a message).
-fn fault_hint(fault: Option<FaultReason>) -> &'static str {
-    match fault {
-        Some(FaultReason::NotReferenced) => {
-            "; it has not been homed since it started: put the instrument in its home \
-             fixture, run `host device zero`, then arm again with --clear-fault"
-        }
-        Some(FaultReason::BrownOutLevel) => {
-            "; its brown-out reset is below level 3 (FLASH_OPTCR's BOR_LEV is not 00), so it \
-             could run on below the 2.7 V its 168 MHz clock needs: run `host flash --set-bor` \
-             (it programs BOR level 3 in the option bytes), then arm again"
-        }
-        _ => "",
-    }
+    Ok(())
 }
 
 /// One line of `host device arm`'s output.
@@ -431,66 +323,41 @@ fn print_armed(s: &Sample, json: bool) {
 }
 
 fn zero(args: ZeroArgs) -> Result<()> {
-    let (cal, crc, name) = bank(&args.device)?;
+    let bank = bank(&args.device)?;
     let fixture = "that the instrument is in its homing fixture";
     super::confirm::require_terminal_or_yes(args.yes, fixture)?;
-    let mut source = open(&args.device, crc, &name)?;
-    let port = &args.device.port;
-    let first = await_sample(&mut source, |_| true)?
-        .map_err(|_| anyhow::anyhow!("{port}: no telemetry from the device within 1 s"))?;
-    if first.state == State::Armed {
-        bail!("{port}: the device is armed; zeroing would make the tip jump: disarm it first");
-    }
-    let home = Workspace::from_device(&cal).tip(
-        f64::from(cal.home_joint[0]),
-        f64::from(cal.home_joint[1]),
-        f64::from(cal.home_joint[2]),
-    );
+    let mut session = open(&args.device, &bank)?;
+    session.ready_to_zero()?;
+    let home = bank.home_tip();
     if !super::confirm::ask(
         args.yes,
         "The device takes the pose it stands in as its home pose. Is the instrument held in \
          its homing fixture?",
     )? {
         bail!(
-            "{port}: not zeroed (nothing sent): put the instrument in its homing fixture and \
-             run `host device zero` again"
+            "{}: not zeroed (nothing sent): put the instrument in its homing fixture and \
+             run `host device zero` again",
+            args.device.port
         );
     }
-    // The tip goes through f32 (a ~0.1 m vector): 10 um is far below any pose change.
-    let at_home = |s: &Sample| {
-        s.tip_m
-            .iter()
-            .zip(home)
-            .all(|(&x, h)| (f64::from(x) - h).abs() < 1e-5)
+    session.zero(home)?;
+    let how = if args.yes {
+        "--yes said so"
+    } else {
+        "you confirmed it"
     };
-    source.command(HostToDevice::ZeroEncoders)?;
-    match await_sample(&mut source, at_home)? {
-        Ok(_) => {
-            let how = if args.yes {
-                "--yes said so"
-            } else {
-                "you confirmed it"
-            };
-            println!(
-                "zeroed: the device applied ZeroEncoders; its tip now reads the home pose \
-                 [{:+.2}, {:+.2}, {:+.2}] mm\n\
-                 checked: the device received and applied the command (it reads the home pose \
-                 after any zeroing, wherever the instrument stands, so this says nothing of the \
-                 pose)\n\
-                 not checked: that the instrument is in its homing fixture ({how}); if it was \
-                 not, the organ, the joint limits and the gravity feed-forward are misplaced \
-                 until the next zero",
-                home[0] * 1e3,
-                home[1] * 1e3,
-                home[2] * 1e3
-            );
-            Ok(())
-        }
-        Err(seen) => bail!(
-            "{port}: the device did not apply ZeroEncoders within 1 s: its tip did not move to \
-             the home pose ({}; tip {:?} m)",
-            describe(&seen),
-            seen.map(|s| s.tip_m)
-        ),
-    }
+    println!(
+        "zeroed: the device applied ZeroEncoders; its tip now reads the home pose \
+         [{:+.2}, {:+.2}, {:+.2}] mm\n\
+         checked: the device received and applied the command (it reads the home pose \
+         after any zeroing, wherever the instrument stands, so this says nothing of the \
+         pose)\n\
+         not checked: that the instrument is in its homing fixture ({how}); if it was \
+         not, the organ, the joint limits and the gravity feed-forward are misplaced \
+         until the next zero",
+        home[0] * 1e3,
+        home[1] * 1e3,
+        home[2] * 1e3
+    );
+    Ok(())
 }

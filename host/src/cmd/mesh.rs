@@ -1,17 +1,12 @@
 //! `host mesh`: a closed surface (STL, OBJ, PLY, VTK polydata, VTP) to a tetrahedral mesh for the
-//! FEM, through Gmsh: units, surface checks and opt-in repairs, a size field fine where the
-//! scene's tool reaches, quality, an atomic write.
+//! FEM, through Gmsh ([`haptic::meshing::mesh_surface`]: units, surface checks and opt-in
+//! repairs, a size field fine where the scene's tool reaches, an atomic write); prints its
+//! steps, the mesh and its quality.
 
-use anyhow::{Context, Result, bail};
+use anyhow::{Result, bail};
 use fem::mesh::quality::{QualitySummary, SLIVER_DIHEDRAL_DEG};
-use fem::surface::{CheckOptions, read_surface};
-use haptic::meshing::{self, Sizes};
-use haptic::scene::Scene;
+use haptic::meshing::{self, MeshConfig, MeshOutcome};
 use std::path::PathBuf;
-use std::time::Instant;
-
-/// Largest `--fill-holes`.
-const MAX_FILL_HOLES: usize = 1000;
 
 /// Arguments of `host mesh`.
 #[derive(clap::Args, Debug)]
@@ -70,7 +65,6 @@ pub struct Args {
 
 /// Runs the command.
 pub fn run(a: Args) -> Result<()> {
-    let t0 = Instant::now();
     if meshing::is_volume_mesh(&a.surface) {
         if !a.check {
             bail!(
@@ -81,116 +75,41 @@ pub fn run(a: Args) -> Result<()> {
         }
         return check_volume(&a);
     }
-    let surface = read_surface(&a.surface)?;
-    let name = a.surface.display().to_string();
-    eprintln!(
-        "{name}: {} vertices, {} faces",
-        surface.vertices.len(),
-        surface.triangles.len()
-    );
-    let (units, note) = meshing::resolve_units(
-        a.units.map(Into::into),
-        haptic::units::largest_side(surface.bounding_box()),
-        &name,
-        "--units",
-    )?;
-    if let Some(n) = note {
-        eprintln!("{n}");
-    }
-    // The least-area filling is O(n^3) in time and O(n^2) in memory: 1,000 edges take about
-    // 10^8 steps and 16 MB.
-    if a.fill_holes > MAX_FILL_HOLES {
-        bail!(
-            "--fill-holes {}: at most {MAX_FILL_HOLES} edges (a larger hole is no small defect: \
-             close it where the surface was made)",
-            a.fill_holes
-        );
-    }
-    if !(a.merge_tolerance >= 0.0 && a.merge_tolerance < 0.01) {
-        bail!(
-            "--merge-tolerance {}: must be in [0, 0.01)",
-            a.merge_tolerance
-        );
-    }
-    let opts = CheckOptions {
+    let config = MeshConfig {
+        surface: a.surface.clone(),
+        output: a.output.clone(),
+        units: a.units.map(Into::into),
+        size: a.size,
+        refine_near: a.refine_near.clone(),
+        fine: a.fine,
+        gradient: a.gradient,
         repair: a.repair,
-        merge_tolerance: a.merge_tolerance,
         fill_holes: a.fill_holes,
+        merge_tolerance: a.merge_tolerance,
         largest: a.largest,
+        check: a.check,
     };
-    let (checked, notes) =
-        fem::surface::check(&surface, opts).with_context(|| format!("{name}: refused"))?;
-    for n in &notes {
-        eprintln!("repaired: {n}");
-    }
-    let surface_m = checked.scaled(units.to_metres());
-    // The default size is the kept surface's (--largest may have dropped a far shell).
-    let side_m = haptic::units::largest_side(surface_m.bounding_box());
-    let volume = surface_m.signed_volume();
-    eprintln!(
-        "surface: closed, {} faces, volume {:.4e} m^3 ({:.1} cm^3), largest side {:.4} m",
-        surface_m.triangles.len(),
-        volume,
-        volume * 1e6,
-        side_m
-    );
-    let size = a.size.unwrap_or(side_m / 15.0);
-    if !(size > 0.0 && size.is_finite()) {
-        bail!("--size {size}: must be a positive length in metres");
-    }
-    let mut sizes = Sizes {
-        size,
-        fine: None,
-        reach: Vec::new(),
-    };
-    if let Some(scene_path) = &a.refine_near {
-        let scene = Scene::load(scene_path)?;
-        let fine = a.fine.unwrap_or(size / 3.0);
-        if !(fine > 0.0 && fine <= size) {
-            bail!("--fine {fine}: must be positive and at most the size {size} m");
-        }
-        if !(a.gradient > 0.0 && a.gradient.is_finite()) {
-            bail!("--gradient {}: must be positive", a.gradient);
-        }
-        sizes.reach = meshing::reach_points(&surface_m, &scene);
-        if sizes.reach.is_empty() {
-            bail!(
-                "{}: the tool reaches no point of {name} (in {}): is the organ where the scene's \
-                 trocar and insertion range expect it?",
-                scene_path.display(),
-                units.name()
+    match meshing::mesh_surface(&config, &mut |line| eprintln!("{line}"))? {
+        MeshOutcome::Checked => eprintln!("--check: the surface passes; not meshed"),
+        MeshOutcome::Meshed {
+            output,
+            mesh,
+            volume_m3,
+            surface_volume_m3,
+            seconds,
+        } => {
+            println!(
+                "{}: {} nodes, {} tetrahedra, volume {:.4e} m^3 ({:+.2}% of the surface's), \
+                 {seconds:.1} s",
+                output.display(),
+                mesh.nodes.len(),
+                mesh.tets.len(),
+                volume_m3,
+                100.0 * (volume_m3 / surface_volume_m3 - 1.0),
             );
+            print_quality(&mesh, " after Gmsh's and Netgen's optimisation");
         }
-        eprintln!(
-            "reach: {} surface points within the tool's reach ({}); size {fine:.4} m there, \
-             growing by {} per m to {size:.4} m",
-            sizes.reach.len(),
-            scene_path.display(),
-            a.gradient
-        );
-        sizes.fine = Some((fine, a.gradient));
-    } else {
-        eprintln!("size: {size:.4} m everywhere");
     }
-    let Some(output) = a.output.as_ref().filter(|_| !a.check) else {
-        eprintln!("--check: the surface passes; not meshed");
-        return Ok(());
-    };
-    let mesh = meshing::run_gmsh(&surface_m, &sizes)?;
-    let mut bytes = Vec::new();
-    mesh.write_msh4_ascii(&mut bytes)?;
-    haptic::fsio::write_atomic(output, &bytes, &[&a.surface])?;
-    let tet_volume: f64 = (0..mesh.tets.len()).map(|t| mesh.signed_volume(t)).sum();
-    println!(
-        "{}: {} nodes, {} tetrahedra, volume {:.4e} m^3 ({:+.2}% of the surface's), {:.1} s",
-        output.display(),
-        mesh.nodes.len(),
-        mesh.tets.len(),
-        tet_volume,
-        100.0 * (tet_volume / volume - 1.0),
-        t0.elapsed().as_secs_f64()
-    );
-    print_quality(&mesh, " after Gmsh's and Netgen's optimisation");
     Ok(())
 }
 

@@ -1,4 +1,4 @@
-//! Gravity compensation of the instrument's own weight (issue 14): the currents that hold the
+//! Gravity compensation of the instrument's own weight: the currents that hold the
 //! instrument still at a few poses (device in constant-current mode) become joint efforts
 //! `tau = i x transmission x Kt` (the firmware's current mapping inverted, see
 //! [`bank_format::DeviceCalibration`]), and the eight coefficients of the potential
@@ -13,6 +13,7 @@
 use super::csv::{CsvError, Table};
 use bank_format::{DeviceCalibration, GRAVITY_COEFF_MAX, GRAVITY_COEFFS};
 use faer::Mat;
+use std::path::PathBuf;
 
 /// Bench-file columns, in the order [`poses`] reads them.
 pub const COLUMNS: [&str; 6] = [
@@ -268,6 +269,58 @@ pub fn fit(poses: &[Pose]) -> Result<GravityFit, GravityError> {
         rms_n: (sum_n / n).sqrt(),
         worst_n,
         conditioning,
+    })
+}
+
+/// What `host calibrate gravity` fits: its options.
+#[derive(Debug, Clone)]
+pub struct Config {
+    /// CSV of held poses with [`COLUMNS`].
+    pub csv: PathBuf,
+    /// Scene file: its motor calibration turns the currents into joint efforts.
+    pub scene: PathBuf,
+    /// Where the calibrated scene goes; `None`: `scene`, edited in place.
+    pub out: Option<PathBuf>,
+}
+
+/// The gravity fit (serialised as `host calibrate gravity --json` prints it).
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct Report {
+    /// The fit.
+    pub fit: GravityFit,
+    /// The coefficients' names ([`NAMES`]).
+    pub names: [&'static str; GRAVITY_COEFFS],
+    /// The scene written.
+    pub scene: PathBuf,
+}
+
+/// Reads the poses, fits the coefficients ([`fit`]) and writes them into the scene's
+/// `[gravity]` table (of `out`, or of the scene in place).
+pub fn run(a: &Config) -> anyhow::Result<Report> {
+    use anyhow::Context;
+    let scene = crate::scene::Scene::load(&a.scene)?;
+    let table = super::csv::read(&a.csv, &COLUMNS)?;
+    let poses = poses(&table, &scene.device)?;
+    let f = fit(&poses).with_context(|| a.csv.display().to_string())?;
+    let source = format!(
+        "{}, {} poses, residual RMS {:.3e} N m (worst {:.3e}), insertion {:.3e} N (worst {:.3e})",
+        a.csv.display(),
+        f.poses,
+        f.rms_nm,
+        f.worst_nm.0.abs(),
+        f.rms_n,
+        f.worst_n.0.abs()
+    );
+    let text = std::fs::read_to_string(&a.scene)
+        .with_context(|| format!("{}: cannot read the scene", a.scene.display()))?;
+    let out = a.out.as_deref().unwrap_or(&a.scene);
+    let new = super::scene_edit::set_gravity(out, &text, &f.coeffs, &source)?;
+    crate::fsio::write_atomic(out, new.as_bytes(), &[])
+        .with_context(|| format!("writing {}", out.display()))?;
+    Ok(Report {
+        fit: f,
+        names: NAMES,
+        scene: out.to_path_buf(),
     })
 }
 

@@ -1,4 +1,4 @@
-//! Bench calibration (issue 8): the tissue force law Q and the display law P (paper, section
+//! Bench calibration: the tissue force law Q and the display law P (paper, section
 //! 3-4, fig. 9) fitted to compression curves, and the motor torque constants fitted to
 //! load-cell measurements.
 //!
@@ -12,6 +12,11 @@
 //! Fung's quasi-linear viscoelasticity (Prony terms and the instantaneous elastic law) to a
 //! ramp-and-hold test. (What evaluating a fitted law costs on the MCU is
 //! [`crate::mcu::law_cost`]'s.)
+//!
+//! Each `host calibrate` command is one `run(&Config) -> Result<Report>` here: [`tissue::run`],
+//! [`motor::run`], [`gravity::run`], [`specimen::run`], [`relaxation::run`]; it reads the bench
+//! file, fits, writes the plots and the scene, and returns a report the CLI prints (as text or
+//! as the report's JSON).
 
 pub mod cheb;
 pub mod csv;
@@ -22,3 +27,17 @@ pub mod plot;
 pub mod relaxation;
 pub mod scene_edit;
 pub mod specimen;
+pub mod tissue;
+
+use anyhow::{Context, Result};
+use std::path::Path;
+
+/// Edits the scene file `path` in place: `edit` turns its text into the new text, which is
+/// written atomically (through a link to it, with its mode kept).
+fn write_scene(path: &Path, edit: impl FnOnce(&str) -> Result<String>) -> Result<()> {
+    let text = std::fs::read_to_string(path)
+        .with_context(|| format!("{}: cannot read the scene", path.display()))?;
+    let new = edit(&text)?;
+    crate::fsio::write_atomic(path, new.as_bytes(), &[])
+        .with_context(|| format!("writing {}", path.display()))
+}

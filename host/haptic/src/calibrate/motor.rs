@@ -11,6 +11,11 @@
 //! fulcrum, i.e. the insertion) and `tau = F` for insertion.
 
 use super::csv::{CsvError, Table};
+use super::plot::{self, PlotSpec};
+use super::scene_edit;
+use crate::scene::Scene;
+use anyhow::{Context, Result, bail};
+use std::path::{Path, PathBuf};
 
 /// Axis names, in joint order (0 = pitch, 1 = yaw, 2 = insertion).
 pub const AXES: [&str; 3] = ["pitch", "yaw", "insertion"];
@@ -176,4 +181,122 @@ pub fn fit(samples: &[Sample]) -> Result<Vec<AxisFit>, MotorError> {
         return Err(MotorError::Empty);
     }
     Ok(fits)
+}
+/// What `host calibrate motor` fits: its options.
+#[derive(Debug, Clone)]
+pub struct Config {
+    /// Bench CSV with [`COLUMNS`].
+    pub csv: PathBuf,
+    /// Scene file whose gear ratios turn the gains into torque constants, written back with
+    /// the friction offsets.
+    pub scene: Option<PathBuf>,
+    /// Plot path without extension: `<plot>-<axis>.svg` and `.png` per fitted axis.
+    pub plot: PathBuf,
+}
+
+/// One fitted axis of a [`Report`].
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct Row {
+    /// Its name ([`AXES`]).
+    pub axis: &'static str,
+    /// The fit.
+    #[serde(flatten)]
+    pub fit: AxisFit,
+    /// `k / transmission` with a scene, N m/A (N/A for insertion).
+    pub torque_constant_nm_per_a: Option<f64>,
+}
+
+/// The motor fit (serialised as `host calibrate motor --json` prints it).
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct Report {
+    /// The fitted axes.
+    pub axes: Vec<Row>,
+    /// The plots written.
+    pub plots: Vec<PathBuf>,
+    /// The scene written, if any.
+    pub scene: Option<PathBuf>,
+}
+
+/// Reads the bench file, fits every measured axis ([`fit`]), refuses a gain whose sign
+/// disagrees with the scene's gear ratio, writes the plots and, with a scene, its torque
+/// constants and friction offsets.
+pub fn run(a: &Config) -> Result<Report> {
+    let table = super::csv::read(&a.csv, &COLUMNS)?;
+    table.require_rows(MIN_POINTS, "three per fitted axis")?;
+    let samples = samples(&table)?;
+    let fits = fit(&samples).with_context(|| a.csv.display().to_string())?;
+    let scene = a.scene.as_deref().map(Scene::load).transpose()?;
+    let mut kt = [None; 3];
+    let mut friction = [None; 3];
+    for f in &fits {
+        friction[f.axis] = Some(f.friction);
+        if let Some(s) = &scene {
+            let g = f64::from(s.device.transmission[f.axis]);
+            let k = f.gain / g;
+            if !(k > 0.0 && k.is_finite()) {
+                bail!(
+                    "{}: axis {}: fitted gain {:.6} has the opposite sign of gear_ratio {g}: \
+                     check the load cell's direction or the motor wiring",
+                    a.csv.display(),
+                    AXES[f.axis],
+                    f.gain
+                );
+            }
+            kt[f.axis] = Some(k);
+        }
+    }
+    let mut plots = Vec::new();
+    for f in &fits {
+        let name = AXES[f.axis];
+        let unit = if f.axis == 2 { "N" } else { "N m" };
+        let pts: Vec<(f64, f64)> = samples
+            .iter()
+            .filter(|s| s.axis == f.axis)
+            .map(|s| (s.current_a, s.effort()))
+            .collect();
+        let (lo, hi) = pts
+            .iter()
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), p| {
+                (l.min(p.0), h.max(p.0))
+            });
+        let line = |i: f64| f.gain * i - f.friction;
+        let mut stem = a.plot.clone().into_os_string();
+        stem.push(format!("-{name}"));
+        let spec = PlotSpec {
+            title: format!(
+                "{name}: k = {:.5} {unit}/A, friction {:.4} {unit}, RMS {:.2} %",
+                f.gain,
+                f.friction,
+                100.0 * f.rms_rel
+            ),
+            x_label: "commanded current, A".into(),
+            y_label: format!("joint effort from the load cell, {unit}"),
+            data: ("bench data".into(), pts),
+            curves: vec![(
+                "fit: k i - friction".into(),
+                vec![(lo, line(lo)), (hi, line(hi))],
+            )],
+            residual_label: format!("residual, {unit}"),
+            residuals: f.residuals.clone(),
+        };
+        plots.extend(plot::write(Path::new(&stem), &spec)?);
+    }
+    if let Some(path) = &a.scene {
+        super::write_scene(path, |text| {
+            Ok(scene_edit::set_motor(path, text, kt, friction)?)
+        })?;
+    }
+    let axes = fits
+        .into_iter()
+        .map(|f| Row {
+            axis: AXES[f.axis],
+            torque_constant_nm_per_a: kt[f.axis],
+            fit: f,
+        })
+        .collect();
+    Ok(Report {
+        axes,
+        plots,
+        scene: a.scene.clone(),
+    })
 }

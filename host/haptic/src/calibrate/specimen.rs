@@ -9,10 +9,11 @@
 //! constraining the deformation). The response is linear, so one solve gives the force and the
 //! radial displacement per metre of compression.
 
-use anyhow::{Result, bail};
+use anyhow::{Context, Result, bail};
 use fem::compliance::solve_prescribed;
 use fem::elasticity::{Elasticity, FixedSet, Material};
 use fem::mesh::TetMesh;
+use std::path::PathBuf;
 
 /// The specimen's linear response per metre of axial compression.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
@@ -150,4 +151,21 @@ pub fn compress(mesh: &TetMesh, material: Material) -> Result<SpecimenResponse> 
         top_nodes: top.len(),
         ring_nodes: ring.len(),
     })
+}
+/// What `host calibrate specimen` computes: its options.
+#[derive(Debug, Clone)]
+pub struct Config {
+    /// The specimen's cylinder mesh, axis z, m.
+    pub mesh: PathBuf,
+    /// Young's modulus of the linear model, Pa.
+    pub young_pa: f64,
+    /// Poisson's ratio of the linear model.
+    pub poisson: f64,
+}
+
+/// Loads the mesh and computes its response ([`compress`]).
+pub fn run(a: &Config) -> Result<SpecimenResponse> {
+    let mesh = fem::mesh::load(&a.mesh)?;
+    let material = Material::new(a.young_pa, a.poisson)?;
+    compress(&mesh, material).with_context(|| format!("{}: specimen compression", a.mesh.display()))
 }
