@@ -12,6 +12,7 @@ use anyhow::{Context, Result, bail};
 use bank_format::{AlignedBytes, Bank};
 use haptic::bank::{BuiltBank, Prepared};
 use haptic::deform::Deformer;
+use haptic::display::law::DisplayLaw;
 use haptic::display::server::{Server, SteerFn};
 use haptic::display::source::{LoopStats, SerialSource, Source, SourceSpec};
 use haptic::display::{DisplayMesh, DisplayStats, Pipeline, SurfaceModel, surface_neighbours};
@@ -339,6 +340,7 @@ pub fn run(args: Args) -> Result<()> {
         bank_to_mesh,
         hub: server.hub.clone(),
         fps: args.fps,
+        display_law: prep.organ.scene.display_law.and_then(DisplayLaw::new),
     };
     let (display_stats, loop_stats) = pipeline.run(
         &stop,
@@ -383,6 +385,8 @@ fn report(
             "column_batch_mean_ms": mean_batch_ms(d),
             "column_batch_max_ms": d.columns.max_seconds * 1e3,
             "display_nodes": nodes, "recorded_frames": recorded, "press_point_m": press_point,
+            "max_radial_linear_m": d.max_radial_linear_m,
+            "max_radial_displayed_m": d.max_radial_displayed_m,
         });
         println!("{v}");
         return;
@@ -403,6 +407,17 @@ fn report(
         "display   {:.1} frames/s ({} frames of a {nodes}-node surface, {:.2} ms mean, {:.2} ms max \
          per frame, {} while columns were being solved)",
         d.display_fps, d.frames, d.mean_frame_ms, d.max_frame_ms, d.approximate_frames
+    );
+    println!(
+        "radial    largest displacement orthogonal to the contact force {:.3} mm linear, {:.3} mm \
+         displayed{}",
+        d.max_radial_linear_m * 1e3,
+        d.max_radial_displayed_m * 1e3,
+        if d.max_radial_linear_m == d.max_radial_displayed_m {
+            ""
+        } else {
+            " (the scene's display law P)"
+        }
     );
     println!(
         "columns   {} contact nodes solved in {} batches, {:.1} ms mean, {:.1} ms max per batch",
