@@ -81,6 +81,11 @@ fn headless_press_prints_the_figures_as_json() {
     // The press reaches 8 mm into the liver along the shaft 1.5 s into the 3 s run.
     assert_peak_is_the_probes(&v, 0.008);
     assert_eq!(v["faults"], 0, "{json}");
+    // The shipped scene has no display law P: the surface is shown as the linear model
+    // computes it, and the press bulges it sideways.
+    let radial = v["max_radial_linear_m"].as_f64().unwrap();
+    assert!(radial > 1e-4, "{json}");
+    assert_eq!(v["max_radial_displayed_m"].as_f64(), Some(radial), "{json}");
     // A 1 kHz loop, and at least half the display's 60 frames a second over the run.
     let rate = v["tick_rate_hz"].as_f64().unwrap();
     assert!((900.0..1100.0).contains(&rate), "{json}");

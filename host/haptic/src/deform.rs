@@ -1,7 +1,7 @@
 //! The displayed deformation: `u = C[:, S] f_S` on the display nodes (the paper's superposition,
 //! eq. 9, written with the compliance: the contact forces `f_S` the device reports replace the
-//! modified constraints `u~*`, since `T^u_nk u~*_k = C_nk f_k`), followed by the displacement
-//! correction `P` of section 4 ([`Correction`]; the identity until a calibration provides one).
+//! modified constraints `u~*`, since `T^u_nk u~*_k = C_nk f_k`). The display law P is applied
+//! afterwards, for either contact model ([`crate::display::law`]).
 //!
 //! Memory: a dense `C[display, R]` is gigabytes for a 100k-node organ, so columns are produced on
 //! demand from the kept factorisation: one batched solve `K_ff X = E_k` (three unit right-hand
@@ -18,39 +18,6 @@ use fem::compliance::Compliance;
 use std::collections::{HashMap, VecDeque};
 use std::sync::Arc;
 use std::sync::mpsc::{Receiver, Sender, channel};
-
-/// The displacement correction `P` (paper section 4, eq. 3): given the direction of the
-/// constraint (unit) and the linear displacements of the display nodes, returns them corrected.
-pub trait Correction: Send {
-    /// Corrects `u` (one `[x, y, z]` per display node, m) in place.
-    fn correct(&self, direction: [f32; 3], u: &mut [[f32; 3]]);
-}
-
-/// No correction (`P(x) = x`): what the display uses until calibration fits a `P`.
-#[derive(Debug, Clone, Copy, Default)]
-pub struct Identity;
-
-impl Correction for Identity {
-    fn correct(&self, _direction: [f32; 3], _u: &mut [[f32; 3]]) {}
-}
-
-/// Eq. 3: `u = u^t + u^r` with `u^t` along the constraint direction kept linear and the
-/// amplitude of the orthogonal part `u^r` replaced by `p(|u^r|)` (a fitted curve, m -> m).
-pub struct Radial<F>(pub F);
-
-impl<F: Fn(f32) -> f32 + Send> Correction for Radial<F> {
-    fn correct(&self, d: [f32; 3], u: &mut [[f32; 3]]) {
-        for v in u {
-            let s = v[0] * d[0] + v[1] * d[1] + v[2] * d[2];
-            let r = [v[0] - s * d[0], v[1] - s * d[1], v[2] - s * d[2]];
-            let len = (r[0] * r[0] + r[1] * r[1] + r[2] * r[2]).sqrt();
-            if len > 0.0 {
-                let k = (self.0)(len) / len;
-                *v = std::array::from_fn(|i| s * d[i] + k * r[i]);
-            }
-        }
-    }
-}
 
 /// Whether a displacement used every contact node's own columns.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -82,7 +49,6 @@ pub struct Deformer {
     results: Receiver<Batch>,
     clock: u64,
     solves: SolveStats,
-    correction: Box<dyn Correction>,
 }
 
 impl std::fmt::Debug for Deformer {
@@ -229,13 +195,7 @@ impl Deformer {
             results,
             clock: 0,
             solves: SolveStats::default(),
-            correction: Box::new(Identity),
         }
-    }
-
-    /// Replaces the displacement correction `P` (default [`Identity`]).
-    pub fn set_correction(&mut self, correction: Box<dyn Correction>) {
-        self.correction = correction;
     }
 
     /// Column solves so far.
@@ -356,12 +316,10 @@ impl Deformer {
         u.clear();
         u.resize(self.display.len(), [0.0; 3]);
         let mut coverage = Coverage::Exact;
-        let mut total = [0.0f32; 3];
         for &(k, f) in contacts {
             if k >= self.positions.len() {
                 continue;
             }
-            (0..3).for_each(|i| total[i] += f[i]);
             let carrier = if self.cache.contains_key(&k) {
                 Some(k)
             } else {
@@ -378,10 +336,6 @@ impl Deformer {
                     v[r] += b[3 * r] * f[0] + b[3 * r + 1] * f[1] + b[3 * r + 2] * f[2];
                 }
             }
-        }
-        let n = (total[0] * total[0] + total[1] * total[1] + total[2] * total[2]).sqrt();
-        if n > 0.0 {
-            self.correction.correct(total.map(|x| x / n), u);
         }
         coverage
     }
@@ -540,16 +494,5 @@ mod tests {
         assert_eq!(q.next_batch(), vec![20, 100]);
         assert!(!q.prefetch.contains(&20));
         assert_eq!(q.next_batch(), vec![8, 9]);
-    }
-
-    #[test]
-    fn radial_correction_scales_only_the_orthogonal_part() {
-        let mut u = vec![[0.001f32, 0.002, -0.004], [0.0, 0.0, -0.001]];
-        Radial(|x: f32| 2.0 * x).correct([0.0, 0.0, -1.0], &mut u);
-        assert_eq!(u[0], [0.002, 0.004, -0.004]);
-        assert_eq!(u[1], [0.0, 0.0, -0.001]);
-        let mut same = u.clone();
-        Identity.correct([0.0, 0.0, 1.0], &mut same);
-        assert_eq!(same, u);
     }
 }

@@ -14,13 +14,13 @@ use crate::display::server::{Server, SteerFn};
 use crate::display::source::{LoopStats, SerialSource, Source, SourceSpec};
 use crate::display::{DisplayMesh, DisplayStats, Pipeline, SurfaceModel, surface_neighbours};
 use crate::kinematics::Workspace;
-use crate::units::Units;
 use crate::organ::Organ;
 use crate::record::{Recorded, Recorder};
 use crate::scene::{ContactModel, MeshSource, Scene};
 use crate::script::{Scripted, aim_joints, press_point};
 use crate::sil::source::SilSource;
 use crate::trajectory::Script;
+use crate::units::Units;
 use crate::virtual_device::VirtualDevice;
 use anyhow::{Context, Result, bail};
 use bank_format::{AlignedBytes, Bank};
@@ -330,6 +330,11 @@ pub fn run(config: &DemoConfig, ui: &dyn Frontend, stop: &AtomicBool) -> Result<
         bank_to_mesh,
         hub: server.hub.clone(),
         fps: args.fps,
+        display_law: prep
+            .organ
+            .scene
+            .display_law
+            .and_then(crate::display::law::DisplayLaw::new),
     };
     let ran = pipeline.run(
         stop,

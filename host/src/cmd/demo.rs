@@ -166,6 +166,8 @@ fn report(args: &Args, summary: &DemoSummary) {
             "column_batch_mean_ms": mean_batch_ms(d),
             "column_batch_max_ms": d.columns.max_seconds * 1e3,
             "display_nodes": nodes, "recorded_frames": recorded, "press_point_m": press_point,
+            "max_radial_linear_m": d.max_radial_linear_m,
+            "max_radial_displayed_m": d.max_radial_displayed_m,
         });
         println!("{v}");
         return;
@@ -186,6 +188,17 @@ fn report(args: &Args, summary: &DemoSummary) {
         "display   {:.1} frames/s ({} frames of a {nodes}-node surface, {:.2} ms mean, {:.2} ms max \
          per frame, {} while columns were being solved)",
         d.display_fps, d.frames, d.mean_frame_ms, d.max_frame_ms, d.approximate_frames
+    );
+    println!(
+        "radial    largest displacement orthogonal to the contact force {:.3} mm linear, {:.3} mm \
+         displayed{}",
+        d.max_radial_linear_m * 1e3,
+        d.max_radial_displayed_m * 1e3,
+        if d.max_radial_linear_m == d.max_radial_displayed_m {
+            ""
+        } else {
+            " (the scene's display law P)"
+        }
     );
     println!(
         "columns   {} contact nodes solved in {} batches, {:.1} ms mean, {:.1} ms max per batch",

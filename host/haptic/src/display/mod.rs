@@ -4,7 +4,8 @@
 //! device on a serial port, the QEMU image).
 //! [`Pipeline::run`] takes the newest [`Sample`] of a [`Source`] at a fixed frame rate, maps its
 //! contact set to mesh nodes, computes the surface displacement ([`SurfaceModel`]: the nodal
-//! [`Deformer`], or a sampled scene's precomputed fields on its fine mesh), and publishes
+//! [`Deformer`], or a sampled scene's precomputed fields on its fine mesh), applies the scene's
+//! display law P to it ([`law`], the paper's eq. 4), and publishes
 //! one binary frame ([`encode_frame`]) to the [`server`], which hands each viewer only the newest
 //! frame (a slow or vanished browser drops frames; the loop thread never waits for anyone).
 //! Optionally every frame is also offered to a recorder (ParaView series, [`crate::record`]).
@@ -14,6 +15,7 @@
 //! [`FRAME_HEADER_BYTES`] of header (see [`encode_frame`]) then `f32 positions[3 nodes]`.
 
 pub mod fields;
+pub mod law;
 pub mod server;
 pub mod source;
 
@@ -182,6 +184,12 @@ pub struct DisplayStats {
     pub approximate_frames: u64,
     /// Compliance column solves (in the deformer's worker thread).
     pub columns: SolveStats,
+    /// Largest amplitude of the linear model's displacement orthogonal to the constraint
+    /// (`|u^r|`, paper eq. 4) over every node and frame, m.
+    pub max_radial_linear_m: f64,
+    /// The same, as displayed: after the display law P ([`law`]); equal to
+    /// `max_radial_linear_m` without P.
+    pub max_radial_displayed_m: f64,
 }
 
 /// Receives each frame's sample and displacement (a recorder).
@@ -219,6 +227,9 @@ pub struct Pipeline<'a> {
     pub hub: server::Hub,
     /// Target frame rate, Hz.
     pub fps: f64,
+    /// The display law P applied to every frame (paper eq. 4, [`law`]); `None`: the linear
+    /// displacement is shown as computed.
+    pub display_law: Option<law::DisplayLaw>,
 }
 
 /// How long [`Pipeline::run`] waits for a source's first sample beyond its run time.
@@ -304,6 +315,17 @@ impl Pipeline<'_> {
                     Coverage::Exact
                 }
             };
+            if let Some(direction) =
+                law::constraint_direction(sample.contacts.iter().map(|c| &c.force_n))
+            {
+                let extent = match &self.display_law {
+                    Some(p) => p.apply(direction, &mut u),
+                    None => law::radial_extent(direction, &u),
+                };
+                stats.max_radial_linear_m = stats.max_radial_linear_m.max(extent.linear_m.into());
+                stats.max_radial_displayed_m =
+                    stats.max_radial_displayed_m.max(extent.displayed_m.into());
+            }
             positions.clear();
             positions.extend(
                 self.mesh
@@ -418,5 +440,149 @@ mod tests {
         assert_eq!(n[&5], vec![2, 7, 9]);
         assert_eq!(n[&9], vec![5, 7]);
         assert_eq!(n.len(), 4);
+    }
+
+    /// A source that always has the same sample (a held press).
+    struct Held(Sample);
+
+    impl Source for Held {
+        fn latest(&mut self, _timeout: Duration) -> anyhow::Result<Option<Sample>> {
+            Ok(Some(self.0.clone()))
+        }
+        fn stats(&self) -> LoopStats {
+            LoopStats::default()
+        }
+    }
+
+    /// Keeps the last frame computed from every contact node's own columns.
+    #[derive(Default)]
+    struct LastExact(Option<Vec<[f32; 3]>>);
+
+    impl FrameSink for LastExact {
+        fn frame(&mut self, info: &FrameInfo, _: &[(usize, [f32; 3])], u: &[[f32; 3]]) {
+            if info.exact {
+                self.0 = Some(u.to_vec());
+            }
+        }
+    }
+
+    /// The frame loop on a held oblique press of a soft block, with and without a display law
+    /// `P(x) = 3 x`: the shown displacement is the direct solve's `K^-1 f` with its part
+    /// orthogonal to `f` tripled and its part along `f` unchanged, node by node; without P it
+    /// is the direct solve, and the radial extents are the same before and after.
+    #[test]
+    fn the_frame_loop_shows_the_display_law() {
+        use fem::compliance::Compliance;
+        use fem::elasticity::{Elasticity, FixedSet, Material};
+        let mesh = fem::mesh::structured::box_mesh([0.04, 0.04, 0.02], [4, 4, 2]);
+        let mut fixed = FixedSet::none(mesh.nodes.len());
+        fixed
+            .fix_box(&mesh, [-1.0, -1.0, -1.0, 1.0, 1.0, 1e-6], [true; 3])
+            .unwrap();
+        let body = Elasticity::new(&mesh, Material::new(3.0e3, 0.45).unwrap()).unwrap();
+        let c = Arc::new(Compliance::factorize(&body, &fixed).unwrap());
+        let surface = fem::mesh::boundary(&mesh).unwrap();
+        let k = (0..mesh.nodes.len())
+            .find(|&i| {
+                let p = mesh.nodes[i];
+                (p[0] - 0.02).abs() < 1e-9
+                    && (p[1] - 0.02).abs() < 1e-9
+                    && (p[2] - 0.02).abs() < 1e-9
+            })
+            .unwrap();
+        let force = [0.1f32, -0.05, -0.3];
+        let mut contacts = firmware::tick::Contacts::new();
+        contacts
+            .push(bank_format::Contact {
+                node: 0,
+                force_n: force,
+            })
+            .unwrap();
+        let sample = Sample {
+            tick: 1,
+            state: State::Armed,
+            fault: None,
+            tip_m: [0.02, 0.02, 0.018],
+            contacts,
+            contact_point: None,
+            tool_force_n: force.map(|f| -f),
+            mode: bank_format::Mode::Render,
+            currents_a: [0.0; 3],
+        };
+        let mut f = vec![0.0; 3 * mesh.nodes.len()];
+        (0..3).for_each(|i| f[3 * k + i] = f64::from(force[i]));
+        let reference = c.displacement(&f);
+        let display = DisplayMesh::of_surface(&mesh.nodes, &surface);
+        let server =
+            server::Server::start(0, display.encode(), serde_json::json!({}), None).unwrap();
+        let gain = 3.0;
+        let p = law::DisplayLaw::new(
+            bank_format::TissueLaw::chebyshev(&[gain * 0.005, gain * 0.005], [0.0, 0.01]).unwrap(),
+        )
+        .unwrap();
+        let fnorm = force
+            .iter()
+            .map(|x| f64::from(*x).powi(2))
+            .sum::<f64>()
+            .sqrt();
+        let d = force.map(|x| f64::from(x) / fnorm);
+        for display_law in [None, Some(p)] {
+            let mut source = Held(sample.clone());
+            let mut pipeline = Pipeline {
+                source: &mut source,
+                surface: SurfaceModel::Nodal {
+                    deformer: Box::new(Deformer::new(
+                        Arc::clone(&c),
+                        &mesh.nodes,
+                        surface.nodes.clone(),
+                        8,
+                    )),
+                    neighbours: HashMap::new(),
+                },
+                mesh: Arc::new(display.clone()),
+                bank_to_mesh: vec![k],
+                hub: server.hub.clone(),
+                fps: 200.0,
+                display_law,
+            };
+            let mut sink = LastExact::default();
+            let stop = AtomicBool::new(false);
+            let (stats, _) = pipeline
+                .run(&stop, Some(Duration::from_millis(300)), Some(&mut sink))
+                .unwrap();
+            let shown = sink.0.expect("an exact frame within 0.3 s");
+            let k_radial = if display_law.is_some() {
+                f64::from(gain)
+            } else {
+                1.0
+            };
+            let mut largest = 0.0f64;
+            for (i, &n) in surface.nodes.iter().enumerate() {
+                let lin: [f64; 3] = std::array::from_fn(|r| reference[3 * n + r]);
+                let s = lin[0] * d[0] + lin[1] * d[1] + lin[2] * d[2];
+                let want: [f64; 3] =
+                    std::array::from_fn(|r| s * d[r] + k_radial * (lin[r] - s * d[r]));
+                largest =
+                    largest.max(((0..3).map(|r| (lin[r] - s * d[r]).powi(2)).sum::<f64>()).sqrt());
+                for r in 0..3 {
+                    let err = (f64::from(shown[i][r]) - want[r]).abs();
+                    assert!(
+                        err <= 2e-5 * 1e-3 + 1e-5 * want[r].abs(),
+                        "node {n}: {:?} vs {want:?}",
+                        shown[i]
+                    );
+                }
+            }
+            assert!(largest > 1e-4, "the press must bulge the block: {largest}");
+            let rel = |a: f64, b: f64| (a / b - 1.0).abs();
+            assert!(
+                rel(stats.max_radial_linear_m, largest) < 1e-4,
+                "{stats:?} vs {largest}"
+            );
+            assert!(
+                rel(stats.max_radial_displayed_m, k_radial * largest) < 1e-4,
+                "{stats:?} vs {largest}"
+            );
+        }
     }
 }
