@@ -3,7 +3,7 @@
 //! displayed; `check` prints the joints of the telemetry's tip (the forward kinematics of known
 //! joint values) and the encoder counts they mean; `arm` and `zero` send the commands a person
 //! at bring-up needs, following the firmware's state machine; the library's arm guard
-//! (`haptic::link::Session::arm`) disarms the device when dropped.
+//! (`haptic::device::Session::arm`) disarms the device when dropped.
 #![cfg(target_os = "linux")]
 
 use bank_format::Contact;
@@ -12,9 +12,10 @@ use bank_format::{
     Mode, PROTOCOL_VERSION, ResetCause, State, Telemetry, encode_frame,
 };
 use firmware::tick::Contacts;
+use haptic::device::{BankSource, ExpectedBank, Session};
 use haptic::display::source::{SerialSource, Source};
 use haptic::kinematics::{Workspace, counts_for};
-use haptic::link::{BankSource, ExpectedBank, Identity, Session, await_identity};
+use haptic::link::{Identity, await_identity};
 use std::fs::File;
 use std::io::{Read, Write};
 use std::os::fd::FromRawFd;
@@ -681,7 +682,7 @@ fn device_arm_reports_a_fault_during_the_run_and_fails() {
     assert_eq!(log.last(), Some(&HostToDevice::Disarm));
 }
 
-/// The library's arm guard (`haptic::link::Armed`): an error returned from inside an armed
+/// The library's arm guard (`haptic::device::Armed`): an error returned from inside an armed
 /// run drops the guard without `Armed::disarm`, and the drop sends `Disarm` and waits for the
 /// device to leave the armed state, so the device is disarmed before the session (and its
 /// link) ends.

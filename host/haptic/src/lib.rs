@@ -8,8 +8,8 @@
 //! the [`virtual_device`] or a real one, frames and the browser viewer), [`deform`] (surface
 //! displacement from the contact forces), [`record`] (ParaView series) and [`script`] (aiming
 //! and the scripted hand motions, on [`trajectory`]'s tool paths); [`demo`] runs them together.
-//! [`link`] is the client of a device's serial link (port, frames, greeting) and its bring-up
-//! session. [`sil`] runs the firmware image under QEMU,
+//! [`link`] is the client of a device's serial link (port, frames, greeting), [`device`] a
+//! bring-up session on it (check, zero, arm with a guard that disarms when dropped). [`sil`] runs the firmware image under QEMU,
 //! [`calibrate`] fits the tissue laws and the motor constants; [`mod@bench`] measures.
 //! Leaves the others share: [`units`] (mesh units), [`cache`] (the on-disk cache and FNV-1a),
 //! [`linalg`] (3 x 3 blocks) and [`realtime`] (thread scheduling).
@@ -21,6 +21,7 @@ pub mod calibrate;
 pub mod contact;
 pub mod deform;
 pub mod demo;
+pub mod device;
 pub mod display;
 pub mod fsio;
 pub mod kinematics;

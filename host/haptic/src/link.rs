@@ -8,8 +8,8 @@
 //! chip); [`DeviceLink`] does all of it and then runs a
 //! thread that sends a heartbeat every 2 ms and the commands given to it, and hands every
 //! message the device sends to a callback (the display's serial source,
-//! [`crate::display::source::SerialSource`]). [`Session`] is a bring-up session on it
-//! (`host device`): check, zero, and arm with a guard that disarms when dropped.
+//! [`crate::display::source::SerialSource`]). [`crate::device::Session`] is a bring-up
+//! session on it (`host device`).
 
 use anyhow::{Context, Result, anyhow, bail};
 use bank_format::{
@@ -21,10 +21,6 @@ use std::sync::mpsc::{Receiver, Sender};
 use std::sync::{Arc, mpsc};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
-
-mod session;
-
-pub use session::{Armed, BankSource, CONFIRM, ExpectedBank, Session};
 
 /// How long [`DeviceLink::open`] waits for the device's `Hello`.
 const HELLO_TIMEOUT: Duration = Duration::from_secs(3);

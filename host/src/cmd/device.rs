@@ -6,9 +6,9 @@
 
 use anyhow::{Context, Result, bail};
 use bank_format::{HostToDevice, Mode};
+use haptic::device::{BankSource, ExpectedBank, Session};
 use haptic::display::source::{Sample, Source};
 use haptic::kinematics::{Workspace, counts_for};
-use haptic::link::{BankSource, ExpectedBank, Session};
 use std::path::PathBuf;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
