@@ -49,8 +49,8 @@
 //! `J^T`, so a correct calibration asks for at most about the limit; a request somewhat over it
 //! (up to `current_fault_ratio`, default 1.25) is clamped to the limit and reported in
 //! [`Output::clamped`]. A request beyond that means a wrong calibration, a diverging solve or a
-//! bad host command, so it is a `CurrentLimit` fault and the motors go to zero (the issue's "a
-//! commanded current over the limit ends at zero current with the fault reported"). A host's
+//! bad host command, so it is a `CurrentLimit` fault and the motors go to zero and the fault
+//! is reported. A host's
 //! `ConstantCurrent` command ([`TickInput::host_currents`]) has no such tolerance: it reaches
 //! the supervisor unclamped, and any current over its limit, or not finite, is a `BadCommand`
 //! fault naming the motor.

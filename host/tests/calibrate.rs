@@ -483,7 +483,7 @@ fn cli_fits_writes_scene_json_and_plots() {
     assert!(dir.path().join("m-insertion.png").exists());
 }
 
-/// Pure noise (y = x + N(0, 1) on [0, 5], the case) is no tissue law: refused with
+/// Pure noise (y = x + N(0, 1) on [0, 5]) is no tissue law: refused with
 /// the RMS error named and the scene left alone; forced with --accept-poor-fit, the law still
 /// may not pull the tool in at first contact, and when written the scene says it was forced.
 #[test]

@@ -1,4 +1,4 @@
-//! `host calibrate relaxation` (issue 30): the QLV fit recovers the published brain law the
+//! `host calibrate relaxation`: the QLV fit recovers the published brain law the
 //! bench data was generated from (`scripts/gen_relaxation_bench.py`: Miller & Chinzei 2002,
 //! g = (0.450, 0.365), tau = (0.5, 50) s, with a finite ramp and noise), from one ramp and
 //! jointly from three ramp speeds; reports the rate dependence of data that is not QLV;

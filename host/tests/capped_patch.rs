@@ -1,4 +1,4 @@
-//! Fine meshes (issue 15, item 3): a tool patch with more nodes than the firmware's solve carries
+//! Fine meshes: a tool patch with more nodes than the firmware's solve carries
 //! (`firmware::solve::MAX_CONTACT_NODES` = 8) keeps its 8 heaviest nodes, renormalised, and
 //! reports the dropped share. How far is the force of that capped patch from the force of the
 //! whole patch? Measured on the 10k liver (3.26 mm mean surface edge) with 5 mm and 8 mm tips,

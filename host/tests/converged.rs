@@ -1,4 +1,4 @@
-//! The shipped scene's rendered force against the converged reference (issue 26).
+//! The shipped scene's rendered force against the converged reference.
 //!
 //! Reference: `host/tests/data/patch-study-p2.json`, written by
 //!

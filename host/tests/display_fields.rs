@@ -1,4 +1,4 @@
-//! The default (sampled) scene's display fields (issue 26, item 6) against direct solves: at
+//! The default (sampled) scene's display fields against direct solves: at
 //! lattice points of the collision surface, `u = U(p) F` on the fine FEM surface equals the
 //! P1 body's displacement under the tool load scaled to the bank's `W` (computed here with
 //! `Compliance::displacement`, one solve per load, not the fields' chunked solves), and the

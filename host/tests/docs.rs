@@ -1,4 +1,4 @@
-//! The user guide is tested (issue 29, item 4).
+//! The user guide is tested.
 //!
 //! - Every ` ```console ` block of `README.md` and `docs/*.md` runs (trycmd): each `$ ` line is
 //!   a command, the lines after it its expected output (stdout and stderr together; `[..]`

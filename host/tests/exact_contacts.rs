@@ -70,7 +70,7 @@ fn the_tool_bank_is_exact_on_every_contact_the_tool_can_make() {
         e.dropped_max
     );
     assert_eq!(e.failed, 0, "{e:?}");
-    // The bound, unchanged and the same for either precision (not loosened for bfp16):
+    // One bound (1e-4 of the force), the same for either precision (not loosened for bfp16):
     // an f32 bank meets it by far (about 5e-7, the f32 arithmetic alone), the shipped bfp16 one
     // with its 16-bit rounding (about 3e-5). That this is the rounding and nothing else is
     // `bfp16_blocks_stay_within_their_rounding_bound`'s check, site by site, against the bound
@@ -206,7 +206,7 @@ fn bfp16_blocks_stay_within_their_rounding_bound() {
             "{e16:e} > {bound:e} + 2 x {f32_worst:e}"
         );
     }
-    // The rounding is visible (16 bits are not f32) and within the 1e-4.
+    // The rounding is visible (16 bits are not f32) and within the 1e-4 bound.
     assert!(worst16 > 10.0 * f32_worst, "{worst16:e} vs {f32_worst:e}");
     assert!(worst16 <= 1e-4, "{worst16:e}");
 }

@@ -1,4 +1,4 @@
-//! `host calibrate gravity` (issue 14): held-pose currents from known coefficients go through
+//! `host calibrate gravity`: held-pose currents from known coefficients go through
 //! the CLI into the scene's `[gravity]` table; bad files name their line and leave the scene
 //! alone; too few or degenerate poses are refused naming what to add.
 

@@ -574,7 +574,7 @@ fn nodal_bank(grid_cell_m: f64, dir: &std::path::Path) -> Result<(PathBuf, Align
     Ok((path, AlignedBytes::new(&bytes)))
 }
 
-/// Item 4 of issue 27: the worst tick is bounded by the firmware, not by the bank. A hostile but
+/// The worst tick is bounded by the firmware, not by the bank. A hostile but
 /// valid bank, the nodal liver on 20 mm cells (114 candidate triangles in its fullest cell,
 /// against 28 on the shipped 6 mm cells; `MAX_CELL_CANDIDATES` is 128), pressed, slid and
 /// struck: every tick's loop body stays far inside the budget `SPEC.md` derives from the
@@ -753,7 +753,7 @@ fn a_recorded_near_surface_trajectory_replays_bit_identical_to_the_native_loop()
     }
 }
 
-/// The converged force under QEMU (issue 26): at three sites of the study, the hand brings the
+/// The converged force under QEMU: at three sites of the study, the hand brings the
 /// tip in along the shaft's line through the site to 5 mm past the surface and holds; in the
 /// linear mode (Q bypassed, set before arming) the force the image renders on the tool for its
 /// own tip and anchor (telemetry) is within 5 % of the converged reference's
@@ -832,7 +832,7 @@ fn presses_at_study_sites_render_the_converged_force_under_qemu() {
     }
 }
 
-/// Issue 30: `press-hold` (5 mm in, 10 s held, out) on the liver with viscoelastic relaxation
+/// `press-hold` (5 mm in, 10 s held, out) on the liver with viscoelastic relaxation
 /// (`host/scenes/liver-qlv.toml`). The image's force trace is (a) bit-identical to the native
 /// loop's on the same bank, and (b) Fung's QLV response to the elastic force the same motion
 /// gives on the elastic liver (`liver.toml`, replayed natively): the hereditary integral of
@@ -937,7 +937,7 @@ fn press_hold_relaxes_as_the_scenes_qlv_law() {
     );
     // Constant cost: what the relaxation adds to the worst tick stays within its per-tick
     // cost (measured 62 fixed + 18 a term on the mean; 30 + 60 a term allowed on the worst
-    // tick's excess), and every run within the loop's goal (issue 26: body <= 3,000, whole
+    // tick's excess), and every run within the loop's goal (`haptic::sil::cost`: body <= 3,000, whole
     // tick <= 6,000; measured 2,683 / 2,812 / 2,848 and 4,662 / 4,790 / 4,834).
     assert!(worst_body(&plain) <= 3_000, "{}", worst_body(&plain));
     assert!(worst_tick(&plain) <= 6_000, "{}", worst_tick(&plain));
@@ -949,7 +949,7 @@ fn press_hold_relaxes_as_the_scenes_qlv_law() {
     }
 }
 
-/// Issue 41, item 10: the worst tick on paths the scripts do not take. Four seeded `wander`
+/// The worst tick on paths the scripts do not take. Four seeded `wander`
 /// paths (`host sil --script wander --seed N`: presses, slides, leaving and re-entering, held
 /// contacts, at tip speeds up to 0.45 m/s), 5 s each under QEMU: no fault, no overrun, held
 /// and first contacts present, and every tick's loop body within the 3,000-instruction goal.

@@ -339,7 +339,7 @@ fn linear_law_and_transparent_modes() {
 
 /// A host's `ConstantCurrent` command reaches the supervisor as sent: a current over its
 /// motor's limit (-9 A against 2 A) or a NaN is a `BadCommand` fault naming the motor, with
-/// zero current, not a request silently clamped to the limit (issue 15, item 4).
+/// zero current, not a request silently clamped to the limit.
 #[test]
 fn constant_current_over_the_limit_or_not_finite_is_a_bad_command() {
     let bytes = flat_patch();

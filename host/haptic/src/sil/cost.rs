@@ -50,14 +50,12 @@ impl CostStats {
     }
 }
 
-/// The loop's instruction budget (issue 26, with the sampled contact model; issue 15 set
-/// 5,000): every tick's loop body at most this many instructions on the MCU image...
+/// The loop's instruction budget with the sampled contact model: every tick's loop body at most this many instructions on the MCU image...
 pub const BODY_GOAL: u32 = 3_000;
-/// ...and every whole tick (executor, link and plant I/O included) at most this many (issue
-/// 15: 8,000), which leaves room to run the same loop at 20 kHz (6,250 a period at 125 MIPS).
+/// ...and every whole tick (executor, link and plant I/O included) at most this many, which leaves room to run the same loop at 20 kHz (6,250 a period at 125 MIPS).
 pub const TICK_GOAL: u32 = 6_000;
 
-/// The nodal contact model's budget (issue 15), kept for the nodal banks measured for
+/// The nodal contact model's budget, kept for the nodal banks measured for
 /// comparison (the report's scene bank): loop body at most this many instructions...
 pub const NODAL_BODY_GOAL: u32 = 5_000;
 /// ...and whole tick at most this many.

@@ -7,7 +7,7 @@
 //! - `slide`: down to 4 mm, sweep pitch +-0.05 rad (about +-5 mm at the tip) while pressed, up;
 //! - `strike`: from 10 mm above, 18 mm down in 20 ms (peak 1.35 m/s), hold, retract;
 //! - `press-hold`: down to 5 mm below the surface in 0.5 s, hold 10 s, back up in 0.5 s (a
-//!   viscoelastic tissue's relaxation, issue 30).
+//!   viscoelastic tissue's relaxation).
 //!
 //! `wander` ([`Trajectory::wander`], [`super::wander`]) is not a cycle but a seeded random path
 //! near and into the surface (presses, slides, leaving and re-entering, held contacts) at tip
