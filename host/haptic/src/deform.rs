@@ -388,14 +388,19 @@ fn solve_columns(c: &Compliance, display: &[usize], nodes: &[usize]) -> Vec<(usi
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
     use fem::elasticity::{Elasticity, FixedSet, Material};
     use fem::mesh::structured::box_mesh;
 
-    /// A 40 x 20 x 20 mm block resting on its bottom face, its boundary as display nodes.
-    fn block() -> (fem::mesh::TetMesh, Arc<Compliance>, Vec<usize>) {
-        let mesh = box_mesh([0.04, 0.02, 0.02], [6, 3, 3]);
+    /// A block of soft tissue (3 kPa, nu 0.45) of `size` (m) on `cells` hexahedra of box_mesh,
+    /// resting on its bottom face (z = 0 fixed): the mesh, its factorised compliance and its
+    /// boundary surface. The display's tests share it.
+    pub(crate) fn resting_block(
+        size: [f64; 3],
+        cells: [usize; 3],
+    ) -> (fem::mesh::TetMesh, Arc<Compliance>, fem::mesh::Surface) {
+        let mesh = box_mesh(size, cells);
         let mut fixed = FixedSet::none(mesh.nodes.len());
         fixed
             .fix_box(&mesh, [-1.0, -1.0, -1.0, 1.0, 1.0, 1e-6], [true; 3])
@@ -403,6 +408,12 @@ mod tests {
         let body = Elasticity::new(&mesh, Material::new(3.0e3, 0.45).unwrap()).unwrap();
         let c = Arc::new(Compliance::factorize(&body, &fixed).unwrap());
         let surface = fem::mesh::boundary(&mesh).unwrap();
+        (mesh, c, surface)
+    }
+
+    /// A 40 x 20 x 20 mm block resting on its bottom face, its boundary as display nodes.
+    fn block() -> (fem::mesh::TetMesh, Arc<Compliance>, Vec<usize>) {
+        let (mesh, c, surface) = resting_block([0.04, 0.02, 0.02], [6, 3, 3]);
         (mesh, c, surface.nodes)
     }
 

@@ -244,8 +244,6 @@ fn pvd(entries: &[(f64, PathBuf)]) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use fem::elasticity::{Elasticity, FixedSet, Material};
-    use fem::mesh::structured::box_mesh;
 
     /// A frame's info with the tool force `tool_force_n`.
     fn info(tool_force_n: [f32; 3]) -> FrameInfo {
@@ -265,13 +263,7 @@ mod tests {
 
     #[test]
     fn recorded_frames_read_back_deformed_with_every_point() {
-        let mesh = box_mesh([0.04, 0.02, 0.02], [4, 2, 2]);
-        let mut fixed = FixedSet::none(mesh.nodes.len());
-        fixed
-            .fix_box(&mesh, [-1.0, -1.0, -1.0, 1.0, 1.0, 1e-6], [true; 3])
-            .unwrap();
-        let body = Elasticity::new(&mesh, Material::new(3.0e3, 0.45).unwrap()).unwrap();
-        let c = Arc::new(Compliance::factorize(&body, &fixed).unwrap());
+        let (mesh, c, _) = crate::deform::tests::resting_block([0.04, 0.02, 0.02], [4, 2, 2]);
         let top = (0..mesh.nodes.len())
             .find(|&i| mesh.nodes[i][2] > 0.0199)
             .unwrap();

@@ -472,16 +472,7 @@ mod tests {
     /// is the direct solve, and the radial extents are the same before and after.
     #[test]
     fn the_frame_loop_shows_the_display_law() {
-        use fem::compliance::Compliance;
-        use fem::elasticity::{Elasticity, FixedSet, Material};
-        let mesh = fem::mesh::structured::box_mesh([0.04, 0.04, 0.02], [4, 4, 2]);
-        let mut fixed = FixedSet::none(mesh.nodes.len());
-        fixed
-            .fix_box(&mesh, [-1.0, -1.0, -1.0, 1.0, 1.0, 1e-6], [true; 3])
-            .unwrap();
-        let body = Elasticity::new(&mesh, Material::new(3.0e3, 0.45).unwrap()).unwrap();
-        let c = Arc::new(Compliance::factorize(&body, &fixed).unwrap());
-        let surface = fem::mesh::boundary(&mesh).unwrap();
+        let (mesh, c, surface) = crate::deform::tests::resting_block([0.04, 0.04, 0.02], [4, 4, 2]);
         let k = (0..mesh.nodes.len())
             .find(|&i| {
                 let p = mesh.nodes[i];
