@@ -1,0 +1,426 @@
+//! Newton's method with adaptive load stepping and a backtracking line search (module docs of
+//! [`super`]).
+
+use super::body::{HyperelasticBody, State};
+use super::{HyperError, Prescribed};
+use crate::elasticity::{DofMap, Stiffness};
+use crate::ordering::nested_dissection;
+use faer::dyn_stack::{MemBuffer, MemStack};
+use faer::perm::PermRef;
+use faer::sparse::SparseColMat;
+use faer::sparse::linalg::cholesky::{
+    CholeskySymbolicParams, LdltRef, LltRef, SymbolicCholesky, SymmetricOrdering,
+    factorize_symbolic_cholesky,
+};
+use faer::{Conj, Mat, Par, Side};
+
+/// Tolerances and limits of [`solve`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct NewtonOptions {
+    /// Load steps to try first (the step length starts at `1 / initial_steps`).
+    pub initial_steps: usize,
+    /// Smallest load step before giving up (fraction of the full load).
+    pub min_step: f64,
+    /// Newton iterations per load step before the step is halved.
+    pub max_iterations: usize,
+    /// Convergence: free-dof residual norm at most this fraction of the reaction norm...
+    pub residual_tolerance: f64,
+    /// ...and the last Newton correction at most this fraction of the displacement norm.
+    pub increment_tolerance: f64,
+    /// Halvings of the line search before the iteration counts as failed.
+    pub line_search_halvings: usize,
+}
+
+impl Default for NewtonOptions {
+    /// 4 initial steps, smallest step 1e-4, 25 iterations, tolerances 1e-10 and 1e-8, 10
+    /// line-search halvings.
+    fn default() -> Self {
+        Self {
+            initial_steps: 4,
+            min_step: 1e-4,
+            max_iterations: 25,
+            residual_tolerance: 1e-10,
+            increment_tolerance: 1e-8,
+            line_search_halvings: 10,
+        }
+    }
+}
+
+/// One converged load step.
+#[derive(Debug, Clone, PartialEq)]
+pub struct StepReport {
+    /// Step number, 1-based (accepted steps only).
+    pub step: usize,
+    /// Load factor reached (1 is the full prescribed displacement).
+    pub load: f64,
+    /// Newton iterations after the predictor.
+    pub iterations: usize,
+    /// Free-dof residual norm after the predictor and after each iteration, N.
+    pub residuals: Vec<f64>,
+    /// Failed attempts (halvings) before this step converged.
+    pub halvings: usize,
+    /// Whether some tangent of the step was not positive definite (factorised as `L D L^T`).
+    pub indefinite: bool,
+}
+
+/// The converged state at the full load.
+#[derive(Debug, Clone)]
+pub struct Solution {
+    /// Node-major displacements, m.
+    pub u: Vec<f64>,
+    /// Internal nodal forces, node-major, N: the reactions at prescribed dofs, zero to the
+    /// tolerance elsewhere.
+    pub forces: Vec<f64>,
+    /// The accepted load steps.
+    pub steps: Vec<StepReport>,
+}
+
+impl Solution {
+    /// Sum of the reactions on the prescribed dofs of `nodes` along `axis`, N (the force a
+    /// platen or a grasper exerts on the body is this sum).
+    pub fn reaction(&self, nodes: impl IntoIterator<Item = usize>, axis: usize) -> f64 {
+        nodes.into_iter().map(|n| self.forces[3 * n + axis]).sum()
+    }
+}
+
+/// Why one attempt at a load step failed.
+enum StepFailure {
+    Inverted(usize),
+    NoConvergence {
+        iterations: usize,
+        residual: f64,
+        reason: String,
+    },
+    Singular(String),
+}
+
+/// The symbolic factorisation of `K_ff`, shared by every tangent of the solve.
+struct Factor {
+    symbolic: SymbolicCholesky<usize>,
+}
+
+impl Factor {
+    /// Solves `K x = b` in place; `Ok(true)` if `K` was not positive definite (solved by
+    /// `L D L^T`).
+    fn solve(&self, k: &SparseColMat<usize, f64>, rhs: &mut Mat<f64>) -> Result<bool, String> {
+        let par = Par::rayon(0);
+        let mut values = vec![0.0; self.symbolic.len_val()];
+        let scratch = self
+            .symbolic
+            .factorize_numeric_llt_scratch::<f64>(par, Default::default())
+            .or(self
+                .symbolic
+                .factorize_numeric_ldlt_scratch::<f64>(par, Default::default()))
+            .or(self.symbolic.solve_in_place_scratch::<f64>(1, par));
+        let mut mem = MemBuffer::try_new(scratch).map_err(|_| "out of memory".to_string())?;
+        let stack = MemStack::new(&mut mem);
+        let llt = self.symbolic.factorize_numeric_llt(
+            &mut values,
+            k.as_ref(),
+            Side::Upper,
+            Default::default(),
+            par,
+            stack,
+            Default::default(),
+        );
+        if llt.is_ok() {
+            LltRef::new(&self.symbolic, &values).solve_in_place_with_conj(
+                Conj::No,
+                rhs.as_mut(),
+                par,
+                MemStack::new(&mut mem),
+            );
+            return Ok(false);
+        }
+        values.fill(0.0);
+        self.symbolic
+            .factorize_numeric_ldlt(
+                &mut values,
+                k.as_ref(),
+                Side::Upper,
+                Default::default(),
+                par,
+                MemStack::new(&mut mem),
+                Default::default(),
+            )
+            .map_err(|e| format!("L D L^T: {e:?}"))?;
+        LdltRef::new(&self.symbolic, &values).solve_in_place_with_conj(
+            Conj::No,
+            rhs.as_mut(),
+            par,
+            MemStack::new(&mut mem),
+        );
+        Ok(true)
+    }
+}
+
+/// The norm of the free part of a node-major force vector.
+fn free_norm(dofs: &DofMap, f: &[f64]) -> f64 {
+    f.iter()
+        .enumerate()
+        .filter(|(d, _)| dofs.free_dof(d / 3, d % 3).is_some())
+        .map(|(_, x)| x * x)
+        .sum::<f64>()
+        .sqrt()
+}
+
+/// The norm of the prescribed part of a node-major force vector (the reactions).
+fn held_norm(dofs: &DofMap, f: &[f64]) -> f64 {
+    f.iter()
+        .enumerate()
+        .filter(|(d, _)| dofs.free_dof(d / 3, d % 3).is_none())
+        .map(|(_, x)| x * x)
+        .sum::<f64>()
+        .sqrt()
+}
+
+fn norm(v: &[f64]) -> f64 {
+    v.iter().map(|x| x * x).sum::<f64>().sqrt()
+}
+
+/// Solves the static equilibrium of `body` under the displacements `prescribed` (every other
+/// dof free of load) from the undeformed state, reporting each converged load step to
+/// `on_step`. Refuses prescribed sets that leave a rigid motion free.
+pub fn solve(
+    body: &HyperelasticBody,
+    prescribed: &Prescribed,
+    options: &NewtonOptions,
+    on_step: &mut dyn FnMut(&StepReport),
+) -> Result<Solution, HyperError> {
+    if prescribed.nodes() != body.nodes() {
+        return Err(HyperError::Prescribed(format!(
+            "the prescribed set covers {} nodes but the body has {}",
+            prescribed.nodes(),
+            body.nodes()
+        )));
+    }
+    if options.initial_steps == 0 || !(options.min_step > 0.0 && options.min_step <= 1.0) {
+        return Err(HyperError::Prescribed(format!(
+            "options: initial_steps must be at least 1 and min_step in (0, 1], got {} and {}",
+            options.initial_steps, options.min_step
+        )));
+    }
+    let fixed = prescribed.fixed_set();
+    body.quadratic().check_rigid_motions(&fixed)?;
+    let dofs = DofMap::new(&fixed);
+    let target = prescribed.field();
+    let mut u = vec![0.0; 3 * body.nodes()];
+    let rest = body.evaluate(&u).map_err(|element| HyperError::Inverted {
+        element,
+        step: 1,
+        from: 0.0,
+        to: 0.0,
+    })?;
+    let factor = if dofs.free_count() == 0 {
+        None
+    } else {
+        let perm =
+            nested_dissection(body.quadratic(), &dofs).map_err(|e| HyperError::Singular {
+                step: 1,
+                load: 0.0,
+                reason: e,
+            })?;
+        let pattern = body.tangent(&rest, &dofs);
+        let symbolic = factorize_symbolic_cholesky(
+            pattern.symbolic(),
+            Side::Upper,
+            SymmetricOrdering::Custom(PermRef::new_checked(
+                &perm.forward,
+                &perm.inverse,
+                dofs.free_count(),
+            )),
+            CholeskySymbolicParams::default(),
+        )
+        .map_err(|e| HyperError::Singular {
+            step: 1,
+            load: 0.0,
+            reason: format!("{e:?}"),
+        })?;
+        Some(Factor { symbolic })
+    };
+    let mut load = 0.0;
+    let mut dl = 1.0 / options.initial_steps as f64;
+    let mut steps = Vec::new();
+    let mut halvings = 0;
+    while load < 1.0 {
+        let to = if load + dl > 1.0 - 1e-12 {
+            1.0
+        } else {
+            load + dl
+        };
+        let increment: Vec<f64> = target.iter().map(|x| (to - load) * x).collect();
+        match step(body, &dofs, factor.as_ref(), &u, &increment, options) {
+            Ok((next, residuals, indefinite)) => {
+                u = next;
+                load = to;
+                let report = StepReport {
+                    step: steps.len() + 1,
+                    load,
+                    iterations: residuals.len() - 1,
+                    residuals,
+                    halvings,
+                    indefinite,
+                };
+                on_step(&report);
+                if report.iterations <= 4 {
+                    dl = (dl * 1.5).min(1.0);
+                }
+                steps.push(report);
+                halvings = 0;
+            }
+            Err(failure) => {
+                if dl * 0.5 >= options.min_step * (1.0 - 1e-12) {
+                    dl *= 0.5;
+                    halvings += 1;
+                    continue;
+                }
+                let (step, from) = (steps.len() + 1, load);
+                return Err(match failure {
+                    StepFailure::Inverted(element) => HyperError::Inverted {
+                        element,
+                        step,
+                        from,
+                        to,
+                    },
+                    StepFailure::NoConvergence {
+                        iterations,
+                        residual,
+                        reason,
+                    } => HyperError::NoConvergence {
+                        step,
+                        from,
+                        to,
+                        iterations,
+                        residual,
+                        reason,
+                    },
+                    StepFailure::Singular(reason) => HyperError::Singular {
+                        step,
+                        load: from,
+                        reason,
+                    },
+                });
+            }
+        }
+    }
+    let state = body
+        .evaluate(&u)
+        .expect("the converged state was evaluated");
+    let forces = body.forces(&state);
+    Ok(Solution { u, forces, steps })
+}
+
+/// Solves `K_ff x = -r_f` for the tangent of `state`; returns the node-major correction (zero
+/// at prescribed dofs) and whether the tangent was indefinite.
+fn correction(
+    body: &HyperelasticBody,
+    dofs: &DofMap,
+    factor: &Factor,
+    state: &State,
+    r: &[f64],
+) -> Result<(Vec<f64>, bool), StepFailure> {
+    let k = body.tangent(state, dofs);
+    let mut rhs = Mat::<f64>::zeros(dofs.free_count(), 1);
+    for (d, x) in r.iter().enumerate() {
+        if let Some(f) = dofs.free_dof(d / 3, d % 3) {
+            rhs[(f, 0)] = -x;
+        }
+    }
+    let indefinite = factor.solve(&k, &mut rhs).map_err(StepFailure::Singular)?;
+    let free: Vec<f64> = (0..dofs.free_count()).map(|f| rhs[(f, 0)]).collect();
+    if free.iter().any(|x| !x.is_finite()) {
+        return Err(StepFailure::Singular(
+            "the tangent solve gave a non-finite correction".into(),
+        ));
+    }
+    Ok((dofs.expand(&free), indefinite))
+}
+
+/// One load step from the converged `u` by the prescribed `increment` (zero at free dofs):
+/// the linearised predictor, then Newton iterations with a backtracking line search on the
+/// free-dof residual norm. Returns the new state, the residual history and whether a tangent
+/// was indefinite.
+fn step(
+    body: &HyperelasticBody,
+    dofs: &DofMap,
+    factor: Option<&Factor>,
+    u: &[f64],
+    increment: &[f64],
+    options: &NewtonOptions,
+) -> Result<(Vec<f64>, Vec<f64>, bool), StepFailure> {
+    let mut x: Vec<f64> = u.iter().zip(increment).map(|(a, b)| a + b).collect();
+    let Some(factor) = factor else {
+        body.evaluate(&x).map_err(StepFailure::Inverted)?;
+        return Ok((x, vec![0.0], false));
+    };
+    // Predictor: K_ff dx_f = -(r_f(u) + K_fp du_p) at the converged state.
+    let old = body.evaluate(u).map_err(StepFailure::Inverted)?;
+    let r_old = body.forces(&old);
+    let k_inc = body.tangent_apply(&old, increment);
+    let rhs: Vec<f64> = r_old.iter().zip(&k_inc).map(|(a, b)| a + b).collect();
+    let (dx, mut indefinite) = correction(body, dofs, factor, &old, &rhs)?;
+    for (xi, d) in x.iter_mut().zip(&dx) {
+        *xi += d;
+    }
+    let mut state = body.evaluate(&x).map_err(StepFailure::Inverted)?;
+    let mut forces = body.forces(&state);
+    let mut residual = free_norm(dofs, &forces);
+    let mut residuals = vec![residual];
+    let mut last = norm(&dx);
+    for _ in 0..=options.max_iterations {
+        let scale = held_norm(dofs, &forces);
+        if residual <= options.residual_tolerance * scale
+            && last <= options.increment_tolerance * norm(&x)
+        {
+            return Ok((x, residuals, indefinite));
+        }
+        if residuals.len() > options.max_iterations {
+            break;
+        }
+        let (dx, ind) = correction(body, dofs, factor, &state, &forces)?;
+        indefinite |= ind;
+        let mut alpha = 1.0;
+        let mut accepted = None;
+        let mut inverted = None;
+        for _ in 0..=options.line_search_halvings {
+            let trial: Vec<f64> = x.iter().zip(&dx).map(|(a, d)| a + alpha * d).collect();
+            match body.evaluate(&trial) {
+                Err(t) => inverted = Some(t),
+                Ok(s) => {
+                    let f = body.forces(&s);
+                    let r = free_norm(dofs, &f);
+                    // Sufficient decrease, or already at round-off (a full step near the
+                    // solution whose residual cannot drop further).
+                    if r <= (1.0 - 1e-4 * alpha) * residual
+                        || (alpha == 1.0 && r <= 1e3 * options.residual_tolerance * scale)
+                    {
+                        accepted = Some((trial, s, f, r));
+                        break;
+                    }
+                }
+            }
+            alpha *= 0.5;
+        }
+        let Some((trial, s, f, r)) = accepted else {
+            return Err(match inverted {
+                Some(t) => StepFailure::Inverted(t),
+                None => StepFailure::NoConvergence {
+                    iterations: residuals.len(),
+                    residual,
+                    reason: "the line search found no decrease of the residual".into(),
+                },
+            });
+        };
+        last = alpha * norm(&dx);
+        x = trial;
+        state = s;
+        forces = f;
+        residual = r;
+        residuals.push(residual);
+    }
+    Err(StepFailure::NoConvergence {
+        iterations: residuals.len() - 1,
+        residual,
+        reason: format!("{} iterations were not enough", options.max_iterations),
+    })
+}
