@@ -41,8 +41,10 @@ pub enum Volumetric {
 /// The state at one quadrature point of a displacement field.
 #[derive(Debug, Clone, Copy)]
 pub(super) struct Point {
-    /// `F`.
-    f: [[f64; 3]; 3],
+    /// `H = F - I`.
+    h: [[f64; 3]; 3],
+    /// `M = I - F^-1 = F^-1 H`.
+    m: [[f64; 3]; 3],
     /// `ln J`.
     log_j: f64,
     /// Spatial gradients `g_a = F^-T G_a`.
@@ -134,23 +136,37 @@ impl HyperelasticBody {
                 let nodes = tets[t];
                 let mut out = [None; 4];
                 for (slot, g) in out.iter_mut().zip(&self.grads[t]) {
-                    let mut f = [[0.0; 3]; 3];
-                    for (i, row) in f.iter_mut().enumerate() {
-                        row[i] = 1.0;
-                    }
+                    // H = F - I = sum_a u_a G_a^T, kept apart from I so that nothing cancels at
+                    // small strain.
+                    let mut h = [[0.0; 3]; 3];
                     for (n, ga) in nodes.iter().zip(g) {
-                        for (i, row) in f.iter_mut().enumerate() {
+                        for (i, row) in h.iter_mut().enumerate() {
                             let ui = u[3 * n + i];
                             for (x, gj) in row.iter_mut().zip(ga) {
                                 *x += ui * gj;
                             }
                         }
                     }
-                    let log_j = log_det(f)?;
+                    let log_j = log_det(h)?;
+                    let f: [[f64; 3]; 3] = std::array::from_fn(|i| {
+                        std::array::from_fn(|j| h[i][j] + if i == j { 1.0 } else { 0.0 })
+                    });
                     let inv = inverse(f)?;
-                    let spatial = g
-                        .map(|ga| std::array::from_fn(|i| (0..3).map(|j| inv[j][i] * ga[j]).sum()));
-                    *slot = Some(Point { f, log_j, spatial });
+                    // M = I - F^-1 = F^-1 H, so F^-T G = G - M^T G.
+                    let m: [[f64; 3]; 3] = std::array::from_fn(|i| {
+                        std::array::from_fn(|j| (0..3).map(|k| inv[i][k] * h[k][j]).sum())
+                    });
+                    let spatial = g.map(|ga| {
+                        std::array::from_fn(|i| {
+                            ga[i] - (0..3).map(|j| m[j][i] * ga[j]).sum::<f64>()
+                        })
+                    });
+                    *slot = Some(Point {
+                        h,
+                        m,
+                        log_j,
+                        spatial,
+                    });
                 }
                 let points = out.map(|p| p.expect("filled above"));
                 let theta = points.iter().map(|p| p.log_j).sum::<f64>() / 4.0;
@@ -193,8 +209,9 @@ impl HyperelasticBody {
                     for ((p, g), v) in e.points.iter().zip(&self.grads[t]).zip(e.volumetric) {
                         let (ga, sa) = (g[a], p.spatial[a]);
                         for (i, o) in out.iter_mut().enumerate() {
-                            let fg: f64 = (0..3).map(|j| p.f[i][j] * ga[j]).sum();
-                            *o += w * (mu * (fg - sa[i]) + lambda * v * sa[i]);
+                            // (F - F^-T) G = H G + M^T G.
+                            let d: f64 = (0..3).map(|j| (p.h[i][j] + p.m[j][i]) * ga[j]).sum();
+                            *o += w * (mu * d + lambda * v * sa[i]);
                         }
                     }
                 }
@@ -216,8 +233,10 @@ impl HyperelasticBody {
                     .iter()
                     .zip(e.volumetric)
                     .map(|(p, v)| {
-                        let i1: f64 = p.f.iter().flatten().map(|x| x * x).sum();
-                        w * (0.5 * mu * (i1 - 3.0) - mu * p.log_j + 0.5 * lambda * v * v)
+                        // I1 - 3 = 2 tr H + |H|^2.
+                        let tr = p.h[0][0] + p.h[1][1] + p.h[2][2];
+                        let hh: f64 = p.h.iter().flatten().map(|x| x * x).sum();
+                        w * (0.5 * mu * (2.0 * tr + hh) - mu * p.log_j + 0.5 * lambda * v * v)
                     })
                     .sum::<f64>()
             })

@@ -64,9 +64,7 @@ impl NeoHookean {
 
 /// `ln det F` from `H = F - I` without cancellation at small strain
 /// (`det(I + H) - 1 = tr H + ((tr H)^2 - tr H^2) / 2 + det H`), or `None` if `det F <= 0`.
-pub(crate) fn log_det(f: [[f64; 3]; 3]) -> Option<f64> {
-    let h: [[f64; 3]; 3] =
-        std::array::from_fn(|i| std::array::from_fn(|j| f[i][j] - if i == j { 1.0 } else { 0.0 }));
+pub(crate) fn log_det(h: [[f64; 3]; 3]) -> Option<f64> {
     let tr = h[0][0] + h[1][1] + h[2][2];
     let tr2: f64 = (0..3)
         .flat_map(|i| (0..3).map(move |j| (i, j)))

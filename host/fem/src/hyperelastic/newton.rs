@@ -23,9 +23,12 @@ pub struct NewtonOptions {
     pub min_step: f64,
     /// Newton iterations per load step before the step is halved.
     pub max_iterations: usize,
-    /// Convergence: free-dof residual norm at most this fraction of the reaction norm...
+    /// Convergence: free-dof residual norm at most this fraction of the reaction norm, and
+    /// the last Newton correction at most `increment_tolerance` of the displacement norm; or a
+    /// correction below 1e-12 of the displacement norm (round-off); or, once the line search
+    /// finds no decrease, a correction below `increment_tolerance`.
     pub residual_tolerance: f64,
-    /// ...and the last Newton correction at most this fraction of the displacement norm.
+    /// See `residual_tolerance`.
     pub increment_tolerance: f64,
     /// Halvings of the line search before the iteration counts as failed.
     pub line_search_halvings: usize,
@@ -45,6 +48,11 @@ impl Default for NewtonOptions {
         }
     }
 }
+
+/// A Newton correction below this fraction of the displacement norm is round-off: the
+/// iteration has converged whatever the residual (which then sits at its floating-point floor,
+/// above a relative tolerance at very small loads).
+const ROUND_OFF: f64 = 1e-12;
 
 /// One converged load step.
 #[derive(Debug, Clone, PartialEq)]
@@ -369,8 +377,10 @@ fn step(
     let mut last = norm(&dx);
     for _ in 0..=options.max_iterations {
         let scale = held_norm(dofs, &forces);
-        if residual <= options.residual_tolerance * scale
-            && last <= options.increment_tolerance * norm(&x)
+        let size = norm(&x);
+        if (residual <= options.residual_tolerance * scale
+            && last <= options.increment_tolerance * size)
+            || last <= ROUND_OFF * size
         {
             return Ok((x, residuals, indefinite));
         }
@@ -402,6 +412,11 @@ fn step(
             alpha *= 0.5;
         }
         let Some((trial, s, f, r)) = accepted else {
+            // At round-off the residual cannot drop further; a correction below the increment
+            // tolerance says the state is the solution to that precision.
+            if inverted.is_none() && norm(&dx) <= options.increment_tolerance * norm(&x) {
+                return Ok((x, residuals, indefinite));
+            }
             return Err(match inverted {
                 Some(t) => StepFailure::Inverted(t),
                 None => StepFailure::NoConvergence {
