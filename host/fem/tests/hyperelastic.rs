@@ -148,16 +148,16 @@ fn an_inverted_element_is_reported_by_id() {
     let d = [-0.6 * l, 0.9 * l, 0.35 * l];
     let mut p = Prescribed::none(body.nodes());
     for v in 0..mesh.nodes.len() {
-        for a in 0..3 {
-            p.set(v, a, if v == moved { d[a] } else { 0.0 }).unwrap();
+        for (a, &da) in d.iter().enumerate() {
+            p.set(v, a, if v == moved { da } else { 0.0 }).unwrap();
         }
     }
     let q = body.quadratic();
     for t in &mesh.tets {
         for &(a, b) in &EDGES {
             let m = q.edge_node(t[a], t[b]).unwrap();
-            for c in 0..3 {
-                let half = |v: usize| if v == moved { 0.5 * d[c] } else { 0.0 };
+            for (c, &dc) in d.iter().enumerate() {
+                let half = |v: usize| if v == moved { 0.5 * dc } else { 0.0 };
                 p.set(m, c, half(t[a]) + half(t[b])).unwrap();
             }
         }
@@ -264,8 +264,7 @@ fn bonded_cube_refinement_series() {
             println!("nu {nu} {v:?} cells {c}: {n} nodes, platen force {f:.6} N, {t:.2} s");
         }
         let (f1, f2, f3) = (levels[0].1.0, levels[1].1.0, levels[2].1.0);
-        let order = ((f1 - f2) / (f2 - f3)).log2();
-        let error = (f2 - f3) / (2f64.powf(order) - 1.0);
+        let (order, error) = richardson([0.5, 0.25, 0.125], [f1, f2, f3]);
         println!(
             "nu {nu} {v:?}: observed order {order:.2}, Richardson error of cells 8 {error:.3e} N ({:.3} %)",
             100.0 * error / f3
@@ -274,14 +273,100 @@ fn bonded_cube_refinement_series() {
     }
 }
 
-/// The 80 mm gel cube (nu = 0.499) between bonded platens at 18.25 %: force and time per mesh.
+/// Platen force of the cube of side `l` between bonded platens at compressive strain `strain`
+/// from one eighth of it (`cells` per side of the eighth): the eighth `[0, l/2]^3` with
+/// rollers on the three symmetry planes (x = 0, y = 0, z = 0: normal displacement zero), the
+/// platen face z = l/2 moved by `(0, 0, -strain l / 2)`. The whole platen carries four times
+/// the eighth's reaction. Returns (force N, nodes, seconds).
+fn eighth_bonded_force(
+    l: f64,
+    nu: f64,
+    volumetric: Volumetric,
+    strain: f64,
+    cells: usize,
+) -> (f64, usize, f64) {
+    let half = 0.5 * l;
+    let mesh = box_mesh([half; 3], [cells; 3]);
+    let material = Material::new(E, nu).unwrap();
+    let body = HyperelasticBody::with_volumetric(&mesh, material, volumetric).unwrap();
+    let x = body.positions();
+    let mut p = Prescribed::none(body.nodes());
+    for axis in 0..3 {
+        let mut c = [None; 3];
+        c[axis] = Some(0.0);
+        p.set_where(x, |q| q[axis] <= 1e-12 * l, c).unwrap();
+    }
+    let on_top = |q: [f64; 3]| q[2] >= half * (1.0 - 1e-12);
+    p.set_where(x, on_top, [Some(0.0), Some(0.0), Some(-strain * half)])
+        .unwrap();
+    let top: Vec<usize> = (0..x.len()).filter(|&i| on_top(x[i])).collect();
+    let start = Instant::now();
+    let sol = solve(&body, &p, &NewtonOptions::default(), &mut |r| {
+        eprintln!(
+            "  eighth, cells {cells}: step {} load {:.4} iterations {} halvings {}",
+            r.step, r.load, r.iterations, r.halvings
+        );
+    })
+    .unwrap();
+    let seconds = start.elapsed().as_secs_f64();
+    (-4.0 * sol.reaction(top, 2), body.nodes(), seconds)
+}
+
+/// Observed order and error of the finest of three levels with mesh sizes `h` (any ratios),
+/// by bisection on `(f1 - f2) / (f2 - f3) = (h1^p - h2^p) / (h2^p - h3^p)`.
+fn richardson(h: [f64; 3], f: [f64; 3]) -> (f64, f64) {
+    let ratio = (f[0] - f[1]) / (f[1] - f[2]);
+    let model = |p: f64| (h[0].powf(p) - h[1].powf(p)) / (h[1].powf(p) - h[2].powf(p));
+    let (mut lo, mut hi) = (0.05, 8.0);
+    for _ in 0..200 {
+        let mid = 0.5 * (lo + hi);
+        if model(mid) < ratio {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+    }
+    let p = 0.5 * (lo + hi);
+    let c = (f[1] - f[2]) / (h[1].powf(p) - h[2].powf(p));
+    (p, c * h[2].powf(p))
+}
+
+/// The 80 mm gel cube (nu = 0.499) between bonded platens at 18.25 %: the platen force and
+/// time per mesh, whole cube and one eighth by symmetry, with the Richardson error.
 #[test]
 #[ignore = "timing of the specimen; run with --ignored --nocapture"]
 fn gel_cube_80mm_timing() {
+    let (l, nu, strain) = (0.08, 0.499, 0.1825);
     for v in [Volumetric::Pointwise, Volumetric::ElementMean] {
         for cells in [2, 4, 6, 8] {
-            let (f, n, t) = bonded_force(0.08, 0.499, v, 0.1825, cells);
-            println!("{v:?} cells {cells}: {n} nodes, platen force {f:.6} N, {t:.2} s");
+            let (f, n, t) = bonded_force(l, nu, v, strain, cells);
+            println!("{v:?} whole, cells {cells}: {n} nodes, platen force {f:.6} N, {t:.2} s");
+        }
+    }
+    for (v, levels) in [
+        (Volumetric::ElementMean, &[4, 6, 8, 10][..]),
+        (Volumetric::Pointwise, &[4, 6, 8][..]),
+    ] {
+        let mut forces = Vec::new();
+        for &cells in levels {
+            let (f, n, t) = eighth_bonded_force(l, nu, v, strain, cells);
+            println!(
+                "{v:?} eighth, cells {cells} (whole {}): {n} nodes, platen force {f:.6} N, \
+                 {t:.2} s",
+                2 * cells
+            );
+            forces.push(f);
+        }
+        for k in 0..levels.len() - 2 {
+            let h = [0, 1, 2].map(|i| 1.0 / levels[k + i] as f64);
+            let f = [0, 1, 2].map(|i| forces[k + i]);
+            let (order, error) = richardson(h, f);
+            println!(
+                "{v:?} eighth, cells {:?}: observed order {order:.2}, Richardson error of the \
+                 finest {error:.4} N ({:.2} %)",
+                &levels[k..k + 3],
+                100.0 * error / f[2]
+            );
         }
     }
 }
