@@ -215,6 +215,54 @@ fn an_inverted_element_is_reported_by_id() {
     }
 }
 
+/// Bad input and an impossible schedule are errors that say what is wrong.
+#[test]
+fn bad_input_and_failures_are_named_errors() {
+    let l = 0.02;
+    let mesh = box_mesh([l; 3], [1, 1, 1]);
+    let body = HyperelasticBody::new(&mesh, Material::new(E, 0.3).unwrap()).unwrap();
+    let opts = NewtonOptions::default();
+    // A set for another body.
+    let wrong = Prescribed::none(body.nodes() + 1);
+    let err = solve(&body, &wrong, &opts, &mut |_| {}).unwrap_err();
+    assert!(matches!(err, HyperError::Prescribed(_)), "{err}");
+    // Not a number, an axis that does not exist, a node that does not exist.
+    let mut p = Prescribed::none(body.nodes());
+    assert!(
+        p.set(0, 0, f64::NAN)
+            .unwrap_err()
+            .to_string()
+            .contains("node 0 axis 0")
+    );
+    assert!(p.set(0, 3, 0.0).is_err());
+    assert!(p.set(body.nodes(), 0, 0.0).is_err());
+    // Only the bottom's z held: the body can slide and spin.
+    p.set_where(body.positions(), |x| x[2] <= 0.0, [None, None, Some(0.0)])
+        .unwrap();
+    let err = solve(&body, &p, &opts, &mut |_| {}).unwrap_err();
+    assert!(err.to_string().contains("rigid motions"), "{err}");
+    // 30 % bonded compression with one Newton iteration allowed and no halving.
+    let p = bonded(&body, l, [0.0, 0.0, -0.3 * l]);
+    let strict = NewtonOptions {
+        initial_steps: 1,
+        min_step: 1.0,
+        max_iterations: 1,
+        ..opts
+    };
+    match solve(&body, &p, &strict, &mut |_| {}).unwrap_err() {
+        HyperError::NoConvergence {
+            step,
+            from,
+            to,
+            iterations,
+            ..
+        } => {
+            assert_eq!((step, from, to, iterations), (1, 0.0, 1.0, 1));
+        }
+        other => panic!("expected no convergence, got {other}"),
+    }
+}
+
 /// Platen force of a cube of side `l` between bonded platens at compressive strain `strain`.
 fn bonded_force(
     l: f64,

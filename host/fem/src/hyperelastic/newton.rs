@@ -439,3 +439,75 @@ fn step(
         reason: format!("{} iterations were not enough", options.max_iterations),
     })
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use faer::sparse::{SymbolicSparseColMat, Triplet};
+
+    /// The upper triangle of a symmetric matrix given densely, in CSC.
+    fn upper(a: &[[f64; 4]; 4]) -> SparseColMat<usize, f64> {
+        let mut t = Vec::new();
+        for (i, row) in a.iter().enumerate() {
+            for (j, &x) in row.iter().enumerate() {
+                if i <= j && x != 0.0 {
+                    t.push(Triplet::new(i, j, x));
+                }
+            }
+        }
+        SparseColMat::try_new_from_triplets(4, 4, &t).unwrap()
+    }
+
+    fn factor(k: &SparseColMat<usize, f64>) -> Factor {
+        let symbolic: SymbolicSparseColMat<usize> = k.symbolic().to_owned().unwrap();
+        Factor {
+            symbolic: factorize_symbolic_cholesky(
+                symbolic.as_ref(),
+                Side::Upper,
+                SymmetricOrdering::Identity,
+                CholeskySymbolicParams::default(),
+            )
+            .unwrap(),
+        }
+    }
+
+    /// Solves with the matrix and checks `A x = b` by a dense product.
+    fn solves(a: [[f64; 4]; 4], definite: bool) {
+        let k = upper(&a);
+        let b = [1.0, -2.0, 0.5, 3.0];
+        let mut x = Mat::<f64>::from_fn(4, 1, |i, _| b[i]);
+        let indefinite = factor(&k).solve(&k, &mut x).unwrap();
+        assert_eq!(indefinite, !definite);
+        for (row, bi) in a.iter().zip(b) {
+            let ax: f64 = (0..4).map(|j| row[j] * x[(j, 0)]).sum();
+            assert!((ax - bi).abs() < 1e-12, "{ax} vs {bi}");
+        }
+    }
+
+    #[test]
+    fn positive_definite_tangents_take_cholesky() {
+        solves(
+            [
+                [4.0, 1.0, 0.0, 0.5],
+                [1.0, 3.0, 1.0, 0.0],
+                [0.0, 1.0, 2.0, 0.3],
+                [0.5, 0.0, 0.3, 5.0],
+            ],
+            true,
+        );
+    }
+
+    #[test]
+    fn indefinite_tangents_fall_back_to_ldlt() {
+        // Eigenvalues of the leading 2x2 block: 3 and -1.
+        solves(
+            [
+                [1.0, 2.0, 0.0, 0.0],
+                [2.0, 1.0, 0.5, 0.0],
+                [0.0, 0.5, 3.0, 1.0],
+                [0.0, 0.0, 1.0, -2.0],
+            ],
+            false,
+        );
+    }
+}
