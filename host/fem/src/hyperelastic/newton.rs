@@ -107,38 +107,44 @@ struct Factor {
     symbolic: SymbolicCholesky<usize>,
 }
 
+/// A numeric factorisation of one tangent: `L L^T`, or `L D L^T` when the tangent is not
+/// positive definite.
+struct Numeric {
+    values: Vec<f64>,
+    indefinite: bool,
+}
+
 impl Factor {
-    /// Solves `K x = b` in place; `Ok(true)` if `K` was not positive definite (solved by
-    /// `L D L^T`).
-    fn solve(&self, k: &SparseColMat<usize, f64>, rhs: &mut Mat<f64>) -> Result<bool, String> {
-        let par = Par::rayon(0);
-        let mut values = vec![0.0; self.symbolic.len_val()];
-        let scratch = self
-            .symbolic
+    fn scratch(&self, par: Par) -> faer::dyn_stack::StackReq {
+        self.symbolic
             .factorize_numeric_llt_scratch::<f64>(par, Default::default())
             .or(self
                 .symbolic
                 .factorize_numeric_ldlt_scratch::<f64>(par, Default::default()))
-            .or(self.symbolic.solve_in_place_scratch::<f64>(1, par));
-        let mut mem = MemBuffer::try_new(scratch).map_err(|_| "out of memory".to_string())?;
-        let stack = MemStack::new(&mut mem);
+            .or(self.symbolic.solve_in_place_scratch::<f64>(1, par))
+    }
+
+    /// Factorises `K` (upper triangle, the symbolic structure's pattern): Cholesky, or
+    /// `L D L^T` if Cholesky finds it not positive definite.
+    fn factorize(&self, k: &SparseColMat<usize, f64>) -> Result<Numeric, String> {
+        let par = Par::rayon(0);
+        let mut values = vec![0.0; self.symbolic.len_val()];
+        let mut mem =
+            MemBuffer::try_new(self.scratch(par)).map_err(|_| "out of memory".to_string())?;
         let llt = self.symbolic.factorize_numeric_llt(
             &mut values,
             k.as_ref(),
             Side::Upper,
             Default::default(),
             par,
-            stack,
+            MemStack::new(&mut mem),
             Default::default(),
         );
         if llt.is_ok() {
-            LltRef::new(&self.symbolic, &values).solve_in_place_with_conj(
-                Conj::No,
-                rhs.as_mut(),
-                par,
-                MemStack::new(&mut mem),
-            );
-            return Ok(false);
+            return Ok(Numeric {
+                values,
+                indefinite: false,
+            });
         }
         values.fill(0.0);
         self.symbolic
@@ -152,13 +158,34 @@ impl Factor {
                 Default::default(),
             )
             .map_err(|e| format!("L D L^T: {e:?}"))?;
-        LdltRef::new(&self.symbolic, &values).solve_in_place_with_conj(
-            Conj::No,
-            rhs.as_mut(),
-            par,
-            MemStack::new(&mut mem),
-        );
-        Ok(true)
+        Ok(Numeric {
+            values,
+            indefinite: true,
+        })
+    }
+
+    /// Solves `K x = b` in place with a factorisation of `K`.
+    fn solve(&self, numeric: &Numeric, rhs: &mut Mat<f64>) -> Result<(), String> {
+        let par = Par::rayon(0);
+        let mut mem = MemBuffer::try_new(self.symbolic.solve_in_place_scratch::<f64>(1, par))
+            .map_err(|_| "out of memory".to_string())?;
+        let stack = MemStack::new(&mut mem);
+        if numeric.indefinite {
+            LdltRef::new(&self.symbolic, &numeric.values).solve_in_place_with_conj(
+                Conj::No,
+                rhs.as_mut(),
+                par,
+                stack,
+            );
+        } else {
+            LltRef::new(&self.symbolic, &numeric.values).solve_in_place_with_conj(
+                Conj::No,
+                rhs.as_mut(),
+                par,
+                stack,
+            );
+        }
+        Ok(())
     }
 }
 
@@ -250,6 +277,7 @@ pub fn solve(
     let mut dl = 1.0 / options.initial_steps as f64;
     let mut steps = Vec::new();
     let mut halvings = 0;
+    let mut last_tangent = None;
     while load < 1.0 {
         let to = if load + dl > 1.0 - 1e-12 {
             1.0
@@ -257,7 +285,15 @@ pub fn solve(
             load + dl
         };
         let increment: Vec<f64> = target.iter().map(|x| (to - load) * x).collect();
-        match step(body, &dofs, factor.as_ref(), &u, &increment, options) {
+        match step(
+            body,
+            &dofs,
+            factor.as_ref(),
+            &u,
+            &increment,
+            options,
+            &mut last_tangent,
+        ) {
             Ok((next, residuals, indefinite)) => {
                 u = next;
                 load = to;
@@ -277,6 +313,8 @@ pub fn solve(
                 halvings = 0;
             }
             Err(failure) => {
+                // The failed attempt's tangents belong to states that were not kept.
+                last_tangent = None;
                 if dl * 0.5 >= options.min_step * (1.0 - 1e-12) {
                     dl *= 0.5;
                     halvings += 1;
@@ -318,36 +356,51 @@ pub fn solve(
     Ok(Solution { u, forces, steps })
 }
 
-/// Solves `K_ff x = -r_f` for the tangent of `state`; returns the node-major correction (zero
-/// at prescribed dofs) and whether the tangent was indefinite.
-fn correction(
+/// The factorised tangent `K_ff` of `state`.
+fn factorize(
     body: &HyperelasticBody,
     dofs: &DofMap,
     factor: &Factor,
     state: &State,
+) -> Result<Numeric, StepFailure> {
+    factor
+        .factorize(&body.tangent(state, dofs))
+        .map_err(StepFailure::Singular)
+}
+
+/// Solves `K_ff x = -r_f` with a factorised tangent; returns the node-major correction (zero
+/// at prescribed dofs).
+fn correction(
+    dofs: &DofMap,
+    factor: &Factor,
+    numeric: &Numeric,
     r: &[f64],
-) -> Result<(Vec<f64>, bool), StepFailure> {
-    let k = body.tangent(state, dofs);
+) -> Result<Vec<f64>, StepFailure> {
     let mut rhs = Mat::<f64>::zeros(dofs.free_count(), 1);
     for (d, x) in r.iter().enumerate() {
         if let Some(f) = dofs.free_dof(d / 3, d % 3) {
             rhs[(f, 0)] = -x;
         }
     }
-    let indefinite = factor.solve(&k, &mut rhs).map_err(StepFailure::Singular)?;
+    factor
+        .solve(numeric, &mut rhs)
+        .map_err(StepFailure::Singular)?;
     let free: Vec<f64> = (0..dofs.free_count()).map(|f| rhs[(f, 0)]).collect();
     if free.iter().any(|x| !x.is_finite()) {
         return Err(StepFailure::Singular(
             "the tangent solve gave a non-finite correction".into(),
         ));
     }
-    Ok((dofs.expand(&free), indefinite))
+    Ok(dofs.expand(&free))
 }
 
 /// One load step from the converged `u` by the prescribed `increment` (zero at free dofs):
 /// the linearised predictor, then Newton iterations with a backtracking line search on the
 /// free-dof residual norm. Returns the new state, the residual history and whether a tangent
-/// was indefinite.
+/// was indefinite. `last_tangent` holds the last tangent factorised by the previous step (assembled
+/// one correction before its converged state): the predictor solves with it instead of
+/// factorising the converged state's tangent, which is one factorisation fewer per step and
+/// only an initial guess; this step's last factorisation replaces it.
 fn step(
     body: &HyperelasticBody,
     dofs: &DofMap,
@@ -355,6 +408,7 @@ fn step(
     u: &[f64],
     increment: &[f64],
     options: &NewtonOptions,
+    last_tangent: &mut Option<Numeric>,
 ) -> Result<(Vec<f64>, Vec<f64>, bool), StepFailure> {
     let mut x: Vec<f64> = u.iter().zip(increment).map(|(a, b)| a + b).collect();
     let Some(factor) = factor else {
@@ -366,7 +420,12 @@ fn step(
     let r_old = body.forces(&old);
     let k_inc = body.tangent_apply(&old, increment);
     let rhs: Vec<f64> = r_old.iter().zip(&k_inc).map(|(a, b)| a + b).collect();
-    let (dx, mut indefinite) = correction(body, dofs, factor, &old, &rhs)?;
+    let numeric = match last_tangent.take() {
+        Some(n) => n,
+        None => factorize(body, dofs, factor, &old)?,
+    };
+    let mut indefinite = numeric.indefinite;
+    let dx = correction(dofs, factor, &numeric, &rhs)?;
     for (xi, d) in x.iter_mut().zip(&dx) {
         *xi += d;
     }
@@ -387,8 +446,10 @@ fn step(
         if residuals.len() > options.max_iterations {
             break;
         }
-        let (dx, ind) = correction(body, dofs, factor, &state, &forces)?;
-        indefinite |= ind;
+        let numeric = factorize(body, dofs, factor, &state)?;
+        indefinite |= numeric.indefinite;
+        let dx = correction(dofs, factor, &numeric, &forces)?;
+        *last_tangent = Some(numeric);
         let mut alpha = 1.0;
         let mut accepted = None;
         let mut inverted = None;
@@ -476,8 +537,10 @@ mod tests {
         let k = upper(&a);
         let b = [1.0, -2.0, 0.5, 3.0];
         let mut x = Mat::<f64>::from_fn(4, 1, |i, _| b[i]);
-        let indefinite = factor(&k).solve(&k, &mut x).unwrap();
-        assert_eq!(indefinite, !definite);
+        let f = factor(&k);
+        let numeric = f.factorize(&k).unwrap();
+        assert_eq!(numeric.indefinite, !definite);
+        f.solve(&numeric, &mut x).unwrap();
         for (row, bi) in a.iter().zip(b) {
             let ax: f64 = (0..4).map(|j| row[j] * x[(j, 0)]).sum();
             assert!((ax - bi).abs() < 1e-12, "{ax} vs {bi}");
