@@ -19,7 +19,10 @@
 //!    [`compliance::Compliance::patch_compliances`];
 //! 6. [`reference`](mod@reference): the reference problems of the locking study (a flat punch
 //!    on the liver, uniform refinement), solved with any element or the 10-node
-//!    [`elasticity::quadratic::QuadraticBody`].
+//!    [`elasticity::quadratic::QuadraticBody`];
+//! 7. [`hyperelastic`]: the large-deformation reference, a compressible neo-Hookean body on
+//!    the same 10-node tetrahedra, loaded by prescribed displacements and solved by Newton's
+//!    method with load stepping.
 //!
 //! ```
 //! use fem::compliance::Compliance;
@@ -42,6 +45,7 @@
 
 pub mod compliance;
 pub mod elasticity;
+pub mod hyperelastic;
 pub mod mesh;
 pub mod ordering;
 pub mod progress;

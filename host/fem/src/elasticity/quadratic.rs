@@ -28,7 +28,7 @@ pub const EDGES: [(usize, usize); 6] = [(0, 1), (1, 2), (0, 2), (0, 3), (1, 3), 
 
 /// The 4-point Gauss rule on a tetrahedron (degree 2): barycentric coordinates, each point
 /// weighted by a quarter of the volume.
-const GAUSS: [[f64; 4]; 4] = {
+pub(crate) const GAUSS: [[f64; 4]; 4] = {
     const A: f64 = 0.585_410_196_624_968_5; // (5 + 3 sqrt 5) / 20
     const B: f64 = 0.138_196_601_125_010_5; // (5 - sqrt 5) / 20
     [[A, B, B, B], [B, A, B, B], [B, B, A, B], [B, B, B, A]]
@@ -104,9 +104,24 @@ impl QuadraticBody {
         self.edge_nodes.get(&(a.min(b), a.max(b))).copied()
     }
 
+    /// The elements: 4 vertices, then 6 edge nodes in [`EDGES`] order.
+    pub(crate) fn tets(&self) -> &[[usize; 10]] {
+        &self.tets
+    }
+
+    /// Volume of (straight-sided) element `t`, m^3.
+    pub(crate) fn volume(&self, t: usize) -> f64 {
+        self.elements[t].volume
+    }
+
+    /// Elements incident to `node`.
+    pub(crate) fn node_tets(&self, node: usize) -> &[usize] {
+        self.node_tets.row(node)
+    }
+
     /// Shape-function gradients of element `t` at barycentric point `l`:
     /// `(4 L_i - 1) grad L_i` at the vertices, `4 (L_i grad L_j + L_j grad L_i)` at the edges.
-    fn gradients(&self, t: usize, l: [f64; 4]) -> [[f64; 3]; 10] {
+    pub(crate) fn gradients(&self, t: usize, l: [f64; 4]) -> [[f64; 3]; 10] {
         let g = self.elements[t].grad;
         std::array::from_fn(|k| {
             if k < 4 {
