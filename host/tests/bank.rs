@@ -462,10 +462,13 @@ fn the_firmware_loop_runs_on_the_shipped_bank_without_faults() {
         (press / probe - 1.0).abs() < 0.01,
         "{press} N against the probe's {probe} N"
     );
-    // And the loop itself, through the probe's normal press there (frictionless: the anchor
-    // stays): the linear model's force for it, `W^-1 (D n)` computed here from the probe's W
-    // (the bank's patch compliance at the point) with the scene's linear law (Q the identity),
-    // within f32 rounding (1e-3 allows for it; a loop that renders 1 % more fails).
+    // The press above ticks the same loop on both sides, so it cannot see the loop itself
+    // render too much; the probe's normal press there (frictionless: the anchor stays) can:
+    // against the linear model's force for it, `W^-1 (D n)`, computed here from the probe's W
+    // (the bank's patch compliance at the closest point) with the scene's linear law (Q the
+    // identity). Measured 4.8e-4 apart (the tick builds its patch in f32 where the tip's path
+    // crosses the bank's f32 triangle); 2e-3 allows for it, and a loop rendering 1 % more
+    // fails (10 % more: tried, it does).
     let positions: Vec<[f64; 3]> = bank.positions().iter().map(|p| p.map(f64::from)).collect();
     let triangles: Vec<[usize; 3]> = bank
         .triangles()
@@ -479,7 +482,7 @@ fn the_firmware_loop_runs_on_the_shipped_bank_without_faults() {
     let error: [f64; 3] = std::array::from_fn(|i| rendered[i] - expected[i]);
     println!("normal press {rendered:?} N, W^-1 (D n) {expected:?} N");
     assert!(
-        norm(error) < 1e-3 * norm(expected),
+        norm(error) < 2e-3 * norm(expected),
         "{rendered:?} N against W^-1 (D n) = {expected:?} N"
     );
     // The peak comes in the sweep at that depth (the tip moves sideways at a constant insertion

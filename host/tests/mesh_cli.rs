@@ -435,9 +435,11 @@ fn the_organ_is_meshed_graded_near_the_reach_and_becomes_a_scene() {
         (peak / probe - 1.0).abs() < 0.03,
         "the demo's peak {peak} N against the probe's {probe} N"
     );
-    // `host contact probe`'s normal press at the aim point: the linear model's force for it,
-    // `W^-1 (D n)` computed here from the W and the normal it prints (Q the identity), within
-    // f32 rounding (1e-3 allows for it).
+    // The comparison above ticks the same loop on both sides; `host contact probe`'s normal
+    // press at the aim point checks the loop itself: against the linear model's force for it,
+    // `W^-1 (D n)`, computed here from the W and the normal it prints (Q the identity).
+    // Measured 5.9e-4 apart (the tick's patch is built in f32 where the tip's path crosses the
+    // bank's f32 triangle); 2e-3 allows for it and fails a loop rendering 1 % more.
     let at = format!("--at={},{},{}", aim[0], aim[1], aim[2]);
     let o = host(&[
         "contact",
@@ -461,7 +463,7 @@ fn the_organ_is_meshed_graded_near_the_reach_and_becomes_a_scene() {
     let rendered = vector(&p["force_n"]);
     let error: [f64; 3] = std::array::from_fn(|i| rendered[i] - expected[i]);
     assert!(
-        norm(error) < 1e-3 * norm(expected),
+        norm(error) < 2e-3 * norm(expected),
         "{rendered:?} N against W^-1 (D n) = {expected:?} N"
     );
     // A trocar inside the organ is refused, and nothing is written.
