@@ -36,12 +36,27 @@ pub struct Probe {
     pub force_n: Option<[f64; 3]>,
 }
 
-/// Millimetres the pressing tip starts outside the surface.
+/// Metres the pressing tip starts outside the surface.
 const START_M: f64 = 0.005;
-/// The pressing tip's step per tick, m (0.2 m/s: far below the overspeed threshold).
-const STEP_M: f64 = 0.0002;
-/// Ticks the tip is held at the press depth before the force is read.
-const HOLD_TICKS: usize = 10;
+/// The most ticks a press may take.
+const MAX_PRESS_TICKS: usize = 1_000_000;
+
+/// How a press moves the tip ([`press`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PressPath {
+    /// The tip's step per tick, m (> 0).
+    pub step_m: f64,
+    /// Ticks the tip is held at the press depth before the force is read.
+    pub hold_ticks: usize,
+}
+
+impl PressPath {
+    /// The probe's: 0.2 mm a tick (0.2 m/s, far below the overspeed threshold), held 10 ticks.
+    pub const PROBE: PressPath = PressPath {
+        step_m: 0.0002,
+        hold_ticks: 10,
+    };
+}
 
 /// The closest point to `q` over `triangles` of `positions`: (triangle, point, bary, squared
 /// distance); `None` without triangles.
@@ -155,9 +170,14 @@ pub fn probe(
     ];
     let wn: [f64; 3] = std::array::from_fn(|i| dot(w[i], normal));
     let nwn = dot(normal, wn);
-    let force_n = depth
-        .map(|d| press(bank, point, normal, d, law, &name))
-        .transpose()?;
+    let force_n = match depth {
+        Some(d) if !valid_depth(d) => bail!("--depth {d}: must lie in (0, 0.05] m"),
+        Some(d) => Some(
+            press(bank, point, scale(normal, -1.0), d, PressPath::PROBE, law)
+                .with_context(|| format!("--at {name}"))?,
+        ),
+        None => None,
+    };
     Ok(Probe {
         triangle: t as u32,
         bary,
@@ -193,18 +213,46 @@ fn nodal_w(
     Some(m)
 }
 
-/// The firmware tick's tool force for a normal press of `depth` at `point`.
-fn press(
+/// A press depth the probe accepts, m.
+fn valid_depth(depth: f64) -> bool {
+    depth > 0.0 && depth.is_finite() && depth <= 0.05
+}
+
+/// The tool force, N, that the firmware's own tick (a fresh [`HapticLoop`], disarmed) renders
+/// when the device moves its tip along the straight line through `point` (m) in the unit
+/// direction `inward` (into the organ): from 5 mm short of `point` to `depth` (m, in
+/// (0, 0.05]) past it in equal steps of at most `path.step_m`, then held `path.hold_ticks`
+/// ticks; through the bank's Q with `law`, else the linear model's force. The probe's press is
+/// this with `inward` the inward normal and [`PressPath::PROBE`]: frictionless, the anchor
+/// never moves. Along any other line the contact's stick cone lets the anchor slide, which
+/// rebuilds the patch over several ticks, so the force then depends on the speed and needs a
+/// hold to settle. Refuses a tip the device cannot reach and a failed solve.
+pub fn press(
     bank: &Bank<'_>,
     point: [f64; 3],
-    normal: [f64; 3],
+    inward: [f64; 3],
     depth: f64,
+    path: PressPath,
     law: bool,
-    name: &str,
 ) -> Result<[f64; 3]> {
-    if !(depth > 0.0 && depth.is_finite() && depth <= 0.05) {
-        bail!("--depth {depth}: must lie in (0, 0.05] m");
+    if !valid_depth(depth) {
+        bail!("press depth {depth} m: must lie in (0, 0.05] m");
     }
+    let unit = (norm(inward) - 1.0).abs() < 1e-6;
+    if !unit {
+        bail!("the press direction {inward:?} is not a unit vector");
+    }
+    let steps = ((START_M + depth) / path.step_m).ceil();
+    if !(steps.is_finite() && steps >= 1.0) || steps as usize + path.hold_ticks > MAX_PRESS_TICKS {
+        bail!(
+            "a press of {} mm in steps of {} m held {} ticks: not a positive step, or over \
+             {MAX_PRESS_TICKS} ticks",
+            1e3 * (START_M + depth),
+            path.step_m,
+            path.hold_ticks
+        );
+    }
+    let steps = steps as usize;
     let cal = *bank.device();
     let ws = Workspace::from_device(&cal);
     let mut lp = HapticLoop::new(bank);
@@ -214,11 +262,10 @@ fn press(
     {
         bail!("internal: the loop refused the mode");
     }
-    let steps = ((START_M + depth) / STEP_M).ceil() as usize;
     let mut force = [0.0f32; 3];
-    for i in 0..=steps + HOLD_TICKS {
-        let s = START_M - (i.min(steps) as f64 / steps as f64) * (START_M + depth);
-        let tip = add(point, scale(normal, s));
+    for i in 0..=steps + path.hold_ticks {
+        let s = (i.min(steps) as f64 / steps as f64) * (START_M + depth) - START_M;
+        let tip = add(point, scale(inward, s));
         let q = ws.joints_for_tip(tip);
         let inside = (0..3).all(|j| {
             (f64::from(cal.joint_min[j]) - 1e-9..=f64::from(cal.joint_max[j]) + 1e-9)
@@ -226,7 +273,7 @@ fn press(
         });
         if !inside {
             bail!(
-                "--at {name}: the device cannot put its tip at [{:.4}, {:.4}, {:.4}] m on the \
+                "the device cannot put its tip at [{:.4}, {:.4}, {:.4}] m on the \
                  press (pitch {:.3} rad, yaw {:.3} rad, insertion {:.4} m): outside its ranges",
                 tip[0],
                 tip[1],
@@ -243,7 +290,7 @@ fn press(
             interlocks: Interlocks::default(),
         });
         if let Some(e) = out.solve_error {
-            bail!("--at {name}: the firmware's solve failed on the press: {e}");
+            bail!("the firmware's solve failed on the press: {e}");
         }
         force = out.tool_force_n;
     }

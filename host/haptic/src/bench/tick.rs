@@ -21,11 +21,17 @@ const SWEEP_RAD: f64 = 0.05;
 /// Duration of the sweep at depth, s.
 const SWEEP_S: f64 = 2.0;
 
+/// Seconds from the path's start (and from each cycle's) to the bottom of its press, `depth_m`
+/// below the surface.
+fn down_s(depth_m: f64) -> f64 {
+    (depth_m + ABOVE_M) / SPEED_M_S
+}
+
 /// The bench's path ([`crate::trajectory`]) with its bottom `depth_m` below the surface: in
 /// from [`ABOVE_M`] above at [`SPEED_M_S`], one sine sweep of [`SWEEP_S`] at depth (lateral
 /// offset 1 at the sweep's largest), out at the same speed; linear between the waypoints.
 fn stroke(depth_m: f64) -> Stroke {
-    let down_s = (depth_m + ABOVE_M) / SPEED_M_S;
+    let down_s = down_s(depth_m);
     let press = Press {
         above_m: ABOVE_M,
         depth_m,
@@ -50,6 +56,12 @@ pub struct TickBench {
     pub max_contact_nodes: usize,
     /// The largest tool force rendered, N.
     pub peak_force_n: f32,
+    /// The tool force, N, at the last tick of the run that ends a press (the path just at its
+    /// bottom, `depth_m` past first contact straight along the shaft at the home pose, before
+    /// the sweep); `None` when the run ends before the first. The first cycle's press falls
+    /// inside the loop's ramp-in after arming ([`firmware::tick::RAMP_IN_TICKS`]), so only
+    /// a later cycle's is the full force of that press.
+    pub press_force_n: Option<f32>,
     /// Faults the loop raised.
     pub faults: usize,
     /// The insertion at which the tool first touches along its rest axis, m.
@@ -102,6 +114,8 @@ pub fn run(bank: &Bank, ticks: usize, depth_m: f64) -> Result<TickBench> {
     };
     // Press to `depth`, slide in yaw and back, release; repeat.
     let bottom = (surface + depth_m).min(hi);
+    // The path's index of the tick that ends the press.
+    let press_end = (down_s(bottom - surface) * TICK_HZ).round() as usize;
     let path: Vec<[f64; 3]> = {
         let stroke = stroke(bottom - surface);
         let cycle = (stroke.period_s() * TICK_HZ).round() as usize;
@@ -124,7 +138,7 @@ pub fn run(bank: &Bank, ticks: usize, depth_m: f64) -> Result<TickBench> {
         .map_err(|e| anyhow!("the loop refused to arm: {e:?}"))?;
     let mut times = Vec::with_capacity(ticks);
     let (mut touching, mut max_nodes, mut peak) = (0usize, 0usize, 0.0f32);
-    let mut faults = 0;
+    let (mut faults, mut press_force) = (0, None);
     for k in 0..ticks {
         let inp = input(path[k % path.len()]);
         let t = Instant::now();
@@ -135,7 +149,11 @@ pub fn run(bank: &Bank, ticks: usize, depth_m: f64) -> Result<TickBench> {
             max_nodes = max_nodes.max(out.contact_nodes);
         }
         let f = out.tool_force_n;
-        peak = peak.max((f[0] * f[0] + f[1] * f[1] + f[2] * f[2]).sqrt());
+        let magnitude = (f[0] * f[0] + f[1] * f[1] + f[2] * f[2]).sqrt();
+        peak = peak.max(magnitude);
+        if k % path.len() == press_end {
+            press_force = Some(magnitude);
+        }
         if out.new_fault.is_some() {
             faults += 1;
         }
@@ -147,6 +165,7 @@ pub fn run(bank: &Bank, ticks: usize, depth_m: f64) -> Result<TickBench> {
         touching,
         max_contact_nodes: max_nodes,
         peak_force_n: peak,
+        press_force_n: press_force,
         faults,
         contact_insertion_m: surface,
         ns_mean: times.iter().sum::<u64>() as f64 / times.len() as f64,

@@ -46,6 +46,21 @@ struct Combo {
 /// Error below this is drawn at it (log axis).
 const FLOOR: f64 = 1e-6;
 
+/// The series of the front: points of the combinations' series, chosen by comparing their
+/// instruction counts (which vary by a few between runs, so the front's membership can too).
+pub const FRONT: &str = "Pareto front (error, bytes, instructions)";
+
+/// How a combination's point label ends: `, <worst loop-body instructions> instructions`.
+const INSTRUCTIONS: &str = " instructions";
+
+/// A point label of this knob split into the combination and the worst loop-body instructions
+/// it ends with (`None` for a label without them: the finer meshes', not run on the image).
+/// The figures file keys a point by the combination and checks the instructions as a figure.
+pub fn split_instructions(label: &str) -> Option<(&str, f64)> {
+    let (combo, n) = label.rsplit_once(", ")?;
+    Some((combo, n.strip_suffix(INSTRUCTIONS)?.parse().ok()?))
+}
+
 /// The knob, or `None` when there is no reference (one mesh only) or no bank was run.
 /// `scene_bank` is the scene's own rule, radius (m) and storage precision.
 pub fn section(runs: &[MeshRun], banks: &[RunBank], scene_bank: (&str, f64, &str)) -> Option<Knob> {
@@ -112,7 +127,7 @@ pub fn section(runs: &[MeshRun], banks: &[RunBank], scene_bank: (&str, f64, &str
     let point = |c: &Combo| Point {
         x: c.bytes,
         y: c.error,
-        label: format!("{}, {:.0} instructions", c.label, c.instructions),
+        label: format!("{}, {:.0}{INSTRUCTIONS}", c.label, c.instructions),
     };
     // The finer meshes: discretisation error only, at the scene's truncation.
     let finer: Vec<(Point, bool)> = runs[1..]
@@ -159,7 +174,7 @@ pub fn section(runs: &[MeshRun], banks: &[RunBank], scene_bank: (&str, f64, &str
     }
     if front.len() >= 3 {
         series.push(Series {
-            name: "Pareto front (error, bytes, instructions)".into(),
+            name: FRONT.into(),
             points: front.iter().map(|c| point(c)).collect(),
         });
     }
