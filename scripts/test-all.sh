@@ -131,7 +131,7 @@ if cargo tree -p haptic -e normal --prefix none | grep -E '^(clap|ctrlc|indicati
 fi
 
 step "no_std crates cross-compile for the MCU; the QEMU image links against memory.x"
-cargo build --release -p bank-format -p firmware --target thumbv7em-none-eabihf
+cargo build --release -p bank-format -p firmware -p splitmix --target thumbv7em-none-eabihf
 own_target firmware/qemu cargo build --release
 
 step "the board image (STM32F405RG, embassy-stm32): format, lints, build, size against memory.x, stack in CCM"

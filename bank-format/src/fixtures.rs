@@ -32,43 +32,5 @@ pub fn bench_device(fulcrum_m: [f32; 3]) -> DeviceCalibration {
     }
 }
 
-/// SplitMix64 (Steele, Lea & Flood, OOPSLA 2014), the tests' seeded stream: the same seed
-/// gives the same values on every platform. Not for anything secret.
-#[derive(Clone, Debug)]
-pub struct SplitMix64(u64);
-
-impl SplitMix64 {
-    /// A stream from `seed`.
-    pub fn new(seed: u64) -> SplitMix64 {
-        SplitMix64(seed)
-    }
-
-    /// The next 64 bits.
-    pub fn next_u64(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9e37_79b9_7f4a_7c15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
-        z ^ (z >> 31)
-    }
-
-    /// Uniform in [0, 1) (24 bits, every value exact in f32).
-    pub fn unit_f32(&mut self) -> f32 {
-        (self.next_u64() >> 40) as f32 / (1u32 << 24) as f32
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    /// The reference stream of SplitMix64 from seed 0 (the first outputs given with the
-    /// algorithm's public-domain C code by Vigna).
-    #[test]
-    fn matches_the_reference_stream() {
-        let mut r = SplitMix64::new(0);
-        assert_eq!(r.next_u64(), 0xe220_a839_7b1d_cdaf);
-        assert_eq!(r.next_u64(), 0x6e78_9e6a_a1b9_65f4);
-        assert_eq!(r.next_u64(), 0x06c4_5d18_8009_454f);
-    }
-}
+/// The tests' seeded stream (the workspace's one generator).
+pub use splitmix::SplitMix64;

@@ -717,6 +717,30 @@ mod tests {
             r
         }
 
+        /// A boot check's latched `fault` (`detail`) holds: reported at boot, and three times
+        /// over, `ClearFault`, the `also` commands and `Arm` give a tick in `Fault` at zero
+        /// current with the fault reported again; no motor was ever driven.
+        fn refuses_every_arm(&mut self, fault: FaultReason, detail: u32, also: &[HostToDevice]) {
+            let reported = |tick| DeviceToHost::Fault {
+                tick,
+                reason: fault,
+                detail,
+            };
+            self.host.pump();
+            assert_eq!(self.host.sent[1], reported(0));
+            for _ in 0..3 {
+                self.host.send(&HostToDevice::ClearFault);
+                also.iter().for_each(|c| self.host.send(c));
+                self.host.send(&HostToDevice::Arm);
+                let r = self.tick();
+                assert_eq!((r.state, r.currents_a), (WireState::Fault, [0.0; 3]));
+                self.host.pump();
+                assert_eq!(self.host.sent.last(), Some(&reported(r.tick - 1)));
+            }
+            assert!(self.plant.driven.iter().all(Option::is_none));
+            assert_eq!(self.app.telemetry().fault, Some(fault));
+        }
+
         /// The `Fault` frames the host has received.
         fn faults(&self) -> Vec<DeviceToHost> {
             self.host
@@ -1357,23 +1381,7 @@ mod tests {
         let mut link = Link::new();
         let mut rig = Rig::new(Ok(&bank), &mut link).homed();
         rig.app.check_amplifiers(&amps(1.5));
-        let range = |tick| DeviceToHost::Fault {
-            tick,
-            reason: FaultReason::AmplifierRange,
-            detail: 2,
-        };
-        rig.host.pump();
-        assert_eq!(rig.host.sent[1], range(0));
-        for _ in 0..3 {
-            rig.host.send(&HostToDevice::ClearFault);
-            rig.host.send(&HostToDevice::Arm);
-            let r = rig.tick();
-            assert_eq!((r.state, r.currents_a), (WireState::Fault, [0.0; 3]));
-            rig.host.pump();
-            assert_eq!(rig.host.sent.last(), Some(&range(r.tick - 1)));
-        }
-        assert!(rig.plant.driven.iter().all(Option::is_none));
-        assert_eq!(rig.app.telemetry().fault, Some(FaultReason::AmplifierRange));
+        rig.refuses_every_arm(FaultReason::AmplifierRange, 2, &[]);
 
         let mut link = Link::new();
         let mut rig = Rig::new(Ok(&bank), &mut link).homed();
@@ -1394,24 +1402,7 @@ mod tests {
         let mut link = Link::new();
         let mut rig = Rig::new(Ok(&bank), &mut link).homed();
         rig.app.check_brown_out(0x0FFF_AAED);
-        let brown_out = |tick| DeviceToHost::Fault {
-            tick,
-            reason: FaultReason::BrownOutLevel,
-            detail: 0,
-        };
-        rig.host.pump();
-        assert_eq!(rig.host.sent[1], brown_out(0));
-        for _ in 0..3 {
-            rig.host.send(&HostToDevice::ClearFault);
-            rig.host.send(&HostToDevice::ZeroEncoders);
-            rig.host.send(&HostToDevice::Arm);
-            let r = rig.tick();
-            assert_eq!((r.state, r.currents_a), (WireState::Fault, [0.0; 3]));
-            rig.host.pump();
-            assert_eq!(rig.host.sent.last(), Some(&brown_out(r.tick - 1)));
-        }
-        assert!(rig.plant.driven.iter().all(Option::is_none));
-        assert_eq!(rig.app.telemetry().fault, Some(FaultReason::BrownOutLevel));
+        rig.refuses_every_arm(FaultReason::BrownOutLevel, 0, &[HostToDevice::ZeroEncoders]);
 
         // Level 3: no fault at boot; not homed, Arm is refused NotReferenced; after
         // ZeroEncoders it arms.
