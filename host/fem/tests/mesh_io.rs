@@ -368,23 +368,9 @@ fn truncated_inputs_are_errors_not_panics() {
     }
 }
 
-/// A small deterministic generator (xorshift64*).
-struct Rng(u64);
-impl Rng {
-    fn next(&mut self) -> u64 {
-        self.0 ^= self.0 >> 12;
-        self.0 ^= self.0 << 25;
-        self.0 ^= self.0 >> 27;
-        self.0.wrapping_mul(0x2545_f491_4f6c_dd1d)
-    }
-    fn below(&mut self, n: usize) -> usize {
-        (self.next() % n as u64) as usize
-    }
-}
-
 #[test]
 fn garbage_and_corrupted_inputs_are_errors_not_panics() {
-    let mut rng = Rng(0x9e37_79b9_7f4a_7c15);
+    let mut rng = splitmix::SplitMix64::new(0x9e37_79b9_7f4a_7c15);
     let formats = [Format::Msh, Format::Vtu, Format::Vtk];
     // Pure garbage, with and without a plausible header.
     let headers: [&[u8]; 6] = [
@@ -401,7 +387,7 @@ fn garbage_and_corrupted_inputs_are_errors_not_panics() {
         let alphabet = b"0123456789 .-e\n$NodesElements";
         for _ in 0..n {
             bytes.push(if rng.below(2) == 0 {
-                rng.next() as u8
+                rng.next_u64() as u8
             } else {
                 alphabet[rng.below(alphabet.len())]
             });
@@ -421,7 +407,7 @@ fn garbage_and_corrupted_inputs_are_errors_not_panics() {
             for _ in 0..1 + rng.below(4) {
                 let i = rng.below(bytes.len());
                 bytes[i] = match rng.below(3) {
-                    0 => rng.next() as u8,
+                    0 => rng.next_u64() as u8,
                     1 => b"0123456789"[rng.below(10)],
                     _ => b"\n -9"[rng.below(4)],
                 };

@@ -321,15 +321,10 @@ fn brute_distance(q: [f64; 3], t: [[f64; 3]; 3]) -> f64 {
         .fold(f64::INFINITY, f64::min)
 }
 
-/// Pseudo-random points in a box (xorshift64, deterministic).
+/// Pseudo-random points in a box (SplitMix64, deterministic).
 fn random_points(lo: [f64; 3], hi: [f64; 3], count: usize) -> Vec<[f64; 3]> {
-    let mut state = 0x2545_f491_4f6c_dd1du64;
-    let mut draw = || {
-        state ^= state << 13;
-        state ^= state >> 7;
-        state ^= state << 17;
-        (state >> 11) as f64 / (1u64 << 53) as f64
-    };
+    let mut rng = splitmix::SplitMix64::new(0x2545_f491_4f6c_dd1d);
+    let mut draw = || rng.unit();
     (0..count)
         .map(|_| std::array::from_fn(|a| lo[a] + (hi[a] - lo[a]) * draw()))
         .collect()

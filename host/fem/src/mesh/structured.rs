@@ -55,7 +55,7 @@ pub fn box_mesh(size: [f64; 3], cells: [usize; 3]) -> TetMesh {
 }
 
 /// [`box_mesh`] with every interior node moved by up to `amount / 2` of a cell along each axis,
-/// pseudo-randomly from `seed` (xorshift64, deterministic), so that elements are irregular as
+/// pseudo-randomly from `seed` (the workspace's SplitMix64, deterministic), so that elements are irregular as
 /// in a patch test while the boundary stays the box's. `amount` below about 0.5 keeps every
 /// tetrahedron positively oriented; `None` if a move inverted one.
 pub fn distorted_box_mesh(
@@ -66,13 +66,8 @@ pub fn distorted_box_mesh(
 ) -> Option<TetMesh> {
     let mut mesh = box_mesh(size, cells);
     let h = [0, 1, 2].map(|a| size[a] / cells[a] as f64);
-    let mut state = seed.max(1);
-    let mut draw = || {
-        state ^= state << 13;
-        state ^= state >> 7;
-        state ^= state << 17;
-        (state >> 11) as f64 / (1u64 << 53) as f64 - 0.5
-    };
+    let mut rng = splitmix::SplitMix64::new(seed);
+    let mut draw = || rng.unit() - 0.5;
     for p in &mut mesh.nodes {
         if (0..3).all(|a| p[a] > 1e-12 * size[a] && p[a] < size[a] * (1.0 - 1e-12)) {
             for (x, h) in p.iter_mut().zip(h) {
