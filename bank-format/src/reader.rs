@@ -1826,13 +1826,8 @@ mod tests {
             }
             out
         };
-        let mut seed = 0x2545_f491_4f6c_dd1du64;
-        let mut next = move || {
-            seed ^= seed << 13;
-            seed ^= seed >> 7;
-            seed ^= seed << 17;
-            (seed >> 40) as f32 / (1u64 << 24) as f32
-        };
+        let mut rng = crate::fixtures::SplitMix64::new(0x2545_f491_4f6c_dd1d);
+        let mut next = move || rng.unit_f32();
         let mut values = [0.0f32, 1.0e30, -1.0e30, f32::MAX, f32::MIN].to_vec();
         for k in -3..25 {
             let x = header.origin_m[0] + k as f32 * header.cell_size_m;

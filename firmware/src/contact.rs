@@ -990,13 +990,8 @@ mod tests {
     /// curved surface, for short ticks near the surface and long strikes.
     #[test]
     fn detection_equals_brute_force_for_any_cell_size() {
-        let mut seed = 0x2545_f491_4f6c_dd1du64;
-        let mut next = move || {
-            seed ^= seed << 13;
-            seed ^= seed >> 7;
-            seed ^= seed << 17;
-            (seed >> 11) as f64 / (1u64 << 53) as f64
-        };
+        let mut rng = crate::fixtures::SplitMix64::new(0x2545_f491_4f6c_dd1d);
+        let mut next = move || rng.unit();
         for cell in [0.0021, 0.004, 0.01, 0.031] {
             let bytes = patch_shaped(cell, |x, y| 0.2 * (x - 0.02) * (y - 0.015) + 3.0 * x * x);
             let bank = Bank::parse(&bytes).unwrap();
@@ -1334,13 +1329,8 @@ mod tests {
             out[big] = (1.0 - rest).clamp(0.0, 1.0);
             Some(out)
         }
-        let mut seed = 0x9e37_79b9_7f4a_7c15u64;
-        let mut next = move || {
-            seed ^= seed << 13;
-            seed ^= seed >> 7;
-            seed ^= seed << 17;
-            (seed >> 40) as f32 / (1u64 << 24) as f32 * 1.4 - 0.2
-        };
+        let mut rng = crate::fixtures::SplitMix64::new(0x9e37_79b9_7f4a_7c15);
+        let mut next = move || rng.unit_f32() * 1.4 - 0.2;
         let mut cases = std::vec![
             [0.0, 0.0, 0.0],
             [1.0, 0.0, 0.0],

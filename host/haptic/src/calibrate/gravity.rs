@@ -344,13 +344,9 @@ mod tests {
         q
     }
 
-    /// Deterministic noise uniform in [-1, 1) (xorshift64*).
-    fn noise(state: &mut u64) -> f64 {
-        *state ^= *state >> 12;
-        *state ^= *state << 25;
-        *state ^= *state >> 27;
-        let x = state.wrapping_mul(0x2545_f491_4f6c_dd1d) >> 11;
-        2.0 * (x as f64 / (1u64 << 53) as f64) - 1.0
+    /// Deterministic noise uniform in [-1, 1).
+    fn noise(rng: &mut crate::rng::SplitMix64) -> f64 {
+        2.0 * rng.unit() - 1.0
     }
 
     /// The efforts a rigid shaft would need, written from the potential directly: weight G
@@ -399,7 +395,7 @@ mod tests {
     /// 8 fitted directions): the reported RMS must match it, and the coefficients stay close.
     #[test]
     fn noisy_data_reports_the_noise_as_residual() {
-        let mut seed = 0x9e37_79b9_7f4a_7c15u64;
+        let mut seed = crate::rng::SplitMix64::new(0x9e37_79b9_7f4a_7c15);
         let amp = 2e-3; // N m and N; uniform, so RMS amp / sqrt(3)
         let mut q = Vec::new();
         for _ in 0..10 {

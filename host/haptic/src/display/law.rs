@@ -186,13 +186,8 @@ mod tests {
             v.map(|x| x / n)
         };
         let df = d.map(|x| x as f32);
-        let mut seed = 0x2545_f491_4f6c_dd1du64;
-        let mut next = || {
-            seed = seed
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            ((seed >> 11) as f64 / (1u64 << 53) as f64 - 0.5) * 0.004
-        };
+        let mut rng = crate::rng::SplitMix64::new(0x2545_f491_4f6c_dd1d);
+        let mut next = || (rng.unit() - 0.5) * 0.004;
         let lin: Vec<[f32; 3]> = (0..200)
             .map(|_| [next(), next(), next()].map(|x| x as f32))
             .collect();
