@@ -54,6 +54,9 @@ enum Command {
     /// Scene files: `new` writes a complete scene for a mesh, aimed from a trocar.
     #[command(subcommand)]
     Scene(cmd::scene::SceneCmd),
+    /// A compression experiment marker by marker: the predicted marker positions and the
+    /// platen force at each nominal strain, linear or large-deformation model.
+    Specimen(cmd::specimen::Args),
 }
 
 fn main() -> ExitCode {
@@ -84,6 +87,7 @@ fn main() -> ExitCode {
         Command::Report(args) => cmd::report::run(args),
         Command::Mesh(args) => cmd::mesh::run(args),
         Command::Scene(c) => cmd::scene::run(c),
+        Command::Specimen(args) => cmd::specimen::run(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -41,6 +41,7 @@ pub mod scene;
 pub mod scene_new;
 pub mod script;
 pub mod sil;
+pub mod specimen;
 pub mod study;
 pub mod trajectory;
 pub mod units;

@@ -19,4 +19,5 @@ pub mod report;
 pub mod scene;
 pub mod script_arg;
 pub mod sil;
+pub mod specimen;
 pub mod units_arg;
