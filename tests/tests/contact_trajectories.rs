@@ -243,17 +243,15 @@ fn random_walk_keeps_invariants() {
     let bytes = cap();
     let bank = Bank::parse(&bytes).unwrap();
     let mut tr = ContactTracker::new();
-    let mut seed = 0x2545_f491_4f6c_dd1du64;
-    let mut rnd = move || {
-        seed ^= seed << 13;
-        seed ^= seed >> 7;
-        seed ^= seed << 17;
-        (seed >> 40) as f32 / (1u64 << 24) as f32 - 0.5
-    };
+    let mut rng = firmware::fixtures::SplitMix64::new(0x2545_f491_4f6c_dd1d);
+    let mut rnd = move || rng.unit_f32() - 0.5;
     let rf = R as f32;
-    // The mesh's chords lie up to 0.1 mm below the sphere (5 mm spacing); the footprint ends
-    // at +-30 mm, kept 2 mm clear of.
-    let (sag, above, edge) = (2.0e-4f32, 3.0e-4f32, 0.028f32);
+    // The mesh's triangles lie up to 0.324 mm inside the sphere: the 5 mm grid is regular in
+    // x and y, so at the footprint's corners, where the sphere is steep, a cell's diagonal spans
+    // about 11 mm of it (the largest gap, sampled on a 21-point lattice of every triangle, is in
+    // the corner cell). A tip deeper than that is under the mesh. The footprint ends at +-30 mm,
+    // kept 2 mm clear of.
+    let (sag, above, edge) = (3.5e-4f32, 3.0e-4f32, 0.028f32);
     let mut prev = at_radius(0.0, 0.0, rf + 0.003);
     let (mut x, mut y, mut r) = (0.0f32, 0.0f32, rf + 0.003);
     let mut expect = Expect::Out;
@@ -266,7 +264,10 @@ fn random_walk_keeps_invariants() {
         let s = tr.update(&bank, prev, tip);
         let touching = check(&bank, &s, tip).is_some();
         let inside = x.abs() < edge && y.abs() < edge;
-        if r > rf + above {
+        // Above the sphere is above the mesh only over the footprint: past its edge, a slide
+        // that left the mesh keeps the plane of its last triangle, which the sphere does not
+        // follow.
+        if r > rf + above && inside {
             expect = Expect::Out;
         } else if !inside {
             expect = Expect::Either;
@@ -275,7 +276,7 @@ fn random_walk_keeps_invariants() {
             pressed_in += 1;
         }
         match expect {
-            Expect::Out if r > rf + above => {
+            Expect::Out if r > rf + above && inside => {
                 assert!(
                     !touching,
                     "a contact above the surface at tick {tick}, tip {tip:?}"
@@ -284,7 +285,8 @@ fn random_walk_keeps_invariants() {
             Expect::In if r < rf - sag => {
                 assert!(
                     touching,
-                    "missed or lost contact at tick {tick}, tip {tip:?}"
+                    "missed or lost contact at tick {tick}, tip {tip:?}, {} mm under the sphere",
+                    1e3 * (rf - r)
                 )
             }
             _ => {}
