@@ -101,7 +101,7 @@ fn quick_report_renders_every_plot_and_agrees_with_the_references() {
             }
         }
     }
-    // Against the references the fem tests use: the issue's independent P2 punch forces on
+    // Against the references the fem tests use: the independent P2 punch forces on
     // liver-1k4 (0.366, 0.389, 0.409 N) and the exact box compression.
     let cases = json["hard_cases"].as_array().unwrap();
     let find = |prefix: &str| {
@@ -230,7 +230,7 @@ fn quick_report_renders_every_plot_and_agrees_with_the_references() {
     assert!(code_worst.iter().all(|&w| w > 0.0), "{code_worst:?}");
     let link = code_worst[CODE_PHASES.len() - 1];
     assert!(link < worst_tick, "{code_worst:?} {worst_tick}");
-    // Viscoelastic relaxation (issue 30): press-hold on liver-qlv under QEMU follows the
+    // Viscoelastic relaxation: press-hold on liver-qlv under QEMU follows the
     // analytic QLV response (the SIL test's 1e-4 of the peak), the force relaxes during the
     // hold (the rendered force at the end below its peak, above g_inf of it), and the cost is
     // measured for 0 to 4 Prony terms, the law phase growing with them.

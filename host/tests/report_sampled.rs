@@ -1,4 +1,4 @@
-//! `host report`'s sampled-contact section (issue 26) on the default scene: the variants it
+//! `host report`'s sampled-contact section on the default scene: the variants it
 //! builds include the shipped bank (same samples), their force errors against the converged
 //! reference are the ones `converged.rs` holds the shipped bank to, the nodal model is far
 //! off on the same axis, and the knob marks the scene's choice on its Pareto front.

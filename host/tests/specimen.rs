@@ -188,7 +188,7 @@ fn host(args: &[&str]) -> (bool, String, String) {
     )
 }
 
-/// The CLI's JSON has the shape: `levels`, each with its `strain` and one `[x, y, z]`
+/// The CLI's JSON has its documented shape (docs/specimen.md): `levels`, each with its `strain` and one `[x, y, z]`
 /// per marker in the markers' units; the held face's markers do not move axially.
 #[test]
 fn cli_prints_levels_of_markers_as_json() {

@@ -1,4 +1,4 @@
-//! Issue 18's locking measurement: a frictionless flat punch pressed into the top of the liver,
+//! The locking measurement: a frictionless flat punch pressed into the top of the liver,
 //! P1 and the ANP element against 10-node tetrahedra (P2, the reference) on the same mesh,
 //! plus the assembly / factorisation cost of each.
 //!

@@ -1,4 +1,4 @@
-//! Reference problems of the locking study (issue 18), shared by `examples/punch.rs`, the tests
+//! Reference problems of the locking study, shared by `examples/punch.rs`, the tests
 //! and the reports: a frictionless flat punch pressed into the top of an organ, and uniform
 //! 1:8 refinement of a tetrahedral mesh.
 

@@ -201,7 +201,7 @@ fn quadratic_cantilever_converges_to_timoshenko_without_locking() {
     }
 }
 
-/// The convergence series of issue 18: at nu = 0.45 and 0.499, ANP is closer to the beam
+/// The convergence series of the locking study: at nu = 0.45 and 0.499, ANP is closer to the beam
 /// theory than P1 at every resolution and improves with refinement (0.41 / 0.69 / 0.88 at
 /// nu = 0.45, 0.31 / 0.61 / 0.85 at 0.499 on 99 / 336 / 2,009 nodes), while P1 at 0.499 stays
 /// locked (0.03 / 0.04 / 0.10). What remains of ANP's error is the bending stiffness of linear
@@ -223,9 +223,9 @@ fn anp_converges_faster_than_p1_on_the_cantilever() {
     }
 }
 
-/// Issue 18's punch on `liver-1k4`, P1 and ANP against P2 on the same mesh: P1 locks (21 % too
+/// The locking study's punch on `liver-1k4`, P1 and ANP against P2 on the same mesh: P1 locks (21 % too
 /// stiff at nu = 0.45, 2.85 times at 0.499), ANP does not (its ratio to P2 stays at 1.055
-/// +- 0.002 from 0.45 to 0.499). The issue's independent P2 figures are 0.366, 0.389 and
+/// +- 0.002 from 0.45 to 0.499). Independent P2 figures (computed outside the project) are 0.366, 0.389 and
 /// 0.409 N.
 #[test]
 fn punch_on_the_liver_p1_locks_and_anp_does_not() {

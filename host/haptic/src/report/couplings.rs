@@ -169,5 +169,5 @@ pub fn section(rows: &[SweepRow], prep: &Prepared) -> (Knob, Vec<HardCase>) {
     (knob, cases)
 }
 
-/// The demo bank's size budget (issue 15): 128 KiB.
+/// The demo bank's size budget: 128 KiB.
 const DEMO_BUDGET: usize = 128 * 1024;

@@ -23,7 +23,7 @@
 //! - [`pareto`]: the combinations no other beats on error, bytes and instructions;
 //! - [`sampled`]: the sampled patch compliance's FEM and sample spacing against the converged
 //!   reference, with the nodal bank on the same axis and their Pareto front;
-//! - [`relaxation`]: viscoelastic relaxation (issue 30): `press-hold` on the QLV scene, the
+//! - [`relaxation`]: viscoelastic relaxation: `press-hold` on the QLV scene, the
 //!   image's force against the analytic QLV response, and instructions per tick against the
 //!   number of Prony terms.
 

@@ -197,7 +197,7 @@ pub fn run(cfg: &ReportConfig, step: &dyn Fn(&str)) -> Result<Report> {
             .and_then(|g| tick_cost::body_worst(g, nodes))
     };
 
-    // Viscoelastic relaxation (issue 30): press-hold on the shipped QLV scene, on the image.
+    // Viscoelastic relaxation: press-hold on the shipped QLV scene, on the image.
     let skipped = match (&image, relaxation::shipped_scenes()) {
         (Ok(image), Ok((qlv_scene, elastic_scene))) => {
             step("relaxation: the QLV scene's banks (elastic and relaxing)");

@@ -1,4 +1,4 @@
-//! Viscoelastic relaxation in the loop (issue 30), seen in the report: the `press-hold`
+//! Viscoelastic relaxation in the loop, seen in the report: the `press-hold`
 //! script (5 mm in over 0.5 s, held, out) on the QLV scene (`host/scenes/liver-qlv.toml`) run
 //! on the QEMU image, its rendered force against Fung's QLV response to the scene's law, and
 //! the firmware's instructions per tick against the number of Prony terms.

@@ -1,4 +1,4 @@
-//! The sampled contact's knobs (issue 26): the FEM the patch compliance `W` is computed on
+//! The sampled contact's knobs: the FEM the patch compliance `W` is computed on
 //! (mesh and element, with or without Richardson extrapolation) and the sample spacing (lattice
 //! level) against the force the firmware renders, bank bytes, MCU instructions per tick and
 //! precompute time; with the scene's nodal bank beside them, all on one error axis.
