@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # Regenerates docs/figures.md, the user guide's measured figures: runs the same quick report
 # that host/tests/report.rs runs and checks against the committed file, then copies the
-# report's figures.md over it. About 4 minutes on a 2-core machine (the QEMU runs included);
+# report's figures.md over it. About 3 minutes on a quiet 2-core machine, up to 9 beside other
+# builds (the QEMU runs included);
 # needs qemu-system-arm and llvm-tools like the report (scripts/test-all.sh installs them).
 set -euo pipefail
 cd "$(dirname "$0")/.."

@@ -474,7 +474,18 @@ fn cli_fits_writes_scene_json_and_plots() {
     ]);
     assert!(ok, "{err}");
     let v: serde_json::Value = serde_json::from_str(&out).unwrap();
-    assert_eq!(v["axes"].as_array().unwrap().len(), 3, "{v}");
+    let names: Vec<_> = v["axes"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|a| {
+            (
+                a["axis"].as_str().unwrap(),
+                a["axis_index"].as_u64().unwrap(),
+            )
+        })
+        .collect();
+    assert_eq!(names, [("pitch", 0), ("yaw", 1), ("insertion", 2)], "{v}");
     let s = Scene::load(&scene).unwrap();
     for k in s.device.torque_constant_nm_per_a {
         assert!((k - 0.03).abs() < 1e-6, "{k}");

@@ -51,7 +51,8 @@ impl Sample {
 /// The fit of one axis.
 #[derive(Debug, Clone, PartialEq, serde::Serialize)]
 pub struct AxisFit {
-    /// Joint index.
+    /// Joint index (`axis_index` in JSON, beside the axis name of a [`Row`]).
+    #[serde(rename = "axis_index")]
     pub axis: usize,
     /// Points used.
     pub points: usize,
