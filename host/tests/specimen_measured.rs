@@ -209,7 +209,7 @@ fn large_recovers_the_synthetic_markers_to_the_noise_and_linear_does_not() {
 }
 
 /// `--model linear-p` with a `--display-law` file on the command line is the library's run
-/// with the same P; without P, with P and another model, and with a scene that has none, it
+/// with the same P, and a scene holding the same table gives the same markers; without P, with P and another model, and with a scene that has none, it
 /// is refused clearly.
 #[test]
 fn linear_p_on_the_command_line() {
@@ -257,6 +257,22 @@ fn linear_p_on_the_command_line() {
         let got: Vec<[f64; 3]> = serde_json::from_value(l["markers"].clone()).unwrap();
         assert_eq!(got, want.markers);
     }
+    // The same P as a scene's [display_law] (the shipped liver scene with the table added).
+    let dir = tempfile::tempdir().unwrap();
+    let with_p = dir.path().join("liver-with-p.toml");
+    let liver = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/liver.toml");
+    let table = std::fs::read_to_string(p.path()).unwrap();
+    std::fs::write(
+        &with_p,
+        std::fs::read_to_string(&liver).unwrap() + "\n" + &table,
+    )
+    .unwrap();
+    let mut a = args("linear-p");
+    a.extend(["--scene", with_p.to_str().unwrap()]);
+    let (ok, from_scene, err) = host(&a);
+    assert!(ok, "{err}");
+    let from_scene: serde_json::Value = serde_json::from_str(&from_scene).unwrap();
+    assert_eq!(from_scene["levels"], v["levels"]);
     let (ok, _, err) = host(&args("linear-p"));
     assert!(
         !ok && err.contains("linear-p needs a display law P"),
@@ -266,9 +282,8 @@ fn linear_p_on_the_command_line() {
     a.extend(["--display-law", p.path().to_str().unwrap()]);
     let (ok, _, err) = host(&a);
     assert!(!ok && err.contains("linear-p only"), "{err}");
-    let scene = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/liver.toml");
     let mut a = args("linear-p");
-    a.extend(["--scene", scene.to_str().unwrap()]);
+    a.extend(["--scene", liver.to_str().unwrap()]);
     let (ok, _, err) = host(&a);
     assert!(
         !ok && err.contains("liver.toml") && err.contains("no [display_law]"),
