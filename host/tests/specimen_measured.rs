@@ -209,8 +209,8 @@ fn large_recovers_the_synthetic_markers_to_the_noise_and_linear_does_not() {
 }
 
 /// `--model linear-p` with a `--display-law` file on the command line is the library's run
-/// with the same P, and a scene holding the same table gives the same markers; without P, with P and another model, and with a scene that has none, it
-/// is refused clearly.
+/// with the same P, and a scene holding the same table gives the same markers; without P,
+/// with P and another model, and with a scene that has none, it is refused clearly.
 #[test]
 fn linear_p_on_the_command_line() {
     let f = text_file(SLAB_MARKERS);
