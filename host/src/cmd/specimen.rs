@@ -212,14 +212,21 @@ struct Output<'a> {
 /// Runs `host specimen`.
 pub fn run(a: Args) -> Result<()> {
     let config = config(&a)?;
+    // The measured file is checked before the solves, which may take minutes.
+    let given = match &a.measured {
+        Some(path) => {
+            let points = specimen::markers::read(&config.markers)?.points;
+            let m = measured::read(path, points.len(), config.strains.len())?;
+            Some((path, points, m))
+        }
+        None => None,
+    };
     let report = specimen::run(&config)?;
     let mut comparison = None;
-    if let Some(path) = &a.measured {
-        let points = specimen::markers::read(&config.markers)?.points;
-        let m = measured::read(path, points.len(), report.levels.len())?;
-        let c = measured::compare(&report.levels, report.units, &m, config.units.to_metres());
+    if let Some((path, points, m)) = &given {
+        let c = measured::compare(&report.levels, report.units, m, config.units.to_metres());
         if let Some(out) = &a.plot {
-            let svg = specimen::plot::svg(&points, &report.levels, &m, config.axis, report.units);
+            let svg = specimen::plot::svg(points, &report.levels, m, config.axis, report.units);
             write_atomic(out, svg.as_bytes(), &[&config.markers, path])?;
         }
         comparison = Some(c);

@@ -353,8 +353,12 @@ pub fn run(config: &SpecimenConfig) -> Result<SpecimenReport> {
         ),
         (_, None) => None,
         (model, Some(_)) => bail!(
-            "a display law P is given but the model is {model:?}: P applies to --model \
-             linear-p only"
+            "a display law P is given but the model is {}: P applies to --model linear-p only",
+            if model == Model::Large {
+                "large"
+            } else {
+                "linear"
+            }
         ),
     };
     let material = Material::new(config.young_pa, config.poisson)
