@@ -59,6 +59,7 @@ fn config(
         strains: strains.to_vec(),
         markers: markers.to_path_buf(),
         model: Model::Linear,
+        display_law: None,
     }
 }
 
@@ -302,7 +303,7 @@ fn bad_inputs_are_refused_with_what_and_where() {
     args[model] = "linear-p";
     let (ok, _, err) = host(&args);
     assert!(
-        !ok && err.contains("linear-p") && err.contains("not yet"),
+        !ok && err.contains("linear-p needs a display law P"),
         "{err}"
     );
 }

@@ -4,6 +4,10 @@
 
 use crate::cmd::units_arg::UnitsArg;
 use anyhow::{Result, bail};
+use bank_format::TissueLaw;
+use haptic::fsio::write_atomic;
+use haptic::scene::Scene;
+use haptic::specimen::measured::{self, Comparison};
 use haptic::specimen::{
     self, Axis, End, Geometry, Model, Platens, SpecimenConfig, SpecimenReport, parse_numbers,
 };
@@ -43,7 +47,8 @@ pub enum PlatensArg {
 pub enum ModelArg {
     /// Linear elasticity (the paper's model) on 10-node tetrahedra.
     Linear,
-    /// The paper's model with a display law P (not yet supported).
+    /// The paper's model with the display law P (from --scene or --display-law) on the
+    /// markers' radial displacement.
     LinearP,
     /// The neo-Hookean large-deformation reference on the same elements.
     Large,
@@ -89,12 +94,26 @@ pub struct Args {
     /// Markers CSV: a header row with columns x, y, z (in --units), one marker per row.
     #[arg(long)]
     markers: PathBuf,
-    /// Measured marker positions to compare with (not yet supported).
+    /// Measured marker positions to compare with: one CSV, header x,y,z (in --units), one row
+    /// per marker and level, level by level in the --strain order, the markers in the
+    /// --markers file's order (markers x levels rows). Adds each level's RMS and largest
+    /// marker error and every marker's error.
     #[arg(long)]
     measured: Option<PathBuf>,
+    /// With --measured: an SVG of the predicted and measured displacements on a slice through
+    /// the axis, one panel per level.
+    #[arg(long, value_name = "FILE.svg", requires = "measured")]
+    plot: Option<PathBuf>,
     /// The material model.
     #[arg(long, value_enum)]
     model: ModelArg,
+    /// For --model linear-p: the scene whose [display_law] table is P.
+    #[arg(long, conflicts_with = "display_law")]
+    scene: Option<PathBuf>,
+    /// For --model linear-p: a TOML file holding a [display_law] table alone (kind =
+    /// "chebyshev", coeffs, domain_m: the scene's keys) as P.
+    #[arg(long, value_name = "FILE")]
+    display_law: Option<PathBuf>,
     /// Print one JSON object instead of the text table.
     #[arg(long)]
     json: bool,
@@ -102,13 +121,6 @@ pub struct Args {
 
 /// The library's configuration of parsed arguments.
 fn config(a: &Args) -> Result<SpecimenConfig> {
-    if let Some(path) = &a.measured {
-        bail!(
-            "--measured {}: not yet supported; compare the predicted positions (--json) with \
-             the measured ones outside host",
-            path.display()
-        );
-    }
     let geometry = match (&a.box_, &a.mesh, &a.cylinder) {
         (Some(text), _, _) => {
             let v = parse_numbers("--box", text)?;
@@ -165,18 +177,88 @@ fn config(a: &Args) -> Result<SpecimenConfig> {
             ModelArg::LinearP => Model::LinearP,
             ModelArg::Large => Model::Large,
         },
+        display_law: display_law(a)?,
     })
+}
+
+/// P from `--scene` (its `[display_law]`, refused when it has none) or `--display-law`.
+fn display_law(a: &Args) -> Result<Option<TissueLaw>> {
+    if let Some(path) = &a.scene {
+        let scene = Scene::load(path)?;
+        let Some(law) = scene.display_law else {
+            bail!(
+                "--scene {}: the scene has no [display_law] table (P); fit one with \
+                 `host calibrate tissue --law P` or give --display-law FILE",
+                path.display()
+            );
+        };
+        return Ok(Some(law));
+    }
+    a.display_law
+        .as_deref()
+        .map(specimen::linear_p::read)
+        .transpose()
+}
+
+/// The JSON output: the report, with the comparison when measured positions are given.
+#[derive(serde::Serialize)]
+struct Output<'a> {
+    #[serde(flatten)]
+    report: &'a SpecimenReport,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    measured: Option<Comparison>,
 }
 
 /// Runs `host specimen`.
 pub fn run(a: Args) -> Result<()> {
-    let report = specimen::run(&config(&a)?)?;
+    let config = config(&a)?;
+    // The measured file is checked before the solves, which may take minutes.
+    let given = match &a.measured {
+        Some(path) => {
+            let points = specimen::markers::read(&config.markers)?.points;
+            let m = measured::read(path, points.len(), config.strains.len())?;
+            Some((path, points, m))
+        }
+        None => None,
+    };
+    let report = specimen::run(&config)?;
+    let mut comparison = None;
+    if let Some((path, points, m)) = &given {
+        let c = measured::compare(&report.levels, report.units, m, config.units.to_metres());
+        if let Some(out) = &a.plot {
+            let svg = specimen::plot::svg(points, &report.levels, m, config.axis, report.units);
+            write_atomic(out, svg.as_bytes(), &[&config.markers, path])?;
+        }
+        comparison = Some(c);
+    }
     if a.json {
-        println!("{}", serde_json::to_string(&report)?);
+        let out = Output {
+            report: &report,
+            measured: comparison,
+        };
+        println!("{}", serde_json::to_string(&out)?);
     } else {
         print_text(&report);
+        if let Some(c) = &comparison {
+            print_comparison(c);
+        }
     }
     Ok(())
+}
+
+fn print_comparison(c: &Comparison) {
+    println!("against {}:", c.file);
+    for l in &c.levels {
+        println!(
+            "strain {}: marker error RMS {:.6} {u}, largest {:.6} {u} (marker {}, line {})",
+            l.strain,
+            l.rms,
+            l.max,
+            l.max_marker,
+            l.max_line,
+            u = c.units
+        );
+    }
 }
 
 fn print_text(r: &SpecimenReport) {

@@ -128,6 +128,7 @@ fn knob_rules(id: &str) -> Option<(AxisRule, AxisRule)> {
     Some(match id {
         "element" => (computed, computed),
         "law-degree" => (computed, computed),
+        "large-strain" => (exact, computed),
         "f32-vs-f64" => (computed, computed),
         "bank-couplings" => (exact, computed),
         "firmware-phases" => (none, instructions),

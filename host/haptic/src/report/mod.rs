@@ -23,6 +23,8 @@
 //! - [`pareto`]: the combinations no other beats on error, bytes and instructions;
 //! - [`sampled`]: the sampled patch compliance's FEM and sample spacing against the converged
 //!   reference, with the nodal bank on the same axis and their Pareto front;
+//! - [`large_strain`]: the linear model at large strain, marker errors of `linear`,
+//!   `linear-p` and `large` against synthetic CT markers of a compressed gel cube;
 //! - [`relaxation`]: viscoelastic relaxation: `press-hold` on the QLV scene, the
 //!   image's force against the analytic QLV response, and instructions per tick against the
 //!   number of Prony terms.
@@ -31,6 +33,7 @@ pub mod couplings;
 pub mod figures;
 pub mod hard;
 pub mod html;
+pub mod large_strain;
 pub mod law;
 pub mod locking;
 pub mod loops;

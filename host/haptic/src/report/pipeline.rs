@@ -4,8 +4,8 @@
 //! `report.json`, `headline.png` and `figures.md` (the user guide's measured figures).
 
 use super::{
-    Report, couplings, hard, html, law, locking, loops, pareto, precision, precompute_cost,
-    relaxation, sampled, scale, tick_cost,
+    Report, couplings, hard, html, large_strain, law, locking, loops, pareto, precision,
+    precompute_cost, relaxation, sampled, scale, tick_cost,
 };
 use crate::bank::{BankSpec, Prepared};
 use crate::calibrate::{csv, fit};
@@ -114,6 +114,11 @@ pub fn run(cfg: &ReportConfig, step: &dyn Fn(&str)) -> Result<Report> {
 
     step("hard cases: exact references and refusals");
     cases.extend(hard::elastic_cases()?);
+
+    let (models, p_rms) = large_strain::measure(step)?;
+    let (knob, rows) = large_strain::section(&models, p_rms);
+    knobs.push(knob);
+    cases.extend(rows);
 
     // The scene's bank: f32 against f64, the loop's hard cases, the firmware under QEMU.
     step("the scene's bank");

@@ -13,11 +13,13 @@
 //! when the deformation is symmetric about the centre (a homogeneous field has zero lateral
 //! displacement there), so the lateral displacement is measured from the held face's centre.
 //!
-//! **Models**, both on the 10-node tetrahedra of [`QuadraticBody`] (the mesh's vertices and
+//! **Models**, all on the 10-node tetrahedra of [`QuadraticBody`] (the mesh's vertices and
 //! edge midpoints, 4-point Gauss rule) with the same prescribed displacements:
 //! - `Linear`: the linear elasticity of the paper (section 3, eq. 1: `K u = f`) with the
 //!   volumetric term at the quadrature points; one solve for a unit travel, scaled to each
 //!   strain (the response is linear in the travel).
+//! - `LinearP`: `Linear` with the display law P on each marker's radial displacement
+//!   ([`linear_p`]: the paper's eq. 4 with the compression axis as the constraint).
 //! - `Large`: the compressible neo-Hookean reference [`fem::hyperelastic`] with the same Lamé
 //!   parameters, solved from rest to each strain; the volumetric energy on the element mean
 //!   ([`Volumetric::ElementMean`]) when `nu > 0.45` (the pointwise integration locks, see
@@ -27,12 +29,18 @@
 //! in their kinematics; docs/specimen.md measures both parts.
 //!
 //! **Markers** are displaced by the quadratic shape functions of the element that contains
-//! them ([`markers::displacement`]).
+//! them ([`markers::displacement`]); [`measured`] compares them with measured positions and
+//! [`plot`] draws both on a slice.
 
+pub mod linear_p;
 pub mod markers;
+pub mod measured;
+pub mod plot;
 
+use crate::display::law::DisplayLaw;
 use crate::units::Units;
 use anyhow::{Context, Result, bail};
+use bank_format::TissueLaw;
 use fem::compliance::solve_prescribed;
 use fem::elasticity::Material;
 use fem::elasticity::quadratic::QuadraticBody;
@@ -121,7 +129,7 @@ pub enum Platens {
 pub enum Model {
     /// Linear elasticity on 10-node tetrahedra.
     Linear,
-    /// The paper's model with a display law P (not yet supported).
+    /// The paper's model with a display law P on the markers' radial displacement.
     LinearP,
     /// The neo-Hookean large-deformation reference.
     Large,
@@ -153,6 +161,8 @@ pub struct SpecimenConfig {
     pub markers: PathBuf,
     /// The material model.
     pub model: Model,
+    /// The display law P (m -> m) of `LinearP`; required by it, refused with another model.
+    pub display_law: Option<TissueLaw>,
 }
 
 /// One strain level.
@@ -335,12 +345,22 @@ fn platens(
 /// Runs the experiment: meshes the box, reads and locates the markers (a marker outside the
 /// specimen is refused with its line), solves the model at each strain.
 pub fn run(config: &SpecimenConfig) -> Result<SpecimenReport> {
-    if config.model == Model::LinearP {
-        bail!(
-            "--model linear-p: not yet supported; use --model linear (the paper's model \
-             without P) or --model large"
-        );
-    }
+    let display_law = match (config.model, config.display_law) {
+        (Model::LinearP, Some(law)) => DisplayLaw::new(law),
+        (Model::LinearP, None) => bail!(
+            "--model linear-p needs a display law P: give --scene FILE (its [display_law]) or \
+             --display-law FILE"
+        ),
+        (_, None) => None,
+        (model, Some(_)) => bail!(
+            "a display law P is given but the model is {}: P applies to --model linear-p only",
+            if model == Model::Large {
+                "large"
+            } else {
+                "linear"
+            }
+        ),
+    };
     let material = Material::new(config.young_pa, config.poisson)
         .context("--young/--poisson: the material")?;
     check_strains(&config.strains)?;
@@ -372,7 +392,10 @@ pub fn run(config: &SpecimenConfig) -> Result<SpecimenReport> {
             .iter()
             .zip(&located)
             .map(|(p, at)| {
-                let d = markers::displacement(&mesh, body, u, at)?;
+                let mut d = markers::displacement(&mesh, body, u, at)?;
+                if let Some(p) = &display_law {
+                    d = linear_p::apply(p, config.axis, d);
+                }
                 Ok(std::array::from_fn(|k| (p[k] + d[k]) / scale))
             })
             .collect::<Result<Vec<[f64; 3]>>>()?;
