@@ -41,6 +41,7 @@ pub mod precompute_cost;
 pub mod relaxation;
 pub mod sampled;
 pub mod scale;
+pub mod surface;
 pub mod tick_cost;
 
 use serde::Serialize;

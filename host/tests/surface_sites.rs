@@ -1,0 +1,145 @@
+//! The shipped scene's contact against the organ's own surface (`haptic::report::surface`):
+//! presses 5 mm deep along the FEM surface's inward normal at random sites over its reachable
+//! part, the firmware's tick on the shipped bank against the scene's extrapolated `W` computed
+//! directly at each site.
+//!
+//! The sites and their reference are committed (`host/tests/data/surface-sites.json`), written
+//! by the ignored test here (about 1 minute, 2.6 GiB: the scene's two P2 factorisations):
+//!
+//! ```sh
+//! SURFACE_SITES_OUT=host/tests/data/surface-sites.json \
+//!     cargo test --release -p host --test surface_sites -- --ignored --nocapture
+//! ```
+
+use bank_format::{AlignedBytes, Bank};
+use haptic::linalg::normal_compliance;
+use haptic::organ::Organ;
+use haptic::reach::Region;
+use haptic::report::surface::{self, SurfaceSites};
+use std::path::Path;
+
+/// Sites drawn by the ignored test, and its seed.
+const SITES: usize = 200;
+const SEED: u64 = 20261208;
+
+fn manifest(p: &str) -> std::path::PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join(p)
+}
+
+/// Prints and returns the check of `sites` on the shipped bank.
+fn run(sites: &SurfaceSites) -> (Vec<surface::SiteCheck>, surface::Summary) {
+    let scene = manifest("scenes/liver.toml");
+    let organ = Organ::load(&scene).unwrap();
+    let region = Region::of(&organ).unwrap();
+    let bytes = haptic::bank::scene_bank(&scene).unwrap();
+    let aligned = AlignedBytes::new(&bytes);
+    let bank = Bank::parse(&aligned).unwrap();
+    let checks = surface::check(&organ, &region, &bank, &sites.sites, &sites.reference_w);
+    let s = surface::summary(&checks);
+    eprintln!(
+        "{} sites: normal angle max {:.2} deg mean {:.2} deg; {} refused by R (shortfall max \
+         {:.2} mm); force error mean {:.2} %, worst {:.2} % at {}",
+        s.sites,
+        s.angle_max_rad.to_degrees(),
+        s.angle_mean_rad.to_degrees(),
+        s.refused,
+        1e3 * s.shortfall_max_m,
+        100.0 * s.error_mean,
+        100.0 * s.error_max,
+        surface::name(&sites.sites[s.worst])
+    );
+    (checks, s)
+}
+
+/// Draws the sites, computes their reference (and the reference's own error at the study's
+/// sites), writes them where `SURFACE_SITES_OUT` says, and prints the check.
+#[test]
+#[ignore = "about a minute and 2.6 GiB: regenerates host/tests/data/surface-sites.json"]
+fn measure_the_contact_against_the_organ_surface() {
+    let scene_path = manifest("scenes/liver.toml");
+    let organ = Organ::load(&scene_path).unwrap();
+    let scene = &organ.scene;
+    let haptic::scene::ContactModel::Sampled(spec) = &scene.contact else {
+        panic!("the shipped scene is sampled");
+    };
+    let sites = surface::draw(scene, SITES, SEED).unwrap();
+    let study = haptic::report::sampled::reference().unwrap();
+    let mut points: Vec<[f64; 3]> = sites.iter().map(|s| s.point).collect();
+    points.extend(study.sites.iter().map(|s| s.point));
+    let mut w = surface::reference_w(scene, &points).unwrap();
+    let at_study = w.split_off(sites.len());
+    let reference_error = study
+        .sites
+        .iter()
+        .enumerate()
+        .map(|(s, site)| {
+            let k = 1.0 / normal_compliance(&at_study[s], site.normal);
+            let k_inf = 1.0 / normal_compliance(&study.reference_w[s], site.normal);
+            (k / k_inf - 1.0).abs()
+        })
+        .fold(0.0, f64::max);
+    let name = |p: &Path| p.file_name().unwrap().to_string_lossy().into_owned();
+    let data = SurfaceSites {
+        fem_mesh: name(&spec.fem_mesh),
+        fem_mesh_hash: haptic::bank::cache::file_hash(scene, &spec.fem_mesh).unwrap(),
+        richardson_mesh: spec.richardson.as_ref().map(|r| name(&r.mesh)),
+        seed: SEED,
+        sites,
+        reference_w: w,
+        reference_error,
+    };
+    eprintln!(
+        "reference: the scene's extrapolation against the converged continuum at the study's \
+         sites, largest difference {:.2} %",
+        100.0 * reference_error
+    );
+    if let Ok(out) = std::env::var("SURFACE_SITES_OUT") {
+        std::fs::write(out, serde_json::to_string_pretty(&data).unwrap()).unwrap();
+    }
+    let (checks, _) = run(&data);
+    let mut order: Vec<usize> = (0..checks.len()).collect();
+    order.sort_by(|&a, &b| checks[b].error.total_cmp(&checks[a].error));
+    // The diagnosis: within the stick cone, the force against the reference scaled by the
+    // firmware's depth (5 mm plus the collision surface's offset).
+    let cone = f64::from(firmware::contact::STICK_SLOPE).atan();
+    let mut rows = Vec::new();
+    for (c, site) in checks.iter().zip(&data.sites) {
+        let Some(f) = c.rendered else { continue };
+        let k = (surface::DEPTH_M + c.offset_m) / surface::DEPTH_M;
+        let r = c.reference.map(|x| k * x);
+        let e = ((0..3).map(|i| (f[i] - r[i]).powi(2)).sum::<f64>()
+            / r.iter().map(|x| x * x).sum::<f64>())
+        .sqrt();
+        rows.push((c.angle_rad <= cone, c.error, e, c.offset_m));
+    }
+    for inside in [true, false] {
+        let sel: Vec<_> = rows.iter().filter(|r| r.0 == inside).collect();
+        let n = sel.len().max(1) as f64;
+        eprintln!(
+            "within the cone {inside}: {} sites, error mean {:.2} % max {:.2} %; against the \
+             depth-scaled reference mean {:.2} % max {:.2} %; |offset| mean {:.3} max {:.3} mm",
+            sel.len(),
+            100.0 * sel.iter().map(|r| r.1).sum::<f64>() / n,
+            100.0 * sel.iter().map(|r| r.1).fold(0.0, f64::max),
+            100.0 * sel.iter().map(|r| r.2).sum::<f64>() / n,
+            100.0 * sel.iter().map(|r| r.2).fold(0.0, f64::max),
+            1e3 * sel.iter().map(|r| r.3.abs()).sum::<f64>() / n,
+            1e3 * sel.iter().map(|r| r.3.abs()).fold(0.0, f64::max),
+        );
+    }
+    for &i in order.iter().take(10) {
+        let c = &checks[i];
+        eprintln!(
+            "  {}: error {:.2} %, offset {:.3} mm, angle {:.1} deg, shortfall {:.2} mm, rendered {:?}, \
+             reference {:?}",
+            surface::name(&data.sites[i]),
+            100.0 * c.error,
+            1e3 * c.offset_m,
+            c.angle_rad.to_degrees(),
+            1e3 * c.shortfall_m,
+            c.rendered,
+            c.reference
+        );
+    }
+}
+
