@@ -78,9 +78,19 @@ pub fn committed() -> Result<SurfaceSites> {
     serde_json::from_str(COMMITTED).context("the committed surface sites do not parse")
 }
 
-/// `count` sites over the reachable part of the sampled `scene`'s FEM surface (module notes),
-/// from `seed`.
-pub fn draw(scene: &Scene, count: usize, seed: u64) -> Result<Vec<SurfaceSite>> {
+/// Which FEM surface points [`draw`] keeps.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Reach {
+    /// The device can make the whole 5 mm press there ([`crate::probe::press_fits`]).
+    Press,
+    /// Within the scene's tip radius and reach margin of the tip's workspace, the test R
+    /// applies to the collision surface's nodes ([`crate::kinematics::Workspace::reaches`]).
+    Region,
+}
+
+/// `count` sites over the reachable part (`reach`) of the sampled `scene`'s FEM surface
+/// (module notes), from `seed`.
+pub fn draw(scene: &Scene, count: usize, seed: u64, reach: Reach) -> Result<Vec<SurfaceSite>> {
     let ContactModel::Sampled(spec) = &scene.contact else {
         bail!("the surface sites need a scene with [contact] model = \"sampled\"");
     };
@@ -104,6 +114,7 @@ pub fn draw(scene: &Scene, count: usize, seed: u64) -> Result<Vec<SurfaceSite>> 
         bail!("the FEM surface has no free triangle");
     }
     let fulcrum = scene.device.fulcrum_m.map(f64::from);
+    let workspace = crate::kinematics::Workspace::from_device(&scene.device);
     let mut rng = SplitMix64::new(seed);
     let mut sites = Vec::with_capacity(count);
     let attempts = 1000 * count.max(1);
@@ -112,16 +123,22 @@ pub fn draw(scene: &Scene, count: usize, seed: u64) -> Result<Vec<SurfaceSite>> 
             break;
         }
         let a = rng.unit() * total;
-        let i = cumulative.partition_point(|&c| c < a).min(triangles.len() - 1);
+        let i = cumulative
+            .partition_point(|&c| c < a)
+            .min(triangles.len() - 1);
         let t = triangles[i];
         let (r1, r2) = (rng.unit().sqrt(), rng.unit());
         let b = [1.0 - r1, r1 * (1.0 - r2), r1 * r2];
         let point: [f64; 3] = std::array::from_fn(|c| (0..3).map(|k| b[k] * t[k][c]).sum());
         let n = cross(sub(t[1], t[0]), sub(t[2], t[0]));
         let normal = scale(n, 1.0 / norm(n));
-        if dot(normal, sub(fulcrum, point)) <= 0.0
-            || !press_fits(&scene.device, point, scale(normal, -1.0), DEPTH_M)
-        {
+        let reached = match reach {
+            Reach::Press => press_fits(&scene.device, point, scale(normal, -1.0), DEPTH_M),
+            Reach::Region => {
+                workspace.reaches(point, scene.tip_radius_m + scene.bank.reach_margin_m)
+            }
+        };
+        if dot(normal, sub(fulcrum, point)) <= 0.0 || !reached {
             continue;
         }
         sites.push(SurfaceSite { point, normal });
@@ -154,6 +171,33 @@ pub fn reference_w(scene: &Scene, points: &[[f64; 3]]) -> Result<Vec<Block3>> {
     Ok(extrapolated(&w, &w_c, rich.factor()))
 }
 
+/// How far R (cut on the collision surface) falls short of each of `sites`, m: the distance
+/// from the organ's collision-surface point closest to the site to R's nearest point, 0 where
+/// R holds the site ([`crate::probe::closest_reachable`] accepts it).
+pub fn shortfalls(organ: &Organ, region: &Region, sites: &[SurfaceSite]) -> Vec<f64> {
+    let triangles: Vec<[usize; 3]> = region
+        .triangles
+        .iter()
+        .map(|t| t.map(|k| k as usize))
+        .collect();
+    let surface = (&organ.mesh.nodes[..], &organ.surface.triangles[..]);
+    sites
+        .iter()
+        .map(
+            |site| match closest_reachable(&region.positions, &triangles, surface, site.point) {
+                Ok(_) => 0.0,
+                Err(_) => closest_point(surface.0, surface.1, site.point).map_or(
+                    f64::INFINITY,
+                    |(_, o, ..)| {
+                        closest_point(&region.positions, &triangles, o)
+                            .map_or(f64::INFINITY, |(.., d2)| d2.sqrt())
+                    },
+                ),
+            },
+        )
+        .collect()
+}
+
 /// What one site shows.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct SiteCheck {
@@ -184,16 +228,13 @@ pub fn check(
     sites: &[SurfaceSite],
     reference_w: &[Block3],
 ) -> Vec<SiteCheck> {
-    let triangles: Vec<[usize; 3]> = region
-        .triangles
-        .iter()
-        .map(|t| t.map(|k| k as usize))
-        .collect();
     let surface = (&organ.mesh.nodes[..], &organ.surface.triangles[..]);
+    let short = shortfalls(organ, region, sites);
     sites
         .iter()
         .zip(reference_w)
-        .map(|(site, w)| {
+        .zip(short)
+        .map(|((site, w), shortfall_m)| {
             let closest = closest_point(surface.0, surface.1, site.point);
             let (angle_rad, offset_m) = closest.map_or((std::f64::consts::PI, 0.0), |(t, ..)| {
                 let v = surface.1[t].map(|k| surface.0[k]);
@@ -202,14 +243,6 @@ pub fn check(
                 let cos = dot(n, site.normal).clamp(-1.0, 1.0);
                 (cos.acos(), dot(sub(v[0], site.point), n) / cos)
             });
-            let shortfall_m =
-                match closest_reachable(&region.positions, &triangles, surface, site.point) {
-                    Ok(_) => 0.0,
-                    Err(_) => closest.map_or(f64::INFINITY, |(_, o, ..)| {
-                        closest_point(&region.positions, &triangles, o)
-                            .map_or(f64::INFINITY, |(.., d2)| d2.sqrt())
-                    }),
-                };
             let reference = solve3(w, scale(site.normal, DEPTH_M));
             let rendered = press(
                 bank,
@@ -283,4 +316,119 @@ pub fn name(site: &SurfaceSite) -> String {
         1e3 * p[1],
         1e3 * p[2]
     )
+}
+
+/// FEM surface points [`section`] draws for the reach row ([`Reach::Region`]).
+pub const REACH_SITES: usize = 2000;
+
+/// The report's rows for the sampled `scene` and its `bank`, from the committed sites (module
+/// notes): the presses' force error (the worst site named), the collision normal's angle to the
+/// organ's and the sites beyond the stick cone, and R's shortfall on the organ's surface
+/// ([`REACH_SITES`] sites drawn by R's own reach test). Refuses a scene whose FEM mesh is not
+/// the one the sites were drawn on.
+pub fn section(scene: &Scene, bank: &[u8]) -> Result<Vec<HardCase>> {
+    let ContactModel::Sampled(spec) = &scene.contact else {
+        bail!("the surface check needs a scene with [contact] model = \"sampled\"");
+    };
+    let data = committed()?;
+    if crate::bank::cache::file_hash(scene, &spec.fem_mesh)? != data.fem_mesh_hash {
+        bail!(
+            "the committed sites lie on {}, not on the scene's fem_mesh {}",
+            data.fem_mesh,
+            spec.fem_mesh.display()
+        );
+    }
+    let organ = Organ::from_scene(scene.clone())?;
+    let region = Region::of(&organ)?;
+    let aligned = bank_format::AlignedBytes::new(bank);
+    let bank = Bank::parse(&aligned).map_err(|e| anyhow::anyhow!("the scene's bank: {e}"))?;
+    let checks = check(&organ, &region, &bank, &data.sites, &data.reference_w);
+    let s = summary(&checks);
+    let cone = f64::from(firmware::contact::STICK_SLOPE).atan();
+    let inside: Vec<&SiteCheck> = checks.iter().filter(|c| c.angle_rad <= cone).collect();
+    let beyond: Vec<&SiteCheck> = checks.iter().filter(|c| c.angle_rad > cone).collect();
+    let worst_of = |v: &[&SiteCheck]| v.iter().map(|c| c.error).fold(0.0, f64::max);
+    let offset_max = inside.iter().map(|c| c.offset_m.abs()).fold(0.0, f64::max);
+    let within = checks.iter().filter(|c| c.error <= 0.05).count();
+    let reach = draw(scene, REACH_SITES, data.seed, Reach::Region)?;
+    let short = shortfalls(&organ, &region, &reach);
+    let refused = short.iter().filter(|&&x| x > 0.0).count();
+    let short_max = short.iter().copied().fold(0.0, f64::max);
+    let reference = format!(
+        "W of the scene's FEM and Richardson step computed at each site (not interpolated), \
+         W^-1 d for d 5 mm along the FEM normal; within {:.1} % of the converged study at its \
+         14 sites",
+        100.0 * data.reference_error
+    );
+    Ok(vec![
+        HardCase {
+            case: format!(
+                "5 mm presses along the organ's normal at {} random sites of its FEM surface",
+                s.sites
+            ),
+            measurement: format!(
+                "firmware force on the scene's bank: mean {:.1} %, worst {:.1} % at {}; {} of \
+                 {} within 5 %",
+                100.0 * s.error_mean,
+                100.0 * s.error_max,
+                name(&data.sites[s.worst]),
+                within,
+                s.sites
+            ),
+            reference,
+            verdict: if s.error_max <= 0.05 {
+                Verdict::MatchesReference
+            } else {
+                Verdict::Weakness
+            },
+            value: Some(s.error_max),
+            reference_value: Some(0.05),
+        },
+        HardCase {
+            case: "collision normal against the organ's (FEM surface) normal".into(),
+            measurement: format!(
+                "over {} sites: max {:.1} deg, mean {:.1} deg; {} sites beyond the stick cone \
+                 ({:.1} deg), where the press slides on the collision triangle (force error up \
+                 to {:.1} %); within it up to {:.1} %, all of it the collision surface's offset \
+                 from the organ along the press (up to {:.2} mm), which shifts where contact \
+                 starts",
+                s.sites,
+                s.angle_max_rad.to_degrees(),
+                s.angle_mean_rad.to_degrees(),
+                beyond.len(),
+                cone.to_degrees(),
+                100.0 * worst_of(&beyond),
+                100.0 * worst_of(&inside),
+                1e3 * offset_max
+            ),
+            reference: format!(
+                "the stick cone's half-angle, atan {}",
+                firmware::contact::STICK_SLOPE
+            ),
+            verdict: if beyond.is_empty() {
+                Verdict::Bounded
+            } else {
+                Verdict::Weakness
+            },
+            value: Some(s.angle_max_rad),
+            reference_value: Some(cone),
+        },
+        HardCase {
+            case: "reach on the organ's surface: R cut on the collision surface".into(),
+            measurement: format!(
+                "{refused} of {} FEM surface points within R's reach test (tip radius and \
+                 margin of the workspace) refused by R, up to {:.2} mm short",
+                reach.len(),
+                1e3 * short_max
+            ),
+            reference: "every point within the reach test held".into(),
+            verdict: if refused == 0 {
+                Verdict::MatchesReference
+            } else {
+                Verdict::Weakness
+            },
+            value: Some(short_max),
+            reference_value: Some(0.0),
+        },
+    ])
 }
