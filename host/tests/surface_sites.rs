@@ -98,6 +98,40 @@ fn presses_on_the_organ_render_its_compliance_at_the_collision_depth() {
     assert!(inside >= SITES * 9 / 10, "{inside} sites within the cone");
 }
 
+/// The committed sites are the ones [`surface::draw`] draws today from the committed seed (the
+/// same FEM mesh, the same reach), and `host report`'s rows state the check's figures: the
+/// worst press error and its site, the largest normal angle, R's shortfall.
+#[test]
+fn the_committed_sites_and_the_report_rows_are_todays() {
+    let scene_path = manifest("scenes/liver.toml");
+    let scene = haptic::scene::Scene::load(&scene_path).unwrap();
+    let data = surface::committed().unwrap();
+    let drawn = surface::draw(&scene, SITES, data.seed, surface::Reach::Press).unwrap();
+    // To the JSON's round trip (serde_json parses a decimal to within an ulp or so).
+    assert_eq!(drawn.len(), data.sites.len());
+    for (a, b) in drawn.iter().zip(&data.sites) {
+        for c in 0..3 {
+            assert!((a.point[c] - b.point[c]).abs() < 1e-15, "{a:?} vs {b:?}");
+            assert!((a.normal[c] - b.normal[c]).abs() < 1e-14, "{a:?} vs {b:?}");
+        }
+    }
+    let bytes = haptic::bank::scene_bank(&scene_path).unwrap();
+    let rows = surface::section(&scene, &bytes).unwrap();
+    let (_, s) = run(&data);
+    assert_eq!(rows.len(), 3);
+    assert_eq!(rows[0].value, Some(s.error_max));
+    assert!(
+        rows[0]
+            .measurement
+            .contains(&surface::name(&data.sites[s.worst])),
+        "{}",
+        rows[0].measurement
+    );
+    assert_eq!(rows[1].value, Some(s.angle_max_rad));
+    let short = rows[2].value.unwrap();
+    assert!(short.is_finite() && short >= 0.0, "{short}");
+}
+
 /// Draws the sites, computes their reference (and the reference's own error at the study's
 /// sites), writes them where `SURFACE_SITES_OUT` says, and prints the check.
 #[test]

@@ -110,7 +110,7 @@ pub fn draw(scene: &Scene, count: usize, seed: u64, reach: Reach) -> Result<Vec<
         total += 0.5 * norm(cross(sub(t[1], t[0]), sub(t[2], t[0])));
         cumulative.push(total);
     }
-    if !(total > 0.0) {
+    if total.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater) {
         bail!("the FEM surface has no free triangle");
     }
     let fulcrum = scene.device.fulcrum_m.map(f64::from);
