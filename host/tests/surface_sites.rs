@@ -238,3 +238,38 @@ fn measure_the_contact_against_the_organ_surface() {
         );
     }
 }
+
+/// R's shortfall on the organ's surface against the reach margin R is cut with: the 2000
+/// FEM-surface points the report draws (within the scene's tip radius and margin of the
+/// workspace), R's nodes and triangles, and the points R refuses, for margins of 2 to 10 mm.
+#[test]
+#[ignore = "a few seconds per margin: a measurement for docs/scenes-and-banks.md"]
+fn reach_margin_against_the_shortfall() {
+    let scene_path = manifest("scenes/liver.toml");
+    let organ = Organ::load(&scene_path).unwrap();
+    let seed = surface::committed().unwrap().seed;
+    let sites = surface::draw(
+        &organ.scene,
+        surface::REACH_SITES,
+        seed,
+        surface::Reach::Region,
+    )
+    .unwrap();
+    for margin_mm in [2.0, 4.0, 6.0, 8.0, 10.0] {
+        let mut scene = organ.scene.clone();
+        scene.bank.reach_margin_m = 1e-3 * margin_mm;
+        let wider = Organ::from_scene(scene).unwrap();
+        let region = Region::of(&wider).unwrap();
+        let short = surface::shortfalls(&wider, &region, &sites);
+        let refused = short.iter().filter(|&&x| x > 0.0).count();
+        let worst = short.iter().copied().fold(0.0, f64::max);
+        eprintln!(
+            "margin {margin_mm} mm: R {} nodes, {} triangles; {refused} of {} refused, up to \
+             {:.2} mm",
+            region.len(),
+            region.triangles.len(),
+            sites.len(),
+            1e3 * worst
+        );
+    }
+}

@@ -371,7 +371,7 @@ pub fn section(scene: &Scene, bank: &[u8]) -> Result<Vec<HardCase>> {
                  {} within 5 %",
                 100.0 * s.error_mean,
                 100.0 * s.error_max,
-                name(&data.sites[s.worst]),
+                data.sites.get(s.worst).map_or_else(String::new, name),
                 within,
                 s.sites
             ),
@@ -417,9 +417,13 @@ pub fn section(scene: &Scene, bank: &[u8]) -> Result<Vec<HardCase>> {
             case: "reach on the organ's surface: R cut on the collision surface".into(),
             measurement: format!(
                 "{refused} of {} FEM surface points within R's reach test (tip radius and \
-                 margin of the workspace) refused by R, up to {:.2} mm short",
+                 margin of the workspace) refused by R, up to {:.2} mm short (R keeps a \
+                 collision triangle only when its three vertices pass the test); {} of the {} \
+                 press sites (where the device can make the whole press)",
                 reach.len(),
-                1e3 * short_max
+                1e3 * short_max,
+                s.refused,
+                s.sites
             ),
             reference: "every point within the reach test held".into(),
             verdict: if refused == 0 {
