@@ -23,6 +23,8 @@
 //! - [`pareto`]: the combinations no other beats on error, bytes and instructions;
 //! - [`sampled`]: the sampled patch compliance's FEM and sample spacing against the converged
 //!   reference, with the nodal bank on the same axis and their Pareto front;
+//! - [`surface`]: on a sampled scene, presses along the organ's (FEM surface's) own normal at
+//!   random sites of it, the collision normal's angle to the organ's and R's shortfall there;
 //! - [`relaxation`]: viscoelastic relaxation: `press-hold` on the QLV scene, the
 //!   image's force against the analytic QLV response, and instructions per tick against the
 //!   number of Prony terms.
