@@ -56,7 +56,7 @@ pub struct SurfaceSite {
 /// Random sites with their reference, as committed (`host/tests/data/surface-sites.json`).
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
 pub struct SurfaceSites {
-    /// The FEM mesh the sites lie on, and FNV-1a 64 of its bytes.
+    /// The file name of the FEM mesh the sites lie on.
     pub fem_mesh: String,
     /// FNV-1a 64 of the FEM mesh file's bytes.
     pub fem_mesh_hash: u64,
