@@ -213,6 +213,31 @@ fn nodal_w(
     Some(m)
 }
 
+/// Whether joint values `q` (pitch, yaw in rad, insertion in m) lie within the device's ranges
+/// (1e-9 of slack for the round trip through the kinematics).
+fn joints_inside(cal: &bank_format::DeviceCalibration, q: [f64; 3]) -> bool {
+    (0..3).all(|j| {
+        (f64::from(cal.joint_min[j]) - 1e-9..=f64::from(cal.joint_max[j]) + 1e-9).contains(&q[j])
+    })
+}
+
+/// Whether the device of `cal` can make [`press`]'s whole path through `point` along `inward`
+/// to `depth` (m): every tip from 5 mm short of `point` to `depth` past it, at 0.1 mm spacing,
+/// within its joint ranges.
+pub fn press_fits(
+    cal: &bank_format::DeviceCalibration,
+    point: [f64; 3],
+    inward: [f64; 3],
+    depth: f64,
+) -> bool {
+    let ws = Workspace::from_device(cal);
+    let steps = ((START_M + depth) / 1e-4).ceil().max(1.0) as usize;
+    (0..=steps).all(|i| {
+        let s = (i as f64 / steps as f64) * (START_M + depth) - START_M;
+        joints_inside(cal, ws.joints_for_tip(add(point, scale(inward, s))))
+    })
+}
+
 /// A press depth the probe accepts, m.
 fn valid_depth(depth: f64) -> bool {
     depth > 0.0 && depth.is_finite() && depth <= 0.05
@@ -267,11 +292,7 @@ pub fn press(
         let s = (i.min(steps) as f64 / steps as f64) * (START_M + depth) - START_M;
         let tip = add(point, scale(inward, s));
         let q = ws.joints_for_tip(tip);
-        let inside = (0..3).all(|j| {
-            (f64::from(cal.joint_min[j]) - 1e-9..=f64::from(cal.joint_max[j]) + 1e-9)
-                .contains(&q[j])
-        });
-        if !inside {
+        if !joints_inside(&cal, q) {
             bail!(
                 "the device cannot put its tip at [{:.4}, {:.4}, {:.4}] m on the \
                  press (pitch {:.3} rad, yaw {:.3} rad, insertion {:.4} m): outside its ranges",

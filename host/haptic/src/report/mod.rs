@@ -25,6 +25,8 @@
 //!   reference, with the nodal bank on the same axis and their Pareto front;
 //! - [`large_strain`]: the linear model at large strain, marker errors of `linear`,
 //!   `linear-p` and `large` against synthetic CT markers of a compressed gel cube;
+//! - [`surface`]: on a sampled scene, presses along the organ's (FEM surface's) own normal at
+//!   random sites of it, the collision normal's angle to the organ's and R's shortfall there;
 //! - [`relaxation`]: viscoelastic relaxation: `press-hold` on the QLV scene, the
 //!   image's force against the analytic QLV response, and instructions per tick against the
 //!   number of Prony terms.
@@ -44,6 +46,7 @@ pub mod precompute_cost;
 pub mod relaxation;
 pub mod sampled;
 pub mod scale;
+pub mod surface;
 pub mod tick_cost;
 
 use serde::Serialize;

@@ -313,6 +313,13 @@ pub fn run(cfg: &ReportConfig, step: &dyn Fn(&str)) -> Result<Report> {
         knobs.push(knob);
         cases.extend(rows);
         cases.extend(sampled::refinement_case(&study));
+        if let Some(chosen) = variants.iter().find(|v| v.chosen) {
+            step("sampled contact: presses on the organ's own surface");
+            match super::surface::section(sampled_scene, &chosen.bank) {
+                Ok(rows) => cases.extend(rows),
+                Err(e) => not_measured.push(format!("the presses on the organ's surface: {e:#}")),
+            }
+        }
     } else {
         not_measured.push(
             "the sampled patch compliance's knobs (the scene's contact model is nodal)".into(),
