@@ -434,7 +434,6 @@ pub fn run_with_progress(
     }
     let scale = units.to_metres();
     let points: Vec<[f64; 3]> = file.points.iter().map(|p| p.map(|x| x * scale)).collect();
-    let whole = |positions: &[[f64; 3]], travel: f64| platens(positions, config, travel);
     let mut levels: Vec<MeshLevel> = Vec::new();
     let mut last: Option<(solve::Solved, f64)> = None;
     let mut tolerance = None;
@@ -452,7 +451,6 @@ pub fn run_with_progress(
             config,
             &points,
             &|i| outside(config, &file, units, i),
-            &whole,
             &mut |_| {},
         )?;
         let change = last.as_ref().map(|(prev, _)| {

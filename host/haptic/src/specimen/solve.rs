@@ -72,8 +72,8 @@ fn part_supports(
     let a = config.axis.index();
     let top = centre[a] + 0.5 * length;
     let mut p = Prescribed::none(positions.len());
-    for k in 0..3 {
-        for n in on_plane(positions, k, centre[k], length) {
+    for (k, &c) in centre.iter().enumerate() {
+        for n in on_plane(positions, k, c, length) {
             p.set(n, k, 0.0)?;
         }
     }
@@ -96,16 +96,14 @@ fn part_supports(
 
 /// Solves `problem` at every strain of `config` for the markers `points` (metres, in the
 /// whole specimen): `Linear` once for a unit travel and scaled; `Large` along one
-/// continuation path from rest through the strains in increasing order. `whole_supports`
-/// gives the whole specimen's supports for a travel (the platens of [`super::platens`]);
-/// `outside` the error for the marker of that index when it lies outside the specimen.
+/// continuation path from rest through the strains in increasing order. The whole specimen
+/// is held by [`super::platens`], the part by rollers and its platen face; `outside` the error for the marker of that index when it lies outside the specimen.
 /// `on_strain` hears each strain as it is solved (progress).
 pub fn solve(
     problem: &Problem,
     config: &SpecimenConfig,
     points: &[[f64; 3]],
     outside: &dyn Fn(usize) -> anyhow::Error,
-    whole_supports: &dyn Fn(&[[f64; 3]], f64) -> Result<(Prescribed, Vec<usize>)>,
     on_strain: &mut dyn FnMut(f64),
 ) -> Result<Solved> {
     let material = Material::new(config.young_pa, config.poisson)
@@ -123,7 +121,7 @@ pub fn solve(
     let located = markers::locate(&problem.mesh, &located_at, MARKER_TOLERANCE).map_err(outside)?;
     let supports = |positions: &[[f64; 3]], travel: f64| match problem.centre {
         Some(c) => part_supports(positions, config, c, problem.length, travel),
-        None => whole_supports(positions, travel),
+        None => super::platens(positions, config, travel),
     };
     // Force along the moving platen's travel from the reaction sum on the supported face, and
     // the markers' displacements from the mesh's field.
