@@ -6,22 +6,27 @@
 //! **Loading**: the face at the moving end of the axis travels towards the other, which is
 //! held; nominal strain = platen travel / specimen length along the axis. `Bonded` platens hold
 //! both faces' lateral motion (all three components prescribed). `Frictionless` platens
-//! prescribe only the axial component on both faces and leave them free to slide; the rigid
-//! lateral motions are removed by holding the held face's node nearest its centre laterally
-//! and, in the second lateral direction, a second node of the held face on the same line
-//! through that centre along the first lateral direction. These two supports carry no load
-//! when the deformation is symmetric about the centre (a homogeneous field has zero lateral
-//! displacement there), so the lateral displacement is measured from the held face's centre.
+//! prescribe only the axial component on both faces and leave them free to slide; on the
+//! whole specimen the rigid lateral motions are removed by holding the held face's node
+//! nearest its centre laterally and, in the second lateral direction, a second node of the
+//! held face on the same line through that centre along the first lateral direction. These
+//! two supports carry no load when the deformation is symmetric about the centre (a
+//! homogeneous field has zero lateral displacement there), so the lateral displacement is
+//! measured from the held face's centre. On the symmetric eighth the rollers of its symmetry
+//! planes remove those motions (`solve.rs`).
 //!
-//! **Models**, both on the 10-node tetrahedra of [`QuadraticBody`] (the mesh's vertices and
-//! edge midpoints, 4-point Gauss rule) with the same prescribed displacements:
+//! **Models**, both on the 10-node tetrahedra of
+//! [`QuadraticBody`](fem::elasticity::quadratic::QuadraticBody) (the mesh's vertices and edge
+//! midpoints, 4-point Gauss rule) with the same prescribed displacements:
 //! - `Linear`: the linear elasticity of the paper (section 3, eq. 1: `K u = f`) with the
 //!   volumetric term at the quadrature points; one solve for a unit travel, scaled to each
 //!   strain (the response is linear in the travel).
 //! - `Large`: the compressible neo-Hookean reference [`fem::hyperelastic`] with the same Lamé
-//!   parameters, solved from rest to each strain; the volumetric energy on the element mean
-//!   ([`Volumetric::ElementMean`]) when `nu > 0.45` (the pointwise integration locks, see
-//!   docs/large-deformation.md), at the quadrature points otherwise.
+//!   parameters, solved along one continuation path from rest through the strains in
+//!   increasing order ([`fem::hyperelastic::solve_from`]); the volumetric energy on the
+//!   element mean ([`fem::hyperelastic::Volumetric::ElementMean`]) when `nu > 0.45` (the
+//!   pointwise integration locks, see docs/large-deformation.md), at the quadrature points
+//!   otherwise.
 //!
 //! At `nu > 0.45` the two models therefore differ in their volumetric integration as well as
 //! in their kinematics; docs/specimen.md measures both parts.
@@ -30,7 +35,7 @@
 //! them ([`markers::displacement`]).
 //!
 //! **Symmetry**: a box or a cylinder is solved on the part cut by its three symmetry planes
-//! (an eighth; [`geometry`], the reason it is exact in [`solve`]) unless `symmetry` is off,
+//! (an eighth; [`geometry`], the reason it is exact in `solve.rs`) unless `symmetry` is off,
 //! when the whole specimen is solved on that part's mirror image (the same resolution).
 //!
 //! **Mesh convergence**: without a fixed level a box or a cylinder is meshed at a sequence of
@@ -446,13 +451,9 @@ pub fn run_with_progress(
             None => level_problem(config, cells)?,
         };
         let length = problem.length;
-        let solved = solve::solve(
-            &problem,
-            config,
-            &points,
-            &|i| outside(config, &file, units, i),
-            &mut |_| {},
-        )?;
+        let solved = solve::solve(&problem, config, &points, &|i| {
+            outside(config, &file, units, i)
+        })?;
         let change = last.as_ref().map(|(prev, _)| {
             largest_change(
                 &prev.displacements[at_largest],

@@ -97,14 +97,13 @@ fn part_supports(
 /// Solves `problem` at every strain of `config` for the markers `points` (metres, in the
 /// whole specimen): `Linear` once for a unit travel and scaled; `Large` along one
 /// continuation path from rest through the strains in increasing order. The whole specimen
-/// is held by [`super::platens`], the part by rollers and its platen face; `outside` the error for the marker of that index when it lies outside the specimen.
-/// `on_strain` hears each strain as it is solved (progress).
+/// is held by [`super::platens`], the part by rollers and its platen face. `outside` makes
+/// the error for the marker of that index when it lies outside the specimen.
 pub fn solve(
     problem: &Problem,
     config: &SpecimenConfig,
     points: &[[f64; 3]],
     outside: &dyn Fn(usize) -> anyhow::Error,
-    on_strain: &mut dyn FnMut(f64),
 ) -> Result<Solved> {
     let material = Material::new(config.young_pa, config.poisson)
         .context("--young/--poisson: the material")?;
@@ -169,7 +168,6 @@ pub fn solve(
                 forces[i] = force(sol.reaction(moving.iter().copied(), a));
                 displacements[i] = field(body.quadratic(), &sol.u, travel)?;
                 u = sol.u;
-                on_strain(strains[i]);
             }
         }
         _ => {
@@ -182,7 +180,6 @@ pub fn solve(
             for (i, &s) in strains.iter().enumerate() {
                 displacements[i] = unit.iter().map(|d| d.map(|x| s * x)).collect();
                 forces[i] = s * force(reaction);
-                on_strain(s);
             }
         }
     }
