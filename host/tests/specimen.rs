@@ -292,6 +292,7 @@ fn a_mesh_file_is_solved_whole() {
         guess_units: true,
     };
     c.units = Units::M;
+    c.cells = None;
     let filed = specimen::run(&c).unwrap();
     assert_eq!(filed.units, "mm");
     assert_eq!((filed.cells, filed.convergence.tolerance), (None, None));
@@ -377,13 +378,10 @@ fn host(args: &[&str]) -> (bool, String, String) {
     )
 }
 
-/// The CLI's JSON has its documented shape (docs/specimen.md): `levels`, each with its `strain` and one `[x, y, z]`
-/// per marker in the markers' units; the held face's markers do not move axially.
-#[test]
-fn cli_prints_levels_of_markers_as_json() {
-    let f = markers_file(&[[1.0, 1.0, 0.0], [2.0, 1.5, 4.0], [1.0, 1.0, 3.0]]);
-    let m = f.path().to_str().unwrap();
-    let (ok, out, err) = host(&[
+/// Arguments of the CLI's JSON test: a 2 x 2 x 4 cm box along z, bonded, 5 and 10 %, the
+/// markers file `m`, linear, 2 cells.
+fn base_args(m: &str) -> [&str; 23] {
+    [
         "--box",
         "0,0,0,2,2,4",
         "--units",
@@ -407,7 +405,20 @@ fn cli_prints_levels_of_markers_as_json() {
         "--cells",
         "2",
         "--json",
-    ]);
+    ]
+}
+
+/// The CLI's JSON has its documented shape (docs/specimen.md): `levels`, each with its
+/// `strain` and one `[x, y, z]` per marker in the markers' units; the held face's markers do
+/// not move axially. `convergence` has one level with `--cells`; without it, the series with
+/// the default tolerance (1 % of the largest travel), stopped at the first level within it,
+/// each level's progress on stderr.
+#[test]
+fn cli_prints_levels_of_markers_as_json() {
+    let f = markers_file(&[[1.0, 1.0, 0.0], [2.0, 1.5, 4.0], [1.0, 1.0, 3.0]]);
+    let m = f.path().to_str().unwrap();
+    let (ok, out, err) = host(&base_args(m));
+
     assert!(ok, "{err}");
     let v: serde_json::Value = serde_json::from_str(&out).unwrap();
     let levels = v["levels"].as_array().unwrap();
@@ -423,6 +434,27 @@ fn cli_prints_levels_of_markers_as_json() {
         assert!((at(1, 2) - (4.0 - 4.0 * s)).abs() < 1e-12);
         assert!((at(1, 0) - 2.0).abs() < 1e-12 && (at(1, 1) - 1.5).abs() < 1e-12);
     }
+    assert_eq!(v["convergence"]["levels"].as_array().unwrap().len(), 1);
+    assert!(v["convergence"]["tolerance"].is_null());
+    // Without --cells: the series, its tolerance 1 % of the largest travel (0.1 * 4 cm).
+    let mut args: Vec<&str> = base_args(m).to_vec();
+    args.retain(|a| *a != "--cells" && *a != "2");
+    let (ok, out, err) = host(&args);
+    assert!(ok, "{err}");
+    assert!(err.contains("level 2 cells"), "progress on stderr: {err}");
+    let v: serde_json::Value = serde_json::from_str(&out).unwrap();
+    let c = &v["convergence"];
+    let tolerance = c["tolerance"].as_f64().unwrap();
+    assert!((tolerance - 0.004).abs() < 1e-15, "{tolerance}");
+    let levels = c["levels"].as_array().unwrap();
+    let last = levels.last().unwrap()["change"].as_f64().unwrap();
+    assert!(c["converged"].as_bool().unwrap() && last <= tolerance);
+    assert!(
+        levels[..levels.len() - 1][1..]
+            .iter()
+            .all(|l| l["change"].as_f64().unwrap() > tolerance)
+    );
+    assert_eq!(v["cells"], levels.last().unwrap()["cells"]);
 }
 
 /// Bad inputs exit non-zero with a message naming the input and where it is wrong.
@@ -514,9 +546,17 @@ fn bad_inputs_are_refused_with_what_and_where() {
     args.splice(0..4, ["--mesh", tet.to_str().unwrap(), "--units", "m"]);
     let i = args.iter().position(|a| *a == "--markers").unwrap();
     args[i + 1] = f.path().to_str().unwrap();
+    let i = args.iter().position(|a| *a == "--cells").unwrap();
+    args.drain(i..i + 2);
     let (ok, _, err) = host(&args);
     assert!(
         !ok && err.contains("moving platen face") && err.contains("has 1 node"),
+        "{err}"
+    );
+    args.extend(["--cells", "3"]);
+    let (ok, _, err) = host(&args);
+    assert!(
+        !ok && err.contains("--cells") && err.contains("own resolution"),
         "{err}"
     );
 }

@@ -413,6 +413,16 @@ pub fn run_with_progress(
     if config.cells == Some(0) {
         bail!("--cells: at least 1 cell along the part's longest side");
     }
+    let is_mesh = matches!(config.geometry, Geometry::Mesh { .. });
+    if is_mesh && (config.cells.is_some() || config.tolerance.is_some()) {
+        bail!(
+            "--cells and --tolerance set the mesh of a box or a cylinder; a --mesh file is \
+             solved at its own resolution"
+        );
+    }
+    if config.cells.is_some() && config.tolerance.is_some() {
+        bail!("--tolerance: not with --cells, which fixes one mesh level (no convergence series)");
+    }
     let file = markers::read(&config.markers)?;
     let start = Instant::now();
     let largest = config.strains.iter().copied().fold(0.0, f64::max);
@@ -422,7 +432,7 @@ pub fn run_with_progress(
         .position(|&s| s == largest)
         .unwrap_or(0);
     // A mesh file: one level, solved whole.
-    let (mut units, mut fixed) = (config.units, config.cells);
+    let (mut units, fixed) = (config.units, config.cells);
     let mut file_problem = None;
     if let Geometry::Mesh { path, guess_units } = &config.geometry {
         let given = (!guess_units).then_some(config.units);
@@ -435,7 +445,6 @@ pub fn run_with_progress(
             mesh,
             centre: None,
         });
-        fixed = None;
     }
     let scale = units.to_metres();
     let points: Vec<[f64; 3]> = file.points.iter().map(|p| p.map(|x| x * scale)).collect();
@@ -463,7 +472,6 @@ pub fn run_with_progress(
         let tol = config
             .tolerance
             .unwrap_or(DEFAULT_TOLERANCE * largest * length / scale);
-        let is_mesh = matches!(config.geometry, Geometry::Mesh { .. });
         levels.push(MeshLevel {
             cells: (!is_mesh).then_some(cells),
             nodes: solved.nodes,
