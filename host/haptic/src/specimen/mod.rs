@@ -340,7 +340,9 @@ fn level_problem(config: &SpecimenConfig, cells: usize) -> Result<Problem> {
             centre[a] = 0.5 * h;
             (geometry::cylinder_part(r, h, a, size)?, centre, h)
         }
-        Geometry::Mesh { .. } => unreachable!("a mesh file has no levels"),
+        Geometry::Mesh { path, .. } => {
+            bail!("--mesh {}: a mesh file has no mesh levels", path.display())
+        }
     };
     Ok(if config.symmetry {
         Problem {
