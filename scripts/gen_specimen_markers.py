@@ -12,8 +12,8 @@ prediction plus a CT voxel's noise. Two files under host/data/:
 
 The truth (the case the tests and the report re-solve)
 ------------------------------------------------------
-- specimen: the cube [0, 40 mm]^3, `--cells 4` (4 x 4 x 4 cubes, six 10-node tetrahedra each,
-  729 nodes): the generator and every check use this same mesh, so a prediction with the
+- specimen: the cube [0, 40 mm]^3, `--cells 4` (solved on its symmetric eighth, [0, 20 mm]^3 in
+  4 x 4 x 4 cubes, six 10-node tetrahedra each, 729 nodes; the markers mirrored): the generator and every check use this same mesh, so a prediction with the
   truth parameters differs from the data by the noise alone (and the Newton solver's
   tolerance), not by discretisation;
 - material: compressible neo-Hookean (`--model large`), E = 5000 Pa, nu = 0.49 (the

@@ -11,6 +11,7 @@ use haptic::specimen::measured::{self, Comparison};
 use haptic::specimen::{
     self, Axis, End, Geometry, Model, Platens, SpecimenConfig, SpecimenReport, parse_numbers,
 };
+use haptic::units::Units;
 use std::path::PathBuf;
 
 /// Compression axis.
@@ -60,19 +61,33 @@ pub struct Args {
     /// A box specimen: XMIN,YMIN,ZMIN,XMAX,YMAX,ZMAX in --units.
     #[arg(long = "box", value_name = "XMIN,YMIN,ZMIN,XMAX,YMAX,ZMAX", conflicts_with_all = ["mesh", "cylinder"], required_unless_present_any = ["mesh", "cylinder"])]
     box_: Option<String>,
-    /// A tetrahedral mesh of the specimen (not yet supported: use --box).
+    /// A tetrahedral mesh of the specimen (.msh, .mesh, .vtu, .vtk), solved whole at its own
+    /// resolution (no convergence series); the platen faces are its nodes at the min and max
+    /// of the axis.
     #[arg(long, conflicts_with = "cylinder")]
     mesh: Option<PathBuf>,
-    /// A cylinder R,H along the axis (not yet supported: use --box).
+    /// A cylinder R,H whose axis is --axis through the origin, base at 0, top at H (in
+    /// --units), meshed by Gmsh.
     #[arg(long, value_name = "R,H")]
     cylinder: Option<String>,
-    /// Units of the geometry, the markers and the predicted positions.
-    #[arg(long, value_enum, default_value = "m")]
-    units: UnitsArg,
-    /// Cells of the structured box mesh along its longest side (six 10-node tetrahedra each;
-    /// the other sides get cells of about the same size).
-    #[arg(long, default_value_t = 8)]
-    cells: usize,
+    /// Units of the geometry, the markers and the predicted positions (m by default; with
+    /// --mesh, guessed from the mesh's size when not given).
+    #[arg(long, value_enum)]
+    units: Option<UnitsArg>,
+    /// A fixed mesh level instead of the convergence series: cells along the longest side of
+    /// the part solved (the eighth: half the specimen's longest side; box: cubes of six 10-node
+    /// tetrahedra, cylinder: Gmsh elements of that side / N).
+    #[arg(long, value_name = "N")]
+    cells: Option<usize>,
+    /// The convergence series stops when the largest change of a marker's displacement at the
+    /// largest strain between two successive levels is at most this (in --units); default 1 %
+    /// of the platen travel at the largest strain.
+    #[arg(long, value_name = "LENGTH")]
+    tolerance: Option<f64>,
+    /// Solve the whole box or cylinder instead of the eighth cut by its symmetry planes (the
+    /// same answer, about eight times the work; for checking).
+    #[arg(long)]
+    no_symmetry: bool,
     /// Young's modulus of the material, Pa.
     #[arg(long)]
     young: f64,
@@ -135,7 +150,10 @@ fn config(a: &Args) -> Result<SpecimenConfig> {
                 hi: [v[3], v[4], v[5]],
             }
         }
-        (None, Some(path), _) => Geometry::Mesh(path.clone()),
+        (None, Some(path), _) => Geometry::Mesh {
+            path: path.clone(),
+            guess_units: a.units.is_none(),
+        },
         (None, None, Some(text)) => {
             let v = parse_numbers("--cylinder", text)?;
             if v.len() != 2 {
@@ -153,8 +171,10 @@ fn config(a: &Args) -> Result<SpecimenConfig> {
     };
     Ok(SpecimenConfig {
         geometry,
-        units: a.units.into(),
+        units: a.units.map_or(Units::M, Units::from),
         cells: a.cells,
+        tolerance: a.tolerance,
+        symmetry: !a.no_symmetry,
         young_pa: a.young,
         poisson: a.poisson,
         axis: match a.axis {
@@ -221,7 +241,7 @@ pub fn run(a: Args) -> Result<()> {
         }
         None => None,
     };
-    let report = specimen::run(&config)?;
+    let report = specimen::run_with_progress(&config, &mut |line| eprintln!("specimen: {line}"))?;
     let mut comparison = None;
     if let Some((path, points, m)) = &given {
         let c = measured::compare(&report.levels, report.units, m, config.units.to_metres());
@@ -263,17 +283,44 @@ fn print_comparison(c: &Comparison) {
 
 fn print_text(r: &SpecimenReport) {
     println!(
-        "model {:?} ({} volumetric), {} nodes on {}x{}x{} cells, length {} {}, solved in {:.2} s",
+        "model {:?} ({} volumetric), {} nodes on the {}{}, length {} {}, solved in {:.2} s",
         r.model,
         r.volumetric,
         r.nodes,
-        r.cells[0],
-        r.cells[1],
-        r.cells[2],
+        if r.symmetry {
+            "eighth"
+        } else {
+            "whole specimen"
+        },
+        r.cells.map_or(String::new(), |c| format!(" at {c} cells")),
         r.length,
         r.units,
         r.solve_seconds
     );
+    let c = &r.convergence;
+    match c.tolerance {
+        Some(t) => println!(
+            "mesh levels ({}; tolerance {t:.4} {}): {}",
+            c.criterion,
+            r.units,
+            if c.converged {
+                "converged"
+            } else {
+                "NOT converged"
+            }
+        ),
+        None => println!("mesh level fixed (no convergence series)"),
+    }
+    for l in &c.levels {
+        println!(
+            "  {:>6}  {:>7} nodes  {:>7.1} s  change {}",
+            l.cells.map_or("file".to_string(), |c| format!("{c} cells")),
+            l.nodes,
+            l.seconds,
+            l.change
+                .map_or("-".to_string(), |x| format!("{x:.4} {}", r.units))
+        );
+    }
     for level in &r.levels {
         println!(
             "strain {}: platen force {:.6} N (positive in compression)",

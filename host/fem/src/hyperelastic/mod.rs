@@ -41,7 +41,7 @@ mod body;
 mod newton;
 
 pub use body::{HyperelasticBody, Volumetric};
-pub use newton::{NewtonOptions, Solution, StepReport, solve};
+pub use newton::{NewtonOptions, Solution, StepReport, solve, solve_from};
 
 use crate::elasticity::{FemError, FixedSet, Material};
 

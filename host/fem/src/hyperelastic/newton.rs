@@ -222,10 +222,39 @@ pub fn solve(
     options: &NewtonOptions,
     on_step: &mut dyn FnMut(&StepReport),
 ) -> Result<Solution, HyperError> {
+    solve_from(
+        body,
+        prescribed,
+        &vec![0.0; 3 * body.nodes()],
+        options,
+        on_step,
+    )
+}
+
+/// [`solve`] from the state `start` (node-major displacements, m; e.g. the solution at a
+/// smaller platen travel, a continuation path) instead of the undeformed one: the load factor
+/// goes from 0 at `start` to 1 at the displacements `prescribed`, the prescribed dofs moving
+/// along the straight line between the two and the free ones following by equilibrium. With
+/// `start` all zeros it is [`solve`]. Refuses a `start` of the wrong length or with an
+/// inverted element.
+pub fn solve_from(
+    body: &HyperelasticBody,
+    prescribed: &Prescribed,
+    start: &[f64],
+    options: &NewtonOptions,
+    on_step: &mut dyn FnMut(&StepReport),
+) -> Result<Solution, HyperError> {
     if prescribed.nodes() != body.nodes() {
         return Err(HyperError::Prescribed(format!(
             "the prescribed set covers {} nodes but the body has {}",
             prescribed.nodes(),
+            body.nodes()
+        )));
+    }
+    if start.len() != 3 * body.nodes() || start.iter().any(|x| !x.is_finite()) {
+        return Err(HyperError::Prescribed(format!(
+            "the starting state has {} values (some not finite?) for a body of {} nodes",
+            start.len(),
             body.nodes()
         )));
     }
@@ -238,8 +267,18 @@ pub fn solve(
     let fixed = prescribed.fixed_set();
     body.quadratic().check_rigid_motions(&fixed)?;
     let dofs = DofMap::new(&fixed);
-    let target = prescribed.field();
-    let mut u = vec![0.0; 3 * body.nodes()];
+    // The prescribed dofs' travel from `start` to the target; zero at the free dofs.
+    let target: Vec<f64> = prescribed
+        .field()
+        .iter()
+        .zip(start)
+        .enumerate()
+        .map(|(d, (x, s))| match dofs.free_dof(d / 3, d % 3) {
+            Some(_) => 0.0,
+            None => x - s,
+        })
+        .collect();
+    let mut u = start.to_vec();
     let rest = body.evaluate(&u).map_err(|element| HyperError::Inverted {
         element,
         step: 1,

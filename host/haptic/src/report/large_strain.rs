@@ -12,7 +12,7 @@
 //! linear radial amplitude to the measured one, as `host calibrate tissue --law P` does for a
 //! bench curve.
 //!
-//! The generator and this section use the same mesh (4 cells per side), so `large` with the
+//! The generator and this section use the same mesh (4 cells along the solved eighth's side), so `large` with the
 //! truth parameters differs from the data by the noise alone: its RMS is the noise's,
 //! expected `sqrt(3) x 0.3 mm / sqrt(12) = 0.150 mm`.
 
@@ -57,7 +57,9 @@ pub fn gel_cube(markers: &Path, model: Model, display_law: Option<TissueLaw>) ->
             hi: [40.0; 3],
         },
         units: Units::Mm,
-        cells: 4,
+        cells: Some(4),
+        tolerance: None,
+        symmetry: true,
         young_pa: 5000.0,
         poisson: 0.49,
         axis: Axis::Z,
