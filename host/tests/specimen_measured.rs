@@ -52,14 +52,28 @@ fn slab(markers: &Path, model: Model, law: Option<TissueLaw>) -> SpecimenConfig 
 const SLAB_MARKERS: &str = "x,y,z\n0,10,15\n20,20,15\n3,17,5\n10,10,15\n10,10,30\n14,2,25\n";
 
 /// P(x) = x as a Chebyshev series on [0, 2 mm] (c0 = 1 mm, c1 = 1 mm): no correction, the
-/// markers are `linear`'s bit for bit.
+/// markers are `linear`'s (to the round-off of two solves).
 #[test]
 fn an_identity_p_gives_exactly_linear() {
     let f = text_file(SLAB_MARKERS);
     let identity = TissueLaw::chebyshev(&[0.001, 0.001], [0.0, 0.002]).unwrap();
     let linear = specimen::run(&slab(f.path(), Model::Linear, None)).unwrap();
     let p = specimen::run(&slab(f.path(), Model::LinearP, Some(identity))).unwrap();
-    assert_eq!(linear.levels, p.levels);
+    // Two runs solve twice: the parallel sparse factorisation may round the last bits
+    // differently between them (seen: 3 ulp), so the runs agree to round-off; the law itself
+    // is `None` for an identity P (`DisplayLaw::new`, tested bit for bit in the display).
+    assert_eq!(linear.levels.len(), p.levels.len());
+    for (a, b) in linear.levels.iter().zip(&p.levels) {
+        assert_eq!(a.strain, b.strain);
+        for (x, y) in a.markers.iter().zip(&b.markers) {
+            for k in 0..3 {
+                assert!(
+                    (x[k] - y[k]).abs() <= 1e-14 * x[k].abs().max(1.0),
+                    "{x:?} vs {y:?}"
+                );
+            }
+        }
+    }
 }
 
 /// A curved P (three Chebyshev coefficients on [0, 3 mm]): each marker's axial displacement is
@@ -255,9 +269,18 @@ fn linear_p_on_the_command_line() {
     let v: serde_json::Value = serde_json::from_str(&out).unwrap();
     let law = haptic::specimen::linear_p::read(p.path()).unwrap();
     let lib = specimen::run(&slab(f.path(), Model::LinearP, Some(law))).unwrap();
+    // Two solves (the CLI's and this one): equal to round-off, as above.
     for (l, want) in v["levels"].as_array().unwrap().iter().zip(&lib.levels) {
         let got: Vec<[f64; 3]> = serde_json::from_value(l["markers"].clone()).unwrap();
-        assert_eq!(got, want.markers);
+        assert_eq!(got.len(), want.markers.len());
+        for (g, w) in got.iter().zip(&want.markers) {
+            for k in 0..3 {
+                assert!(
+                    (g[k] - w[k]).abs() <= 1e-14 * w[k].abs().max(1.0),
+                    "{g:?} vs {w:?}"
+                );
+            }
+        }
     }
     // The same P as a scene's [display_law] (the shipped liver scene with the table added).
     let dir = tempfile::tempdir().unwrap();
