@@ -222,6 +222,29 @@ pub fn solve(
     options: &NewtonOptions,
     on_step: &mut dyn FnMut(&StepReport),
 ) -> Result<Solution, HyperError> {
+    let mut path = solve_path(body, prescribed, &[1.0], options, on_step)?;
+    Ok(path.pop().expect("one stop asked, one solution"))
+}
+
+/// [`solve`] along one load path that stops at each load factor of `stops` (increasing, in
+/// `(0, 1]`): the load steps are shortened to land on every stop, and the converged state at
+/// each stop is returned, in order (its `steps` are those of the path up to it). One path to
+/// several depths costs about one solve to the deepest, not one solve per depth.
+pub fn solve_path(
+    body: &HyperelasticBody,
+    prescribed: &Prescribed,
+    stops: &[f64],
+    options: &NewtonOptions,
+    on_step: &mut dyn FnMut(&StepReport),
+) -> Result<Vec<Solution>, HyperError> {
+    if stops.is_empty()
+        || stops.iter().any(|&s| !(s > 0.0 && s <= 1.0))
+        || stops.windows(2).any(|w| w[1] <= w[0])
+    {
+        return Err(HyperError::Prescribed(format!(
+            "the load stops must increase within (0, 1], got {stops:?}"
+        )));
+    }
     if prescribed.nodes() != body.nodes() {
         return Err(HyperError::Prescribed(format!(
             "the prescribed set covers {} nodes but the body has {}",
@@ -278,82 +301,90 @@ pub fn solve(
     let mut steps = Vec::new();
     let mut halvings = 0;
     let mut last_tangent = None;
-    while load < 1.0 {
-        let to = if load + dl > 1.0 - 1e-12 {
-            1.0
-        } else {
-            load + dl
-        };
-        let increment: Vec<f64> = target.iter().map(|x| (to - load) * x).collect();
-        match step(
-            body,
-            &dofs,
-            factor.as_ref(),
-            &u,
-            &increment,
-            options,
-            &mut last_tangent,
-        ) {
-            Ok((next, residuals, indefinite)) => {
-                u = next;
-                load = to;
-                let report = StepReport {
-                    step: steps.len() + 1,
-                    load,
-                    iterations: residuals.len() - 1,
-                    residuals,
-                    halvings,
-                    indefinite,
-                };
-                on_step(&report);
-                if report.iterations <= 4 {
-                    dl = (dl * 1.5).min(1.0);
+    let mut solutions = Vec::with_capacity(stops.len());
+    for &stop in stops {
+        while load < stop {
+            let to = if load + dl > stop - 1e-12 * stop {
+                stop
+            } else {
+                load + dl
+            };
+            let increment: Vec<f64> = target.iter().map(|x| (to - load) * x).collect();
+            match step(
+                body,
+                &dofs,
+                factor.as_ref(),
+                &u,
+                &increment,
+                options,
+                &mut last_tangent,
+            ) {
+                Ok((next, residuals, indefinite)) => {
+                    u = next;
+                    load = to;
+                    let report = StepReport {
+                        step: steps.len() + 1,
+                        load,
+                        iterations: residuals.len() - 1,
+                        residuals,
+                        halvings,
+                        indefinite,
+                    };
+                    on_step(&report);
+                    if report.iterations <= 4 {
+                        dl = (dl * 1.5).min(1.0);
+                    }
+                    steps.push(report);
+                    halvings = 0;
                 }
-                steps.push(report);
-                halvings = 0;
-            }
-            Err(failure) => {
-                // The failed attempt's tangents belong to states that were not kept.
-                last_tangent = None;
-                if dl * 0.5 >= options.min_step * (1.0 - 1e-12) {
-                    dl *= 0.5;
-                    halvings += 1;
-                    continue;
+                Err(failure) => {
+                    // The failed attempt's tangents belong to states that were not kept.
+                    last_tangent = None;
+                    if dl * 0.5 >= options.min_step * (1.0 - 1e-12) {
+                        dl *= 0.5;
+                        halvings += 1;
+                        continue;
+                    }
+                    let (step, from) = (steps.len() + 1, load);
+                    return Err(match failure {
+                        StepFailure::Inverted(element) => HyperError::Inverted {
+                            element,
+                            step,
+                            from,
+                            to,
+                        },
+                        StepFailure::NoConvergence {
+                            iterations,
+                            residual,
+                            reason,
+                        } => HyperError::NoConvergence {
+                            step,
+                            from,
+                            to,
+                            iterations,
+                            residual,
+                            reason,
+                        },
+                        StepFailure::Singular(reason) => HyperError::Singular {
+                            step,
+                            load: from,
+                            reason,
+                        },
+                    });
                 }
-                let (step, from) = (steps.len() + 1, load);
-                return Err(match failure {
-                    StepFailure::Inverted(element) => HyperError::Inverted {
-                        element,
-                        step,
-                        from,
-                        to,
-                    },
-                    StepFailure::NoConvergence {
-                        iterations,
-                        residual,
-                        reason,
-                    } => HyperError::NoConvergence {
-                        step,
-                        from,
-                        to,
-                        iterations,
-                        residual,
-                        reason,
-                    },
-                    StepFailure::Singular(reason) => HyperError::Singular {
-                        step,
-                        load: from,
-                        reason,
-                    },
-                });
             }
         }
+        let state = body
+            .evaluate(&u)
+            .expect("the converged state was evaluated");
+        let forces = body.forces(&state);
+        solutions.push(Solution {
+            u: u.clone(),
+            forces,
+            steps: steps.clone(),
+        });
     }
-    let state = body
-        .evaluate(&u)
-        .expect("the converged state was evaluated");
-    let forces = body.forces(&state);
-    Ok(Solution { u, forces, steps })
+    Ok(solutions)
 }
 
 /// The factorised tangent `K_ff` of `state`.
