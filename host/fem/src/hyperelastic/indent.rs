@@ -39,10 +39,10 @@ pub enum IndentError {
     #[error("indenter: {0}")]
     Patch(String),
     /// The neo-Hookean solve failed (an inverted element, no convergence, bad supports).
-    #[error("the large-deformation solve: {0}")]
+    #[error(transparent)]
     Large(#[from] HyperError),
     /// The linear solve failed.
-    #[error("the linear solve: {0}")]
+    #[error(transparent)]
     Linear(#[from] ComplianceError),
 }
 

@@ -1,0 +1,81 @@
+//! The large-deformation reference on the default liver (`haptic::large`): presses of 8, 12
+//! and 15 mm and pulls of 10, 20 and 30 mm at study sites, neo-Hookean and linear on the same
+//! mesh, the data of `host report`'s large-press section. Ignored by default (minutes per site
+//! and mesh): `cargo test --profile checked -p haptic --test large_press -- --ignored
+//! --nocapture`. `LARGE_MESH` = the mesh file (default the committed liver-reach-4mm),
+//! `LARGE_SITES` = site names separated by `;` (default right lobe top), `LARGE_OUT` = a JSON
+//! file to write the runs to (`host/tests/data/large-press.json` is this output).
+
+use haptic::large::LargeFem;
+use haptic::report::large_press::{PRESSES_M, PULLS_M, SiteRun};
+use haptic::scene::Scene;
+use haptic::study::Site;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+fn root() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("..")
+}
+
+#[test]
+#[ignore = "minutes: large presses and pulls on the liver"]
+fn liver_presses_and_pulls() {
+    let scene = Scene::load(&root().join("scenes/liver.toml")).unwrap();
+    let mesh = std::env::var("LARGE_MESH")
+        .map_or_else(|_| root().join("meshes/liver-reach-4mm.msh"), PathBuf::from);
+    let text = std::fs::read_to_string(root().join("tests/data/patch-study-p2.json")).unwrap();
+    let v: serde_json::Value = serde_json::from_str(&text).unwrap();
+    let all: Vec<Site> = serde_json::from_value(v["sites"].clone()).unwrap();
+    let wanted = std::env::var("LARGE_SITES").unwrap_or_else(|_| "right lobe top".into());
+    let t0 = Instant::now();
+    let fem = LargeFem::load(&scene, &mesh).unwrap();
+    println!(
+        "{}: {} vertices, {} nodes, built in {:.1} s",
+        mesh.display(),
+        fem.vertices,
+        fem.nodes(),
+        t0.elapsed().as_secs_f64()
+    );
+    let pulls: Vec<f64> = PULLS_M.iter().map(|d| -d).collect();
+    let mut runs = Vec::new();
+    for site in all
+        .iter()
+        .filter(|s| wanted.split(';').any(|w| w == s.name))
+    {
+        let run = |what: &str, depths: &[f64]| {
+            let t = Instant::now();
+            let r = fem.press(site, depths).map_err(|e| format!("{e:#}"));
+            match &r {
+                Ok(p) => {
+                    for x in p {
+                        let n = |v: [f64; 3]| v.iter().map(|c| c * c).sum::<f64>().sqrt();
+                        println!(
+                            "{:<22} {what} {:4.1} mm: |F_large| {:.5} N, |F_lin| {:.5} N, ratio \
+                             {:.4}, linear error {:5.1} %, {} iterations",
+                            site.name,
+                            x.depth_m.abs() * 1e3,
+                            n(x.large),
+                            n(x.linear),
+                            x.ratio(),
+                            100.0 * x.linear_error(),
+                            x.iterations
+                        );
+                    }
+                }
+                Err(e) => println!("{:<22} {what}: FAILED: {e}", site.name),
+            }
+            println!("    {what}: {:.1} s", t.elapsed().as_secs_f64());
+            r
+        };
+        let presses = run("press", &PRESSES_M);
+        let pulls = run("pull", &pulls);
+        runs.push(SiteRun {
+            site: site.name.clone(),
+            presses,
+            pulls,
+        });
+    }
+    if let Ok(out) = std::env::var("LARGE_OUT") {
+        std::fs::write(&out, serde_json::to_string_pretty(&runs).unwrap()).unwrap();
+    }
+}
