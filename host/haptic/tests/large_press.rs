@@ -7,7 +7,7 @@
 //! file to write the runs to (`host/tests/data/large-press.json` is this output).
 
 use haptic::large::LargeFem;
-use haptic::report::large_press::{PRESSES_M, PULLS_M, SiteRun};
+use haptic::report::large_press::{PRESSES_M, PULLS_M, SPECIMEN_STRAINS, SiteRun, specimen_law};
 use haptic::scene::Scene;
 use haptic::study::Site;
 use std::path::{Path, PathBuf};
@@ -77,5 +77,41 @@ fn liver_presses_and_pulls() {
     }
     if let Ok(out) = std::env::var("LARGE_OUT") {
         std::fs::write(&out, serde_json::to_string_pretty(&runs).unwrap()).unwrap();
+    }
+}
+
+/// The specimen's large-deformation curve (`host report`'s Q is fitted to it) against the
+/// closed form of homogeneous uniaxial compression of the same strain energy: between
+/// frictionless platens the field is homogeneous, so force / linear force is
+/// `-P_33 / (E strain)` whatever the cross-section, with the lateral stretch `l` the root of
+/// `mu (l^2 - 1) + lambda ln(l^2 s) = 0` and `P_33 = mu (s - 1/s) + lambda ln(l^2 s) / s`.
+#[test]
+#[ignore = "a minute: the cylinder's large-deformation compression"]
+fn the_specimen_curve_is_the_closed_form() {
+    let scene = Scene::load(&root().join("scenes/liver.toml")).unwrap();
+    let mesh = fem::mesh::load(&root().join("meshes/cylinder-2k.msh")).unwrap();
+    let t = Instant::now();
+    let law = specimen_law(&mesh, &scene).unwrap();
+    println!(
+        "specimen law in {:.1} s, RMS {:.2e}",
+        t.elapsed().as_secs_f64(),
+        law.rms
+    );
+    let (lambda, mu) = scene.material.lame();
+    for (k, &e) in SPECIMEN_STRAINS.iter().enumerate() {
+        let s = 1.0 - e;
+        let mut l = 1.0f64;
+        for _ in 0..50 {
+            let g = mu * (l * l - 1.0) + lambda * (l * l * s).ln();
+            l -= g / (2.0 * mu * l + 2.0 * lambda / l);
+        }
+        let p33 = mu * (s - 1.0 / s) + lambda * (l * l * s).ln() / s;
+        let want = -p33 / (scene.material.young * e);
+        let got = law.large_n[k] / law.linear_n[k];
+        println!("strain {e}: force / linear {got:.6}, closed form {want:.6}");
+        assert!(
+            (got - want).abs() < 1e-5 * want,
+            "strain {e}: {got} against {want}"
+        );
     }
 }

@@ -431,3 +431,83 @@ pub fn run(
     let (knob, cases, not) = section(&m, scene);
     Ok((vec![knob], cases, not))
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn press(depth_m: f64, large: f64, linear: f64) -> Press {
+        Press {
+            depth_m,
+            large: [0.0, 0.0, large],
+            linear: [0.0, 0.0, linear],
+            iterations: 1,
+        }
+    }
+
+    /// Hand-made runs: the errors are `|F_lin - F_large| / |F_large|` (1/11 and 2/10 by hand),
+    /// the worst site is named, a law that doubles the force doubles `F_lin` first, and the
+    /// verdict is a weakness over 10 % only.
+    #[test]
+    fn errors_and_verdicts_by_hand() {
+        let scene = Scene::load_or_default(None).unwrap();
+        let presses = |large: f64| -> Vec<Press> {
+            PRESSES_M
+                .iter()
+                .map(|&d| press(d, -large * d, -d))
+                .collect()
+        };
+        let pulls: Vec<Press> = PULLS_M.iter().map(|&d| press(-d, d, 1.25 * d)).collect();
+        let m = Measured {
+            mesh: REFERENCE_MESH.into(),
+            sites: vec![
+                SiteRun {
+                    site: "a".into(),
+                    presses: Ok(presses(1.1)),
+                    pulls: Ok(pulls.clone()),
+                },
+                SiteRun {
+                    site: "b".into(),
+                    presses: Ok(presses(1.0)),
+                    pulls: Err("no convergence".into()),
+                },
+            ],
+            specimen: Ok(SpecimenLaw {
+                mesh: String::new(),
+                linear_n: Vec::new(),
+                large_n: Vec::new(),
+                coeffs: vec![1.0, 1.0],
+                domain: [0.0, 1.0],
+                rms: 0.0,
+            }),
+            cold_s: 0.0,
+        };
+        let (knob, cases, not) = section(&m, &scene);
+        assert!(not.is_empty(), "{not:?}");
+        let series = |name: &str| knob.series.iter().find(|s| s.name == name).unwrap();
+        for p in &series("press, linear").points {
+            assert!((p.y - 100.0 / 11.0).abs() < 1e-9, "{p:?}");
+        }
+        // The scene's Q is the identity: the same errors (to f32, the law's arithmetic).
+        for p in &series("press, the scene's Q").points {
+            assert!((p.y - 100.0 / 11.0).abs() < 1e-4, "{p:?}");
+        }
+        // Chebyshev [1, 1] on [0, 1]: Q(f) = 1 + (2 f - 1) = 2 f, so site a is off by
+        // |2 - 1.1| / 1.1 and site b by 1, the worst (to f32).
+        for p in &series("press, Q from the specimen").points {
+            assert!((p.y - 100.0).abs() < 1e-3, "{p:?}");
+        }
+        let pull = &series("pull, linear (Q has no tension branch)").points;
+        assert_eq!(pull.len(), 3);
+        for p in pull {
+            assert!((p.y - 25.0).abs() < 1e-9 && p.x < 0.0, "{p:?}");
+        }
+        let row = |c: &str| cases.iter().find(|h| h.case == c).unwrap();
+        let r = row("press, linear 15 mm, 2 sites");
+        assert_eq!(r.verdict, Verdict::Bounded);
+        assert!(r.measurement.contains("(a)"), "{}", r.measurement);
+        let r = row("pull, linear (Q has no tension branch) 30 mm, 1 sites");
+        assert_eq!(r.verdict, Verdict::Weakness);
+        assert_eq!(row("pulls at b").verdict, Verdict::Refused);
+    }
+}
