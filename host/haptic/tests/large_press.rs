@@ -86,7 +86,6 @@ fn liver_presses_and_pulls() {
 /// `-P_33 / (E strain)` whatever the cross-section, with the lateral stretch `l` the root of
 /// `mu (l^2 - 1) + lambda ln(l^2 s) = 0` and `P_33 = mu (s - 1/s) + lambda ln(l^2 s) / s`.
 #[test]
-#[ignore = "a minute: the cylinder's large-deformation compression"]
 fn the_specimen_curve_is_the_closed_form() {
     let scene = Scene::load(&root().join("scenes/liver.toml")).unwrap();
     let mesh = fem::mesh::load(&root().join("meshes/cylinder-2k.msh")).unwrap();
