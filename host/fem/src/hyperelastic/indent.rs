@@ -13,10 +13,9 @@
 //! stiffest patch of that radius (on a half-space the rigid flat punch gives
 //! `2 E a / (1 - nu^2)` N/m, the mean displacement of a uniform pressure
 //! `3 pi^2 / 16 E a / (1 - nu^2)`, 8 % less: Johnson, *Contact Mechanics*, 1985, section 3.2).
-//! Both models
-//! are compared with themselves only: [`indent`] returns the neo-Hookean force and the linear
-//! 10-node force of the same indenter, mesh and supports, so their ratio isolates the
-//! nonlinearity of the material and of the geometry.
+//! So each tool model is compared with itself only: [`indent`] returns the neo-Hookean force
+//! and the linear 10-node force of the same indenter, mesh and supports, and their ratio
+//! isolates the nonlinearity of the material and of the geometry.
 
 use super::{HyperError, HyperelasticBody, NewtonOptions, Prescribed, solve_path};
 use crate::compliance::{ComplianceError, solve_prescribed};

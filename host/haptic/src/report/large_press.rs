@@ -411,6 +411,13 @@ pub fn run(
         ));
     }
     let m = measure(scene, specimen_mesh.expect("checked above"), step)?;
+    if m.sites.is_empty() {
+        return Ok((
+            Vec::new(),
+            Vec::new(),
+            vec!["large presses and pulls: host/tests/data/large-press.json holds no runs".into()],
+        ));
+    }
     let (knob, cases, not) = section(&m, scene);
     Ok((vec![knob], cases, not))
 }
