@@ -310,7 +310,9 @@ pub fn run(cfg: &ReportConfig, step: &dyn Fn(&str)) -> Result<Report> {
         cases.extend(sampled::refinement_case(&study));
         let cylinder = shipped("cylinder-2k.msh");
         let (k, c, n) = large_press::run(sampled_scene, cylinder.as_deref(), step)?;
-        (knobs.extend(k), cases.extend(c), not_measured.extend(n));
+        knobs.extend(k);
+        cases.extend(c);
+        not_measured.extend(n);
     } else {
         not_measured.push(
             "the sampled patch compliance's knobs (the scene's contact model is nodal)".into(),
