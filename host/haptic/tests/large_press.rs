@@ -7,7 +7,10 @@
 //! file to write the runs to (`host/tests/data/large-press.json` is this output).
 
 use haptic::large::LargeFem;
-use haptic::report::large_press::{PRESSES_M, PULLS_M, SPECIMEN_STRAINS, SiteRun, specimen_law};
+use haptic::report::large_press::{
+    Measured, PRESSES_M, PULLS_M, REFERENCE_MESH, SPECIMEN_STRAINS, SiteRun, reference_runs,
+    section, specimen_law,
+};
 use haptic::scene::Scene;
 use haptic::study::Site;
 use std::path::{Path, PathBuf};
@@ -112,5 +115,43 @@ fn the_specimen_curve_is_the_closed_form() {
             (got - want).abs() < 1e-5 * want,
             "strain {e}: {got} against {want}"
         );
+    }
+}
+
+/// The report's section on the committed runs: the worst linear error per press depth is the
+/// largest `|F_lin - F_large| / |F_large|` over the sites, recomputed here from the vectors.
+#[test]
+fn the_report_section_on_the_committed_runs() {
+    let scene = Scene::load(&root().join("scenes/liver.toml")).unwrap();
+    let mesh = fem::mesh::load(&root().join("meshes/cylinder-2k.msh")).unwrap();
+    let runs = reference_runs().unwrap();
+    let m = Measured {
+        mesh: REFERENCE_MESH.into(),
+        sites: runs.clone(),
+        specimen: Ok(specimen_law(&mesh, &scene).unwrap()),
+        cold_s: 0.0,
+    };
+    let (knob, cases, not) = section(&m, &scene);
+    assert!(not.is_empty(), "{not:?}");
+    println!("{}", knob.finding);
+    for c in &cases {
+        println!("{}: {} [{}]", c.case, c.measurement, c.verdict.text());
+    }
+    let linear = knob
+        .series
+        .iter()
+        .find(|s| s.name == "press, linear")
+        .unwrap();
+    for (k, p) in linear.points.iter().enumerate() {
+        let worst = runs
+            .iter()
+            .map(|r| {
+                let x = &r.presses.as_ref().unwrap()[k];
+                let d: f64 = (0..3).map(|a| (x.linear[a] - x.large[a]).powi(2)).sum();
+                let l: f64 = (0..3).map(|a| x.large[a].powi(2)).sum();
+                (d / l).sqrt()
+            })
+            .fold(0.0f64, f64::max);
+        assert!((p.y - 100.0 * worst).abs() < 1e-9, "{p:?} against {worst}");
     }
 }

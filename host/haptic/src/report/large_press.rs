@@ -353,7 +353,7 @@ pub fn section(m: &Measured, scene: &Scene) -> (Knob, Vec<HardCase>, Vec<String>
             .fold(0.0f64, f64::max)
     };
     let finding = format!(
-        "At {} sites (on {}, computed offline; the specimen's Q {:.0} s, cached): presses of 8-15 mm \
+        "At {} sites (on {}, computed offline; the specimen's Q {:.1} s, cached): presses of 8-15 mm \
          are off by up to {:.0} % linear and {:.0} % with the specimen's Q; pulls of 10-30 mm \
          by up to {:.0} % (no Q in tension)",
         m.sites.len(),
