@@ -7,7 +7,7 @@ use fem::compliance::solve_prescribed;
 use fem::elasticity::Material;
 use fem::elasticity::quadratic::EDGES;
 use fem::hyperelastic::{
-    HyperError, HyperelasticBody, NewtonOptions, Prescribed, Volumetric, solve, solve_from,
+    HyperError, HyperelasticBody, NewtonOptions, Prescribed, Volumetric, solve,
 };
 use fem::mesh::structured::box_mesh;
 use std::time::Instant;
@@ -213,32 +213,6 @@ fn an_inverted_element_is_reported_by_id() {
         }
         other => panic!("expected an inversion, got {other}"),
     }
-}
-
-/// A continuation path (rest to 10 % bonded compression with a sideways shift, then from that
-/// state to 20 %) ends where the solve from rest to 20 % does: the same equilibrium, to the
-/// Newton tolerance (1e-8 of the displacement norm); a starting state of the wrong length is
-/// refused.
-#[test]
-fn solve_from_a_previous_state_equals_the_solve_from_rest() {
-    let l = 0.02;
-    let mesh = box_mesh([l; 3], [2, 2, 2]);
-    let material = Material::new(E, 0.45).unwrap();
-    let body = HyperelasticBody::with_volumetric(&mesh, material, Volumetric::ElementMean).unwrap();
-    let opts = NewtonOptions::default();
-    let top = |s: f64| [0.3 * s * l, 0.0, -s * l];
-    let half = solve(&body, &bonded(&body, l, top(0.1)), &opts, &mut |_| {}).unwrap();
-    let p = bonded(&body, l, top(0.2));
-    let mut steps = 0;
-    let path = solve_from(&body, &p, &half.u, &opts, &mut |_| steps += 1).unwrap();
-    let direct = solve(&body, &p, &opts, &mut |_| {}).unwrap();
-    let du = max_abs(path.u.iter().zip(&direct.u).map(|(a, b)| a - b)) / max_abs(direct.u.clone());
-    let df = max_abs(path.forces.iter().zip(&direct.forces).map(|(a, b)| a - b))
-        / max_abs(direct.forces.clone());
-    println!("continuation in {steps} steps: u {du:.2e}, forces {df:.2e}");
-    assert!(du < 1e-7 && df < 1e-7, "u {du:e}, forces {df:e}");
-    let err = solve_from(&body, &p, &half.u[1..], &opts, &mut |_| {}).unwrap_err();
-    assert!(err.to_string().contains("starting state"), "{err}");
 }
 
 /// Bad input and an impossible schedule are errors that say what is wrong.

@@ -10,7 +10,8 @@
 //! and the scripted hand motions, on [`trajectory`]'s tool paths); [`demo`] runs them together.
 //! [`link`] is the client of a device's serial link (port, frames, greeting), [`device`] a
 //! bring-up session on it (check, zero, arm with a guard that disarms when dropped). [`sil`] runs the firmware image under QEMU,
-//! [`calibrate`] fits the tissue laws and the motor constants; [`mod@bench`] measures.
+//! [`calibrate`] fits the tissue laws and the motor constants; [`mod@bench`] measures;
+//! [`large`] presses the organ in the large-deformation reference.
 //! Leaves the others share: [`units`] (mesh units), [`cache`] (the on-disk cache and FNV-1a),
 //! [`linalg`] (3 x 3 blocks) and [`realtime`] (thread scheduling).
 
@@ -25,6 +26,7 @@ pub mod device;
 pub mod display;
 pub mod fsio;
 pub mod kinematics;
+pub mod large;
 pub mod linalg;
 pub mod link;
 pub mod mcu;

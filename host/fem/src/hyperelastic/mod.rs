@@ -36,12 +36,17 @@
 //! iteration) or, when the tangent is not positive definite, sparse `L D L^T` on the same
 //! symbolic structure; a backtracking line search on the residual norm rejects trial states
 //! with an inverted element. Failures are errors that name the reason ([`HyperError`]).
+//! [`solve_path`] stops on the way at given load factors (several depths in one solve).
+//!
+//! **Tool presses** ([`indent`]): a rigid bonded tool patch moved into or out of the surface,
+//! its force in this model and in the linear one on the same mesh.
 
 mod body;
+pub mod indent;
 mod newton;
 
 pub use body::{HyperelasticBody, Volumetric};
-pub use newton::{NewtonOptions, Solution, StepReport, solve, solve_from};
+pub use newton::{NewtonOptions, Solution, StepReport, solve, solve_path};
 
 use crate::elasticity::{FemError, FixedSet, Material};
 

@@ -222,39 +222,33 @@ pub fn solve(
     options: &NewtonOptions,
     on_step: &mut dyn FnMut(&StepReport),
 ) -> Result<Solution, HyperError> {
-    solve_from(
-        body,
-        prescribed,
-        &vec![0.0; 3 * body.nodes()],
-        options,
-        on_step,
-    )
+    let mut path = solve_path(body, prescribed, &[1.0], options, on_step)?;
+    Ok(path.pop().expect("one stop asked, one solution"))
 }
 
-/// [`solve`] from the state `start` (node-major displacements, m; e.g. the solution at a
-/// smaller platen travel, a continuation path) instead of the undeformed one: the load factor
-/// goes from 0 at `start` to 1 at the displacements `prescribed`, the prescribed dofs moving
-/// along the straight line between the two and the free ones following by equilibrium. With
-/// `start` all zeros it is [`solve`]. Refuses a `start` of the wrong length or with an
-/// inverted element.
-pub fn solve_from(
+/// [`solve`] along one load path that stops at each load factor of `stops` (increasing, in
+/// `(0, 1]`): the load steps are shortened to land on every stop, and the converged state at
+/// each stop is returned, in order (its `steps` are those of the path up to it). One path to
+/// several depths costs about one solve to the deepest, not one solve per depth.
+pub fn solve_path(
     body: &HyperelasticBody,
     prescribed: &Prescribed,
-    start: &[f64],
+    stops: &[f64],
     options: &NewtonOptions,
     on_step: &mut dyn FnMut(&StepReport),
-) -> Result<Solution, HyperError> {
+) -> Result<Vec<Solution>, HyperError> {
+    if stops.is_empty()
+        || stops.iter().any(|&s| !(s > 0.0 && s <= 1.0))
+        || stops.windows(2).any(|w| w[1] <= w[0])
+    {
+        return Err(HyperError::Prescribed(format!(
+            "the load stops must increase within (0, 1], got {stops:?}"
+        )));
+    }
     if prescribed.nodes() != body.nodes() {
         return Err(HyperError::Prescribed(format!(
             "the prescribed set covers {} nodes but the body has {}",
             prescribed.nodes(),
-            body.nodes()
-        )));
-    }
-    if start.len() != 3 * body.nodes() || start.iter().any(|x| !x.is_finite()) {
-        return Err(HyperError::Prescribed(format!(
-            "the starting state has {} values (some not finite?) for a body of {} nodes",
-            start.len(),
             body.nodes()
         )));
     }
@@ -267,18 +261,8 @@ pub fn solve_from(
     let fixed = prescribed.fixed_set();
     body.quadratic().check_rigid_motions(&fixed)?;
     let dofs = DofMap::new(&fixed);
-    // The prescribed dofs' travel from `start` to the target; zero at the free dofs.
-    let target: Vec<f64> = prescribed
-        .field()
-        .iter()
-        .zip(start)
-        .enumerate()
-        .map(|(d, (x, s))| match dofs.free_dof(d / 3, d % 3) {
-            Some(_) => 0.0,
-            None => x - s,
-        })
-        .collect();
-    let mut u = start.to_vec();
+    let target = prescribed.field();
+    let mut u = vec![0.0; 3 * body.nodes()];
     let rest = body.evaluate(&u).map_err(|element| HyperError::Inverted {
         element,
         step: 1,
@@ -317,82 +301,90 @@ pub fn solve_from(
     let mut steps = Vec::new();
     let mut halvings = 0;
     let mut last_tangent = None;
-    while load < 1.0 {
-        let to = if load + dl > 1.0 - 1e-12 {
-            1.0
-        } else {
-            load + dl
-        };
-        let increment: Vec<f64> = target.iter().map(|x| (to - load) * x).collect();
-        match step(
-            body,
-            &dofs,
-            factor.as_ref(),
-            &u,
-            &increment,
-            options,
-            &mut last_tangent,
-        ) {
-            Ok((next, residuals, indefinite)) => {
-                u = next;
-                load = to;
-                let report = StepReport {
-                    step: steps.len() + 1,
-                    load,
-                    iterations: residuals.len() - 1,
-                    residuals,
-                    halvings,
-                    indefinite,
-                };
-                on_step(&report);
-                if report.iterations <= 4 {
-                    dl = (dl * 1.5).min(1.0);
+    let mut solutions = Vec::with_capacity(stops.len());
+    for &stop in stops {
+        while load < stop {
+            let to = if load + dl > stop - 1e-12 * stop {
+                stop
+            } else {
+                load + dl
+            };
+            let increment: Vec<f64> = target.iter().map(|x| (to - load) * x).collect();
+            match step(
+                body,
+                &dofs,
+                factor.as_ref(),
+                &u,
+                &increment,
+                options,
+                &mut last_tangent,
+            ) {
+                Ok((next, residuals, indefinite)) => {
+                    u = next;
+                    load = to;
+                    let report = StepReport {
+                        step: steps.len() + 1,
+                        load,
+                        iterations: residuals.len() - 1,
+                        residuals,
+                        halvings,
+                        indefinite,
+                    };
+                    on_step(&report);
+                    if report.iterations <= 4 {
+                        dl = (dl * 1.5).min(1.0);
+                    }
+                    steps.push(report);
+                    halvings = 0;
                 }
-                steps.push(report);
-                halvings = 0;
-            }
-            Err(failure) => {
-                // The failed attempt's tangents belong to states that were not kept.
-                last_tangent = None;
-                if dl * 0.5 >= options.min_step * (1.0 - 1e-12) {
-                    dl *= 0.5;
-                    halvings += 1;
-                    continue;
+                Err(failure) => {
+                    // The failed attempt's tangents belong to states that were not kept.
+                    last_tangent = None;
+                    if dl * 0.5 >= options.min_step * (1.0 - 1e-12) {
+                        dl *= 0.5;
+                        halvings += 1;
+                        continue;
+                    }
+                    let (step, from) = (steps.len() + 1, load);
+                    return Err(match failure {
+                        StepFailure::Inverted(element) => HyperError::Inverted {
+                            element,
+                            step,
+                            from,
+                            to,
+                        },
+                        StepFailure::NoConvergence {
+                            iterations,
+                            residual,
+                            reason,
+                        } => HyperError::NoConvergence {
+                            step,
+                            from,
+                            to,
+                            iterations,
+                            residual,
+                            reason,
+                        },
+                        StepFailure::Singular(reason) => HyperError::Singular {
+                            step,
+                            load: from,
+                            reason,
+                        },
+                    });
                 }
-                let (step, from) = (steps.len() + 1, load);
-                return Err(match failure {
-                    StepFailure::Inverted(element) => HyperError::Inverted {
-                        element,
-                        step,
-                        from,
-                        to,
-                    },
-                    StepFailure::NoConvergence {
-                        iterations,
-                        residual,
-                        reason,
-                    } => HyperError::NoConvergence {
-                        step,
-                        from,
-                        to,
-                        iterations,
-                        residual,
-                        reason,
-                    },
-                    StepFailure::Singular(reason) => HyperError::Singular {
-                        step,
-                        load: from,
-                        reason,
-                    },
-                });
             }
         }
+        let state = body
+            .evaluate(&u)
+            .expect("the converged state was evaluated");
+        let forces = body.forces(&state);
+        solutions.push(Solution {
+            u: u.clone(),
+            forces,
+            steps: steps.clone(),
+        });
     }
-    let state = body
-        .evaluate(&u)
-        .expect("the converged state was evaluated");
-    let forces = body.forces(&state);
-    Ok(Solution { u, forces, steps })
+    Ok(solutions)
 }
 
 /// The factorised tangent `K_ff` of `state`.

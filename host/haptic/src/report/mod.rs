@@ -29,12 +29,15 @@
 //!   random sites of it, the collision normal's angle to the organ's and R's shortfall there;
 //! - [`relaxation`]: viscoelastic relaxation: `press-hold` on the QLV scene, the
 //!   image's force against the analytic QLV response, and instructions per tick against the
-//!   number of Prony terms.
+//!   number of Prony terms;
+//! - [`large_press`]: large presses and pulls at study sites, the linear model (with and without
+//!   Q) against the neo-Hookean reference.
 
 pub mod couplings;
 pub mod figures;
 pub mod hard;
 pub mod html;
+pub mod large_press;
 pub mod large_strain;
 pub mod law;
 pub mod locking;

@@ -4,8 +4,8 @@
 //! `report.json`, `headline.png` and `figures.md` (the user guide's measured figures).
 
 use super::{
-    Report, couplings, hard, html, large_strain, law, locking, loops, pareto, precision,
-    precompute_cost, relaxation, sampled, scale, tick_cost,
+    Report, couplings, hard, html, large_press, large_strain, law, locking, loops, pareto,
+    precision, precompute_cost, relaxation, sampled, scale, tick_cost,
 };
 use crate::bank::{BankSpec, Prepared};
 use crate::calibrate::{csv, fit};
@@ -320,6 +320,11 @@ pub fn run(cfg: &ReportConfig, step: &dyn Fn(&str)) -> Result<Report> {
                 Err(e) => not_measured.push(format!("the presses on the organ's surface: {e:#}")),
             }
         }
+        let cylinder = shipped("cylinder-2k.msh");
+        let (k, c, n) = large_press::run(sampled_scene, cylinder.as_deref(), step)?;
+        knobs.extend(k);
+        cases.extend(c);
+        not_measured.extend(n);
     } else {
         not_measured.push(
             "the sampled patch compliance's knobs (the scene's contact model is nodal)".into(),

@@ -25,7 +25,7 @@
 //!   ([`linear_p`]: the paper's eq. 4 with the compression axis as the constraint).
 //! - `Large`: the compressible neo-Hookean reference [`fem::hyperelastic`] with the same Lamé
 //!   parameters, solved along one continuation path from rest through the strains in
-//!   increasing order ([`fem::hyperelastic::solve_from`]); the volumetric energy on the
+//!   increasing order ([`fem::hyperelastic::solve_path`]); the volumetric energy on the
 //!   element mean ([`fem::hyperelastic::Volumetric::ElementMean`]) when `nu > 0.45` (the
 //!   pointwise integration locks, see docs/large-deformation.md), at the quadrature points
 //!   otherwise.

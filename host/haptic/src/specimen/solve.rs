@@ -28,7 +28,7 @@ use anyhow::{Context, Result, bail};
 use fem::compliance::solve_prescribed;
 use fem::elasticity::Material;
 use fem::elasticity::quadratic::QuadraticBody;
-use fem::hyperelastic::{HyperelasticBody, NewtonOptions, Prescribed, Volumetric, solve_from};
+use fem::hyperelastic::{HyperelasticBody, NewtonOptions, Prescribed, Volumetric, solve_path};
 use fem::mesh::TetMesh;
 
 /// The mesh solved on and what it represents.
@@ -158,17 +158,23 @@ pub fn solve(
             };
             let body = HyperelasticBody::with_volumetric(&problem.mesh, material, volumetric)?;
             nodes = body.nodes();
-            let mut order: Vec<usize> = (0..strains.len()).collect();
-            order.sort_by(|&i, &j| strains[i].total_cmp(&strains[j]));
-            let mut u = vec![0.0; 3 * nodes];
-            for i in order {
-                let travel = strains[i] * problem.length;
-                let (p, moving) = supports(body.positions(), travel)?;
-                let sol = solve_from(&body, &p, &u, &NewtonOptions::default(), &mut |_| {})
-                    .with_context(|| format!("--model large at strain {}", strains[i]))?;
+            // One load path through the distinct strains in increasing order: the prescribed
+            // displacements are proportional to the travel, so stop k is at load factor
+            // `s_k / s_max` of the largest travel's.
+            let mut distinct = strains.clone();
+            distinct.sort_by(f64::total_cmp);
+            distinct.dedup();
+            let largest = distinct.last().copied().unwrap_or(0.0);
+            let (p, moving) = supports(body.positions(), largest * problem.length)?;
+            let stops: Vec<f64> = distinct.iter().map(|s| s / largest).collect();
+            let solutions =
+                solve_path(&body, &p, &stops, &NewtonOptions::default(), &mut |_| {})
+                    .with_context(|| format!("--model large on the path to strain {largest}"))?;
+            for (i, &s) in strains.iter().enumerate() {
+                let k = distinct.partition_point(|&x| x < s);
+                let sol = &solutions[k];
                 forces[i] = force(sol.reaction(moving.iter().copied(), a));
-                displacements[i] = field(body.quadratic(), &sol.u, travel)?;
-                u = sol.u;
+                displacements[i] = field(body.quadratic(), &sol.u, s * problem.length)?;
             }
         }
         _ => {
