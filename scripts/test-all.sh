@@ -85,7 +85,7 @@ need chromium chromium
 need shellcheck shellcheck
 qemu-system-arm --version | sed -n 1p
 
-step "Gmsh for host mesh: the Python module gmsh==4.15.2 and numpy (pip), its X/GL libraries (apt-get)"
+step "Gmsh for host mesh and host specimen --cylinder: the Python module gmsh==4.15.2 and numpy (pip), its X/GL libraries (apt-get)"
 # `host mesh` runs Gmsh through its Python module, pinned like every mesh of the project
 # (scripts/gen_meshes.py): the pip wheel is the whole library at that version (Debian's gmsh
 # is another), so pip installs it here as apt-get installs QEMU. The wheel's library links
