@@ -154,47 +154,60 @@ pub struct Sizes {
 pub fn run_gmsh(surface: &TriSurface, sizes: &Sizes) -> Result<TetMesh> {
     let dir = tempfile::tempdir().context("cannot make a temporary directory for Gmsh")?;
     let stl = dir.path().join("surface.stl");
-    let out = dir.path().join("volume.msh");
-    let script = dir.path().join("mesh_surface.py");
-    let job = dir.path().join("job.json");
     std::fs::write(&stl, surface.to_stl_binary())?;
-    std::fs::write(&script, SCRIPT)?;
     let (fine, gradient) = sizes.fine.unzip();
-    let job_json = serde_json::json!({
+    let job = serde_json::json!({
         "surface": stl,
-        "output": out,
         "size": sizes.size,
         "fine": fine,
         "gradient": gradient,
         "reach_points": sizes.reach,
     });
-    std::fs::write(&job, job_json.to_string())?;
-    let python = std::env::var("HOST_PYTHON").unwrap_or_else(|_| "python3".into());
-    let status = Command::new(&python)
-        .arg(&script)
-        .arg(&job)
-        .status()
-        .with_context(|| {
-            format!(
-                "cannot run {python} for Gmsh (install Python 3 and `pip install gmsh==4.15.2 \
-                 numpy`; scripts/test-all.sh does)"
-            )
-        })?;
-    if !status.success() {
-        bail!(
-            "Gmsh failed ({status}; its messages are above). If the module is missing: `pip \
-             install gmsh==4.15.2 numpy`"
-        );
-    }
-    let mesh = fem::mesh::read(&out).context("reading Gmsh's mesh")?;
-    let mesh = compact(mesh);
+    let mesh = run_gmsh_job(dir.path(), SCRIPT, job, "")?;
     fem::mesh::validate(&mesh).context("Gmsh's mesh fails validation")?;
     Ok(mesh)
 }
 
+/// Runs the Gmsh Python script `script` (its text, embedded in the binary) with `python3` (or
+/// `$HOST_PYTHON`) on `job`, a JSON object written to a file in `dir` whose `"output"` is set
+/// here to the MSH file the script must write there; reads that mesh back without the nodes no
+/// tetrahedron uses ([`compact`]). `what` prefixes the error messages (e.g. `"--cylinder: "`).
+pub(crate) fn run_gmsh_job(
+    dir: &std::path::Path,
+    script: &str,
+    mut job: serde_json::Value,
+    what: &str,
+) -> Result<TetMesh> {
+    let script_path = dir.join("gmsh_job.py");
+    let job_path = dir.join("job.json");
+    let out = dir.join("volume.msh");
+    std::fs::write(&script_path, script)?;
+    job["output"] = serde_json::json!(out);
+    std::fs::write(&job_path, job.to_string())?;
+    let python = std::env::var("HOST_PYTHON").unwrap_or_else(|_| "python3".into());
+    let status = Command::new(&python)
+        .arg(&script_path)
+        .arg(&job_path)
+        .status()
+        .with_context(|| {
+            format!(
+                "{what}cannot run {python} for Gmsh (install Python 3 and `pip install \
+                 gmsh==4.15.2 numpy`; scripts/test-all.sh does)"
+            )
+        })?;
+    if !status.success() {
+        bail!(
+            "{what}Gmsh failed ({status}; its messages are above). If the module is missing: \
+             `pip install gmsh==4.15.2 numpy`"
+        );
+    }
+    let mesh = fem::mesh::read(&out).with_context(|| format!("{what}reading Gmsh's mesh"))?;
+    Ok(compact(mesh))
+}
+
 /// The mesh without the nodes no tetrahedron uses (Gmsh may keep some of the input
 /// surface's), the others in their original order.
-fn compact(mesh: TetMesh) -> TetMesh {
+pub(crate) fn compact(mesh: TetMesh) -> TetMesh {
     let mut used = vec![false; mesh.nodes.len()];
     for t in &mesh.tets {
         for &v in t {

@@ -8,10 +8,9 @@
 //! quarter of the disc, half the height) is meshed by Gmsh through its pinned Python module
 //! (`scripts/mesh_cylinder.py`, embedded here and run with `python3` or `$HOST_PYTHON`).
 
-use anyhow::{Context, Result, bail};
+use anyhow::{Context, Result};
 use fem::mesh::TetMesh;
 use fem::mesh::structured::box_mesh;
-use std::process::Command;
 
 const CYLINDER_SCRIPT: &str = include_str!("../../../../scripts/mesh_cylinder.py");
 
@@ -42,36 +41,12 @@ pub fn box_part(lo: [f64; 3], hi: [f64; 3], cells: usize) -> (TetMesh, [usize; 3
 /// `size` (metres). The part's faces on the symmetry planes are snapped exactly onto them.
 pub fn cylinder_part(radius: f64, height: f64, axis: usize, size: f64) -> Result<TetMesh> {
     let dir = tempfile::tempdir().context("cannot make a temporary directory for Gmsh")?;
-    let script = dir.path().join("mesh_cylinder.py");
-    let job = dir.path().join("job.json");
-    let out = dir.path().join("part.msh");
-    std::fs::write(&script, CYLINDER_SCRIPT)?;
-    let job_json = serde_json::json!({
+    let job = serde_json::json!({
         "radius": radius,
         "half_height": 0.5 * height,
         "size": size,
-        "output": out,
     });
-    std::fs::write(&job, job_json.to_string())?;
-    let python = std::env::var("HOST_PYTHON").unwrap_or_else(|_| "python3".into());
-    let status = Command::new(&python)
-        .arg(&script)
-        .arg(&job)
-        .status()
-        .with_context(|| {
-            format!(
-                "--cylinder: cannot run {python} for Gmsh (install Python 3 and `pip install \
-                 gmsh==4.15.2`; scripts/test-all.sh does)"
-            )
-        })?;
-    if !status.success() {
-        bail!(
-            "--cylinder: Gmsh failed ({status}; its messages are above). If the module is \
-             missing: `pip install gmsh==4.15.2`"
-        );
-    }
-    let local = fem::mesh::read(&out).context("--cylinder: reading Gmsh's mesh")?;
-    let local = compact(local);
+    let local = crate::meshing::run_gmsh_job(dir.path(), CYLINDER_SCRIPT, job, "--cylinder: ")?;
     // Gmsh's frame: the axis is z, the part in x >= 0, y >= 0, z in [0, height / 2].
     let lateral = [(axis + 1) % 3, (axis + 2) % 3];
     let mut mesh = TetMesh {
@@ -95,22 +70,6 @@ pub fn cylinder_part(radius: f64, height: f64, axis: usize, size: f64) -> Result
     snap(&mut mesh, centre);
     fem::mesh::validate(&mesh).context("--cylinder: Gmsh's mesh fails validation")?;
     Ok(mesh)
-}
-
-/// The mesh without the nodes no tetrahedron uses, the others in their original order.
-fn compact(mesh: TetMesh) -> TetMesh {
-    let mut new_id = vec![usize::MAX; mesh.nodes.len()];
-    let mut nodes = Vec::new();
-    for t in &mesh.tets {
-        for &v in t {
-            if new_id[v] == usize::MAX {
-                new_id[v] = nodes.len();
-                nodes.push(mesh.nodes[v]);
-            }
-        }
-    }
-    let tets = mesh.tets.iter().map(|t| t.map(|v| new_id[v])).collect();
-    TetMesh { nodes, tets }
 }
 
 /// The part's largest side.
