@@ -3,6 +3,10 @@
 //! the shipped brain-tissue data meets the accuracy goal and matches the host FEM, and bad
 //! bench files fail with the line named and the scene untouched.
 
+#[path = "support/cli.rs"]
+mod cli;
+
+use cli::run;
 use faer::Mat;
 use faer::linalg::solvers::Solve;
 use fem::elasticity::Material;
@@ -12,7 +16,6 @@ use haptic::calibrate::scene_edit::{self, Law};
 use haptic::calibrate::{cheb, csv, specimen, tissue};
 use haptic::scene::Scene;
 use std::path::{Path, PathBuf};
-use std::process::Command;
 
 use haptic::rng::SplitMix64;
 
@@ -341,19 +344,6 @@ fn non_monotone_fit_is_refused() {
     let rows = fit::survey(&x, &y, fit::AUTO_DEGREES).unwrap();
     assert!(rows.iter().any(|r| r.degree == 2 && !r.monotone));
     assert_ne!(fit::choose(&rows, 0.02), Some(2));
-}
-
-fn host() -> Command {
-    Command::new(env!("CARGO_BIN_EXE_host"))
-}
-
-fn run(args: &[&str]) -> (bool, String, String) {
-    let out = host().args(args).output().unwrap();
-    (
-        out.status.success(),
-        String::from_utf8_lossy(&out.stdout).into_owned(),
-        String::from_utf8_lossy(&out.stderr).into_owned(),
-    )
 }
 
 /// `--scene` through a symbolic link: the real scene is updated, the link stays a link, and

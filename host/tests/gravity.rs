@@ -2,25 +2,16 @@
 //! the CLI into the scene's `[gravity]` table; bad files name their line and leave the scene
 //! alone; too few or degenerate poses are refused naming what to add.
 
+#[path = "support/cli.rs"]
+mod cli;
+
+use cli::run;
 use haptic::calibrate::gravity;
 use haptic::scene::Scene;
 use std::path::{Path, PathBuf};
-use std::process::Command;
 
 fn manifest(rel: &str) -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join(rel)
-}
-
-fn run(args: &[&str]) -> (bool, String, String) {
-    let out = Command::new(env!("CARGO_BIN_EXE_host"))
-        .args(args)
-        .output()
-        .unwrap();
-    (
-        out.status.success(),
-        String::from_utf8_lossy(&out.stdout).into_owned(),
-        String::from_utf8_lossy(&out.stderr).into_owned(),
-    )
 }
 
 const TRUE: [f64; 8] = [0.012, -0.004, 0.03, 0.35, 0.08, -0.6, 0.02, -0.01];

@@ -5,12 +5,15 @@
 //! is the closed form's; bad inputs exit non-zero naming what and where. Ignored by default
 //! (`--ignored --nocapture`): the 80 mm gel cube's timing and linear-vs-large differences.
 
+#[path = "support/cli.rs"]
+mod cli;
+
+use fem::hyperelastic::uniaxial_stress;
 use haptic::specimen::geometry::{box_part, whole};
 use haptic::specimen::{self, Axis, End, Geometry, Model, Platens, SpecimenConfig};
 use haptic::units::Units;
 use std::io::Write;
 use std::path::Path;
-use std::process::Command;
 use std::time::Instant;
 
 const E: f64 = 5000.0;
@@ -106,18 +109,6 @@ fn large_equals_linear_at_small_strain() {
     }
 }
 
-/// Lateral stretch of the neo-Hookean model in uniaxial stress at axial stretch `s`: the root
-/// of `P_11 = mu (l - 1/l) + lambda ln(l^2 s) / l = 0`.
-fn lateral_stretch(lambda: f64, mu: f64, s: f64) -> f64 {
-    let mut l = 1.0f64;
-    for _ in 0..50 {
-        let g = mu * (l * l - 1.0) + lambda * (l * l * s).ln();
-        let dg = 2.0 * mu * l + 2.0 * lambda / l;
-        l -= g / dg;
-    }
-    l
-}
-
 /// 10 % between frictionless platens, compressed along x from the min face of an off-origin
 /// box in millimetres: every marker's displacement is the homogeneous closed form to 1e-6 of
 /// the platen travel (axial `s (x_max - x)`, lateral `(l - 1) (y - y_c)` from the held face's
@@ -147,9 +138,7 @@ fn frictionless_platens_give_the_homogeneous_closed_form() {
         let mu = E / (2.0 * (1.0 + nu));
         let (lateral, force) = match model {
             Model::Large => {
-                let l = lateral_stretch(lambda, mu, 1.0 - s);
-                let st = 1.0 - s;
-                let p11 = mu * (st - 1.0 / st) + lambda * (l * l * st).ln() / st;
+                let (l, p11) = uniaxial_stress(lambda, mu, 1.0 - s);
                 (l - 1.0, -p11 * area_m2)
             }
             _ => (nu * s, E * s * area_m2),
@@ -366,17 +355,9 @@ fn a_cylinder_is_meshed_by_gmsh_and_solved_on_its_eighth() {
     assert!(gap < 1e-9 && df < 1e-9, "markers {gap:e}, force {df:e}");
 }
 
+/// `host specimen` with `args` ([`cli::run`]).
 fn host(args: &[&str]) -> (bool, String, String) {
-    let out = Command::new(env!("CARGO_BIN_EXE_host"))
-        .arg("specimen")
-        .args(args)
-        .output()
-        .unwrap();
-    (
-        out.status.success(),
-        String::from_utf8_lossy(&out.stdout).into_owned(),
-        String::from_utf8_lossy(&out.stderr).into_owned(),
-    )
+    cli::run(&[&["specimen"][..], args].concat())
 }
 
 /// Arguments of the CLI's JSON test: a 2 x 2 x 4 cm box along z, bonded, 5 and 10 %, the

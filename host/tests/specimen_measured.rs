@@ -5,13 +5,15 @@
 //! 0.3 mm CT voxel's uniform noise) `large` with the truth parameters leaves the noise and
 //! `linear` more at large strain; the plot and bad inputs.
 
+#[path = "support/cli.rs"]
+mod cli;
+
 use bank_format::TissueLaw;
 use haptic::report::large_strain::{self, STRAINS, noise_rms_mm};
 use haptic::specimen::{self, Axis, End, Geometry, Model, Platens, SpecimenConfig};
 use haptic::units::Units;
 use std::io::Write;
 use std::path::{Path, PathBuf};
-use std::process::Command;
 
 fn data(name: &str) -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR"))
@@ -123,17 +125,9 @@ fn a_hand_made_p_moves_the_radial_part_as_it_says() {
     assert!(moved >= 6, "{moved}");
 }
 
+/// `host specimen` with `args` ([`cli::run`]).
 fn host(args: &[&str]) -> (bool, String, String) {
-    let out = Command::new(env!("CARGO_BIN_EXE_host"))
-        .arg("specimen")
-        .args(args)
-        .output()
-        .unwrap();
-    (
-        out.status.success(),
-        String::from_utf8_lossy(&out.stdout).into_owned(),
-        String::from_utf8_lossy(&out.stderr).into_owned(),
-    )
+    cli::run(&[&["specimen"][..], args].concat())
 }
 
 /// The generator's case (scripts/gen_specimen_markers.py) on the command line.

@@ -6,6 +6,7 @@
 //! `LARGE_SITES` = site names separated by `;` (default right lobe top), `LARGE_OUT` = a JSON
 //! file to write the runs to (`host/tests/data/large-press.json` is this output).
 
+use fem::hyperelastic::uniaxial_stress;
 use haptic::large::LargeFem;
 use haptic::report::large_press::{
     Measured, PRESSES_M, PULLS_M, REFERENCE_MESH, SPECIMEN_STRAINS, SiteRun, reference_runs,
@@ -101,13 +102,7 @@ fn the_specimen_curve_is_the_closed_form() {
     );
     let (lambda, mu) = scene.material.lame();
     for (k, &e) in SPECIMEN_STRAINS.iter().enumerate() {
-        let s = 1.0 - e;
-        let mut l = 1.0f64;
-        for _ in 0..50 {
-            let g = mu * (l * l - 1.0) + lambda * (l * l * s).ln();
-            l -= g / (2.0 * mu * l + 2.0 * lambda / l);
-        }
-        let p33 = mu * (s - 1.0 / s) + lambda * (l * l * s).ln() / s;
+        let (_, p33) = uniaxial_stress(lambda, mu, 1.0 - e);
         let want = -p33 / (scene.material.young * e);
         let got = law.large_n[k] / law.linear_n[k];
         println!("strain {e}: force / linear {got:.6}, closed form {want:.6}");

@@ -48,6 +48,21 @@ mod newton;
 pub use body::{HyperelasticBody, Volumetric};
 pub use newton::{NewtonOptions, Solution, StepReport, solve, solve_path};
 
+/// Homogeneous uniaxial stress of the compressible neo-Hookean model (the strain energy of
+/// this module, Lamé parameters `lambda`, `mu` in Pa) at axial stretch `s`: returns the lateral
+/// stretch `l`, the root of `P_11 = mu (l - 1/l) + lambda ln(l^2 s) / l = 0` by a scalar Newton
+/// iteration from 1, and the axial nominal (first Piola-Kirchhoff) stress
+/// `P_33 = mu (s - 1/s) + lambda ln(l^2 s) / s` (Pa, negative in compression). The closed form
+/// a frictionless-platen compression test is checked against.
+pub fn uniaxial_stress(lambda: f64, mu: f64, s: f64) -> (f64, f64) {
+    let mut l = 1.0f64;
+    for _ in 0..50 {
+        let g = mu * (l * l - 1.0) + lambda * (l * l * s).ln();
+        l -= g / (2.0 * mu * l + 2.0 * lambda / l);
+    }
+    (l, mu * (s - 1.0 / s) + lambda * (l * l * s).ln() / s)
+}
+
 use crate::elasticity::{FemError, FixedSet, Material};
 
 /// The compressible neo-Hookean material (module docs: Bonet & Wood eq. 6.27), in pascals.
