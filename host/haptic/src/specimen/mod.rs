@@ -59,7 +59,7 @@ use crate::units::Units;
 use anyhow::{Context, Result, bail};
 use bank_format::TissueLaw;
 use fem::elasticity::Material;
-use fem::hyperelastic::Prescribed;
+use fem::hyperelastic::{Prescribed, Volumetric};
 use serde::Serialize;
 use solve::Problem;
 use std::path::PathBuf;
@@ -68,6 +68,16 @@ use std::time::Instant;
 /// Poisson's ratio above which the `Large` model integrates the volumetric energy on the
 /// element mean.
 pub const ELEMENT_MEAN_ABOVE_NU: f64 = 0.45;
+
+/// The `Large` model's volumetric integration for Poisson's ratio `nu`: the element mean above
+/// [`ELEMENT_MEAN_ABOVE_NU`], the quadrature points otherwise.
+pub fn large_volumetric(nu: f64) -> Volumetric {
+    if nu > ELEMENT_MEAN_ABOVE_NU {
+        Volumetric::ElementMean
+    } else {
+        Volumetric::Pointwise
+    }
+}
 
 /// Nodes of a mesh file within this fraction of its length along the axis from its min (max)
 /// coordinate there lie on the min (max) platen face.
@@ -545,10 +555,9 @@ pub fn run_with_progress(
             platen_force_n: solved.forces[i],
         })
         .collect();
-    let volumetric = if config.model == Model::Large && config.poisson > ELEMENT_MEAN_ABOVE_NU {
-        "element-mean"
-    } else {
-        "pointwise"
+    let volumetric = match (config.model, large_volumetric(config.poisson)) {
+        (Model::Large, Volumetric::ElementMean) => "element-mean",
+        _ => "pointwise",
     };
     Ok(SpecimenReport {
         levels: level_out,
@@ -556,7 +565,7 @@ pub fn run_with_progress(
         volumetric,
         units: units.name(),
         length: length / scale,
-        symmetry: config.symmetry && !matches!(config.geometry, Geometry::Mesh { .. }),
+        symmetry: config.symmetry && !is_mesh,
         cells: levels.last().and_then(|l| l.cells),
         nodes: solved.nodes,
         convergence: Convergence {

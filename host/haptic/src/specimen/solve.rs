@@ -28,7 +28,7 @@ use anyhow::{Context, Result, bail};
 use fem::compliance::solve_prescribed;
 use fem::elasticity::Material;
 use fem::elasticity::quadratic::QuadraticBody;
-use fem::hyperelastic::{HyperelasticBody, NewtonOptions, Prescribed, Volumetric, solve_path};
+use fem::hyperelastic::{HyperelasticBody, NewtonOptions, Prescribed, solve_path};
 use fem::mesh::TetMesh;
 
 /// The mesh solved on and what it represents.
@@ -151,11 +151,7 @@ pub fn solve(
     let nodes;
     match config.model {
         super::Model::Large => {
-            let volumetric = if config.poisson > super::ELEMENT_MEAN_ABOVE_NU {
-                Volumetric::ElementMean
-            } else {
-                Volumetric::Pointwise
-            };
+            let volumetric = super::large_volumetric(config.poisson);
             let body = HyperelasticBody::with_volumetric(&problem.mesh, material, volumetric)?;
             nodes = body.nodes();
             // One load path through the distinct strains in increasing order: the prescribed
